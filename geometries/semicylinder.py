@@ -1,0 +1,26 @@
+"""Half-cylinder of radius R and length L, the reference shape of DESIGN section 3.
+
+Cross-section: the half-disk x^2 + y^2 <= R^2, y >= 0, parametrised by (xi, eta) as in the
+``semidisk`` geometry; z = L * zeta. The side faces map the square's edges; the caps
+(zeta = 0, 1) are the Coons patch of those four edges.
+"""
+
+import numpy as np
+
+from meshgen.geometry import load_geometry
+from meshgen.tfi import transfinite
+
+name = "semicylinder"
+dim = 3
+description = "Half-cylinder of radius R and length L (half-disk section x^2+y^2<=R^2, y>=0, along z)"
+params = {"radius": 1.0, "length": 2.0}
+
+_section = load_geometry("semidisk", check=False)
+
+
+def boundary(points, radius, length):
+    """(N, 3) points on the unit cube's boundary -> (N, 3) points on the half-cylinder's surface."""
+    section = _section.with_params(radius=radius)
+    # The Coons patch reproduces the section's edges on the side faces and fills the caps.
+    xy = transfinite(section.boundary, [points[:, 0], points[:, 1]])
+    return np.column_stack([xy, length * points[:, 2]])

@@ -1,0 +1,31 @@
+"""meshgen: structured hexahedral and quadrilateral meshes of parametrised geometries.
+
+The node array ``X`` is the one currency between the parts: shape ``(n1+1, n2+1, n3+1, 3)``
+(2D: ``(n1+1, n2+1, 2)``), float64, index order (i, j, k) = (xi, eta, zeta).
+
+Public functions are imported lazily so that ``import meshgen`` stays cheap (no torch, no trimesh).
+"""
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "load_geometry": "meshgen.geometry",
+    "list_geometries": "meshgen.geometry",
+    "Geometry": "meshgen.geometry",
+    "tfi": "meshgen.tfi",
+    "transfinite": "meshgen.tfi",
+    "parametric_grid": "meshgen.tfi",
+    "write_mesh": "meshgen.formats",
+    "MeshgenError": "meshgen.errors",
+}
+
+__all__ = ["__version__", *_LAZY]
+
+
+def __getattr__(name):
+    module_name = _LAZY.get(name)
+    if module_name is None:
+        raise AttributeError(f"module 'meshgen' has no attribute {name!r}")
+    import importlib
+
+    return getattr(importlib.import_module(module_name), name)

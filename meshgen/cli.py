@@ -1,0 +1,112 @@
+"""The ``meshgen`` command group. Each command lives in ``meshgen.commands.<name>`` and is imported
+only when it runs, so ``meshgen --help`` stays fast (no torch, no trimesh, no numpy).
+
+Errors a user can act on (MeshgenError, click usage errors) are printed as one line with exit
+status 2; Ctrl-C exits with status 130. Set MESHGEN_DEBUG=1 to see tracebacks.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+
+import click
+
+from meshgen import __version__
+
+# name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
+COMMANDS = {
+    "train": ("meshgen.commands.train:train", "Train a mesh network (3DMeshNet and ablations) on a geometry."),
+    "mesh": ("meshgen.commands.mesh:mesh", "Make a mesh (tfi, elliptic or a trained network) and write it."),
+    "evaluate": ("meshgen.commands.evaluate:evaluate", "Measure mesh quality; gate it with --fail-if."),
+    "compare": ("meshgen.commands.compare:compare", "Compare meshing methods side by side."),
+    "geometries": ("meshgen.commands.geometries:geometries", "List geometries; show one as a surface."),
+}
+
+
+def one_line(message: str) -> str:
+    return " ".join(str(message).split())
+
+
+class MeshgenGroup(click.Group):
+    def list_commands(self, ctx):
+        return list(COMMANDS)
+
+    def get_command(self, ctx, name):
+        if name not in COMMANDS:
+            return None
+        module_name, function_name = COMMANDS[name][0].split(":")
+        return getattr(importlib.import_module(module_name), function_name)
+
+    def format_commands(self, ctx, formatter):
+        with formatter.section("Commands"):
+            formatter.write_dl([(name, help_text) for name, (_, help_text) in COMMANDS.items()])
+
+    def resolve_command(self, ctx, args):
+        name = args[0] if args else None
+        if name is not None and name not in COMMANDS and not name.startswith("-"):
+            import difflib
+
+            close = difflib.get_close_matches(name, list(COMMANDS), n=1)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            raise click.UsageError(f"no command '{name}' (commands: {', '.join(COMMANDS)}){hint}", ctx)
+        return super().resolve_command(ctx, args)
+
+    def main(self, args=None, prog_name=None, **extra):
+        """Run with our own error reporting: one line on stderr, exit 2 for usage errors."""
+        from meshgen.errors import MeshgenError
+
+        extra.pop("standalone_mode", None)
+        debug = bool(os.environ.get("MESHGEN_DEBUG"))
+        try:
+            result = super().main(args=args, prog_name=prog_name or "meshgen", standalone_mode=False, **extra)
+        except click.exceptions.Exit as exc:
+            sys.exit(exc.exit_code)
+        except click.exceptions.Abort:
+            click.echo("Aborted.", err=True)
+            sys.exit(130)
+        except click.UsageError as exc:
+            if debug:
+                raise
+            command = exc.ctx.command_path if exc.ctx else "meshgen"
+            click.echo(f"Error: {one_line(exc.format_message())} (see '{command} --help')", err=True)
+            sys.exit(2)
+        except click.ClickException as exc:
+            if debug:
+                raise
+            click.echo(f"Error: {one_line(exc.format_message())}", err=True)
+            sys.exit(exc.exit_code)
+        except MeshgenError as exc:
+            if debug:
+                raise
+            click.echo(f"Error: {one_line(exc)}", err=True)
+            sys.exit(2)
+        except KeyboardInterrupt:
+            click.echo("Interrupted.", err=True)
+            sys.exit(130)
+        except BrokenPipeError:
+            sys.exit(1)
+        except Exception as exc:  # a bug of ours: still one line, the traceback on request
+            if debug:
+                raise
+            click.echo(
+                f"Error: internal error {type(exc).__name__}: {one_line(exc)} (set MESHGEN_DEBUG=1 for a traceback)",
+                err=True,
+            )
+            sys.exit(1)
+        sys.exit(result if isinstance(result, int) else 0)
+
+
+@click.group(cls=MeshgenGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(__version__, "--version", prog_name="meshgen")
+def cli():
+    """meshgen: structured hexahedral and quadrilateral meshes of parametrised geometries.
+
+    Methods: transfinite interpolation (tfi), an elliptic Winslow solver (elliptic), and a network
+    trained on the Winslow equations (3DMeshNet), which meshes at any size in one forward pass.
+    """
+
+
+def main():
+    cli.main()

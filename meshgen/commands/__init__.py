@@ -1,0 +1,1 @@
+"""One module per CLI command; each parses and prints, the work lives in importable functions."""

@@ -1,0 +1,103 @@
+"""Mesh writers (and readers), looked up by file extension.
+
+Each format is a small module with ``write(path, X, cell_data, metadata)`` and, where meshgen can
+read it back, ``read(path) -> meshio.Mesh``. ``X`` is the node array of DESIGN section 2;
+``cell_data`` maps names to per-cell arrays in C order of the cells (i, j[, k]); ``metadata`` is a
+JSON-serialisable dict (geometry, parameters, method, meshgen version) stored where the format
+allows. Adding a format is one module and one ``register_format`` line.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import FormatError
+
+
+@dataclass(frozen=True)
+class Format:
+    name: str
+    extensions: tuple[str, ...]
+    module: str
+    description: str
+
+
+FORMATS: list[Format] = []
+
+
+def register_format(name: str, extensions, module: str, description: str) -> None:
+    FORMATS.append(Format(name, tuple(extensions), module, description))
+
+
+register_format("vtu", [".vtu"], "meshgen.formats._meshio", "VTK XML unstructured grid (zlib-compressed)")
+register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
+register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
+register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone")
+register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D whole grid, single block")
+
+
+def extensions() -> list[str]:
+    return [ext for fmt in FORMATS for ext in fmt.extensions]
+
+
+def format_for(path: str | os.PathLike) -> Format:
+    """The registered format of ``path``'s extension; FormatError listing the valid ones otherwise."""
+    suffix = Path(path).suffix.lower()
+    for fmt in FORMATS:
+        if suffix in fmt.extensions:
+            return fmt
+    shown = suffix or "(none)"
+    raise FormatError(f"unknown output extension {shown} for {path}; pick one of {', '.join(extensions())}")
+
+
+def check_output_path(path: str | os.PathLike) -> Path:
+    """Validate an output path before any work is done: known extension, existing writable folder,
+    not a folder itself. Returns it as a Path."""
+    path = Path(path)
+    format_for(path)
+    if path.is_dir():
+        raise FormatError(f"output {path} is a folder; give a file name such as {path / ('mesh' + extensions()[0])}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise FormatError(f"output folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise FormatError(f"output folder {folder} is not writable")
+    return path
+
+
+def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dict | None = None) -> Path:
+    """Write node array ``X`` to ``path`` atomically in the format its extension names."""
+    from meshgen.atomic import atomic_path
+
+    path = check_output_path(path)
+    X = np.asarray(X, dtype=float)
+    if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
+        raise FormatError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}")
+    writer = importlib.import_module(format_for(path).module)
+    try:
+        with atomic_path(path) as temporary:
+            writer.write(temporary, X, dict(cell_data or {}), dict(metadata or {}))
+    except OSError as exc:
+        raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
+    return path
+
+
+def read_mesh(path):
+    """Read a mesh file as a ``meshio.Mesh`` (our CGNS and Plot3D readers, meshio for the rest)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FormatError(f"mesh file {path} does not exist")
+    suffix = path.suffix.lower()
+    module = next((fmt.module for fmt in FORMATS if suffix in fmt.extensions), "meshgen.formats._meshio")
+    reader = importlib.import_module(module)
+    try:
+        return reader.read(path)
+    except FormatError:
+        raise
+    except Exception as exc:
+        raise FormatError(f"could not read {path}: {type(exc).__name__}: {exc}") from exc

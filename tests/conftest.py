@@ -1,0 +1,28 @@
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def run_cli(tmp_path):
+    """Run ``python -m meshgen ARGS`` in a subprocess (this checkout's code), in tmp_path by default.
+    Returns the CompletedProcess with text stdout/stderr."""
+
+    def run(*args, cwd=None, env=None, timeout=600):
+        environment = {**os.environ, "PYTHONPATH": str(REPO), **(env or {})}
+        environment.pop("MESHGEN_DEBUG", None)
+        return subprocess.run(
+            [sys.executable, "-m", "meshgen", *map(str, args)],
+            cwd=cwd or tmp_path,
+            env=environment,
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+        )
+
+    return run
