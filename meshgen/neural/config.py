@@ -66,7 +66,7 @@ class AdamConfig:
 
 @dataclass
 class LbfgsConfig:
-    steps: int = 400  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
+    steps: int = 500  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
     max_iter: int = 20  # iterations per step
     history_size: int = 50
     lr: float = 1.0
@@ -162,10 +162,11 @@ def _coerce(key: str, kind, value):
     elif typing.get_origin(kind) is list:
         ok = isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
         value = list(value) if ok else value
-    elif value is None:  # Optional[...]
-        ok = True
-    else:
-        return _coerce(key, typing.get_args(kind)[0], value)
+    else:  # Optional[int] or Optional[float]
+        try:
+            return None if value is None else _coerce(key, typing.get_args(kind)[0], value)
+        except ConfigError:
+            ok = False
     if not ok:
         raise ConfigError(f"configuration key '{key}' must be {_type_name(kind)}, got {value!r}")
     return value

@@ -115,7 +115,10 @@ def autograd_derivatives(function, points: torch.Tensor, create_graph: bool = Tr
         (gradient,) = torch.autograd.grad(values[:, c].sum(), points, create_graph=True)
         first.append(gradient)  # (N, d): d r_c / d xi_i
     second = []
-    for c, gradient in enumerate(first):
+    for gradient in first:
+        if not gradient.requires_grad:  # an affine function: constant first derivatives
+            second.append(torch.zeros(*gradient.shape, gradient.shape[-1], dtype=points.dtype, device=points.device))
+            continue
         rows = [
             torch.autograd.grad(gradient[:, i].sum(), points, create_graph=create_graph)[0]
             for i in range(points.shape[1])

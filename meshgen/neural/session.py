@@ -88,11 +88,12 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
     """
     from meshgen.commands._options import load_selected_geometry
     from meshgen.geometry import load_geometry, parse_params
-    from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
     from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
     checkpoint = resume_path = None
     if resume is not None:
+        from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
+
         for flag, value in (("--preset", preset), ("--config", config_file), ("--seed", seed)):
             if value is not None:
                 raise ConfigError(f"{flag} does not apply with --resume: the run goes on with the checkpoint's "

@@ -235,7 +235,8 @@ def adam_step(network, weights, problem, config, optimizer, scheduler, generator
     if not (torch.isfinite(pde) and torch.isfinite(boundary)):
         return {"L1": pde.item(), "L2": boundary.item(), "total": math.nan}
     # The two terms come from disjoint forward passes: two backward passes cost one joint pass.
-    g1 = flatten(torch.autograd.grad(factor_pde * pde, parameters))
+    # materialize_grads: with autograd derivatives the output bias does not enter L1 at all.
+    g1 = flatten(torch.autograd.grad(factor_pde * pde, parameters, allow_unused=True, materialize_grads=True))
     if problem.exact:
         g2 = torch.zeros_like(g1)
     else:
@@ -482,6 +483,7 @@ def train(
                 if not (math.isfinite(row["total"]) and _finite(network)):
                     # Divergence guard: back to the last good state, a smaller learning rate.
                     failures += 1
+                    lowered = [group["lr"] * config.guard.lr_factor for group in optimizer.param_groups]
                     _restore(good, network, weights, optimizer, scheduler)
                     if failures > config.guard.max_retries:
                         save(stage)
@@ -490,8 +492,8 @@ def train(
                             f"{config.guard.max_retries} learning-rate reductions; the last good state is "
                             f"saved in {checkpoint_path}"
                         )
-                    for group in optimizer.param_groups:
-                        group["lr"] *= config.guard.lr_factor
+                    for group, lr in zip(optimizer.param_groups, lowered):
+                        group["lr"] = lr
                     lr_reductions += 1
                     say(f"non-finite loss at step {step} ({stage}): restored the last good state, "
                         f"learning rate lowered to {optimizer.param_groups[0]['lr']:.3g}")
