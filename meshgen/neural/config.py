@@ -58,7 +58,7 @@ class PretrainConfig:
 @dataclass
 class AdamConfig:
     steps: int = 500
-    lr: float = 1e-3
+    lr: float = 1e-4  # paper: 1e-3 from random weights; after the fit to TFI a smaller step keeps the boundary
     decay: float = 0.9  # the learning rate is multiplied by this ...
     decay_every: int = 1000  # ... every this many steps
     weights_lr: typing.Optional[float] = None  # learning rate of log a1, log a2 (null: lr, decayed alike)

@@ -24,44 +24,52 @@ import torch
 SCALE_FLOOR = 1e-6  # in units of (normalised length)^4; a healthy normalised map has a trace ~ 0.1-3
 
 
-def metric(first: torch.Tensor) -> torch.Tensor:
-    """Covariant metric g_ij = r_i . r_j.
+def cofactor_terms(first: torch.Tensor):
+    """The distinct cofactors of g from the first derivatives (..., dim, dim), each of shape (...):
+    3D (a1, a2, a3, b12, b23, b31), 2D (g22, g11, -g12) in the same roles (a1, a2, b12)."""
+    r = first.unbind(-2)  # r_i = d r / d xi_i, (..., dim) each
 
-    ``first``: (..., dim, dim) with first[..., i, c] = d r_c / d xi_i. Returns (..., dim, dim).
-    """
-    return torch.einsum("...ic,...jc->...ij", first, first)
+    def g(i, j):
+        return (r[i] * r[j]).sum(-1)
 
-
-def cofactors(g: torch.Tensor) -> torch.Tensor:
-    """Cofactor matrix of a symmetric metric (= det(g) g^-1), shape (..., dim, dim).
-
-    Written out term by term so that it stays defined where g is singular.
-    """
-    if g.shape[-1] == 2:
-        g11, g12, g22 = g[..., 0, 0], g[..., 0, 1], g[..., 1, 1]
-        return torch.stack([torch.stack([g22, -g12], -1), torch.stack([-g12, g11], -1)], -2)
-    g11, g12, g13 = g[..., 0, 0], g[..., 0, 1], g[..., 0, 2]
-    g22, g23, g33 = g[..., 1, 1], g[..., 1, 2], g[..., 2, 2]
+    if first.shape[-1] == 2:
+        return g(1, 1), g(0, 0), -g(0, 1)
+    g11, g12, g13, g22, g23, g33 = g(0, 0), g(0, 1), g(0, 2), g(1, 1), g(1, 2), g(2, 2)
     a1 = g22 * g33 - g23**2
     a2 = g11 * g33 - g13**2
     a3 = g11 * g22 - g12**2
     b12 = g13 * g23 - g12 * g33
     b23 = g12 * g13 - g11 * g23
     b31 = g12 * g23 - g13 * g22
+    return a1, a2, a3, b12, b23, b31
+
+
+def cofactors(first: torch.Tensor) -> torch.Tensor:
+    """Cofactor matrix of the metric (= det(g) g^-1 where g is regular), (..., dim, dim), from the
+    first derivatives (..., dim, dim)."""
+    if first.shape[-1] == 2:
+        a1, a2, b12 = cofactor_terms(first)
+        return torch.stack([torch.stack([a1, b12], -1), torch.stack([b12, a2], -1)], -2)
+    a1, a2, a3, b12, b23, b31 = cofactor_terms(first)
     return torch.stack(
         [torch.stack([a1, b12, b31], -1), torch.stack([b12, a2, b23], -1), torch.stack([b31, b23, a3], -1)], -2
     )
 
 
 def winslow_residual(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:
-    """Scale-free Winslow residual (sum_ij C_ij r_ij) / trace(C), C the cofactors of g.
+    """Scale-free Winslow residual: the left-hand side over the cofactor trace a1 + a2 + a3.
 
     ``first``: (..., dim, dim), first[..., i, c] = d r_c / d xi_i.
     ``second``: (..., dim, dim, dim), second[..., i, j, c] = d^2 r_c / d xi_i d xi_j (symmetric in i, j).
-    Returns (..., dim): one residual per component of r. The full contraction with the symmetric
-    cofactor matrix counts each mixed term twice, which is the factor 2 of the formula.
+    Returns (..., dim): one residual per component of r. Written term by term (no matrix products):
+    for thousands of 3x3 metrics that is several times faster in torch.
     """
-    C = cofactors(metric(first))
-    raw = torch.einsum("...ij,...ijc->...c", C, second)
-    trace = torch.diagonal(C, dim1=-2, dim2=-1).sum(-1)
-    return raw / (trace + SCALE_FLOOR)[..., None]
+    # unbind rather than index: the backward of an index fills a zero tensor of second's full size
+    r = [row.unbind(-2) for row in second.unbind(-3)]  # r[i][j] = d^2 r / d xi_i d xi_j, (..., dim)
+    if first.shape[-1] == 2:
+        a1, a2, b12 = (t[..., None] for t in cofactor_terms(first))
+        raw = a1 * r[0][0] + a2 * r[1][1] + 2 * b12 * r[0][1]
+        return raw / (a1 + a2 + SCALE_FLOOR)
+    a1, a2, a3, b12, b23, b31 = (t[..., None] for t in cofactor_terms(first))
+    raw = a1 * r[0][0] + a2 * r[1][1] + a3 * r[2][2] + 2 * (b12 * r[0][1] + b23 * r[1][2] + b31 * r[2][0])
+    return raw / (a1 + a2 + a3 + SCALE_FLOOR)
