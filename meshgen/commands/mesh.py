@@ -14,8 +14,15 @@ from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz).")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
+@click.option(
+    "--cluster",
+    "clusters",
+    multiple=True,
+    metavar="AXIS:SIDE:RATIO",
+    help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors.")
-def mesh(method, geometry, params, dims, output, tol, max_iter, quiet):
+def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet):
     """Make a structured mesh of a geometry and write it.
 
     --dims counts cells; nodes are dims + 1. The write is atomic: an interrupted run never leaves a
@@ -26,11 +33,11 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, quiet):
     from meshgen import __version__
     from meshgen.formats import check_output_path, write_mesh
     from meshgen.methods import make_mesh
-    from meshgen.tfi import parametric_grid
+    from meshgen.clustering import node_coordinates
 
     output = check_output_path(output)
     geometry = load_selected_geometry(geometry, params, dims)
-    coords = parametric_grid(dims)
+    coords = node_coordinates(dims, clusters)
     start = time.perf_counter()
     X, info = make_mesh(method, geometry, coords, tol=tol, max_iter=max_iter)
     seconds = time.perf_counter() - start
@@ -40,6 +47,7 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, quiet):
         "geometry": geometry.name,
         "params": geometry.values,
         "dims": list(dims),
+        **({"cluster": list(clusters)} if clusters else {}),
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
