@@ -1,0 +1,54 @@
+"""Semicircular canal: a tube of circular cross-section (radius r) bent along a half circle
+(radius R), an arch standing on the plane z = 0 with its two open ends there.
+
+Cross-section: the disk of radius r, the unit square's boundary mapped to the circle uniformly in
+angle, one quarter per edge with the square's corners at 45 + k * 90 degrees, so that the Coons
+patch (TFI) of the four arcs fills the disk without folding. In the section, a runs along the
+bend's radial direction e_r = (cos phi, 0, sin phi) and b along y; the section is swept by the
+angle phi = pi * zeta along the centre line R (cos phi, 0, sin phi):
+
+    x(xi, eta, zeta) = (R + a) e_r(phi) + b e_y,   (a, b) = Coons patch of the circle at (xi, eta).
+
+(e_r, e_y, e_phi) is right-handed, so the map is orientation preserving. The caps (zeta = 0, 1)
+are Coons-filled disks. Volume (Pappus): pi r^2 * pi R. Needs r < R.
+"""
+
+import numpy as np
+
+from meshgen.errors import GeometryError
+from meshgen.tfi import transfinite
+
+name = "canal"
+dim = 3
+description = "Semicircular canal: a tube of radius r bent along a half circle of radius R (an arch on z = 0)"
+params = {"tube_radius": 0.5, "bend_radius": 2.0}
+
+
+def square_boundary_angle(xi, eta):
+    """Angle (radians) of a point of the unit square's boundary, uniform along each edge, a quarter
+    turn per edge, counterclockwise, corners at 5pi/4 (0, 0), 7pi/4 (1, 0), pi/4 (1, 1), 3pi/4 (0, 1)."""
+    on = lambda t, side: np.isclose(t, side, rtol=0.0, atol=1e-14)  # noqa: E731
+    return np.select(
+        [on(eta, 0.0), on(xi, 1.0), on(eta, 1.0)],
+        [5 * np.pi / 4 + xi * np.pi / 2, -np.pi / 4 + eta * np.pi / 2, 3 * np.pi / 4 - xi * np.pi / 2],
+        default=5 * np.pi / 4 - eta * np.pi / 2,  # xi = 0
+    )
+
+
+def boundary(points, tube_radius, bend_radius):
+    """(N, 3) points on the unit cube's boundary -> (N, 3) points on the canal's surface."""
+    if not 0 < tube_radius < bend_radius:
+        raise GeometryError(
+            f"geometry 'canal': need 0 < tube_radius < bend_radius "
+            f"(got tube_radius={tube_radius:g}, bend_radius={bend_radius:g})"
+        )
+
+    def circle(square_points):
+        angle = square_boundary_angle(square_points[:, 0], square_points[:, 1])
+        return tube_radius * np.column_stack([np.cos(angle), np.sin(angle)])
+
+    # Side faces: the circle's arcs reproduced; caps: the Coons-filled disk.
+    ab = transfinite(circle, [points[:, 0], points[:, 1]])
+    phi = np.pi * points[:, 2]
+    radial = bend_radius + ab[:, 0]
+    return np.column_stack([radial * np.cos(phi), ab[:, 1], radial * np.sin(phi)])
