@@ -45,11 +45,16 @@ def geometries(ctx, as_json):
 @click.option("--resolution", default=64, show_default=True, type=click.IntRange(2, 2048), help="Samples per face edge.")
 def show(name, params, output, resolution):
     """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0)."""
-    from meshgen.surface import write_surface
+    from meshgen.surface import check_surface_path, write_surface
 
+    check_surface_path(output)  # before loading: a bad path fails fast, whatever the geometry
     geometry = load_selected_geometry(name, params)
     path, surface = write_surface(geometry, output, resolution)
     click.echo(
         f"wrote {path}: {len(surface.vertices)} vertices, {len(surface.faces)} triangles"
-        + (f", watertight, volume {surface.volume:.6g}" if geometry.dim == 3 else f", area {surface.area:.6g}")
+        + (
+            f", {'watertight' if surface.is_watertight else 'NOT watertight'}, volume {surface.volume:.6g}"
+            if geometry.dim == 3
+            else f", area {surface.area:.6g}"
+        )
     )
