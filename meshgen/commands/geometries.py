@@ -20,9 +20,15 @@ def geometries(ctx, as_json):
     """List the available geometries (built-in, installed plugins) with their parameters."""
     if ctx.invoked_subcommand is not None:
         return
-    from meshgen.geometry import list_geometries
+    from meshgen.errors import GeometryError
+    from meshgen.geometry import available_names, load_geometry
 
-    described = [g.describe() for g in list_geometries()]
+    described = []
+    for name in available_names():
+        try:
+            described.append(load_geometry(name, check=False).describe())
+        except GeometryError as exc:  # one broken installed plugin must not hide the others
+            click.echo(f"Warning: {' '.join(str(exc).split())}", err=True)
     if as_json:
         click.echo(json.dumps(described, indent=2))
         return
