@@ -24,14 +24,20 @@ description = "Semicircular canal: a tube of radius r bent along a half circle o
 params = {"tube_radius": 0.5, "bend_radius": 2.0}
 
 
+# Angles (radians) of the square's corners (0, 0), (1, 0), (1, 1), (0, 1), increasing counterclockwise:
+# a quarter turn per edge, as in an O-grid of the disk.
+CORNER_ANGLES = np.radians([225.0, 315.0, 405.0, 495.0])
+
+
 def square_boundary_angle(xi, eta):
-    """Angle (radians) of a point of the unit square's boundary, uniform along each edge, a quarter
-    turn per edge, counterclockwise, corners at 5pi/4 (0, 0), 7pi/4 (1, 0), pi/4 (1, 1), 3pi/4 (0, 1)."""
+    """Angle (radians) of points of the unit square's boundary: linear along each edge between
+    the corners' CORNER_ANGLES, counterclockwise."""
+    c0, c1, c2, c3 = CORNER_ANGLES
     on = lambda t, side: np.isclose(t, side, rtol=0.0, atol=1e-14)  # noqa: E731
     return np.select(
         [on(eta, 0.0), on(xi, 1.0), on(eta, 1.0)],
-        [5 * np.pi / 4 + xi * np.pi / 2, -np.pi / 4 + eta * np.pi / 2, 3 * np.pi / 4 - xi * np.pi / 2],
-        default=5 * np.pi / 4 - eta * np.pi / 2,  # xi = 0
+        [c0 + xi * (c1 - c0), c1 + eta * (c2 - c1), c3 + xi * (c2 - c3)],
+        default=c0 + 2 * np.pi + eta * (c3 - c0 - 2 * np.pi),  # xi = 0, from (0, 0) up to (0, 1)
     )
 
 

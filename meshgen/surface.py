@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -55,8 +56,6 @@ def boundary_surface(geometry, resolution: int = 64):
 def check_surface_path(path) -> Path:
     """Validate a surface output path before any work: known extension, an existing writable
     folder, not a folder itself. Returns it as a Path."""
-    import os
-
     path = Path(path)
     if path.suffix.lower() not in SURFACE_EXTENSIONS:
         raise MeshgenError(f"unknown surface extension {path.suffix or '(none)'}; pick one of {', '.join(SURFACE_EXTENSIONS)}")
