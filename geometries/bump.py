@@ -14,7 +14,7 @@ from meshgen.errors import GeometryError
 
 name = "bump"
 dim = 2
-description = "Channel L x H with a cos^2 bump of height h, width w at x = c on its lower wall"
+description = "Channel length x height with a cos^2 bump (bump_height, bump_width, at x = bump_center) on its lower wall"
 params = {"length": 3.0, "height": 1.0, "bump_height": 0.25, "bump_width": 1.0, "bump_center": 1.5}
 
 

@@ -20,7 +20,7 @@ from meshgen.tfi import transfinite
 
 name = "canal"
 dim = 3
-description = "Semicircular canal: a tube of radius r bent along a half circle of radius R (an arch on z = 0)"
+description = "Semicircular canal: a tube of tube_radius bent along a half circle of bend_radius (an arch on z = 0)"
 params = {"tube_radius": 0.5, "bend_radius": 2.0}
 
 

@@ -21,7 +21,7 @@ from meshgen.tfi import transfinite
 
 name = "flower"
 dim = 3
-description = "Prism of five-petal section r = R(1 + a cos 5t), length L, twisted by tau degrees along z"
+description = "Prism of five-petal section r = radius (1 + amplitude cos 5t) along z, twisted by twist degrees over its length"
 params = {"radius": 1.0, "amplitude": 0.2, "length": 2.0, "twist": 90.0}
 
 # Angles (radians) of the square's corners (0, 0), (1, 0), (1, 1), (0, 1), increasing counterclockwise.

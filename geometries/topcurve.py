@@ -14,7 +14,7 @@ from meshgen.errors import GeometryError
 
 name = "topcurve"
 dim = 3
-description = "Box Lx x Ly x H whose top is the curved surface z = H + A sin(pi x/Lx) sin(pi y/Ly)"
+description = "Box length x width x height, its top curved to z = height + amplitude sin(pi x/length) sin(pi y/width)"
 params = {"length": 2.0, "width": 1.0, "height": 1.0, "amplitude": 0.3}
 
 
