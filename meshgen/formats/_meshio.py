@@ -18,6 +18,7 @@ metadata is added to the file meshio wrote (still the temporary file of the atom
 
 from __future__ import annotations
 
+import re
 from xml.sax.saxutils import escape
 
 import numpy as np
@@ -49,7 +50,7 @@ def write(path, X, cell_data, metadata):
         mesh = meshio.Mesh(flat_points(X), cells, cell_data={name: [v] for name, v in cell_arrays.items()})
         meshio.vtu.write(path, mesh, binary=True, compression="zlib")
         if text:
-            _insert_after(path, b"<UnstructuredGrid>", _vtu_field_data(text))
+            _insert_after(path, rb"<UnstructuredGrid\b[^>]*>", _vtu_field_data(text))
     elif file_format == "vtk":
         # meshio writes points, cells and cell types; the metadata must come before the cell data.
         meshio.vtk.write(path, meshio.Mesh(flat_points(X), cells), fmt_version="4.2", binary=True)
@@ -63,7 +64,7 @@ def write(path, X, cell_data, metadata):
         # Inline XML keeps the mesh one self-contained file, so the atomic rename covers all of it.
         meshio.xdmf.write(path, mesh, data_format="XML")
         if text:
-            _insert_after(path, b'<Grid Name="Grid">', _xdmf_information(text))
+            _insert_after(path, rb"<Grid\b[^>]*>", _xdmf_information(text))
 
 
 def read(path):
@@ -115,14 +116,14 @@ def _xdmf_information(text: str) -> bytes:
     return f'<Information Name="{METADATA_KEY}" Value="{value}">&lt;{METADATA_KEY}/&gt;</Information>'.encode("ascii")
 
 
-def _insert_after(path, marker: bytes, insertion: bytes) -> None:
-    """Insert ``insertion`` right after the first ``marker`` in the header of the file at ``path``."""
+def _insert_after(path, start_tag: bytes, insertion: bytes) -> None:
+    """Insert ``insertion`` right after the first match of the regular expression ``start_tag``
+    in the header of the file at ``path``."""
     with open(path, "r+b") as file:
-        head = file.read(HEADER_BYTES)
-        position = head.find(marker)
-        if position < 0:
-            raise FormatError(f"could not find {marker.decode()} in the file meshio wrote; metadata not stored")
-        position += len(marker)
+        match = re.search(start_tag, file.read(HEADER_BYTES))
+        if match is None:
+            raise FormatError(f"no {start_tag.decode()} in the file meshio wrote, so no place for the metadata")
+        position = match.end()
         file.seek(position)
         rest = file.read()
         file.seek(position)
