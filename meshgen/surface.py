@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshgen.atomic import check_output_file
 from meshgen.errors import MeshgenError
 
 SURFACE_EXTENSIONS = (".stl", ".ply", ".obj", ".off")
@@ -59,16 +60,7 @@ def check_surface_path(path) -> Path:
     path = Path(path)
     if path.suffix.lower() not in SURFACE_EXTENSIONS:
         raise MeshgenError(f"unknown surface extension {path.suffix or '(none)'}; pick one of {', '.join(SURFACE_EXTENSIONS)}")
-    if path.is_dir():
-        raise MeshgenError(f"output {path} is a folder; give a file name such as {path / ('surface' + SURFACE_EXTENSIONS[0])}")
-    folder = path.parent if str(path.parent) else Path(".")
-    if folder.exists() and not folder.is_dir():
-        raise MeshgenError(f"output folder {folder} is not a folder")
-    if not folder.is_dir():
-        raise MeshgenError(f"output folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise MeshgenError(f"output folder {folder} is not writable")
-    return path
+    return check_output_file(path, "surface" + SURFACE_EXTENSIONS[0])
 
 
 def write_surface(geometry, path, resolution: int = 64):

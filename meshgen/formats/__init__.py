@@ -67,16 +67,10 @@ def format_for(path: str | os.PathLike) -> Format:
 def check_output_path(path: str | os.PathLike) -> Path:
     """Validate an output path before any work is done: known extension, existing writable folder,
     not a folder itself. Returns it as a Path."""
-    path = Path(path)
+    from meshgen.atomic import check_output_file
+
     format_for(path)
-    if path.is_dir():
-        raise FormatError(f"output {path} is a folder; give a file name such as {path / ('mesh' + extensions()[0])}")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise FormatError(f"output folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise FormatError(f"output folder {folder} is not writable")
-    return path
+    return check_output_file(path, "mesh" + extensions()[0])
 
 
 def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dict | None = None) -> Path:
