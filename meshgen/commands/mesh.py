@@ -11,7 +11,7 @@ from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 @click.option("--method", "-m", default="tfi", show_default=True, help="Meshing method: tfi, elliptic.")
 @geometry_options()
 @dims_option()
-@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz).")
+@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt).")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
 @click.option(
