@@ -175,15 +175,15 @@ def winslow_operator(R: np.ndarray, grid: Stencils) -> tuple[np.ndarray, list[np
     inverse_trace = 1.0 / sum(A[a, a] for a in axes)
 
     residual = np.zeros((dim,) + inverse_trace.shape)
+    for a, b in itertools.combinations(axes, 2):
+        derivative_b, factor_b = along[b]  # interior along b; the stencil trims a and the third axis
+        values, factor_a = _stencil(derivative_b, a, grid.first[a], tuple(c for c in axes if c not in (a, b)))
+        values *= A[a, b] * (2.0 * factor_a * factor_b * inverse_trace)
+        residual += values
+    del along, r, g  # memory: dim + 1 mesh-sized arrays
     for a in axes:
         values, factor = _stencil(R, a, grid.second[a], tuple(b for b in axes if b != a))
         values *= A[a, a] * (factor * inverse_trace)
-        residual += values
-    for a, b in itertools.combinations(axes, 2):
-        derivative_b, factor_b = along[b]
-        values, factor_a = _stencil(derivative_b, a, grid.first[a], tuple(c for c in axes if c not in (a, b)))
-        # derivative_b is already interior along b; _stencil trims a and the third axis
-        values *= A[a, b] * (2.0 * factor_a * factor_b * inverse_trace)
         residual += values
     return residual, [A[a, a] * inverse_trace for a in axes]
 

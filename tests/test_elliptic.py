@@ -303,6 +303,16 @@ def test_transfers_on_nested_and_odd_grids():
     np.testing.assert_allclose(along_axes([m.T for m in level.prolong], F), expected)
 
 
+def test_weakly_coupled_axis_waits_to_be_coarsened():
+    """Cells 10 times longer along zeta couple 100 times more weakly along it: coarsen xi and eta
+    first, until their coupling has dropped to zeta's."""
+    coords = parametric_grid((32, 32, 32))
+    sizes = [[len(t) - 1 for t in level.grid.coords] for level in hierarchy(coords, [1.0, 1.0, 0.01])]
+    assert sizes == [[32, 32, 32], [16, 16, 32], [8, 8, 32], [4, 4, 16], [4, 4, 8], [4, 4, 4]]
+    sizes = [[len(t) - 1 for t in level.grid.coords] for level in hierarchy(coords, [1.0, 0.5, 0.2])]
+    assert sizes == [[32, 32, 32], [16, 16, 16], [8, 8, 8], [4, 4, 4]]
+
+
 def test_interpolation_matrix_is_linear_interpolation():
     source, target = np.array([0.0, 0.3, 0.5, 1.0]), np.linspace(0.0, 1.0, 7)
     values = np.sin(source)
