@@ -53,10 +53,6 @@ class Stencils:
     def dim(self) -> int:
         return len(self.coords)
 
-    @property
-    def node_shape(self) -> tuple[int, ...]:
-        return tuple(len(t) for t in self.coords)
-
 
 def stencils(coords) -> Stencils:
     """Finite-difference weights of the parametric node coordinates ``coords`` (one 1D array of
@@ -68,7 +64,7 @@ def stencils(coords) -> Stencils:
         if len(t) < 3:
             raise ValueError(f"axis {axis} has {len(t) - 1} cell(s): the Winslow stencil needs at least 2")
         spacing = np.diff(t)
-        if np.all(spacing <= 0):
+        if np.any(spacing <= 0):
             raise ValueError(f"parametric coordinates of axis {axis} must increase")
         h = (t[-1] - t[0]) / (len(t) - 1)
         if np.allclose(spacing, h, rtol=1e-12, atol=0.0):

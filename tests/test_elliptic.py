@@ -152,7 +152,14 @@ def test_residual_matches_reference_implementation(dims):
 
 @pytest.mark.parametrize(
     "name, dims",
-    [("semidisk", (10, 6)), ("semidisk", (9, 7)), ("semicylinder", (6, 4, 6)), ("semicylinder", (5, 4, 7))],
+    [
+        ("semidisk", (10, 6)),
+        ("semidisk", (9, 7)),
+        ("semidisk", (24, 20)),
+        ("semicylinder", (6, 4, 6)),
+        ("semicylinder", (5, 4, 7)),
+        ("semicylinder", (10, 9, 8)),
+    ],
 )
 def test_multigrid_converges_to_the_plain_jacobi_solution(name, dims):
     """Odd sizes (9, 7, 5) make non-nested coarse grids; the answer must not depend on them."""
@@ -249,7 +256,7 @@ def test_elliptic_beats_tfi_on_mean_minimum_angle(semicylinder):
 
 def test_not_converging_is_reported():
     geometry = load_geometry("semidisk")
-    with pytest.warns(ConvergenceWarning, match="did not converge after|did not converge"):
+    with pytest.warns(ConvergenceWarning, match="did not converge"):
         X, info = elliptic(geometry, (16, 16), max_iter=1)
     assert not info["converged"] and info["iterations"] == 1 and info["final_update"] > 1e-6
     assert "1e-06" in info["warnings"][0] and f"{info['final_update']:.3g}" in info["warnings"][0]
