@@ -109,7 +109,18 @@ def _parse_gates(ctx, param, values):
         raise click.BadParameter(str(exc)) from None
 
 
-@click.command("evaluate")
+EPILOG = """\b
+Gate quantities: METRIC.STAT, METRIC one of min_angle, max_angle, equiangle_skewness,
+aspect_ratio, centroid_skewness, non_orthogonality, scaled_jacobian and STAT one of mean, min,
+max, p01, p99; inverted.count, inverted.fraction, inverted.percent, valid (true/false), cells,
+boundary_deviation.max, .mean, .max_rel, .mean_rel. Operators: < <= > >= == !=.
+
+\b
+Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that cannot be evaluated.
+"""
+
+
+@click.command("evaluate", epilog=EPILOG)
 @click.argument("meshes", nargs=-1, required=True, metavar="MESH...")
 @geometry_options(default=None)
 @click.option("--json", "json_path", metavar="FILE", help="Write the report as JSON ('-' for stdout): one mesh an object, several a list.")
