@@ -108,8 +108,27 @@ def project_to_faces(points, face, uv, boundary_map, dim):
         s0 = surface[active]
         J = [(probed[j * k : (j + 1) * k] - s0) / step[:, j : j + 1] for j in range(m)]
         scale = sum(np.einsum("ij,ij->i", Jj, Jj) for Jj in J) + np.finfo(float).tiny
+        # Stationary: the residual is normal to the face (projected gradient ~ 0). 1e-6 is above the
+        # finite-difference error of J and, the distance being stationary there, changes it by
+        # about 1e-12 of itself.
+        r = s0 - p
+        gradient = 0.0
+        for j in range(m):
+            g = np.einsum("ij,ij->i", J[j], r)
+            g = np.where(((u[:, j] <= 0.0) & (g > 0.0)) | ((u[:, j] >= 1.0) & (g < 0.0)), 0.0, g)
+            gradient = gradient + g * g
+        moving = np.sqrt(gradient) > 1e-6 * np.sqrt(scale) * distance[active]
+        if m == 2:
+            # Where the face's parametrisation degenerates (J of rank 1, e.g. a square's corner
+            # mapped onto a smooth arc) a zero gradient proves nothing: keep iterating there.
+            a, b, c = (np.einsum("ij,ij->i", J[i], J[j]) for i, j in ((0, 0), (0, 1), (1, 1)))
+            moving |= a * c - b * b <= 1e-6 * scale * scale
+        active, f, u, p, r, s0, scale = (a[moving] for a in (active, f, u, p, r, s0, scale))
+        J = [Jj[moving] for Jj in J]
+        if len(active) == 0:
+            break
         lam = np.where(np.isnan(damping[active]), 1e-6 * scale, damping[active])
-        delta = _damped_step(J, s0 - p, u, lam)
+        delta = _damped_step(J, r, u, lam)
         candidate = np.clip(u + delta, 0.0, 1.0)
         s = boundary_map(_lift(dim, f, candidate))
         d = np.linalg.norm(s - p, axis=1)
@@ -118,7 +137,7 @@ def project_to_faces(points, face, uv, boundary_map, dim):
         good = active[better]
         uv[good], surface[good], distance[good] = candidate[better], s[better], d[better]
         damping[active] = np.where(better, lam / 4.0, lam * 8.0)
-        # Done: a step below round-off of the parameters, or damping so large that no step is left.
+        # Also done: a step below round-off of the parameters, or damping so large no step is left.
         done = (moved <= 1e-14) | (~better & (lam > 1e12 * scale))
         active = active[~done]
     return distance, uv

@@ -444,11 +444,24 @@ def _sort4(columns):
     return [a, b, c, d]
 
 
-def _hash_rows(columns) -> np.ndarray:
-    """A well-mixed 64-bit hash of integer rows (wrapping uint64 arithmetic)."""
-    h = np.full(len(columns[0]), 0x9E3779B97F4A7C15, dtype=np.uint64)
-    for column in columns:
-        h ^= column.astype(np.uint64)
+def _words(columns) -> list[np.ndarray]:
+    """Row-sorted node-id columns as uint64 words, two ids per word where they fit in 32 bits
+    (half the hashing and comparing): written side by side as uint32 and viewed as one uint64."""
+    if max(int(c.max()) for c in columns) >= 2**32:
+        return [c.astype(np.uint64) for c in columns]
+    words = []
+    for j in range(0, len(columns), 2):
+        halves = np.empty((len(columns[j]), 2), dtype=np.uint32)
+        halves[:, 0], halves[:, 1] = columns[j], columns[j + 1]
+        words.append(halves.view(np.uint64).reshape(-1))
+    return words
+
+
+def _hash_rows(words) -> np.ndarray:
+    """A well-mixed 64-bit hash of rows of uint64 words (wrapping uint64 arithmetic)."""
+    h = np.full(len(words[0]), 0x9E3779B97F4A7C15, dtype=np.uint64)
+    for word in words:
+        h ^= word
         h *= np.uint64(0xBF58476D1CE4E5B9)
         h ^= h >> np.uint64(31)
     h *= np.uint64(0x94D049BB133111EB)
@@ -475,6 +488,7 @@ def match_faces(face_nodes, hash_rows=_hash_rows) -> tuple[np.ndarray, int]:
         columns = _sort4(columns)
     else:
         columns = [np.minimum(columns[0], columns[1]), np.maximum(columns[0], columns[1])]
+    columns = _words(columns)
     index_bits = max(1, int(F - 1).bit_length())
     mask = np.uint64((1 << index_bits) - 1)
     packed = hash_rows(columns)
@@ -563,10 +577,13 @@ def _unstructured(points, cells):
     # One trailing NaN: neighbour index -1 (no neighbour) then reads "none".
     centroid_ext = tuple(np.append(c, np.nan) for c in centroid)
 
-    # Face f of cell c is row c * n_faces + f; one column per face corner.
-    face_nodes = [cells[:, face_corners[:, j]].reshape(-1) for j in range(face_corners.shape[1])]
+    # Face f of cell c is row f * n_cells + c; one column per face corner (rows of the transposed
+    # connectivity: contiguous copies, not a scattered gather).
+    corner_rows = np.ascontiguousarray(cells.T)
+    face_nodes = [corner_rows[face_corners[:, j]].reshape(-1) for j in range(face_corners.shape[1])]
+    del corner_rows
     partner, nonmanifold = match_faces(face_nodes)
-    neighbour_cell = np.where(partner >= 0, partner // n_faces, -1).reshape(n_cells, n_faces)
+    neighbour_cell = np.where(partner >= 0, partner % n_cells, -1).reshape(n_faces, n_cells)
     open_faces = partner < 0
     boundary_nodes = np.flatnonzero(_used(np.concatenate([column[open_faces] for column in face_nodes]), len(points)))
     del face_nodes, partner
@@ -582,7 +599,7 @@ def _unstructured(points, cells):
         block = slice(first, min(n_cells, first + BLOCK_CELLS))
         corner = {s: tuple(c[cells[block, k]] for c in components) for s, k in offsets.items()}
         block_centroid = tuple(c[block] for c in centroid)
-        neighbour = {face: tuple(c[neighbour_cell[block, f]] for c in centroid_ext) for f, face in enumerate(faces)}
+        neighbour = {face: tuple(c[neighbour_cell[f, block]] for c in centroid_ext) for f, face in enumerate(faces)}
         if dim == 3:
             values, short = _hex_kernel(corner, block_centroid, neighbour, tolerance)
         else:
