@@ -31,9 +31,10 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet)
     import time
 
     from meshgen import __version__
-    from meshgen.formats import check_output_path, write_mesh
+    from meshgen.formats import check_output_path
     from meshgen.methods import make_mesh
     from meshgen.clustering import node_coordinates
+    from meshgen.quality import summary_lines, write_mesh_with_quality
 
     output = check_output_path(output)
     geometry = load_selected_geometry(geometry, params, dims)
@@ -51,10 +52,13 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet)
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
-    write_mesh(output, X, metadata=metadata)
+    # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
+    report = write_mesh_with_quality(output, X, geometry, metadata)
     if not quiet:
         cells = 1
         for n in dims:
             cells *= n
         click.echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
         click.echo(f"wrote {output}")
+        for line in summary_lines(report):
+            click.echo(line)
