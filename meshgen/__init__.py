@@ -15,7 +15,12 @@ _LAZY = {
     "tfi": "meshgen.tfi",
     "transfinite": "meshgen.tfi",
     "parametric_grid": "meshgen.tfi",
+    "node_coordinates": "meshgen.clustering",
     "write_mesh": "meshgen.formats",
+    "read_mesh": "meshgen.formats",
+    "cell_metrics": "meshgen.quality",
+    "quality_report": "meshgen.quality",
+    "boundary_deviation": "meshgen.deviation",
     "MeshgenError": "meshgen.errors",
 }
 

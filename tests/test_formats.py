@@ -392,7 +392,11 @@ def test_cli_writes_a_cgns_file_that_passes_cgnscheck(run_cli, tmp_path):
     if cgnscheck is None:
         pytest.skip("cgnscheck not installed (Debian package cgns-convert)")
     rc, output = run_cgnscheck(path)
-    assert rc == 0 and "ERROR" not in output and "WARNING" not in output, output
+    # The quality arrays have meshgen's names, not CGNS's standard data names: cgnscheck warns
+    # about exactly those and about nothing else.
+    warnings = [line for line in output.splitlines() if "WARNING" in line]
+    assert rc == 0 and "ERROR" not in output, output
+    assert warnings == ["WARNING:not a CGNS data-name identifier"] * 7, output
 
 
 def test_cli_unknown_extension_is_one_line_error(run_cli, tmp_path):

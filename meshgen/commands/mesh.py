@@ -33,9 +33,10 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet)
 
     from meshgen import __version__
     from meshgen.commands._progress import progress_display
-    from meshgen.formats import check_output_path, write_mesh
+    from meshgen.formats import check_output_path
     from meshgen.methods import get_method, make_mesh
     from meshgen.clustering import node_coordinates
+    from meshgen.quality import summary_lines, write_mesh_with_quality
 
     output = check_output_path(output)
     geometry = load_selected_geometry(geometry, params, dims)
@@ -55,7 +56,8 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet)
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
-    write_mesh(output, X, metadata=metadata)
+    # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
+    report = write_mesh_with_quality(output, X, geometry, metadata)
     for line in info.get("warnings", []):
         click.echo(f"Warning: {line}", err=True)
     if not quiet:
@@ -69,3 +71,5 @@ def mesh(method, geometry, params, dims, output, tol, max_iter, clusters, quiet)
                 f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
             )
         click.echo(f"wrote {output}")
+        for line in summary_lines(report):
+            click.echo(line)

@@ -14,7 +14,10 @@ them), padded to three columns, and meshgen's metadata as JSON bytes (uint8) in
 
 from __future__ import annotations
 
+import contextlib
 import importlib
+import io
+import sys
 import json
 import os
 from dataclasses import dataclass
@@ -141,9 +144,18 @@ def read_mesh(path):
     suffix = path.suffix.lower()
     module = next((fmt.module for fmt in FORMATS if suffix in fmt.extensions), "meshgen.formats._meshio")
     reader = importlib.import_module(module)
+    captured = io.StringIO()
     try:
-        return reader.read(path)
+        # meshio prints its own "Error:" line and calls sys.exit() on a file it cannot parse.
+        with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
+            mesh = reader.read(path)
+    except SystemExit:
+        said = " ".join(captured.getvalue().replace("Error:", "").split())
+        raise FormatError(f"could not read {path}: {said or 'not a mesh file meshio can read'}") from None
     except FormatError:
         raise
     except Exception as exc:
         raise FormatError(f"could not read {path}: {type(exc).__name__}: {exc}") from exc
+    if captured.getvalue().strip():
+        sys.stderr.write(captured.getvalue())  # the reader's warnings, kept off stdout
+    return mesh
