@@ -7,7 +7,6 @@ evaluated.
 from __future__ import annotations
 
 import json
-import sys
 
 import click
 
