@@ -33,15 +33,16 @@ def markdown_table(header, rows, highlight=frozenset()) -> list[str]:
     return lines
 
 
-def print_table(header, rows, title=None, highlight=frozenset(), file=None) -> None:
-    """Print a table with rich (first column left, others right-aligned; highlighted cells bold green)."""
+def print_table(header, rows, title=None, highlight=frozenset(), caption=None, file=None) -> None:
+    """Print a table with rich (first column left, others right-aligned; highlighted cells bold
+    green; ``caption`` below it)."""
     from rich import box
     from rich.console import Console
     from rich.table import Table
     from rich.text import Text
 
     console = Console(width=200, soft_wrap=False, file=file or sys.stdout)
-    table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left")
+    table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, title_justify="left", caption_justify="left")
     table.add_column(header[0])
     for name in header[1:]:
         table.add_column(name, justify="right")
