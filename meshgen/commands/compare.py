@@ -47,7 +47,9 @@ def _methods_help() -> str:
     type=click.Choice(["min_angle", "max_angle", "equiangle_skewness", "aspect_ratio", "centroid_skewness", "non_orthogonality", "scaled_jacobian"]),
     default="non_orthogonality",
     show_default=True,
-    help="Per-cell metric that colours the pictures.",
+    metavar="METRIC",
+    help="Per-cell metric that colours the pictures: min_angle, max_angle, equiangle_skewness, aspect_ratio, "
+    "centroid_skewness, non_orthogonality or scaled_jacobian.",
 )
 @click.option("--timing-repeats", type=click.IntRange(1), default=1, show_default=True, help="Time meshing as the median of N runs.")
 @click.option("--steps", type=click.IntRange(1), default=None, help="Neural methods: Adam steps of every training run.")
