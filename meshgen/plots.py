@@ -7,7 +7,8 @@ backend and written atomically as PNG.
   cell on its + side (cell index min(n//2, n-1)), computed as on the whole mesh. Each plane is
   drawn on the two physical axes along which it extends most. 2D meshes: one row, every cell.
 - ``loss_curves_figure``: one panel per neural method, L1 (Winslow residual), L2 (boundary) and
-  the weighted total against the step, log scale; dotted lines where a training stage begins.
+  the weighted total against the step, log scale; dotted lines where a training stage begins;
+  the pretraining stage (a fit to TFI, if the history has one) as a separate dashed line.
 
 Pixel size (fixed, at 100 dpi): each panel is ``PANEL_PX`` = 400 x 360 pixels; the sections figure
 adds ``COLORBAR_PX`` = 120 pixels on the right for the colour bar; both add ``TITLE_PX`` = 40 on
@@ -239,10 +240,17 @@ def loss_curves_figure(pictures, path) -> Path | None:
     for c, (label, history) in enumerate(histories):
         axes = _axes(figure, size, c, 0, left=64)
         step = history["step"]
+        # The pretraining stage fits TFI, a loss of another kind: drawn apart, not joined to L1, L2.
+        pretrain = history["stage"] == "pretrain" if "stage" in history else np.zeros(len(step), dtype=bool)
+
+        def positive(values, keep):  # a log axis shows positive values; NaN leaves a gap
+            return np.where(keep & (values > 0), values, np.nan)
+
         for key, name in LOSS_CURVES:
             if key in history:
-                values = np.where(history[key] > 0, history[key], np.nan)  # a log axis shows positive values
-                axes.plot(step, values, label=name, linewidth=1.0)
+                axes.plot(step, positive(history[key], ~pretrain), label=name, linewidth=1.0)
+        if pretrain.any() and "total" in history:
+            axes.plot(step, positive(history["total"], pretrain), color="grey", linestyle="--", linewidth=1.0, label="fit to TFI (pretraining)")
         if "stage" in history:
             changes = np.flatnonzero(history["stage"][1:] != history["stage"][:-1]) + 1
             for index in changes:

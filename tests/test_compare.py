@@ -322,3 +322,49 @@ def test_timed_runs_the_mesher_n_times():
     result, timings = comparing.timed(lambda: calls.append(1) or len(calls), 4)
     assert result == 4 and len(timings) == 4 and len(calls) == 4
     assert statistics.median(timings) >= min(timings) and all(math.isfinite(t) for t in timings)
+
+
+# ---------------------------------------------------------------------------------------------
+# neural methods (run when meshgen.neural is installed)
+
+TINY_BUDGET = [
+    "--steps", "20",
+    "--set", "model.widths=[8,8]",
+    "--set", "pretrain.steps=5",
+    "--set", "points.interior=256",
+    "--set", "points.boundary=256",
+    "--set", "test.interior=100",
+    "--set", "test.boundary=100",
+]  # fmt: skip
+
+
+@pytest.mark.skipif(not HAVE_NEURAL, reason="meshgen.neural not installed")
+def test_neural_method_trains_meshes_and_reuses_its_checkpoint(run_cli, tmp_path):
+    import torch
+
+    result = run_cli("compare", "-g", "semidisk", "--dims", "10", "6", "--methods", "tfi,3dmeshnet", *TINY_BUDGET, "--out", "out")
+    assert result.returncode == 0, result.stderr
+    comparison = json.loads((tmp_path / "out" / "compare.json").read_text())
+    neural = comparison["rows"][1]
+    assert neural["name"] == "3dmeshnet" and neural["kind"] == "neural"
+    checkpoint_path = tmp_path / "out" / "runs" / "3dmeshnet" / "checkpoint.pt"
+    checkpoint = torch.load(checkpoint_path, map_location="cpu", weights_only=True)
+    assert neural["headline"]["test_loss"] == pytest.approx(float(checkpoint["test_loss"]["total"]))
+    assert neural["headline"]["training_seconds"] > 0
+    evaluated = run_cli("evaluate", "out/3dmeshnet.vtu", "--json", "-")
+    report = json.loads(evaluated.stdout)
+    for metric in comparing.HEADLINE_METRICS:
+        assert neural["headline"][metric] == pytest.approx(report["metrics"][metric]["mean"], rel=1e-12)
+    assert neural["headline"]["boundary_deviation_max"] == pytest.approx(report["boundary_deviation"]["max"], rel=1e-9)
+    if HAVE_MATPLOTLIB:
+        assert png_size(tmp_path / "out" / "loss_curves.png") == plots.loss_curves_size(1)
+        assert float(png_pixels(tmp_path / "out" / "loss_curves.png")[..., :3].var()) > 0
+
+    # Reusing the checkpoint: no training, the same network, so the same mesh and test-set loss.
+    again = run_cli("compare", "-g", "semidisk", "--dims", "10", "6", "--methods", "3dmeshnet", "--checkpoint", f"3dmeshnet={checkpoint_path}", "--out", "again")
+    assert again.returncode == 0, again.stderr
+    reused = json.loads((tmp_path / "again" / "compare.json").read_text())["rows"][0]
+    assert reused["headline"]["test_loss"] == neural["headline"]["test_loss"]
+    for metric in comparing.HEADLINE_METRICS:
+        assert reused["headline"][metric] == pytest.approx(neural["headline"][metric], rel=1e-12)
+    assert not (tmp_path / "again" / "runs").exists()
