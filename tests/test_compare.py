@@ -174,17 +174,40 @@ def test_compare_files_gives_the_same_figures_as_the_methods(methods_run, run_cl
 def test_without_matplotlib_the_tables_are_written_and_the_command_says_how_to_get_pictures(tmp_path, monkeypatch):
     from click.testing import CliRunner
 
-    from meshgen.commands.compare import compare
+    from meshgen.cli import cli
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib now raises ImportError
     monkeypatch.chdir(tmp_path)
-    result = CliRunner().invoke(compare, ["-g", "bump", "--dims", "6", "3", "--methods", "tfi", "--out", "out"], catch_exceptions=False)
+    result = CliRunner().invoke(cli, ["compare", "-g", "bump", "--dims", "6", "3", "--methods", "tfi", "--out", "out"])
     assert result.exit_code == 0, result.output
     assert "pip install 'meshgen[plot]'" in result.output
     for name in ("compare.json", "compare.md", "compare.csv", "tfi.vtu"):
         assert (tmp_path / "out" / name).stat().st_size > 0, name
     assert not (tmp_path / "out" / "sections.png").exists()
     assert "pip install 'meshgen[plot]'" in (tmp_path / "out" / "compare.md").read_text()
+
+
+def test_a_failing_method_gets_a_failed_row_and_exit_1_while_the_others_are_compared(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    import meshgen.methods
+    from meshgen.cli import cli
+    from meshgen.errors import MeshgenError
+
+    def broken(geometry, coords):
+        raise MeshgenError("tfi broke")
+
+    monkeypatch.setattr(meshgen.methods, "build_tfi", broken)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(cli, ["compare", "-g", "bump", "--dims", "6", "3", "--out", "out"])
+    assert result.exit_code == 1
+    assert "tfi failed: tfi broke" in result.output
+    comparison = json.loads((tmp_path / "out" / "compare.json").read_text())
+    assert comparison["rows"][0] == {"name": "tfi", "kind": "classical", "error": "tfi broke"}
+    assert comparison["rows"][1]["headline"]["valid"] is True
+    assert comparison["best"] == {}  # one row with figures: nothing to rank
+    assert "- `tfi` failed: tfi broke" in (tmp_path / "out" / "compare.md").read_text()
+    assert not (tmp_path / "out" / "tfi.vtu").exists() and (tmp_path / "out" / "elliptic.vtu").exists()
 
 
 @pytest.mark.parametrize(

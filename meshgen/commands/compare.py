@@ -177,9 +177,9 @@ def _pictures(outcome, metric, out, say) -> list:
     written = []
     undrawable = [p.label for p in outcome.pictures if not plots.drawable(p)]
     if undrawable:
-        comparison.setdefault("notes", []).append(
-            f"Not in the pictures (unstructured 3D meshes have no index mid-planes): {', '.join(undrawable)}."
-        )
+        note = f"not in the pictures (unstructured 3D meshes have no index mid-planes): {', '.join(undrawable)}"
+        say(note)
+        comparison.setdefault("notes", []).append(note[0].upper() + note[1:] + ".")
     sections = plots.sections_figure(outcome.pictures, metric, out / "sections.png", heading)
     if sections is not None:
         written.append(sections)
