@@ -440,12 +440,12 @@ def compare_methods(
     ``checkpoints`` ({method: path}) concern the neural methods (see ``neural_method``).
     ``out_dir``: where meshes (``<method><mesh_format>`` with their quality sidecars) and the
     neural methods' run folders (``runs/<method>/``) go, created after the checks of the input
-    and before any method runs; None keeps nothing. ``say`` receives a
-    line per step. A method that fails with a MeshgenError gets a row with its ``error``.
+    and before any method runs; None keeps nothing. ``say`` receives a line per step. A method
+    that fails with a MeshgenError gets a row with its ``error``; the others still run.
     """
     from meshgen import __version__
     from meshgen.methods import get_method, make_mesh
-    from meshgen.quality import quality_report, write_mesh_with_quality
+    from meshgen.quality import VALID_RULE, quality_report, write_mesh_with_quality
 
     budget = budget or Budget()
     checkpoints = dict(checkpoints or {})
@@ -453,6 +453,8 @@ def compare_methods(
     dims = [len(c) - 1 for c in coords]
 
     # Everything that can be checked is checked before anything runs.
+    if len(coords) != geometry.dim:
+        raise MeshgenError(f"geometry '{geometry.name}' is {geometry.dim}D: it needs {geometry.dim} coordinate axes, got {len(coords)}")
     neural = [name for name in methods if name in NEURAL_PRESETS]
     for name in checkpoints:
         if name not in methods:
@@ -537,15 +539,9 @@ def compare_methods(
         "columns": COLUMNS_JSON,
         "best": best_rows(rows),
         "rows": rows,
-        "valid_rule": _valid_rule(),
+        "valid_rule": VALID_RULE,
     }
     return Outcome(comparison, pictures)
-
-
-def _valid_rule() -> str:
-    from meshgen.quality import VALID_RULE
-
-    return VALID_RULE
 
 
 def check_mesh_files(paths) -> list[Path]:
@@ -568,7 +564,7 @@ def compare_files(paths, geometry=None, params: dict | None = None) -> Outcome:
     """
     from meshgen import __version__
     from meshgen.formats import read_mesh
-    from meshgen.quality import as_node_array, cells_for_quality, evaluate_file, recorded_metadata
+    from meshgen.quality import VALID_RULE, as_node_array, cells_for_quality, evaluate_file, recorded_metadata
 
     paths = check_mesh_files(paths)
     rows, pictures = [], []
@@ -605,7 +601,7 @@ def compare_files(paths, geometry=None, params: dict | None = None) -> Outcome:
         "columns": COLUMNS_JSON,
         "best": best_rows(rows),
         "rows": rows,
-        "valid_rule": _valid_rule(),
+        "valid_rule": VALID_RULE,
     }
     return Outcome(comparison, pictures)
 
