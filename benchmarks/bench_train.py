@@ -34,7 +34,7 @@ from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, norma
 from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
 from meshgen.neural.report import quality_summary, snap_boundary  # noqa: E402
 from meshgen.neural.train import Problem, adam_step, boundary_pool, make_optimizer, train  # noqa: E402
-from meshgen.tfi import parametric_grid, tfi  # noqa: E402
+from meshgen.tfi import parametric_grid  # noqa: E402
 
 VARIANTS = ["default", "fd-pinn", "exact", "pinn", "mgnet", "rwgp-pinn"]
 SIZES = {"default": [48, 48, 48], "paper": [85, 85, 85, 85]}
@@ -90,6 +90,10 @@ def step_table(geometry, sizes, repeats):
             rows.append({"sizes": size_name, "widths": widths, "variant": preset, "derivatives": derivatives,
                          "seconds_per_step": seconds})
             print(f"  {size_name:8s} {preset:10s} {derivatives:9s} {seconds * 1e3:8.2f} ms/step", flush=True)
+        loop = loop_seconds_per_step(geometry, widths, 60 + 2 * repeats)
+        rows.append({"sizes": size_name, "widths": widths, "variant": "default inside the training loop",
+                     "derivatives": "fd", "seconds_per_step": loop})
+        print(f"  {size_name:8s} default inside the training loop: {loop * 1e3:.2f} ms/step", flush=True)
         # the floor: one forward and backward pass over the points an fd step evaluates
         grid_nodes = (16 + 2) ** geometry.dim + 6000
         floor = forward_backward_seconds(widths, geometry.dim, grid_nodes, repeats)
@@ -108,8 +112,36 @@ def ratios(rows):
             "pinn / fd-pinn": by[(size, "pinn")] / by[(size, "fd-pinn")],
             "rwgp-pinn / default (3dmeshnet)": by[(size, "rwgp-pinn")] / by[(size, "default")],
             "default overhead over forward+backward": by[(size, "default")] / by[(size, "forward+backward only")] - 1,
+            "training-loop overhead over the step": by[(size, "default inside the training loop")] / by[(size, "default")] - 1,
         }
     return out
+
+
+class RowKeeper:
+    """A reporter that keeps the history rows."""
+
+    def __init__(self):
+        self.rows = []
+
+    def stage(self, name, done, total):
+        pass
+
+    def message(self, text):
+        pass
+
+    def update(self, row, done, total):
+        self.rows.append(row)
+
+
+def loop_seconds_per_step(geometry, widths, steps):
+    """Seconds per Adam step inside ``train``: the step plus what the loop adds (divergence-guard
+    snapshot, history row, finiteness check), from the rows' clocks between steps 50 and ``steps``."""
+    config = resolve_config("default", None, [f"model.widths={widths}", "points.interior=4096", "pretrain.steps=0",
+                                              f"adam.steps={steps}", "lbfgs.steps=0", "checkpoint.every=100000"])
+    keeper = RowKeeper()
+    with tempfile.TemporaryDirectory() as folder:
+        train(config, geometry, folder, reporter=keeper, summary=False)
+    return (keeper.rows[-1]["seconds"] - keeper.rows[50]["seconds"]) / (steps - 1 - 50)
 
 
 class QualityProbe:

@@ -23,7 +23,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from meshgen.neural.checkpoint import load_checkpoint  # noqa: F401  (part of this module's contract)
+from meshgen.neural.checkpoint import load_checkpoint
+
+__all__ = ["MLP", "bubble", "normalisation", "describe", "load_checkpoint", "mesh_from_checkpoint"]
 
 INPUT_MAP = "2*xi-1"
 

@@ -2,16 +2,19 @@
 
 One run goes through up to three stages, each a number of steps in the configuration:
 
-1. ``pretrain``: Adam fit of the network to TFI (so training starts from a valid map that already
-   meets the boundary, instead of a random one that first cuts the geometry's corners);
+1. ``pretrain``: an L-BFGS least-squares fit of the network to TFI, so that training starts from
+   a valid map that meets the boundary instead of a random one that first cuts the geometry's
+   corners (DESIGN section 10);
 2. ``adam``: the method proper. Each step samples a training grid (fd) or random interior points
    (autograd) and boundary points, computes L1 (Winslow residual) and L2 (boundary), their
    gradients g1, g2 on the network's weights, combines them (PCGrad or a plain sum), gives the
-   reweighting parameters their gradient of L, and takes an Adam step with step decay;
+   reweighting parameters their gradient of L, and takes an Adam step with step decay. With
+   ``method.balance_start`` the weights a1, a2 start at the stationary point of L for the
+   first losses;
 3. ``lbfgs``: L-BFGS with a strong Wolfe line search on fixed points and frozen weights a1, a2.
 
-Everything is computed on the geometry normalised to unit size (``model.normalisation``); the
-checkpoint stores the centre and scale. All randomness after the network's initialisation comes
+Everything is computed on the geometry normalised to unit size (``model.normalisation``: centre
+of the bounding box, largest extent); the checkpoint stores the centre and scale. All randomness after the network's initialisation comes
 from one generator whose state the checkpoint keeps, so a resumed run repeats an uninterrupted one.
 """
 
@@ -19,9 +22,7 @@ from __future__ import annotations
 
 import copy
 import csv
-import dataclasses
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
