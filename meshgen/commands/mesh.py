@@ -109,15 +109,18 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
     from meshgen.neural.inference import find_model
 
     given_params = parse_params(params)
-    if checkpoint is None:  # the geometry asked for must exist and fit --dims before models are looked up
+    name = None
+    if checkpoint is None and (geometry_given or given_params):
+        # --param without --geometry sets the default geometry's parameters. The geometry must
+        # exist and fit --dims before models are looked up.
         name = load_selected_geometry(spec, params, dims).name
-    else:
-        name = load_geometry(spec, given_params).name if geometry_given else None
+    elif geometry_given:
+        name = load_geometry(spec, given_params).name
     model = find_model(
         checkpoint,
-        geometry_name=name if geometry_given else None,
+        geometry_name=name,
         params=given_params,
-        default_geometry=name,
+        default_geometry=spec,
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
     )
     entry = model.geometry_entry
