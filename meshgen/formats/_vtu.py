@@ -47,7 +47,7 @@ from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
 # zlib level 1: at 1e6 hexahedra with seven quality arrays 3% larger than level 3 and 13% larger
 # than level 6 (meshio's), at 3/4 and 1/3 of their compression time (benchmarks/formats.py).
 LEVEL = 1
-BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: many blocks to share out, few Python calls
+BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: enough blocks to share out, few Python calls
 HEADER_TYPE = np.dtype("<u8")
 VTK_TYPES = {np.dtype("<f8"): "Float64", np.dtype("<i8"): "Int64", np.dtype("u1"): "UInt8"}
 VTK_HEXAHEDRON, VTK_QUAD = 12, 9
@@ -61,7 +61,8 @@ FILE_HEAD = (
 def write(path, X, cell_data, metadata, level: int = LEVEL, block_bytes: int = BLOCK_BYTES):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vtu, with ``cell_data``
     (name -> (cells,) float64 array in C order of the cells) and ``metadata`` (JSON-serialisable
-    dict; none stored when empty). ``level``: zlib level; ``block_bytes``: block size."""
+    dict; none stored when empty). ``level``: zlib level; ``block_bytes``: uncompressed bytes per
+    block, a multiple of 8 (meshio decodes each block into whole values)."""
     from meshgen.formats import METADATA_KEY, metadata_json
 
     node_shape = X.shape[:-1]
