@@ -197,6 +197,19 @@ def test_30_cubed_with_quality_arrays_vtk_recomputes_the_stored_scaled_jacobian(
     assert json.loads(vtk_numpy(output.GetFieldData().GetAbstractArray("meshgen")).tobytes()) == METADATA
 
 
+def test_blocks_where_string_matches_find_little_are_run_length_coded():
+    """Noise-like float64 bytes take the Z_RLE path, regular ones plain deflate; both inflate back."""
+    rng = np.random.default_rng(0)
+    noisy = rng.standard_normal(40_000).tobytes()
+    regular = np.tile(np.linspace(0.0, 1.0, 100), 400).tobytes()
+    rle = zlib.compressobj(_vtu.LEVEL, zlib.DEFLATED, zlib.MAX_WBITS, 8, zlib.Z_RLE)
+    assert _vtu.compress_block(noisy) == rle.compress(noisy) + rle.flush() != zlib.compress(noisy, _vtu.LEVEL)
+    assert _vtu.compress_block(regular) == zlib.compress(regular, _vtu.LEVEL)
+    assert _vtu.compress_block(noisy, rle_above=None) == zlib.compress(noisy, _vtu.LEVEL)
+    for data in (noisy, regular, noisy[:1000], b""):
+        assert zlib.decompress(_vtu.compress_block(data)) == data
+
+
 def test_connectivity_matches_grid_for_uneven_shapes():
     for node_shape in [(2, 2), (7, 3), (2, 2, 2), (4, 3, 5), (3, 6, 2)]:
         np.testing.assert_array_equal(_vtu._connectivity(node_shape), cell_connectivity(node_shape))
