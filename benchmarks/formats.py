@@ -195,7 +195,8 @@ def compress_blocks(arrays, codec) -> list[int]:
     from meshgen.formats import _vtu
 
     with ThreadPoolExecutor(max_workers=_vtu._cpu_count()) as pool:
-        return [len(header) + sum(map(len, streams)) for header, streams in _vtu.compressed_arrays(pool, arrays, codec)]
+        blocks = [_vtu.compress_blocks(pool, np.ascontiguousarray(array), codec) for array in arrays]
+        return [len(block.result()) for array_blocks in blocks for block in array_blocks]
 
 
 if __name__ == "__main__":

@@ -1,11 +1,13 @@
 """VTK XML unstructured grid (.vtu) writer: hexahedron (quad) cells, per-cell arrays and meshgen's
 metadata, zlib-compressed in blocks on all cores.
 
-meshio's writer compresses at zlib's default level (6) on one thread: about 3 s of a 1e6-cell mesh
-with its seven quality arrays. Here the arrays are cut into blocks of ``BLOCK_BYTES`` that a
-thread pool compresses at ``LEVEL`` (zlib releases the GIL) while the calling thread encodes and
-writes the arrays already done, and the cells are built in one broadcast sum. Reading stays with
-meshio (``read``).
+meshio's writer deflates at zlib's default level (6) on one thread: about 3 s of a 1e6-cell mesh
+with its seven quality arrays. Here each array is cut into blocks of ``BLOCK_BYTES`` that a
+thread pool deflates at ``LEVEL`` (zlib releases the GIL) as soon as the array exists, while the
+calling thread builds the next array or encodes and writes the finished ones; blocks where string
+matches find little are deflated with run-length matches only (``compress_block``). Measured on
+2 cores (benchmarks/formats.py): 0.5 s instead of 3.6 s for the TFI semicylinder at 100^3,
+0.9 s instead of 4.4 s with its nodes perturbed. Reading stays with meshio (``read``).
 
 The file, VTK's XML format version 1.0 as VTK writes it in its "binary" data mode::
 
@@ -27,15 +29,16 @@ other. The header is UInt64 little-endian: [number of blocks, block size, size o
 if shorter than a block else 0, compressed size of each block]; each block is ``BLOCK_BYTES`` of
 the array's bytes, the last one possibly fewer.
 
-Inline base64 rather than raw appended data: as fast to write (the encoding is ~5% of the time)
-and meshio reads it directly, whereas it reads raw appended data by decompressing and
-re-encoding it all first (0.6 s against 4.7 s at 1e6 hexahedra); the price is a file 4/3 larger.
+Inline base64 rather than raw appended data: as fast to write (encoding is about 0.1 s of 80 MB)
+and meshio reads it directly, whereas it reads raw appended data by inflating and re-encoding
+all of it first (0.6 s against 4.7 s at 1e6 hexahedra); the price is a file 4/3 larger.
 """
 
 from __future__ import annotations
 
 import base64
 import functools
+import itertools
 import os
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -48,9 +51,10 @@ from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
 # zlib level 1: at 1e6 hexahedra with seven quality arrays 3% larger than level 3 and 13% larger
 # than level 6 (meshio's), at 3/4 and 1/3 of their compression time (benchmarks/formats.py).
 LEVEL = 1
-# Where a block's first PROBE_BYTES shrink to more than RLE_ABOVE of their size at LEVEL, string
+# Where a block's first PROBE_BYTES keep more than RLE_ABOVE of their size at LEVEL, string
 # matches find little (the low bits of computed float64 values): the block is then deflated with
-# run-length matches only (Z_RLE), 1.6-2.3x faster there and 5-10% larger.
+# run-length matches only (Z_RLE), 1.6-2.3x faster on such data and 5-10% larger. The probe costs
+# about 5% where it does not pay (regular meshes).
 PROBE_BYTES = 1 << 16
 RLE_ABOVE = 0.8
 BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: enough blocks to share out, few Python calls
@@ -73,42 +77,40 @@ def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_
     from meshgen.formats import METADATA_KEY, metadata_json
 
     node_shape = X.shape[:-1]
-    connectivity = _connectivity(node_shape)
-    cell_count, corner_count = connectivity.shape
-    field_arrays = []
-    if metadata:
-        codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
-        field_arrays.append((METADATA_KEY, {"NumberOfTuples": codes.size}, codes))
-    # (element, [(name, further attributes, array), ...]) in file order
-    elements = [
-        ("FieldData", field_arrays),
-        ("Points", [("Points", {"NumberOfComponents": 3}, flat_points(X))]),
-        (
-            "Cells",
-            [
-                ("connectivity", {}, connectivity),
-                ("offsets", {}, np.arange(1, cell_count + 1, dtype=np.int64) * corner_count),
-                ("types", {}, np.full(cell_count, VTK_HEXAHEDRON if len(node_shape) == 3 else VTK_QUAD, dtype=np.uint8)),
-            ],
-        ),
-        ("CellData", [(name, {}, values) for name, values in cell_data.items()]),
-    ]
-    elements = [(element, [(name, more, _little_endian(a)) for name, more, a in arrays]) for element, arrays in elements]
-
+    cell_count = int(np.prod([n - 1 for n in node_shape]))
+    compress = functools.partial(compress_block, level=level, rle_above=rle_above)
     pool = ThreadPoolExecutor(max_workers=_cpu_count())
+    arrays = []  # (element, name, further attributes, type, bytes, compressed blocks) in file order
+
+    def add(element, name, more, values):
+        # Each array is handed to the pool as soon as it exists: the points compress while the
+        # cells are built.
+        values = _little_endian(values)
+        arrays.append((element, name, more, values.dtype, values.nbytes, compress_blocks(pool, values, compress, block_bytes)))
+
     try:
-        compress = functools.partial(compress_block, level=level, rle_above=rle_above)
-        compressed = compressed_arrays(pool, [a for _, arrays in elements for *_, a in arrays], compress, block_bytes)
+        if metadata:
+            codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
+            add("FieldData", METADATA_KEY, {"NumberOfTuples": codes.size}, codes)
+        add("Points", "Points", {"NumberOfComponents": 3}, flat_points(X))
+        connectivity = _connectivity(node_shape)
+        corner_count = connectivity.shape[1]
+        add("Cells", "connectivity", {}, connectivity)
+        add("Cells", "offsets", {}, np.arange(1, cell_count + 1, dtype=np.int64) * corner_count)
+        add("Cells", "types", {}, np.full(cell_count, VTK_HEXAHEDRON if len(node_shape) == 3 else VTK_QUAD, dtype=np.uint8))
+        for name, values in cell_data.items():
+            add("CellData", name, {}, values)
+
         with open(path, "wb") as file:
             file.write(FILE_HEAD)
-            for element, arrays in elements:
+            for element, group in itertools.groupby(arrays, key=lambda array: array[0]):
                 if element == "Points":
                     file.write(f'<Piece NumberOfPoints="{int(np.prod(node_shape))}" NumberOfCells="{cell_count}">\n'.encode())
-                if arrays:
-                    file.write(f"<{element}>\n".encode())
-                    for (name, more, array), (header, streams) in zip(arrays, compressed):
-                        _write_data_array(file, name, more, array.dtype, header, streams)
-                    file.write(f"</{element}>\n".encode())
+                file.write(f"<{element}>\n".encode())
+                for _, name, more, dtype, nbytes, blocks in group:
+                    streams = [block.result() for block in blocks]
+                    _write_data_array(file, name, more, dtype, compression_header(nbytes, block_bytes, streams), streams)
+                file.write(f"</{element}>\n".encode())
             file.write(b"</Piece>\n</UnstructuredGrid>\n</VTKFile>\n")
     finally:
         pool.shutdown(cancel_futures=True)  # after a failure (or Ctrl-C), drop the blocks not yet started
@@ -125,18 +127,16 @@ def compress_block(block, level: int = LEVEL, rle_above: float | None = RLE_ABOV
     return probe if len(block) <= PROBE_BYTES else zlib.compress(block, level)
 
 
-def compressed_arrays(pool, arrays, compress=compress_block, block_bytes: int = BLOCK_BYTES):
-    """Iterate over C-contiguous ``arrays`` compressed as VTK stores them: per array
-    ``(header, streams)``, the compression header (bytes) and the zlib stream of each block,
-    ``compress(block)``. The blocks of all arrays go to ``pool`` at once, so later arrays are
-    compressed while the caller writes earlier ones."""
-    views = [memoryview(array).cast("B") for array in arrays]
-    blocks = [view[start : start + block_bytes] for view in views for start in range(0, len(view), block_bytes)]
-    streams_in_order = pool.map(compress, blocks)
-    for view in views:
-        streams = [next(streams_in_order) for _ in range(0, len(view), block_bytes)]
-        header = np.array([len(streams), block_bytes, len(view) % block_bytes, *map(len, streams)], dtype=HEADER_TYPE)
-        yield header.tobytes(), streams
+def compress_blocks(pool, array: np.ndarray, compress=compress_block, block_bytes: int = BLOCK_BYTES) -> list:
+    """Futures of ``compress(block)`` for the blocks of ``block_bytes`` of C-contiguous ``array``."""
+    view = memoryview(array).cast("B")
+    return [pool.submit(compress, view[start : start + block_bytes]) for start in range(0, len(view), block_bytes)]
+
+
+def compression_header(nbytes: int, block_bytes: int, streams) -> bytes:
+    """VTK's header of a compressed array of ``nbytes`` bytes: [number of blocks, block size, size
+    of the last block if shorter else 0, compressed size of each block], ``HEADER_TYPE``."""
+    return np.array([len(streams), block_bytes, nbytes % block_bytes, *map(len, streams)], dtype=HEADER_TYPE).tobytes()
 
 
 def _connectivity(node_shape) -> np.ndarray:
