@@ -889,13 +889,14 @@ def recorded_metadata(path, mesh) -> dict:
     return {}
 
 
-def evaluate_file(path, geometry=None, params: dict | None = None) -> dict:
+def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
 
     ``geometry``: a name or plugin path, a Geometry, or None for the geometry the file (or its
     sidecar) records; ``params`` override the geometry's parameters. A file that is meshgen's own
-    structured grid takes the structured path. MeshgenError when nothing can be evaluated.
+    structured grid takes the structured path. ``mesh``: the file as ``read_mesh(path)`` returned
+    it, for a caller that needs it too (read once). MeshgenError when nothing can be evaluated.
     """
     from meshgen.errors import GeometryError
     from meshgen.formats import read_mesh
@@ -906,7 +907,8 @@ def evaluate_file(path, geometry=None, params: dict | None = None) -> dict:
         raise MeshgenError(f"mesh file {path} does not exist")
     if path.stat().st_size == 0:
         raise MeshgenError(f"mesh file {path} is empty")
-    mesh = read_mesh(path)
+    if mesh is None:
+        mesh = read_mesh(path)
     try:
         points, cells, skipped = cells_for_quality(mesh)
     except MeshgenError as exc:

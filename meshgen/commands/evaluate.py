@@ -7,11 +7,11 @@ evaluated.
 from __future__ import annotations
 
 import json
-import sys
 
 import click
 
 from meshgen.commands._options import geometry_options
+from meshgen.tables import number as _number
 
 METRIC_LABELS = {
     "min_angle": "min angle (deg)",
@@ -23,16 +23,6 @@ METRIC_LABELS = {
     "scaled_jacobian": "scaled Jacobian",
 }
 STAT_LABELS = {"mean": "mean", "min": "min", "max": "max", "p01": "p01", "p99": "p99"}  # as in --json and --fail-if
-
-
-def _number(value) -> str:
-    if value is None:
-        return "n/a"
-    if isinstance(value, bool):
-        return "yes" if value else "NO"
-    if isinstance(value, int):
-        return str(value)
-    return f"{value:.4g}"
 
 
 def _verdict_rows(report) -> list[tuple[str, str]]:
@@ -77,14 +67,13 @@ def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
 
 def markdown(reports, gate_results) -> str:
     """The quality tables as Markdown (a CI job summary), with the gates' outcome."""
-    escape = lambda text: str(text).replace("|", "\\|")  # noqa: E731
+    from meshgen.tables import markdown_table
+
     lines = ["## Mesh quality", ""]
     if len(reports) == 1:
         lines += [f"`{reports[0]['file']}`", ""]
     for header, rows in tables(reports):
-        lines.append("| " + " | ".join(map(escape, header)) + " |")
-        lines.append("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
-        lines += ["| " + " | ".join(map(escape, row)) + " |" for row in rows]
+        lines += markdown_table(header, rows)
         lines.append("")
     if gate_results:
         lines += ["### Gates", ""]
@@ -199,17 +188,8 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
 
 
 def _print_table(reports) -> None:
-    from rich import box
-    from rich.console import Console
-    from rich.table import Table
+    from meshgen.tables import print_table
 
-    console = Console(width=200, soft_wrap=False, file=sys.stdout)
     for number, (header, rows) in enumerate(tables(reports)):
         title = "mesh quality" + (f": {reports[0]['file']}" if len(reports) == 1 else "") if number == 0 else None
-        table = Table(title=title, box=box.SIMPLE_HEAD, title_justify="left")
-        table.add_column(header[0])
-        for name in header[1:]:
-            table.add_column(name, justify="right")
-        for row in rows:
-            table.add_row(*row)
-        console.print(table)
+        print_table(header, rows, title=title)
