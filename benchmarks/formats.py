@@ -161,7 +161,7 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
             f"{row['writer']:<24}{row['write_s']:>10.2f}{row['write_cpu_s']:>9.2f}{row['size_mb']:>11.1f}"
             f"{row['meshio_read_s']:>17.2f}{row['vtk_read_s']:>14.2f}"
         )
-    print(f"  * the default: level {_vtu.LEVEL}, Z_RLE for blocks whose {_vtu.PROBE_BYTES // 1024} KiB probe shrinks to more than {_vtu.RLE_ABOVE}")
+    print(f"  * the default: level {_vtu.LEVEL}, Z_RLE for blocks whose first {_vtu.PROBE_BYTES // 1024} KiB keep more than {_vtu.RLE_ABOVE} of their size at level {_vtu.LEVEL}")
 
     # The codecs alone: the same arrays, the writer's blocks and thread pool.
     arrays = [flat_points(X), cell_connectivity(X.shape[:-1]), *cell_data.values()]
