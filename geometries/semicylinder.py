@@ -7,6 +7,7 @@ Cross-section: the half-disk x^2 + y^2 <= R^2, y >= 0, parametrised by (xi, eta)
 
 import numpy as np
 
+from meshgen.errors import GeometryError
 from meshgen.geometry import load_geometry
 from meshgen.tfi import transfinite
 
@@ -20,6 +21,10 @@ _section = load_geometry("semidisk", check=False)
 
 def boundary(points, radius, length):
     """(N, 3) points on the unit cube's boundary -> (N, 3) points on the half-cylinder's surface."""
+    if radius <= 0 or length <= 0:
+        raise GeometryError(
+            f"geometry 'semicylinder': radius and length must be positive (got radius={radius:g}, length={length:g})"
+        )
     section = _section.with_params(radius=radius)
     # The Coons patch reproduces the section's edges on the side faces and fills the caps.
     xy = transfinite(section.boundary, [points[:, 0], points[:, 1]])

@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from meshgen.errors import GeometryError
+
 name = "semidisk"
 dim = 2
 description = "Half-disk x^2 + y^2 <= R^2, y >= 0 (the semicylinder's cross-section)"
@@ -14,6 +16,8 @@ def boundary(points, radius):
     eta = 0 is the diameter (x = 2 xi - 1); the other three edges share the arc, uniform in angle:
     xi = 0 from pi to 3pi/4, eta = 1 from 3pi/4 to pi/4, xi = 1 from pi/4 to 0.
     """
+    if radius <= 0:
+        raise GeometryError(f"geometry 'semidisk': radius must be positive, got {radius:g}")
     xi, eta = points[:, 0], points[:, 1]
     on_diameter = np.isclose(eta, 0.0, rtol=0.0, atol=1e-14)
     angle = np.where(

@@ -3,7 +3,8 @@
 The node array ``X`` is the one currency between the parts: shape ``(n1+1, n2+1, n3+1, 3)``
 (2D: ``(n1+1, n2+1, 2)``), float64, index order (i, j, k) = (xi, eta, zeta).
 
-Public functions are imported lazily so that ``import meshgen`` stays cheap (no torch, no trimesh).
+Submodules hold the methods (``from meshgen.tfi import tfi``, ``from meshgen.elliptic import
+elliptic``); the names below are imported lazily so that ``import meshgen`` stays cheap (no torch, no trimesh).
 """
 
 __version__ = "0.1.0"
@@ -12,10 +13,16 @@ _LAZY = {
     "load_geometry": "meshgen.geometry",
     "list_geometries": "meshgen.geometry",
     "Geometry": "meshgen.geometry",
-    "tfi": "meshgen.tfi",
     "transfinite": "meshgen.tfi",
     "parametric_grid": "meshgen.tfi",
+    "make_mesh": "meshgen.methods",
+    "winslow_residual": "meshgen.winslow",
+    "node_coordinates": "meshgen.clustering",
     "write_mesh": "meshgen.formats",
+    "read_mesh": "meshgen.formats",
+    "cell_metrics": "meshgen.quality",
+    "quality_report": "meshgen.quality",
+    "boundary_deviation": "meshgen.deviation",
     "MeshgenError": "meshgen.errors",
 }
 

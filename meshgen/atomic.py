@@ -23,3 +23,22 @@ def atomic_path(target: str | os.PathLike):
         with contextlib.suppress(OSError):
             temporary.unlink()
         raise
+
+
+def check_output_file(path: str | os.PathLike, example_name: str) -> Path:
+    """Validate an output file path before any work is done: not a folder, inside an existing,
+    writable folder. ``example_name`` (e.g. "mesh.vtu") is suggested when ``path`` is a folder.
+    Raises MeshgenError; returns the path."""
+    from meshgen.errors import MeshgenError
+
+    path = Path(path)
+    if path.is_dir():
+        raise MeshgenError(f"output {path} is a folder; give a file name such as {path / example_name}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if folder.exists() and not folder.is_dir():
+        raise MeshgenError(f"output folder {folder} is not a folder")
+    if not folder.is_dir():
+        raise MeshgenError(f"output folder {folder} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise MeshgenError(f"output folder {folder} is not writable")
+    return path

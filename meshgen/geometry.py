@@ -78,7 +78,13 @@ class Geometry:
             raise GeometryError(
                 f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}"
             ) from exc
-        mapped = np.asarray(mapped, dtype=float)
+        try:
+            mapped = np.asarray(mapped, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise GeometryError(
+                f"geometry '{self.name}' ({self.source}): boundary() returned something that is not "
+                f"an array of numbers ({type(mapped).__name__})"
+            ) from exc
         if mapped.shape != points.shape:
             raise GeometryError(
                 f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} "
@@ -92,7 +98,19 @@ class Geometry:
     def characteristic_length(self) -> float:
         """Length scale for relative figures: the plugin's own, else the bounding-box diagonal."""
         if self.length_map is not None:
-            return float(self.length_map(**self.values))
+            try:
+                length = float(self.length_map(**self.values))
+            except Exception as exc:  # foreign code, as in boundary()
+                raise GeometryError(
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised "
+                    f"{type(exc).__name__}: {exc}"
+                ) from exc
+            if not (np.isfinite(length) and length > 0):
+                raise GeometryError(
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive "
+                    f"number, got {length!r}"
+                )
+            return length
         corners = np.array(list(itertools.product((0.0, 1.0), repeat=self.dim)))
         samples = np.concatenate([corners, _boundary_samples(self.dim, 9)])
         mapped = self.boundary(samples)
@@ -202,7 +220,11 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
     unknown = sorted(set(values) - set(geometry.defaults))
     if unknown:
         valid = ", ".join(geometry.defaults) or "none"
-        raise GeometryError(f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid})")
+        close = difflib.get_close_matches(unknown[0], list(geometry.defaults), n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise GeometryError(
+            f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}"
+        )
     merged = {**geometry.values, **{k: float(v) for k, v in values.items()}}
     bad = [k for k, v in merged.items() if not np.isfinite(v)]
     if bad:

@@ -31,6 +31,7 @@ def register_method(method: Method) -> None:
 
 
 register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic"))
+register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress")))
 
 
 def get_method(name: str) -> Method:

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
+from meshgen.atomic import check_output_file
 from meshgen.errors import MeshgenError
 
 SURFACE_EXTENSIONS = (".stl", ".ply", ".obj", ".off")
@@ -52,16 +54,20 @@ def boundary_surface(geometry, resolution: int = 64):
     return surface
 
 
+def check_surface_path(path) -> Path:
+    """Validate a surface output path before any work: known extension, an existing writable
+    folder, not a folder itself. Returns it as a Path."""
+    path = Path(path)
+    if path.suffix.lower() not in SURFACE_EXTENSIONS:
+        raise MeshgenError(f"unknown surface extension {path.suffix or '(none)'}; pick one of {', '.join(SURFACE_EXTENSIONS)}")
+    return check_output_file(path, "surface" + SURFACE_EXTENSIONS[0])
+
+
 def write_surface(geometry, path, resolution: int = 64):
     """Write ``boundary_surface`` to ``path`` (STL, PLY, OBJ or OFF by extension), atomically."""
     from meshgen.atomic import atomic_path
 
-    path = Path(path)
-    if path.suffix.lower() not in SURFACE_EXTENSIONS:
-        raise MeshgenError(f"unknown surface extension {path.suffix or '(none)'}; pick one of {', '.join(SURFACE_EXTENSIONS)}")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise MeshgenError(f"output folder {folder} does not exist")
+    path = check_surface_path(path)
     surface = boundary_surface(geometry, resolution)
     try:
         with atomic_path(path) as temporary:

@@ -7,6 +7,7 @@ import re
 import click
 
 _DIM_VALUE = re.compile(r"^(-?\d.*|[^-].*)$")  # anything but an option (negative numbers included)
+_NUMBER = re.compile(r"^[-+]?[\d.]+([eE][-+]?\d+)?$")
 
 
 class DimsCommand(click.Command):
@@ -20,6 +21,10 @@ class DimsCommand(click.Command):
             if token == "--dims":
                 values = []
                 while len(values) < 3 and i + 1 < len(args) and _DIM_VALUE.match(args[i + 1]):
+                    values.append(args[i + 1])
+                    i += 1
+                # A fourth number is a miscount, not an argument: let parse_dims say so.
+                while i + 1 < len(args) and _NUMBER.match(args[i + 1]):
                     values.append(args[i + 1])
                     i += 1
                 joined += [token, ",".join(values)]

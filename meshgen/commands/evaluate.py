@@ -1,9 +1,195 @@
-"""``meshgen evaluate``: arrives in a later release."""
+"""``meshgen evaluate MESH...``: quality table, JSON / Markdown reports, and CI gates (``--fail-if``).
+
+Exit status: 0 when no gate trips, 1 when one does, 2 for usage errors and files that cannot be
+evaluated.
+"""
+
+from __future__ import annotations
+
+import json
 
 import click
 
+from meshgen.commands._options import geometry_options
+from meshgen.tables import number as _number
 
-@click.command("evaluate", context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def evaluate():
-    """Not available in this version yet (see the CHANGELOG)."""
-    raise click.ClickException("'meshgen evaluate' is not available in this version yet")
+METRIC_LABELS = {
+    "min_angle": "min angle (deg)",
+    "max_angle": "max angle (deg)",
+    "equiangle_skewness": "equiangle skewness",
+    "aspect_ratio": "aspect ratio",
+    "centroid_skewness": "centroid skewness",
+    "non_orthogonality": "non-orthogonality (deg)",
+    "scaled_jacobian": "scaled Jacobian",
+}
+STAT_LABELS = {"mean": "mean", "min": "min", "max": "max", "p01": "p01", "p99": "p99"}  # as in --json and --fail-if
+
+
+def _verdict_rows(report) -> list[tuple[str, str]]:
+    inverted = report["inverted"]
+    rows = [
+        ("cells", f"{report['cells']} {report['cell_type']}"),
+        ("inverted cells", f"{inverted['count']} ({100 * inverted['fraction']:.3g}%)"),
+        ("valid (inverted <= 0.5%)", _number(report["valid"])),
+    ]
+    if report.get("skipped"):
+        rows.append(("skipped cells", ", ".join(f"{n} {kind}" for kind, n in report["skipped"].items())))
+    deviation = report.get("boundary_deviation")
+    if deviation:
+        rows.append(("boundary deviation max", f"{_number(deviation['max'])} ({_number(deviation['max_rel'])} of L)"))
+        rows.append(("boundary deviation mean", f"{_number(deviation['mean'])} ({_number(deviation['mean_rel'])} of L)"))
+    else:
+        rows.append(("boundary deviation", "n/a (no geometry)"))
+    return rows
+
+
+def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
+    """(header, rows) of the quality tables: one mesh gives a metric x statistic grid and a
+    verdict table; several give one table with a column per mesh."""
+    from meshgen.quality import METRICS, STATS
+
+    if len(reports) == 1:
+        report = reports[0]
+        header = ["metric", *(STAT_LABELS[s] for s in STATS)]
+        rows = [[METRIC_LABELS[m], *(_number(report["metrics"][m][s]) for s in STATS)] for m in METRICS]
+        return [(header, rows), (["verdict", ""], [list(row) for row in _verdict_rows(report)])]
+    header = ["quantity", *(r["file"] for r in reports)]
+    rows = [
+        [f"{METRIC_LABELS[m]} {STAT_LABELS[s]}", *(_number(r["metrics"][m][s]) for r in reports)]
+        for m in METRICS
+        for s in STATS
+    ]
+    verdicts = [dict(_verdict_rows(r)) for r in reports]
+    labels = list(dict.fromkeys(label for v in verdicts for label in v))
+    rows += [[label, *(v.get(label, "") for v in verdicts)] for label in labels]
+    return [(header, rows)]
+
+
+def markdown(reports, gate_results) -> str:
+    """The quality tables as Markdown (a CI job summary), with the gates' outcome."""
+    from meshgen.tables import markdown_table
+
+    lines = ["## Mesh quality", ""]
+    if len(reports) == 1:
+        lines += [f"`{reports[0]['file']}`", ""]
+    for header, rows in tables(reports):
+        lines += markdown_table(header, rows)
+        lines.append("")
+    if gate_results:
+        lines += ["### Gates", ""]
+        for result in gate_results:
+            status = "**FAILED**" if result["tripped"] else "passed"
+            lines.append(f"- `{result['gate']}` on `{result['file']}`: {status} (value {_number(result['value'])})")
+        lines.append("")
+    lines += [
+        "Angles and non-orthogonality in degrees. Summaries leave degenerate cells out; a cell is inverted "
+        "when its scaled Jacobian is <= 0 at a corner or it is degenerate.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _parse_gates(ctx, param, values):
+    from meshgen.gates import GateError, parse_gate
+
+    try:
+        return [parse_gate(text) for text in values]
+    except GateError as exc:
+        raise click.BadParameter(str(exc)) from None
+
+
+EPILOG = """\b
+Gate quantities: METRIC.STAT, METRIC one of min_angle, max_angle, equiangle_skewness,
+aspect_ratio, centroid_skewness, non_orthogonality, scaled_jacobian and STAT one of mean, min,
+max, p01, p99; inverted.count, inverted.fraction, inverted.percent, valid (true/false), cells,
+boundary_deviation.max, .mean, .max_rel, .mean_rel. Operators: < <= > >= == !=.
+
+\b
+Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that cannot be evaluated.
+"""
+
+
+@click.command("evaluate", epilog=EPILOG)
+@click.argument("meshes", nargs=-1, required=True, metavar="MESH...")
+@geometry_options(default=None)
+@click.option("--json", "json_path", metavar="FILE", help="Write the report as JSON ('-' for stdout): one mesh an object, several a list.")
+@click.option("--markdown", "markdown_path", metavar="FILE", help="Write the table as Markdown (e.g. for a CI job summary).")
+@click.option(
+    "--fail-if",
+    "gates",
+    multiple=True,
+    metavar="EXPR",
+    callback=_parse_gates,
+    help="Exit 1 if EXPR holds for any mesh, e.g. 'inverted.count>0', 'min_angle.mean<70', "
+    "'boundary_deviation.max_rel>1e-3' (repeatable).",
+)
+@click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
+def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
+    """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads).
+
+    Prints per metric the mean, min, max and 1st/99th percentiles, the inverted cells and the
+    validity verdict (valid: inverted cells <= 0.5% of all cells), and the boundary deviation when
+    the geometry is known: files written by meshgen record it; for others pass --geometry.
+    """
+    from meshgen.gates import GateError, check_gates
+    from meshgen.geometry import load_geometry, parse_params
+    from meshgen.quality import evaluate_file, write_json
+
+    parsed_params = parse_params(params)
+    chosen = load_geometry(geometry, parsed_params) if geometry else None
+    reports = [evaluate_file(path, chosen, None if chosen else parsed_params) for path in meshes]
+
+    gate_results = []
+    try:
+        for report in reports:
+            results = check_gates(report, gates)
+            for result in results:
+                result["file"] = report["file"]
+            if gates:
+                report["gates"] = results
+            gate_results += results
+    except GateError as exc:
+        raise click.UsageError(str(exc)) from None
+
+    to_stdout = json_path == "-"
+    if json_path:
+        data = reports[0] if len(reports) == 1 else reports
+        if to_stdout:
+            from meshgen.quality import _nulls
+
+            click.echo(json.dumps(_nulls(data), indent=2, allow_nan=False))
+        else:
+            write_json(json_path, data)
+    if markdown_path:
+        from meshgen.atomic import atomic_path
+        from meshgen.errors import MeshgenError
+
+        try:
+            with atomic_path(markdown_path) as temporary:
+                temporary.write_text(markdown(reports, gate_results))
+        except OSError as exc:
+            raise MeshgenError(f"could not write {markdown_path}: {exc.strerror or exc}") from exc
+
+    if not quiet and not to_stdout:
+        _print_table(reports)
+        for report in reports:
+            for warning in report.get("warnings", []):
+                click.echo(f"warning: {report['file']}: {warning}", err=True)
+    tripped = [r for r in gate_results if r["tripped"]]
+    for result in gate_results:
+        if result["tripped"] or not (quiet or to_stdout):
+            status = "FAILED" if result["tripped"] else "passed"
+            shown = "undefined" if result["value"] is None else _number(result["value"])
+            click.echo(
+                f"gate {result['gate']}: {status} for {result['file']} ({result['quantity']} = {shown})",
+                err=result["tripped"] or to_stdout,
+            )
+    return 1 if tripped else 0
+
+
+def _print_table(reports) -> None:
+    from meshgen.tables import print_table
+
+    for number, (header, rows) in enumerate(tables(reports)):
+        title = "mesh quality" + (f": {reports[0]['file']}" if len(reports) == 1 else "") if number == 0 else None
+        print_table(header, rows, title=title)

@@ -20,9 +20,15 @@ def geometries(ctx, as_json):
     """List the available geometries (built-in, installed plugins) with their parameters."""
     if ctx.invoked_subcommand is not None:
         return
-    from meshgen.geometry import list_geometries
+    from meshgen.errors import GeometryError
+    from meshgen.geometry import available_names, load_geometry
 
-    described = [g.describe() for g in list_geometries()]
+    described = []
+    for name in available_names():
+        try:
+            described.append(load_geometry(name, check=False).describe())
+        except GeometryError as exc:  # one broken installed plugin must not hide the others
+            click.echo(f"Warning: {' '.join(str(exc).split())}", err=True)
     if as_json:
         click.echo(json.dumps(described, indent=2))
         return
@@ -45,11 +51,16 @@ def geometries(ctx, as_json):
 @click.option("--resolution", default=64, show_default=True, type=click.IntRange(2, 2048), help="Samples per face edge.")
 def show(name, params, output, resolution):
     """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0)."""
-    from meshgen.surface import write_surface
+    from meshgen.surface import check_surface_path, write_surface
 
+    check_surface_path(output)  # before loading: a bad path fails fast, whatever the geometry
     geometry = load_selected_geometry(name, params)
     path, surface = write_surface(geometry, output, resolution)
     click.echo(
         f"wrote {path}: {len(surface.vertices)} vertices, {len(surface.faces)} triangles"
-        + (f", watertight, volume {surface.volume:.6g}" if geometry.dim == 3 else f", area {surface.area:.6g}")
+        + (
+            f", {'watertight' if surface.is_watertight else 'NOT watertight'}, volume {surface.volume:.6g}"
+            if geometry.dim == 3
+            else f", area {surface.area:.6g}"
+        )
     )

@@ -1,0 +1,244 @@
+"""CGNS/HDF5 (.cgns): the mesh as ONE structured zone, written with h5py.
+
+The tree (SIDS names and labels; data type and CGNS array shape after the colon)::
+
+    CGNSLibraryVersion      CGNSLibraryVersion_t   R4: [3.4]
+    Base                    CGNSBase_t             I4: [CellDimension, PhysicalDimension]
+      DataClass             DataClass_t            C1: "NormalizedByUnknownDimensional"
+      meshgen               Descriptor_t           C1: meshgen's metadata as JSON
+      Zone                  Zone_t                 I4 (IndexDimension, 3): vertex, cell and
+                                                   boundary-vertex sizes per direction
+        ZoneType            ZoneType_t             C1: "Structured"
+        GridCoordinates     GridCoordinates_t
+          CoordinateX, Y[, Z]  DataArray_t         R8 (ni, nj[, nk]), i fastest
+            DimensionalExponents  DimensionalExponents_t  R4: [0, 1, 0, 0, 0] (a length)
+        FlowSolution        FlowSolution_t         (only with cell data)
+          GridLocation      GridLocation_t         C1: "CellCenter"
+          <name>            DataArray_t            R8 (ni-1, nj-1[, nk-1])
+
+A 3D mesh has IndexDimension = CellDimension = PhysicalDimension = 3, a 2D mesh 2 (x and y only).
+meshgen's coordinates are in the geometry's own, unstated unit: hence the data class
+NormalizedByUnknownDimensional, with the exponents saying that coordinates are lengths. cgnscheck
+then has nothing to warn about, except "not a CGNS data-name identifier" for each cell-data array
+whose name is not one of SIDS' (quality metrics are not).
+
+CGNS/HDF5 mapping (what the CGNS library's ADFH layer reads and cgnscheck checks): every node is an
+HDF5 group with the attributes ``name`` and ``label`` (scalar null-terminated strings of 33 bytes),
+``type`` (3 bytes: MT, C1, I4, R4, R8, ...) and ``flags`` (int32 [1]); its data, if any, is the
+dataset " data" (leading space) whose HDF5 shape is the CGNS shape reversed, so that its C-order
+bytes are the Fortran-order array. The root group is the "HDF5 MotherNode" and also holds the
+datasets " format" (float format of the data) and " hdf5version". Groups track link creation
+order, since the library lists a node's children in that order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshgen.errors import FormatError
+from meshgen.grid import cell_connectivity, flat_points
+
+CGNS_VERSION = 3.4  # the layout below is the one CGNS 3.x and 4.x libraries both read and write
+NAME_LENGTH = 32  # longest CGNS node name or label
+COORDINATE_NAMES = ("CoordinateX", "CoordinateY", "CoordinateZ")
+# Exponents of mass, length, time, temperature and angle.
+LENGTH_EXPONENTS = np.array([0.0, 1.0, 0.0, 0.0, 0.0], dtype="<f4")
+BASE_NAME = "Base"
+ZONE_NAME = "Zone"
+SOLUTION_NAME = "FlowSolution"
+
+
+def write(path, X, cell_data, metadata):
+    """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as one structured zone; ``cell_data``
+    arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor."""
+    import h5py
+
+    from meshgen.formats import METADATA_KEY, metadata_json
+
+    for name in cell_data:
+        _check_name(name, "cell data")
+    node_shape = X.shape[:-1]
+    dim = X.shape[-1]
+    cell_shape = tuple(n - 1 for n in node_shape)
+
+    # libver (earliest, v108): files the HDF5 1.8 and 1.10 libraries of CGNS builds can open.
+    with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
+        _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
+        _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
+        _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
+        _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
+
+        base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
+        _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
+        if metadata:
+            _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
+
+        # Zone_t data is int[3][IndexDimension] in C terms: rows vertex, cell, boundary-vertex sizes.
+        sizes = np.array([node_shape, cell_shape, [0] * dim], dtype="<i4")
+        zone = _node(base, ZONE_NAME, "Zone_t", sizes)
+        _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
+        coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        for axis in range(dim):
+            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", _fortran(X[..., axis]))
+            _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
+        if cell_data:
+            solution = _node(zone, SOLUTION_NAME, "FlowSolution_t")
+            _node(solution, "GridLocation", "GridLocation_t", _chars("CellCenter"))
+            for name, values in cell_data.items():
+                _node(solution, name, "DataArray_t", _fortran(np.reshape(values, cell_shape)))
+
+
+def read(path):
+    """Read the first structured zone of the first base as a ``meshio.Mesh``: hexahedron (quad)
+    cells in the C order of the cells, points in the C order of the nodes padded to 3 columns,
+    cell-centred (vertex) solution arrays as cell (point) data, meshgen's metadata in field data."""
+    import h5py
+    import meshio
+
+    from meshgen.formats import METADATA_KEY
+
+    with h5py.File(path, "r") as root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        zone = _child_with_label(base, "Zone_t", path)
+        zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
+        if zone_type != "Structured":
+            raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
+        node_shape = tuple(int(n) for n in _data(zone)[0])
+        cell_shape = tuple(n - 1 for n in node_shape)
+        grid = _child_with_label(zone, "GridCoordinates_t", path)
+        names = COORDINATE_NAMES[: len(node_shape)]
+        missing = [name for name in names if name not in grid]
+        if missing:
+            raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
+        X = np.stack([_c_order(_data(grid[name]), node_shape, path) for name in names], axis=-1)
+
+        point_data, cell_data = {}, {}
+        for solution in _children_with_label(zone, "FlowSolution_t"):
+            location = _text(solution["GridLocation"]) if "GridLocation" in solution else "Vertex"
+            if location not in ("Vertex", "CellCenter"):
+                continue
+            target, shape = (cell_data, cell_shape) if location == "CellCenter" else (point_data, node_shape)
+            for array in _children_with_label(solution, "DataArray_t"):
+                target[_name(array)] = _c_order(_data(array), shape, path).reshape(-1)
+
+        field_data = {}
+        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
+            field_data[METADATA_KEY] = np.asarray(_data(base[METADATA_KEY])).view(np.uint8)
+
+    cell_type = "hexahedron" if len(node_shape) == 3 else "quad"
+    return meshio.Mesh(
+        flat_points(X),
+        [(cell_type, cell_connectivity(node_shape))],
+        point_data=point_data,
+        cell_data={name: [values] for name, values in cell_data.items()},
+        field_data=field_data,
+    )
+
+
+# --- writing nodes -------------------------------------------------------------------------
+
+
+def _node(parent, name: str, label: str, data: np.ndarray | None = None):
+    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout."""
+    group = parent.create_group(name, track_order=True)
+    data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
+    _set_node_attributes(group, name, label, data_type)
+    if data is not None:
+        group.create_dataset(" data", data=data)
+    return group
+
+
+# NumPy dtype (explicitly little-endian, as " format" says) -> CGNS data type.
+_DATA_TYPES = {"|i1": "C1", "<i4": "I4", "<i8": "I8", "<f4": "R4", "<f8": "R8"}
+
+
+def _set_node_attributes(group, name: str, label: str, data_type: str, flags: bool = True) -> None:
+    _string_attribute(group, "name", name, NAME_LENGTH + 1)
+    _string_attribute(group, "label", label, NAME_LENGTH + 1)
+    _string_attribute(group, "type", data_type, 3)
+    if flags:
+        group.attrs.create("flags", np.array([1], dtype="<i4"))
+
+
+def _string_attribute(group, name: str, value: str, size: int) -> None:
+    """Scalar fixed-size C string attribute (H5T_C_S1, null-terminated), as the CGNS library
+    writes them; h5py's own fixed strings are null-padded."""
+    import h5py
+
+    string_type = h5py.h5t.C_S1.copy()
+    string_type.set_size(size)
+    string_type.set_strpad(h5py.h5t.STR_NULLTERM)
+    attribute = h5py.h5a.create(group.id, name.encode(), string_type, h5py.h5s.create(h5py.h5s.SCALAR))
+    attribute.write(np.array(value.encode("ascii"), dtype=f"S{size}"), mtype=string_type)
+
+
+def _root_string(root, name: str, value: str, size: int) -> None:
+    """A character dataset of the root node, zero-padded to ``size`` bytes."""
+    text = value.encode("ascii")[: size - 1]
+    root.create_dataset(name, data=np.frombuffer(text.ljust(size, b"\0"), dtype=np.int8))
+
+
+def _chars(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode("ascii"), dtype=np.int8)
+
+
+def _fortran(values: np.ndarray) -> np.ndarray:
+    """A C-order (i, j[, k]) array as the HDF5 dataset of a CGNS array: reversed shape, float64 LE."""
+    return np.ascontiguousarray(np.asarray(values).T, dtype="<f8")
+
+
+def _check_name(name: str, what: str) -> None:
+    if not name or len(name) > NAME_LENGTH or "/" in name or name != name.strip() or not name.isascii():
+        raise FormatError(
+            f"{what} name '{name}' is not a valid CGNS node name (1 to {NAME_LENGTH} ASCII characters, "
+            "no '/', no leading or trailing spaces)"
+        )
+
+
+# --- reading nodes -------------------------------------------------------------------------
+
+
+def _attribute_text(group, name: str) -> str:
+    value = group.attrs.get(name, b"")
+    return (value.tobytes() if isinstance(value, np.ndarray) else bytes(value)).split(b"\0")[0].decode().strip()
+
+
+def _name(group) -> str:
+    return _attribute_text(group, "name")
+
+
+def _label(group) -> str:
+    return _attribute_text(group, "label")
+
+
+def _data(group) -> np.ndarray:
+    return group[" data"][()]
+
+
+def _text(group) -> str:
+    return np.asarray(_data(group)).view(np.uint8).tobytes().split(b"\0")[0].decode().strip()
+
+
+def _children_with_label(group, label: str) -> list:
+    import h5py
+
+    return [
+        child
+        for key, child in group.items()
+        if not key.startswith(" ") and isinstance(child, h5py.Group) and _label(child) == label
+    ]
+
+
+def _child_with_label(group, label: str, path):
+    children = _children_with_label(group, label)
+    if not children:
+        raise FormatError(f"{path}: no {label} node under {group.name}")
+    return children[0]
+
+
+def _c_order(data: np.ndarray, shape: tuple, path) -> np.ndarray:
+    """HDF5 dataset of a CGNS array (reversed shape) -> float64 array of C-order ``shape``."""
+    array = np.asarray(data, dtype=float).T
+    if array.shape != shape:
+        raise FormatError(f"{path}: array of shape {array.shape} where {shape} was expected (rind planes are not read)")
+    return array
