@@ -346,12 +346,13 @@ def lbfgs_points(problem: Problem, config: TrainConfig) -> dict:
 
 
 def open_history(path: Path, keep_until_step: int | None):
-    """Open ``history.csv`` for appending. A new run starts it; a resumed run keeps the rows up to
-    its checkpoint's step (rows written after that checkpoint belong to the lost part)."""
+    """Open ``history.csv`` for appending. A new run starts it; a resumed run keeps the rows of the
+    steps its checkpoint holds: a checkpoint at step N has done rows 0 .. N-1 (rows written after
+    it, by a run killed before its next checkpoint, belong to the lost part)."""
     rows = []
     if keep_until_step is not None and path.is_file():
         with open(path, newline="") as handle:
-            rows = [row for row in csv.DictReader(handle) if int(row["step"]) <= keep_until_step]
+            rows = [row for row in csv.DictReader(handle) if int(row["step"]) < keep_until_step]
     handle = open(path, "w", newline="")
     writer = csv.DictWriter(handle, fieldnames=HISTORY_COLUMNS, extrasaction="ignore")
     writer.writeheader()
