@@ -36,9 +36,20 @@ class CheckpointError(MeshgenError):
 
 
 def save_checkpoint(path: str | os.PathLike, checkpoint: dict) -> None:
-    """Write ``checkpoint`` to ``path`` atomically (a reader never sees a partial file)."""
-    with atomic_path(path) as temporary:
-        torch.save(checkpoint, temporary)
+    """Write ``checkpoint`` to ``path`` atomically (a reader never sees a partial file).
+
+    Raises CheckpointError when the file cannot be written (a full disk, no permission); a
+    previous checkpoint at ``path`` is then left as it was."""
+    try:
+        with atomic_path(path) as temporary:
+            # Through an unbuffered Python file: given a path (or a buffered file), torch reports
+            # a full disk as "unexpected pos 704 vs 598" instead of the OSError (ENOSPC).
+            with open(temporary, "wb", buffering=0) as handle:
+                torch.save(checkpoint, handle)
+    except OSError as exc:
+        raise CheckpointError(
+            f"could not write checkpoint {path}: {exc.strerror or exc} (any previous checkpoint there is kept)"
+        ) from exc
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict:
@@ -53,8 +64,7 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise CheckpointError(f"checkpoint {path} is truncated or not a meshgen checkpoint ({reason[:120]})") from exc
+        raise CheckpointError(f"checkpoint {path} {_load_failure(path, exc)}") from exc
     if not isinstance(checkpoint, dict) or checkpoint.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not a meshgen checkpoint")
     version = checkpoint.get("format_version")
@@ -66,4 +76,28 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     missing = [key for key in ("model", "geometry", "config") if key not in checkpoint]
     if missing:
         raise CheckpointError(f"checkpoint {path} lacks {', '.join(missing)}: not a complete meshgen checkpoint")
+    model, geometry = checkpoint["model"], checkpoint["geometry"]
+    if not (isinstance(model, dict) and isinstance(geometry, dict) and {"name", "spec", "dim", "params"} <= set(geometry)):
+        raise CheckpointError(f"checkpoint {path}: its model or geometry entry is damaged: not a meshgen checkpoint")
+    if model.get("dim") != geometry["dim"]:
+        raise CheckpointError(
+            f"checkpoint {path} holds a {model.get('dim')}D map but records the {geometry['dim']}D geometry "
+            f"'{geometry['name']}': not a consistent meshgen checkpoint"
+        )
     return checkpoint
+
+
+def _load_failure(path: Path, exc: Exception) -> str:
+    """Why ``torch.load(path, weights_only=True)`` failed, in words for the user. (torch's own
+    message on a refused object explains how to load the file unsafely: not advice to pass on.)"""
+    text = " ".join(str(exc).split())
+    if isinstance(exc, pickle.UnpicklingError) and "Unsupported global" in text:
+        found = text[text.index("Unsupported global") :].split(" was not an allowed global")[0].split(". ")[0]
+        reason = f"it carries Python objects, not plain data: {found}; refused without running them"
+    elif isinstance(exc, OSError):
+        reason = exc.strerror or text
+    else:
+        with open(path, "rb") as handle:
+            is_zip = handle.read(4) == b"PK\x03\x04"  # torch's format: a zip archive
+        reason = (text.split(". ")[0][:120] or type(exc).__name__) if is_zip else "not a torch zip archive"
+    return f"is truncated or not a meshgen checkpoint ({reason})"
