@@ -248,6 +248,8 @@ def read_yaml(path: Path, what: str):
 
     try:
         text = Path(path).read_text()
+    except UnicodeDecodeError:
+        raise ConfigError(f"{what} {path} is not a text file (not UTF-8): a YAML file was expected") from None
     except OSError as exc:
         raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
     try:
