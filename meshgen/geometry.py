@@ -74,7 +74,9 @@ class Geometry:
             mapped = self.boundary_map(points, **self.values)
         except GeometryError:
             raise
-        except Exception as exc:  # a plugin is foreign code: report it with its name and file
+        # A plugin is foreign code: report it with its name and file. SystemExit too: sys.exit() in
+        # a plugin must not end meshgen with the plugin's status (0 would read as success).
+        except (Exception, SystemExit) as exc:
             raise GeometryError(
                 f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}"
             ) from exc
@@ -100,7 +102,7 @@ class Geometry:
         if self.length_map is not None:
             try:
                 length = float(self.length_map(**self.values))
-            except Exception as exc:  # foreign code, as in boundary()
+            except (Exception, SystemExit) as exc:  # foreign code, as in boundary()
                 raise GeometryError(
                     f"geometry '{self.name}' ({self.source}): characteristic_length() raised "
                     f"{type(exc).__name__}: {exc}"
@@ -174,7 +176,7 @@ def _import_file(path: Path) -> ModuleType:
     sys.modules[module_name] = module
     try:
         spec.loader.exec_module(module)
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:
         del sys.modules[module_name]
         raise GeometryError(f"geometry plugin {path} failed to load: {type(exc).__name__}: {exc}") from exc
     return module
@@ -267,7 +269,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
                 raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){hint}")
             try:
                 module = eps[spec].load()
-            except Exception as exc:
+            except (Exception, SystemExit) as exc:
                 raise GeometryError(
                     f"geometry plugin '{spec}' ({eps[spec].value}) failed to load: {type(exc).__name__}: {exc}"
                 ) from exc
