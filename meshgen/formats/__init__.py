@@ -152,8 +152,10 @@ def read_mesh(path):
     except SystemExit:
         said = " ".join(captured.getvalue().replace("Error:", "").split())
         raise FormatError(f"could not read {path}: {said or 'not a mesh file meshio can read'}") from None
-    except FormatError:
-        raise
+    except FormatError as exc:
+        if str(path) in str(exc):
+            raise
+        raise FormatError(f"could not read {path}: {exc}") from exc  # the reader's reason, with the file
     except Exception as exc:
         raise FormatError(f"could not read {path}: {type(exc).__name__}: {exc}") from exc
     if captured.getvalue().strip():
