@@ -685,6 +685,13 @@ def summarize(values: np.ndarray) -> dict:
 
 def _assess(X_or_mesh):
     """Per-cell metrics of any accepted input, with what the report needs besides them."""
+    # Non-finite coordinates are counted, reported and make their cells degenerate; the arithmetic
+    # on them (inf - inf) must not also print NumPy's RuntimeWarnings beside meshgen's messages.
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        return _assess_quietly(X_or_mesh)
+
+
+def _assess_quietly(X_or_mesh):
     from meshgen.deviation import grid_boundary_nodes
 
     if isinstance(X_or_mesh, np.ndarray):
