@@ -131,10 +131,16 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
     validity verdict (valid: inverted cells <= 0.5% of all cells), and the boundary deviation when
     the geometry is known: files written by meshgen record it; for others pass --geometry.
     """
+    from meshgen.atomic import check_output_file
     from meshgen.gates import GateError, check_gates
     from meshgen.geometry import load_geometry, parse_params
     from meshgen.quality import evaluate_file, write_json
 
+    # Report paths first: a bad one fails before any mesh is read.
+    if json_path and json_path != "-":  # '-': stdout
+        check_output_file(json_path, "report.json")
+    if markdown_path:
+        check_output_file(markdown_path, "report.md")
     parsed_params = parse_params(params)
     chosen = load_geometry(geometry, parsed_params) if geometry else None
     reports = [evaluate_file(path, chosen, None if chosen else parsed_params) for path in meshes]
