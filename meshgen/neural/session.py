@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import threading
@@ -59,6 +60,10 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
                 f"output folder {path} exists and is not a run folder (it holds other files): "
                 f"choose a new or empty folder"
             )
+    # The folder, or the one it will be created in: found out now, not when the first file fails.
+    existing = next((folder for folder in (path, *path.parents) if folder.exists()), Path("."))
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise MeshgenError(f"output folder {existing} is not writable")
     return path
 
 
