@@ -1,8 +1,9 @@
 """The ``meshgen`` command group. Each command lives in ``meshgen.commands.<name>`` and is imported
 only when it runs, so ``meshgen --help`` stays fast (no torch, no trimesh, no numpy).
 
-Errors a user can act on (MeshgenError, click usage errors) are printed as one line with exit
-status 2; Ctrl-C exits with status 130. Set MESHGEN_DEBUG=1 to see tracebacks.
+Errors a user can act on (MeshgenError, click usage errors, and an OSError that no command
+turned into one: a full disk, no permission) are printed as one line with exit status 2; Ctrl-C
+exits with status 130. Set MESHGEN_DEBUG=1 to see tracebacks.
 """
 
 from __future__ import annotations
@@ -87,6 +88,12 @@ class MeshgenGroup(click.Group):
             sys.exit(130)
         except BrokenPipeError:
             sys.exit(1)
+        except OSError as exc:  # the machine, not meshgen: a full disk, no permission, a vanished file
+            if debug:
+                raise
+            where = f" ({exc.filename})" if exc.filename else ""
+            click.echo(f"Error: {one_line(exc.strerror or exc)}{where}", err=True)
+            sys.exit(2)
         except Exception as exc:  # a bug of ours: still one line, the traceback on request
             if debug:
                 raise
