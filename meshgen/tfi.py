@@ -21,14 +21,6 @@ def parametric_grid(dims) -> list[np.ndarray]:
     return [np.linspace(0.0, 1.0, int(n) + 1) for n in dims]
 
 
-def _evaluate(boundary, coords: list) -> np.ndarray:
-    """Boundary map at the broadcast of ``coords`` (arrays or scalars): shape broadcast + (dim,)."""
-    arrays = np.broadcast_arrays(*[np.asarray(c, dtype=float) for c in coords])
-    shape = arrays[0].shape
-    points = np.stack([a.reshape(-1) for a in arrays], axis=1)
-    return boundary(points).reshape(*shape, len(coords))
-
-
 def transfinite(boundary, coords) -> np.ndarray:
     """Gordon-Hall interpolant of ``boundary`` at parametric coordinates ``coords``.
 
@@ -41,7 +33,7 @@ def transfinite(boundary, coords) -> np.ndarray:
     coords = [np.asarray(c, dtype=float) for c in coords]
     dim = len(coords)
     shape = np.broadcast_shapes(*(c.shape for c in coords))
-    result = np.zeros(shape + (dim,))
+    terms = []  # (sign, blending weight, the term's points on the boundary as broadcast arrays)
     for size in range(1, dim + 1):
         sign = 1.0 if size % 2 else -1.0
         for axes in itertools.combinations(range(dim), size):
@@ -50,8 +42,18 @@ def transfinite(boundary, coords) -> np.ndarray:
                 fixed = list(coords)
                 for axis, side in zip(axes, sides):
                     weight = weight * (coords[axis] if side else 1.0 - coords[axis])
-                    fixed[axis] = side
-                result += sign * weight[..., None] * _evaluate(boundary, fixed)
+                    fixed[axis] = np.asarray(side)
+                terms.append((sign, weight, np.broadcast_arrays(*fixed)))
+    # One call of the boundary map for the points of all terms: a plugin's cost is mostly per call
+    # when the terms are small (edges, vertices, a training grid's faces).
+    points = np.concatenate([np.stack([a.reshape(-1) for a in fixed], axis=1) for _, _, fixed in terms])
+    images = boundary(points)
+    result = np.zeros(shape + (dim,))
+    start = 0
+    for sign, weight, fixed in terms:
+        count = fixed[0].size
+        result += sign * weight[..., None] * images[start : start + count].reshape(*fixed[0].shape, dim)
+        start += count
     return result
 
 

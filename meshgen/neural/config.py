@@ -1,0 +1,365 @@
+"""The training configuration: plain data in nested dataclasses, read from YAML presets and files,
+overridden by ``--set section.key=value``, checked before any work starts.
+
+Layers, each over the previous: the defaults below (which ``presets/default.yaml`` spells out), the
+preset chosen with ``--preset``, a YAML file given with ``--config``, then every ``--set``. A run
+folder's ``config.yaml`` is a complete file of this kind, so ``--config runs/x/config.yaml``
+repeats a run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from meshgen.errors import MeshgenError
+
+
+class ConfigError(MeshgenError):
+    """A preset, configuration file or override is unknown, malformed or inconsistent."""
+
+
+@dataclass
+class ModelConfig:
+    widths: list[int] = field(default_factory=lambda: [48, 48, 48])  # hidden layer widths of the tanh MLP
+    exact_boundary: bool = False  # output TFI + b N (boundary met exactly) instead of N
+
+
+@dataclass
+class MethodConfig:
+    derivatives: str = "fd"  # "fd": finite differences on shifted grids; "autograd": AD at random points
+    reweighting: bool = True  # learn a1, a2 (uncertainty weights with the log(1 + a1^2 + a2^2) term)
+    balance_start: bool = True  # reweighting: start a1, a2 at the stationary point of L for the first losses
+    pcgrad: bool = True  # project conflicting PDE / boundary gradients
+    point_weights: float = 1.0  # c of the surface-point weights w = 1 + c |error|; 0 switches them off
+    pde_weight: float = 1.0  # fixed weight of L1 (the starting weight when reweighting)
+    boundary_weight: float = 1.0  # fixed weight of L2 (the starting weight when reweighting)
+
+
+@dataclass
+class PointsConfig:
+    interior: int = 4000  # residual points per step (fd: the nearest m^dim grid nodes)
+    boundary: int = 6000  # boundary points per step
+    random_grid: bool = True  # fd: shift and rescale the training grid at random every step
+    grid_min_scale: float = 0.8  # fd: the random grid spans a fraction in [this, 1] of each axis
+    boundary_pool: int = 64  # boundary points are drawn from a fixed pool of this many steps' worth (0: fresh)
+
+
+@dataclass
+class PretrainConfig:
+    steps: int = 50  # L-BFGS steps fitting the network to TFI before training (0: start from random weights)
+    lr: float = 1.0
+    points: int = 4000  # fixed interior points (and as many boundary points) of the fit
+
+
+@dataclass
+class AdamConfig:
+    steps: int = 500
+    lr: float = 1e-4  # paper: 1e-3 from random weights; after the fit to TFI a smaller step keeps the boundary
+    decay: float = 0.9  # the learning rate is multiplied by this ...
+    decay_every: int = 1000  # ... every this many steps
+    weights_lr: typing.Optional[float] = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
+
+
+@dataclass
+class LbfgsConfig:
+    steps: int = 400  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
+    max_iter: int = 20  # iterations per step
+    history_size: int = 50
+    lr: float = 1.0
+
+
+@dataclass
+class CheckpointConfig:
+    every: int = 100  # save every this many steps (and at the end)
+
+
+@dataclass
+class GuardConfig:
+    max_retries: int = 5  # consecutive non-finite losses tolerated before training stops
+    lr_factor: float = 0.5  # learning-rate factor after a non-finite loss
+
+
+@dataclass
+class TestConfig:
+    interior: int = 1000  # held-out interior points (fixed, independent of the seed)
+    boundary: int = 1000  # held-out boundary points
+
+
+@dataclass
+class TrainConfig:
+    description: str = "the full 3DMeshNet method, sized for about 5 minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
+    dim: typing.Optional[int] = None  # 2 or 3 for presets made for one dimension; null: any
+    seed: int = 0
+    model: ModelConfig = field(default_factory=ModelConfig)
+    method: MethodConfig = field(default_factory=MethodConfig)
+    points: PointsConfig = field(default_factory=PointsConfig)
+    pretrain: PretrainConfig = field(default_factory=PretrainConfig)
+    adam: AdamConfig = field(default_factory=AdamConfig)
+    lbfgs: LbfgsConfig = field(default_factory=LbfgsConfig)
+    checkpoint: CheckpointConfig = field(default_factory=CheckpointConfig)
+    guard: GuardConfig = field(default_factory=GuardConfig)
+    test: TestConfig = field(default_factory=TestConfig)
+
+
+CHOICES = {"method.derivatives": ("fd", "autograd")}
+
+
+# ---------------------------------------------------------------------------------------------
+# keys and types
+
+
+def _fields(cls) -> dict[str, typing.Any]:
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+
+
+def schema(cls=TrainConfig, prefix: str = "") -> dict[str, typing.Any]:
+    """Every dotted key with its type, e.g. {"adam.steps": int, ...}."""
+    keys = {}
+    for name, kind in _fields(cls).items():
+        if dataclasses.is_dataclass(kind):
+            keys.update(schema(kind, f"{prefix}{name}."))
+        else:
+            keys[f"{prefix}{name}"] = kind
+    return keys
+
+
+def _type_name(kind) -> str:
+    if kind is bool:
+        return "true or false"
+    if kind is int:
+        return "an integer"
+    if kind is float:
+        return "a number"
+    if kind is str:
+        return "a string"
+    if typing.get_origin(kind) is list:
+        return "a list of integers, e.g. [48, 48, 48]"
+    return f"null or {_type_name(typing.get_args(kind)[0])}"
+
+
+def _coerce(key: str, kind, value):
+    """``value`` as ``kind`` (int -> float allowed, nothing else), or ConfigError."""
+    ok = False
+    if kind is bool:
+        ok = isinstance(value, bool)
+    elif kind is int:
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif kind is float:
+        if isinstance(value, str):  # YAML 1.1 reads 1e-3 (no dot) as a string
+            try:
+                value = float(value)
+            except ValueError:
+                pass
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif kind is str:
+        ok = isinstance(value, str)
+    elif typing.get_origin(kind) is list:
+        ok = isinstance(value, list) and all(isinstance(v, int) and not isinstance(v, bool) for v in value)
+        value = list(value) if ok else value
+    else:  # Optional[int] or Optional[float]
+        try:
+            return None if value is None else _coerce(key, typing.get_args(kind)[0], value)
+        except ConfigError:
+            ok = False
+    if not ok:
+        raise ConfigError(f"configuration key '{key}' must be {_type_name(kind)}, got {value!r}")
+    return value
+
+
+def _unknown(key: str) -> ConfigError:
+    valid = list(schema())
+    close = difflib.get_close_matches(key, valid, n=1)
+    hint = f"; did you mean '{close[0]}'?" if close else ""
+    return ConfigError(f"unknown configuration key '{key}'{hint} (valid keys: {', '.join(valid)})")
+
+
+def set_key(config: TrainConfig, key: str, value) -> None:
+    """Set the dotted ``key`` of ``config`` to ``value`` (type-checked)."""
+    kinds = schema()
+    if key not in kinds:
+        raise _unknown(key)
+    *sections, name = key.split(".")
+    target = config
+    for section in sections:
+        target = getattr(target, section)
+    setattr(target, name, _coerce(key, kinds[key], value))
+
+
+def apply_mapping(config: TrainConfig, data, source: str) -> None:
+    """Apply a nested mapping (as read from YAML) to ``config``; ``source`` names it in errors."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: expected a mapping of configuration keys, got {type(data).__name__}")
+    sections = {name for name, kind in _fields(TrainConfig).items() if dataclasses.is_dataclass(kind)}
+
+    def walk(mapping, prefix):
+        for name, value in mapping.items():
+            key = f"{prefix}{name}"
+            if prefix == "" and name in sections:
+                if not isinstance(value, dict):
+                    raise ConfigError(f"{source}: '{key}' must be a mapping of keys, got {value!r}")
+                walk(value, f"{key}.")
+            else:
+                try:
+                    set_key(config, key, value)
+                except ConfigError as exc:
+                    raise ConfigError(f"{source}: {exc}") from None
+
+    walk(data, "")
+
+
+def parse_override(text: str) -> tuple[str, typing.Any]:
+    """``"adam.steps=100"`` -> ("adam.steps", 100): the value is read as YAML (numbers, true/false,
+    lists, null, strings)."""
+    import yaml
+
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"malformed --set {text!r}: expected key=value, e.g. adam.steps=2000")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError:
+        raise ConfigError(f"malformed --set {text!r}: {raw!r} is not a value") from None
+    return key, value
+
+
+# ---------------------------------------------------------------------------------------------
+# presets and files
+
+
+def presets_dir() -> Path:
+    from meshgen.geometry import builtin_dir
+
+    return builtin_dir("presets")
+
+
+def preset_paths() -> dict[str, Path]:
+    return {p.stem: p for p in sorted(presets_dir().glob("*.yaml"))}
+
+
+def read_yaml(path: Path, what: str):
+    import yaml
+
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
+    try:
+        return yaml.safe_load(text) or {}
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or "invalid YAML"
+        raise ConfigError(f"{what} {path} is malformed YAML{where}: {problem}") from None
+
+
+def load_preset(name: str) -> dict:
+    """The mapping of preset ``name`` (unknown names raise with the list of presets)."""
+    paths = preset_paths()
+    if name not in paths:
+        close = difflib.get_close_matches(name, list(paths), n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise ConfigError(f"unknown preset '{name}' (presets: {', '.join(paths)}){hint}")
+    return read_yaml(paths[name], "preset")
+
+
+def list_presets() -> list[tuple[str, str]]:
+    """(name, one-line description) of every preset."""
+    described = []
+    for name in preset_paths():
+        data = load_preset(name)
+        described.append((name, str(data.get("description", "")).strip() if isinstance(data, dict) else ""))
+    return described
+
+
+def resolve_config(preset="default", config_file=None, overrides=(), steps=None, seed=None) -> TrainConfig:
+    """The configuration of a run: defaults, then the preset, the file, every ``key=value`` of
+    ``overrides``, ``steps`` (adam.steps) and ``seed``; validated."""
+    config = TrainConfig()
+    if preset is not None:
+        apply_mapping(config, load_preset(preset), f"preset '{preset}'")
+    if config_file is not None:
+        apply_mapping(config, read_yaml(Path(config_file), "configuration file"), str(config_file))
+    for text in overrides:
+        key, value = parse_override(text)
+        try:
+            set_key(config, key, value)
+        except ConfigError as exc:
+            raise ConfigError(f"--set {text}: {exc}") from None
+    if steps is not None:
+        set_key(config, "adam.steps", steps)
+    if seed is not None:
+        set_key(config, "seed", seed)
+    validate(config)
+    return config
+
+
+def from_dict(data: dict) -> TrainConfig:
+    """A configuration from a complete mapping (a checkpoint's or a run folder's), validated."""
+    config = TrainConfig()
+    apply_mapping(config, data, "configuration")
+    validate(config)
+    return config
+
+
+def to_dict(config: TrainConfig) -> dict:
+    return dataclasses.asdict(config)
+
+
+def to_yaml(config: TrainConfig) -> str:
+    import yaml
+
+    return yaml.safe_dump(to_dict(config), sort_keys=False, default_flow_style=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# consistency
+
+
+def validate(config: TrainConfig) -> None:
+    """Raise ConfigError for values out of range or switches that do not go together."""
+
+    def need(condition, key, text):
+        if not condition:
+            value = config
+            for part in key.split("."):
+                value = getattr(value, part)
+            raise ConfigError(f"configuration key '{key}' {text}, got {value!r}")
+
+    for key, choices in CHOICES.items():
+        section, name = key.split(".")
+        need(getattr(getattr(config, section), name) in choices, key, f"must be one of {', '.join(choices)}")
+    need(config.dim in (None, 2, 3), "dim", "must be 2, 3 or null")
+    need(len(config.model.widths) >= 1 and min(config.model.widths) >= 1, "model.widths", "must be positive widths")
+    need(config.method.point_weights >= 0, "method.point_weights", "must be >= 0")
+    need(config.method.pde_weight > 0, "method.pde_weight", "must be > 0")
+    need(config.method.boundary_weight > 0, "method.boundary_weight", "must be > 0")
+    need(config.points.interior >= 1, "points.interior", "must be >= 1")
+    need(config.points.boundary >= 1, "points.boundary", "must be >= 1")
+    need(0 < config.points.grid_min_scale <= 1, "points.grid_min_scale", "must be in (0, 1]")
+    need(config.points.boundary_pool >= 0, "points.boundary_pool", "must be >= 0")
+    for stage in ("pretrain", "adam", "lbfgs"):
+        need(getattr(config, stage).steps >= 0, f"{stage}.steps", "must be >= 0")
+        need(getattr(config, stage).lr > 0, f"{stage}.lr", "must be > 0")
+    need(config.pretrain.points >= 1, "pretrain.points", "must be >= 1")
+    need(0 < config.adam.decay <= 1, "adam.decay", "must be in (0, 1]")
+    need(config.adam.weights_lr is None or config.adam.weights_lr > 0, "adam.weights_lr", "must be > 0 or null")
+    need(config.adam.decay_every >= 1, "adam.decay_every", "must be >= 1")
+    need(config.lbfgs.max_iter >= 1, "lbfgs.max_iter", "must be >= 1")
+    need(config.lbfgs.history_size >= 1, "lbfgs.history_size", "must be >= 1")
+    need(config.checkpoint.every >= 1, "checkpoint.every", "must be >= 1")
+    need(config.guard.max_retries >= 0, "guard.max_retries", "must be >= 0")
+    need(0 < config.guard.lr_factor < 1, "guard.lr_factor", "must be in (0, 1)")
+    need(config.test.interior >= 1, "test.interior", "must be >= 1")
+    need(config.test.boundary >= 1, "test.boundary", "must be >= 1")
+    if config.model.exact_boundary:
+        # The boundary is met by construction: L2 is zero and only the PDE loss is trained.
+        need(config.method.derivatives == "fd", "method.derivatives", "must be fd with model.exact_boundary")
+        need(not config.method.reweighting, "method.reweighting", "must be false with model.exact_boundary (no L2)")
+        need(not config.method.pcgrad, "method.pcgrad", "must be false with model.exact_boundary (no L2)")

@@ -1,0 +1,176 @@
+"""A training run as the command line starts it: every input checked before anything is written
+(``prepare_run``), then the run folder, Ctrl-C handling and progress around ``train``
+(``run_training``)."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from meshgen.errors import MeshgenError
+
+RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
+# What a resumed run may change: how long it goes on and how it saves or guards, nothing that
+# would make the checkpoint's weights or optimiser state mean something else.
+RESUMABLE_KEYS = ("adam.steps", "lbfgs.steps", "checkpoint.every", "guard.max_retries", "guard.lr_factor")
+
+
+@dataclass
+class Run:
+    config: object  # TrainConfig
+    geometry: object  # Geometry
+    geometry_spec: str  # how to load the geometry again: a name, or a plugin file's absolute path
+    run_dir: Path
+    device: str
+    resume: dict | None = None  # the loaded checkpoint when resuming
+    resume_path: Path | None = None
+
+
+def is_run_folder(path: Path) -> bool:
+    """An empty folder, or one that a previous ``meshgen train`` wrote (config.yaml and a
+    checkpoint or history)."""
+    entries = {p.name for p in path.iterdir()}
+    return not entries or ("config.yaml" in entries and bool(entries & {"checkpoint.pt", "history.csv"}))
+
+
+def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
+    """The run folder: ``out``, else the resumed checkpoint's folder, else a new
+    ``runs/<geometry>-<timestamp>``. An existing folder must be a run folder (nothing else is
+    overwritten)."""
+    if out is not None:
+        path = Path(out)
+    elif resume_path is not None:
+        path = resume_path.parent
+    else:
+        base = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
+        path, number = base, 1
+        while path.exists():
+            number += 1
+            path = base.with_name(f"{base.name}-{number}")
+    if path.exists():
+        if not path.is_dir():
+            raise MeshgenError(f"output folder {path} exists and is a file")
+        if not is_run_folder(path):
+            raise MeshgenError(
+                f"output folder {path} exists and is not a run folder (it holds other files): "
+                f"choose a new or empty folder"
+            )
+    return path
+
+
+def resolve_device(device: str) -> str:
+    import torch
+
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if device == "cuda" and not torch.cuda.is_available():
+        raise MeshgenError("--device cuda: no CUDA device is available to torch here; use --device cpu")
+    return device
+
+
+def _geometry_spec(spec: str) -> str:
+    from meshgen.geometry import _looks_like_path
+
+    return str(Path(spec).resolve()) if _looks_like_path(spec) else spec
+
+
+def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrides=(), steps=None, out=None,
+                resume=None, seed=None, device="auto", threads=None) -> Run:
+    """Check every input of ``meshgen train`` and return what to run; writes nothing.
+
+    Raises MeshgenError (one line, exit 2) for an unknown geometry or preset, malformed YAML,
+    unknown or ill-typed keys, a preset for the other dimension, a missing, truncated or foreign
+    checkpoint, or an output folder that holds something other than a run.
+    """
+    from meshgen.commands._options import load_selected_geometry
+    from meshgen.geometry import load_geometry, parse_params
+    from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
+
+    checkpoint = resume_path = None
+    if resume is not None:
+        from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
+
+        for flag, value in (("--preset", preset), ("--config", config_file), ("--seed", seed)):
+            if value is not None:
+                raise ConfigError(f"{flag} does not apply with --resume: the run goes on with the checkpoint's "
+                                  f"configuration (change {', '.join(RESUMABLE_KEYS)} with --set)")
+        resume_path = Path(resume)
+        checkpoint = load_checkpoint(resume_path)
+        if checkpoint.get("stage") == "done":
+            raise CheckpointError(
+                f"checkpoint {resume_path} is of a finished run: nothing to resume (start a new run with "
+                f"--config {resume_path.parent / 'config.yaml'})"
+            )
+        config = from_dict(checkpoint["config"])
+        for text in list(overrides) + ([f"adam.steps={steps}"] if steps is not None else []):
+            key, value = parse_override(text)
+            if key not in RESUMABLE_KEYS:
+                raise ConfigError(f"--set {key} cannot change when resuming (allowed: {', '.join(RESUMABLE_KEYS)})")
+            set_key(config, key, value)
+        validate(config)
+        trained_on = checkpoint["geometry"]
+        spec = trained_on["spec"]
+        geometry_object = load_geometry(geometry or spec, {**trained_on["params"], **parse_params(params)})
+        if geometry_object.name != trained_on["name"] or geometry_object.values != dict(trained_on["params"]):
+            raise CheckpointError(
+                f"checkpoint {resume_path} was trained on {trained_on['name']} {trained_on['params']}, "
+                f"not on {geometry_object.name} {geometry_object.values}"
+            )
+        if geometry_object.dim != checkpoint["model"]["dim"]:
+            raise CheckpointError(
+                f"checkpoint {resume_path} holds a {checkpoint['model']['dim']}D map; "
+                f"geometry '{geometry_object.name}' is {geometry_object.dim}D"
+            )
+        if geometry is None:
+            geometry = spec
+    else:
+        config = resolve_config(preset or "default", config_file, overrides, steps, seed)
+        geometry = geometry or "semicylinder"
+        geometry_object = load_selected_geometry(geometry, params)
+    if config.dim is not None and config.dim != geometry_object.dim:
+        raise ConfigError(
+            f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
+            f"'{geometry_object.name}' is {geometry_object.dim}D"
+        )
+    device = resolve_device(device)
+    if threads is not None:
+        import torch
+
+        torch.set_num_threads(threads)
+    run_dir = choose_run_dir(out, resume_path, geometry_object.name)
+    return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path)
+
+
+def run_training(run: Run, quiet: bool = False):
+    """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
+    (a second one aborts). Returns the TrainResult."""
+    from meshgen.neural.progress import LogReporter, RichReporter
+    from meshgen.neural.train import train
+
+    try:
+        run.run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
+    # A progress bar only where someone watches it; logs (--quiet, or stderr redirected) get lines.
+    reporter = LogReporter() if quiet or not sys.stderr.isatty() else RichReporter()
+    stop_requested = threading.Event()
+
+    def on_interrupt(signum, frame):
+        if stop_requested.is_set():
+            raise KeyboardInterrupt
+        stop_requested.set()
+        reporter.message("Stopping after this step to save a checkpoint (Ctrl-C again to abort without saving)")
+
+    previous = signal.signal(signal.SIGINT, on_interrupt)
+    try:
+        with reporter:
+            return train(
+                run.config, run.geometry, run.run_dir, device=run.device, resume=run.resume, reporter=reporter,
+                stop=stop_requested.is_set, geometry_spec=run.geometry_spec,
+            )
+    finally:
+        signal.signal(signal.SIGINT, previous)

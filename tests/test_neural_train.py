@@ -1,0 +1,149 @@
+"""Training: a short 2D run lowers both losses; the divergence guard; the final summary."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import meshgen.neural.train as training
+from meshgen.geometry import load_geometry
+from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.train import TrainingDiverged, evaluate_losses, lbfgs_points, train
+from neural_helpers import Recorder, tiny_config
+
+
+@pytest.fixture(scope="module")
+def semidisk():
+    return load_geometry("semidisk")
+
+
+@pytest.mark.parametrize("derivatives", ["fd", "autograd"])
+def test_a_short_2d_run_from_random_weights_lowers_both_losses(tmp_path, semidisk, derivatives):
+    config = tiny_config(
+        "model.widths=[16,16]", "points.interior=400", "points.boundary=200", "pretrain.steps=0",
+        "adam.steps=150", "adam.lr=1e-2", "lbfgs.steps=0", "method.balance_start=false",
+        f"method.derivatives={derivatives}",
+    )
+    recorder = Recorder()
+    result = train(config, semidisk, tmp_path, reporter=recorder, summary=False)
+    first, last = recorder.rows[:5], recorder.rows[-5:]
+    for loss in ("L1", "L2"):
+        before, after = np.mean([r[loss] for r in first]), np.mean([r[loss] for r in last])
+        assert after < before / 10, (loss, before, after)
+    assert any(r["conflict"] for r in recorder.rows)  # PDE and boundary did pull apart at times
+    assert result.test_loss["boundary"] < 0.01  # the held-out boundary points agree: mean squared distance
+
+
+def test_lbfgs_lowers_the_weighted_loss_on_its_fixed_points(tmp_path, semidisk):
+    config = tiny_config("adam.steps=20", "lbfgs.steps=5", "lbfgs.max_iter=10")
+    recorder = Recorder()
+    train(config, semidisk, tmp_path, reporter=recorder, summary=False)
+    lbfgs = [r for r in recorder.rows if r["stage"] == "lbfgs"]
+    assert len(lbfgs) == 5 and lbfgs[-1]["total"] < lbfgs[0]["total"]
+    assert [r["stage"] for r in recorder.rows] == ["pretrain"] * 2 + ["adam"] * 20 + ["lbfgs"] * 5
+
+
+def test_pretraining_fits_tfi(tmp_path, semidisk):
+    recorder = Recorder()
+    train(tiny_config("pretrain.steps=8", "adam.steps=0", "lbfgs.steps=0"), semidisk, tmp_path,
+          reporter=recorder, summary=False)
+    fits = [r["total"] for r in recorder.rows]
+    assert fits[-1] < fits[0] / 10
+
+
+def test_a_non_finite_loss_restores_the_last_good_state_and_lowers_the_learning_rate(tmp_path, semidisk, monkeypatch):
+    calls = {"n": 0}
+    real = training.pde_term
+
+    def sometimes_nan(*args):
+        calls["n"] += 1
+        loss = real(*args)
+        return loss * math.nan if calls["n"] in (4, 5) else loss
+
+    monkeypatch.setattr(training, "pde_term", sometimes_nan)
+    recorder = Recorder()
+    config = tiny_config("lbfgs.steps=0", "adam.lr=1e-3")
+    result = train(config, semidisk, tmp_path, reporter=recorder, summary=False)
+    assert not result.interrupted and result.step == 2 + 10
+    restores = [m for m in recorder.messages if "non-finite loss" in m]
+    assert len(restores) == 2 and f"learning rate lowered to {config.adam.lr * 0.5:.3g}" in restores[0]
+    assert f"learning rate lowered to {config.adam.lr * 0.25:.3g}" in restores[1]
+    assert all(math.isfinite(r["total"]) for r in recorder.rows)
+    assert recorder.rows[-1]["lr"] == pytest.approx(config.adam.lr * 0.25)
+    assert result.checkpoint["guard"]["lr_reductions"] == 2
+
+
+def test_repeated_failure_stops_and_keeps_the_last_good_checkpoint(tmp_path, semidisk, monkeypatch):
+    real = training.pde_term
+    calls = {"n": 0}
+
+    def nan_after_a_while(*args):
+        calls["n"] += 1
+        loss = real(*args)
+        return loss * math.nan if calls["n"] > 7 else loss
+
+    monkeypatch.setattr(training, "pde_term", nan_after_a_while)
+    config = tiny_config("lbfgs.steps=0", "guard.max_retries=3")
+    with pytest.raises(TrainingDiverged, match="diverged.*after 3 learning-rate reductions.*checkpoint.pt"):
+        train(config, semidisk, tmp_path, summary=False)
+    saved = load_checkpoint(tmp_path / "checkpoint.pt")
+    assert saved["stage"] == "adam" and saved["step"] == 2 + 6  # balance_start evaluated once, then 6 good steps
+    assert all(bool(torch.isfinite(t).all()) for t in saved["model"]["state_dict"].values())
+
+
+def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
+    from meshgen.neural.model import mesh_from_checkpoint
+    from meshgen.quality import quality_report
+    from meshgen.tfi import parametric_grid
+
+    result = train(tiny_config(), semidisk, tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary == json.loads(json.dumps(result.summary))
+    assert summary["dims"] == [30, 30] and summary["network"]["cells"] == 900
+    assert summary["tfi"]["inverted"]["count"] == 0 and summary["tfi"]["boundary_deviation"]["max"] < 1e-12
+    # the network's figures are those of its 30 x 30 mesh, deviation from the boundary included
+    X = mesh_from_checkpoint(result.checkpoint, parametric_grid((30, 30)), semidisk)
+    expected = json.loads(json.dumps(quality_report(X, semidisk)))
+    assert summary["network"]["metrics"] == expected["metrics"]
+    assert summary["network"]["boundary_deviation"]["max"] == expected["boundary_deviation"]["max"] > 0
+    assert summary["inverted_after_snapping"] >= 0
+
+
+def test_snapping_moves_exactly_the_boundary_nodes_onto_the_geometry(semidisk):
+    from meshgen.neural.train import snap_boundary
+    from meshgen.tfi import parametric_grid, tfi
+
+    coords = parametric_grid((6, 4))
+    exact = tfi(semidisk, None, coords)
+    moved = exact + 0.01
+    snapped = snap_boundary(moved, semidisk, coords)
+    for index in ((0,), (-1,), (slice(None), 0), (slice(None), -1)):
+        np.testing.assert_allclose(snapped[index], exact[index], atol=1e-14)
+    np.testing.assert_array_equal(snapped[1:-1, 1:-1], moved[1:-1, 1:-1])
+
+
+def test_losses_at_fixed_points_are_reproducible(semidisk):
+    from meshgen.neural.model import MLP, normalisation, normalised_boundary
+    from meshgen.neural.train import Problem
+
+    config = tiny_config()
+    center, scale = normalisation(semidisk)
+    problem = Problem(2, normalised_boundary(semidisk, center, scale), center, scale, False, torch.device("cpu"))
+    torch.manual_seed(0)
+    network = MLP(2, [8])
+    first = evaluate_losses(network, problem, config, lbfgs_points(problem, config))
+    again = evaluate_losses(network, problem, config, lbfgs_points(problem, config))
+    assert first == again and first["L1"] > 0 and first["L2"] > 0
+
+
+def test_the_same_seed_repeats_a_cpu_run_and_another_seed_does_not(tmp_path, semidisk):
+    runs = {}
+    for name, seed in (("a", 3), ("b", 3), ("c", 4)):
+        (tmp_path / name).mkdir()
+        runs[name] = train(tiny_config(f"seed={seed}"), semidisk, tmp_path / name, summary=False).checkpoint
+    same = runs["a"]["model"]["state_dict"], runs["b"]["model"]["state_dict"]
+    assert all(torch.equal(same[0][k], same[1][k]) for k in same[0])
+    other = runs["c"]["model"]["state_dict"]
+    assert not torch.equal(same[0]["layers.0.weight"], other["layers.0.weight"])
