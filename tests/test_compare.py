@@ -213,7 +213,7 @@ def test_a_failing_method_gets_a_failed_row_and_exit_1_while_the_others_are_comp
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--methods", "tfi,foo"], "unknown method 'foo' (methods: tfi, elliptic, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet)"),
+        (["--methods", "tfi,foo"], "unknown method 'foo' (methods: tfi, elliptic, neural, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet)"),
         (["--checkpoint", "tfi=x.pt"], "'tfi' is not a neural method"),
         (["--checkpoint", "pinn"], "malformed --checkpoint"),
         (["--steps", "5"], "--steps applies to neural methods only"),

@@ -44,7 +44,7 @@ def evaluate_json(run_cli, tmp_path, *args):
 
 
 def test_evaluate_our_own_mesh_with_recorded_geometry(run_cli, tmp_path, semicylinder):
-    made = run_cli("mesh", "-g", "semicylinder", "--dims", "10", "8", "6", "-o", "m.vtu")
+    made = run_cli("mesh", "-m", "tfi", "-g", "semicylinder", "--dims", "10", "8", "6", "-o", "m.vtu")
     assert made.returncode == 0, made.stderr
     assert "inverted cells: 0" in made.stdout and "boundary deviation" in made.stdout
     sidecar = json.loads((tmp_path / "m.vtu.quality.json").read_text())
@@ -158,7 +158,7 @@ def test_an_inverted_cell_trips_the_inverted_gate_and_the_validity_gate(run_cli,
 
 
 def test_quad_meshes_from_the_mesh_command(run_cli, tmp_path):
-    made = run_cli("mesh", "-g", "semidisk", "--dims", "12", "8", "-o", "d.vtk")
+    made = run_cli("mesh", "-m", "tfi", "-g", "semidisk", "--dims", "12", "8", "-o", "d.vtk")
     assert made.returncode == 0, made.stderr
     report, _ = evaluate_json(run_cli, tmp_path, "d.vtk", "--fail-if", "boundary_deviation.max_rel>1e-9")
     assert report["dim"] == 2 and report["cells"] == 96 and report["cell_type"] == "quad"

@@ -15,7 +15,7 @@ layer but the last, and returns N(xi) in normalised units. The physical map is
 
 with TFI the transfinite interpolant of the geometry's boundary map; b vanishes on the cube's
 boundary, so there the map is the geometry's boundary exactly. ``mesh_from_checkpoint`` evaluates
-either form on a tensor grid.
+either form on a tensor grid (``meshgen.neural.inference``).
 """
 
 from __future__ import annotations
@@ -91,34 +91,21 @@ def network_from_description(model: dict) -> MLP:
     return network.eval()
 
 
-def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int = 1 << 16) -> np.ndarray:
+def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | None = None) -> np.ndarray:
     """The trained map on the tensor grid of 1D parametric coordinates ``coords`` (one array per axis).
 
     ``checkpoint``: a dict from ``load_checkpoint`` (only ``"model"`` and, for the exact-boundary form
     without ``geometry``, ``"geometry"`` are read). ``geometry``: the bound Geometry, needed for the
     exact-boundary form (loaded from the checkpoint's name and parameters when omitted).
-    Evaluates in chunks of ``chunk`` nodes without autograd. Returns the node array X, shape
-    (len(coords[0]), ..., dim), float64.
+    Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.inference``).
+    Returns the node array X, shape (len(coords[0]), ..., dim), float64.
     """
-    model = checkpoint["model"]
-    network = network_from_description(model)
-    coords = [np.asarray(c, dtype=float) for c in coords]
-    shape = tuple(len(c) for c in coords)
-    points = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, len(coords))
-    output = np.empty_like(points)
-    with torch.inference_mode():
-        for start in range(0, len(points), chunk):
-            block = torch.from_numpy(points[start : start + chunk]).float()
-            output[start : start + chunk] = network(block).double().numpy()
-    scale = float(model["scale"])
-    if not model["exact_boundary"]:
-        return (np.asarray(model["center"]) + scale * output).reshape(*shape, -1)
-    from meshgen.tfi import tfi
+    from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
 
-    if geometry is None:
+    model = checkpoint["model"]
+    if model["exact_boundary"] and geometry is None:
         geometry = geometry_from_checkpoint(checkpoint)
-    X = tfi(geometry, None, coords)
-    return X + scale * (bubble(points)[:, None] * output).reshape(X.shape)
+    return mesh_from_model(model, coords, geometry, chunk=chunk or CHUNK_NODES)
 
 
 def geometry_from_checkpoint(checkpoint: dict):

@@ -1,0 +1,561 @@
+"""Inference: a trained map evaluated on a tensor grid of any size, and the choice of the model.
+
+Evaluation (``evaluate_on_grid``, ``mesh_from_model``). A [85]*4 network on 101^3 nodes is about
+4.6e10 flop, nearly all in the three 85 x 85 products. Three things keep it near the matrix-product
+bound on a small CPU:
+
+- no autograd (``torch.inference_mode``), ``addmm`` into buffers allocated once, ``tanh_`` in place;
+- chunks of ``CHUNK_NODES`` nodes, so a chunk's activations (8192 x 85 float32, 2.8 MB) stay in
+  cache between layers (chunks of 131072 measured twice as slow);
+- one single-threaded torch per worker thread, the workers taking chunks in turn (torch releases
+  the GIL): measured 0.34 s for 101^3 nodes on 2 cores, against 0.44 s for torch's own 2 threads
+  on each product, which are too small for it to split well.
+
+The network's inputs are made per chunk from the 1D coordinates, so no (N, d) grid of parametric
+points exists at any time; the only full-size array is the node array itself.
+
+Snapping (``snap_boundary``): the boundary nodes of a structured grid sit at known parametric
+points, so the exact boundary is the geometry's boundary map there. Moving them changes only the
+cells of the outer layer; their validity is checked before and after.
+
+Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/checkpoint.pt``
+(skipping runs of another geometry or other parameters than the ones given); else the model
+bundled in ``meshgen/_models/`` for its geometry with default parameters.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import MeshgenError
+
+CHUNK_NODES = 8192
+MODELS_DIR = Path(__file__).resolve().parents[1] / "_models"
+RUNS_DIR = "runs"
+
+
+# ---------------------------------------------------------------------------------------------
+# evaluation
+
+
+def network_layers(model: dict):
+    """The MLP of a ``checkpoint["model"]`` description as [(W^T (in, out), b (out,)), ...], float32
+    torch tensors, checked against its ``dim`` and ``widths`` (a foreign description raises)."""
+    import torch
+
+    from meshgen.neural.checkpoint import CheckpointError
+
+    try:
+        dim, widths = int(model["dim"]), [int(w) for w in model["widths"]]
+        state = model["state_dict"]
+        sizes = [dim, *widths, dim]
+        layers = []
+        for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+            weight, bias = state[f"layers.{index}.weight"], state[f"layers.{index}.bias"]
+            if tuple(weight.shape) != (fan_out, fan_in) or tuple(bias.shape) != (fan_out,):
+                raise ValueError(f"layer {index} has shape {tuple(weight.shape)}, expected {(fan_out, fan_in)}")
+            # The transposed view, as torch.nn.Linear multiplies: the same kernel, the same rounding.
+            layers.append((weight.detach().float().t(), bias.detach().float()))
+        if len(state) != 2 * len(layers):
+            raise ValueError("extra weights")
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise CheckpointError(f"the checkpoint's model description is not a meshgen network ({exc})") from None
+    if model.get("activation", "tanh") != "tanh" or model.get("input", "2*xi-1") != "2*xi-1":
+        raise CheckpointError(
+            f"the checkpoint's network uses activation {model.get('activation')!r} and input "
+            f"{model.get('input')!r}; this meshgen evaluates tanh networks of 2*xi-1"
+        )
+    return layers
+
+
+def _grid_inputs(axes, start: int, stop: int):
+    """Network inputs u = 2 xi - 1 of the nodes ``start .. stop-1`` of the C-order tensor grid of
+    ``axes`` (1D float32 tensors of u per axis): (stop - start, d) float32."""
+    import torch
+
+    flat = torch.arange(start, stop)
+    columns = []
+    for axis in reversed(axes):  # the last axis varies fastest
+        columns.append(axis[flat % len(axis)])
+        flat = flat // len(axis)
+    return torch.stack(columns[::-1], dim=1)
+
+
+def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers=None) -> np.ndarray:
+    """The network N(xi) of ``model`` (normalised units) at the tensor grid of the 1D parametric
+    coordinates ``coords`` (one array per axis, values in [0, 1]).
+
+    Returns (or fills ``out`` with) an array of shape (n1 * n2 [* n3], d), float64, nodes in C order.
+    ``workers``: threads taking the chunks in turn, each running a single-threaded torch
+    (default: torch's thread count).
+    """
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    import torch
+
+    layers = network_layers(model)
+    dim = int(model["dim"])
+    if len(coords) != dim:
+        raise MeshgenError(f"the network maps {dim}D points: {len(coords)} coordinate axes given")
+    # u = 2 xi - 1 in float32, as the network computes it in training
+    axes = [2.0 * torch.from_numpy(np.asarray(c, dtype=np.float64)).float() - 1.0 for c in coords]
+    count = int(np.prod([len(c) for c in coords]))
+    if out is None:
+        out = np.empty((count, dim))
+    widths = [bias.shape[0] for _, bias in layers]
+    local = threading.local()
+
+    def run(start):
+        stop = min(count, start + chunk)
+        if not hasattr(local, "buffers"):
+            local.buffers = [torch.empty(chunk, width) for width in widths]
+        with torch.inference_mode():
+            hidden = _grid_inputs(axes, start, stop)
+            for index, ((weight, bias), buffer) in enumerate(zip(layers, local.buffers)):
+                result = buffer[: stop - start]
+                torch.addmm(bias, hidden, weight, out=result)
+                if index < len(layers) - 1:
+                    result.tanh_()
+                hidden = result
+            out[start:stop] = hidden.numpy()
+
+    workers = workers or torch.get_num_threads()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # parallel over chunks instead: each product is too small to split
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for _ in pool.map(run, range(0, count, chunk)):
+                pass
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
+def bubble_on_grid(coords) -> np.ndarray:
+    """b(xi) = 4^d prod_i xi_i (1 - xi_i) on the tensor grid of ``coords``: (n1, n2 [, n3])."""
+    dim = len(coords)
+    result = np.ones([1] * dim)
+    for axis, c in enumerate(coords):
+        c = np.asarray(c, dtype=float)
+        result = result * (4.0 * c * (1.0 - c)).reshape([-1 if d == axis else 1 for d in range(dim)])
+    return result
+
+
+def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.ndarray:
+    """Gordon-Hall TFI (``meshgen.tfi``) on the tensor grid of ``coords``, whose first and last
+    values must be 0 and 1, added to ``out`` (n1, .., d) when given, else returned.
+
+    The Boolean sum P1 + P2 (I - P1) + P3 (I - P1)(I - P2) taken one axis at a time: with U_a the
+    interpolant of the first a axes, U_a = U_(a-1) + (1 - t_a) D_a0 + t_a D_a1, where
+    D_as = F - U_(a-1) on the face t_a = s. Each D is face-sized, so the whole grid sees six
+    blended face terms (2D: four) instead of the 26 face, edge and vertex terms of the direct form.
+    """
+    coords = [np.asarray(c, dtype=float) for c in coords]
+    dim = len(coords)
+    if any(c[0] != 0.0 or c[-1] != 1.0 for c in coords):
+        raise ValueError("transfinite_on_grid needs node coordinates from 0 to 1 on every axis")
+    shape = tuple(len(c) for c in coords)
+    faces = boundary_faces(coords)
+    images = boundary(np.concatenate([points for _, points in faces]))
+    corrections = []  # (axis, side, D on the face grid: shape without the axis, + (dim,))
+    start = 0
+    for (index, points), (axis, side) in zip(faces, [(a, s) for a in range(dim) for s in (0, 1)]):
+        face_shape = tuple(n for d, n in enumerate(shape) if d != axis)
+        values = images[start : start + len(points)].reshape(*face_shape, dim).copy()
+        start += len(points)
+        end = 0 if side == 0 else -1
+        for earlier, earlier_side, D in [c for c in corrections if c[0] < axis]:  # minus U_(axis-1) on this face
+            # D lacks its own (earlier) axis, so this axis is D's axis - 1; on the face, the earlier
+            # axis keeps its number, this one being later.
+            restricted = np.expand_dims(np.take(D, end, axis=axis - 1), earlier)
+            weight = coords[earlier] if earlier_side else 1.0 - coords[earlier]
+            values -= _along(weight, earlier, dim - 1) * restricted
+        corrections.append((axis, side, values))
+    result = np.zeros(shape + (dim,)) if out is None else out
+    for axis, side, D in corrections:
+        weight = coords[axis] if side else 1.0 - coords[axis]
+        result += _along(weight, axis, dim) * np.expand_dims(D, axis)
+    return result
+
+
+def _along(values, axis: int, dim: int) -> np.ndarray:
+    """1D ``values`` shaped to broadcast along ``axis`` of a (.., dim)-component grid of ``dim`` axes."""
+    return np.asarray(values).reshape([-1 if d == axis else 1 for d in range(dim)] + [1])
+
+
+def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None) -> np.ndarray:
+    """The physical map of ``model`` (a ``checkpoint["model"]`` description) on the tensor grid of
+    ``coords``: the node array X, shape (len(coords[0]), ..., d), float64.
+
+    Soft boundary: X = center + scale N(xi). Exact boundary: X = TFI(xi) + scale b(xi) N(xi), which
+    needs ``geometry`` (the bound Geometry the model was trained on).
+    """
+    coords = [np.asarray(c, dtype=float) for c in coords]
+    shape = tuple(len(c) for c in coords)
+    dim = len(coords)
+    X = evaluate_on_grid(model, coords, chunk=chunk, workers=workers).reshape(*shape, dim)
+    scale = float(model["scale"])
+    if not model["exact_boundary"]:
+        X *= scale
+        X += np.asarray(model["center"], dtype=float)
+        return X
+    if geometry is None:
+        raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
+    X *= (scale * bubble_on_grid(coords))[..., None]
+    if coords and all(c[0] == 0.0 and c[-1] == 1.0 for c in coords):
+        transfinite_on_grid(geometry.boundary, coords, out=X)
+    else:  # a grid that does not span the cube: the direct form
+        from meshgen.tfi import tfi
+
+        X += tfi(geometry, None, coords)
+    return X
+
+
+# ---------------------------------------------------------------------------------------------
+# snapping
+
+
+def boundary_faces(coords):
+    """The parametric points of each face of the tensor grid of ``coords``: a list of
+    (index, points) per face, ``index`` selecting the face's nodes of X (a tuple of slices and one
+    integer), ``points`` (face nodes, d) on the unit cube's boundary."""
+    dim = len(coords)
+    faces = []
+    for axis in range(dim):
+        for end in (0, -1):
+            others = [np.asarray(c, dtype=float) for d, c in enumerate(coords) if d != axis]
+            grid = np.meshgrid(*others, indexing="ij")
+            columns = [g.reshape(-1) for g in grid]
+            columns.insert(axis, np.full(columns[0].shape, float(coords[axis][end])))
+            index = tuple(end if d == axis else slice(None) for d in range(dim))
+            faces.append((index, np.stack(columns, axis=1)))
+    return faces
+
+
+def inverted_cells(X: np.ndarray) -> np.ndarray:
+    """Per cell (n1, n2 [, n3]) of node array ``X``: whether the Jacobian det(e1, .., ed) of the
+    index-direction edges at one of its 2^d corners is <= 0 or not finite (DESIGN section 7: a
+    scaled Jacobian <= 0 means inverted). 2D quads count against the orientation of the mesh's
+    total signed area, as ``meshgen.quality`` does."""
+    dim = X.shape[-1]
+    cells = tuple(n - 1 for n in X.shape[:-1])
+    differences = [np.diff(X, axis=axis) for axis in range(dim)]
+    orientation = 1.0
+    if dim == 2:
+        a, b = X[1:, 1:] - X[:-1, :-1], X[:-1, 1:] - X[1:, :-1]
+        orientation = 1.0 if np.nansum(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0 else -1.0
+    inverted = np.zeros(cells, dtype=bool)
+    for corner in itertools.product((0, 1), repeat=dim):
+        edges = []
+        for axis in range(dim):
+            index = tuple(slice(0, cells[d]) if d == axis else slice(corner[d], corner[d] + cells[d]) for d in range(dim))
+            edges.append(differences[axis][index])
+        if dim == 3:
+            e1, e2, e3 = edges
+            cross = np.cross(e2, e3)
+            jacobian = np.einsum("...c,...c->...", e1, cross)
+        else:
+            e1, e2 = edges
+            jacobian = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
+        inverted |= ~(orientation * jacobian > 0)
+    return inverted
+
+
+def _outer_layer_inverted(X: np.ndarray) -> np.ndarray:
+    """``inverted_cells`` for the cells that touch the boundary (others left False). 3D: computed
+    on the six slabs of one cell's thickness only; 2D: on the whole mesh, whose orientation decides
+    the sign (and which is small)."""
+    dim = X.shape[-1]
+    cells = tuple(n - 1 for n in X.shape[:-1])
+    whole = inverted_cells(X) if dim == 2 else None
+    flags = np.zeros(cells, dtype=bool)
+    for axis in range(dim):
+        for first in {0, cells[axis] - 1}:
+            nodes = tuple(slice(first, first + 2) if d == axis else slice(None) for d in range(dim))
+            layer = tuple(slice(first, first + 1) if d == axis else slice(None) for d in range(dim))
+            flags[layer] |= whole[layer] if whole is not None else inverted_cells(X[nodes])
+    return flags
+
+
+def snap_boundary(X: np.ndarray, geometry, coords) -> dict:
+    """Move the boundary nodes of ``X`` (n1+1, ..., d), in place, onto the geometry's boundary map
+    at their parametric points ``coords`` (1D arrays per axis). Returns what it did, JSON-ready:
+
+    ``deviation_before``: distance of the boundary nodes from those points before the move (max,
+    mean, max relative to the characteristic length): the boundary deviation of the unsnapped mesh
+    measured at each node's own parametric point, an upper bound of its distance from the surface;
+    ``inverted_before`` / ``inverted_after``: inverted cells of the outer layer (the only cells
+    that change); ``inverted_by_snapping``: cells valid before and inverted after.
+    """
+    faces = boundary_faces(coords)
+    images = geometry.boundary(np.concatenate([points for _, points in faces]))
+    before = _outer_layer_inverted(X)
+    largest, total, count = 0.0, 0.0, 0
+    start = 0
+    for index, points in faces:
+        target = images[start : start + len(points)].reshape(X[index].shape)
+        start += len(points)
+        distance = np.linalg.norm(X[index] - target, axis=-1)
+        largest = max(largest, float(distance.max()))
+        # For the mean, each node once: edges shared with the faces of an earlier axis are theirs.
+        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
+        fresh = tuple(slice(1, -1) if d < axis else slice(None) for d in range(X.ndim - 1) if d != axis)
+        total += float(distance[fresh].sum())
+        count += distance[fresh].size
+        X[index] = target
+    after = _outer_layer_inverted(X)
+    length = float(geometry.characteristic_length)
+    return {
+        "deviation_before": {
+            "max": largest,
+            "mean": total / count,
+            "max_rel": largest / length,
+            "characteristic_length": length,
+            "definition": "distance of each boundary node from the geometry's boundary map at the node's parametric point",
+        },
+        "inverted_before": int(np.count_nonzero(before)),
+        "inverted_after": int(np.count_nonzero(after)),
+        "inverted_by_snapping": int(np.count_nonzero(after & ~before)),
+    }
+
+
+# ---------------------------------------------------------------------------------------------
+# choosing the model
+
+
+@dataclass
+class TrainedModel:
+    """A checkpoint chosen for meshing, with where it came from."""
+
+    path: Path
+    checkpoint: dict
+    source: str  # "checkpoint" (given), "run" (newest under ./runs/), "bundled"
+    record: dict = field(default_factory=dict)  # a bundled model's model.json
+
+    @property
+    def geometry_entry(self) -> dict:
+        return self.checkpoint["geometry"]
+
+    @property
+    def dim(self) -> int:
+        return int(self.checkpoint["model"]["dim"])
+
+    def preset(self) -> str:
+        return self.record.get("preset") or preset_of(self.checkpoint)
+
+    def sha256(self) -> str:
+        digest = hashlib.sha256()
+        with open(self.path, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+        return digest.hexdigest()
+
+    def describe(self) -> str:
+        """``<path> (<preset>, trained <n> steps, test loss ...)`` for the terminal."""
+        checkpoint = self.checkpoint
+        parts = [self.preset()]
+        if self.source == "bundled":
+            parts.insert(0, "bundled")
+        stage = checkpoint.get("stage")
+        steps = f"trained {checkpoint.get('step', '?')} steps"
+        if isinstance(checkpoint.get("elapsed_seconds"), (int, float)):
+            steps += f" in {checkpoint['elapsed_seconds']:.0f} s"
+        if stage not in (None, "done"):
+            steps += f", unfinished: saved in stage {stage}"
+        parts.append(steps)
+        loss = checkpoint.get("test_loss") or {}
+        if isinstance(loss.get("total"), (int, float)):
+            parts.append(f"test loss {loss['total']:.3g} (PDE {loss.get('pde', float('nan')):.3g}, "
+                         f"boundary {loss.get('boundary', float('nan')):.3g})")
+        return f"{display_path(self.path)} ({', '.join(parts)})"
+
+    def metadata(self) -> dict:
+        checkpoint = self.checkpoint
+        return {
+            "checkpoint": str(self.path),
+            "sha256": self.sha256(),
+            "source": self.source,
+            "preset": self.preset(),
+            "step": checkpoint.get("step"),
+            "stage": checkpoint.get("stage"),
+            "training_seconds": checkpoint.get("elapsed_seconds"),
+            "test_loss": checkpoint.get("test_loss"),
+            "widths": list(checkpoint["model"]["widths"]),
+            "exact_boundary": bool(checkpoint["model"]["exact_boundary"]),
+            "trained_with": checkpoint.get("meshgen_version"),
+        }
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the working folder when it lies below it, else absolute."""
+    path = Path(path).resolve()
+    try:
+        return str(path.relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
+def preset_of(checkpoint: dict) -> str:
+    """The preset a checkpoint was trained with: ``checkpoint["preset"]`` when recorded, else the
+    preset whose resolved configuration equals the checkpoint's (``"<name>, modified: keys"`` when
+    only some keys differ from the preset whose description it carries, ``"custom configuration"``
+    when none fits)."""
+    if isinstance(checkpoint.get("preset"), str):
+        return checkpoint["preset"]
+    from meshgen.neural.config import ConfigError, preset_paths, resolve_config, schema, to_dict
+
+    config = checkpoint.get("config") or {}
+
+    def flat(data, prefix=""):
+        items = {}
+        for key, value in data.items():
+            if isinstance(value, dict):
+                items.update(flat(value, f"{prefix}{key}."))
+            else:
+                items[f"{prefix}{key}"] = value
+        return items
+
+    recorded = flat(config)
+    described = None
+    for name in preset_paths():
+        try:
+            preset = flat(to_dict(resolve_config(name)))
+        except ConfigError:
+            continue
+        differing = sorted(key for key in schema() if recorded.get(key) != preset.get(key))
+        if not differing:
+            return name
+        if described is None and recorded.get("description") == preset.get("description"):
+            described = (name, differing)
+    if described is not None:
+        name, differing = described
+        shown = ", ".join(differing[:4]) + (", ..." if len(differing) > 4 else "")
+        return f"{name} preset, modified: {shown}"
+    return "custom configuration"
+
+
+def _same_params(given: dict, recorded: dict) -> bool:
+    return all(np.isclose(float(recorded.get(k, np.nan)), float(v), rtol=1e-12, atol=0.0) for k, v in given.items())
+
+
+def _disagreement(entry: dict, geometry_name: str | None, params: dict) -> str | None:
+    """Why a checkpoint's geometry ``entry`` is not the one asked for (None when it is)."""
+    if geometry_name is not None and entry.get("name") != geometry_name:
+        return f"was trained on '{entry.get('name')}', not on '{geometry_name}'"
+    recorded = entry.get("params", {})
+    for key, value in params.items():
+        if not _same_params({key: value}, recorded):
+            trained = recorded.get(key)
+            return f"was trained with {key}={trained:g}, not {key}={value:g}" if trained is not None else f"has no parameter '{key}'"
+    return None
+
+
+def bundled_models() -> dict[str, Path]:
+    """Geometry name -> bundled model folder (holding checkpoint.pt and model.json)."""
+    if not MODELS_DIR.is_dir():
+        return {}
+    return {p.name: p for p in sorted(MODELS_DIR.iterdir()) if (p / "checkpoint.pt").is_file()}
+
+
+def load_model(path, source: str = "checkpoint", record: dict | None = None) -> TrainedModel:
+    """Load the checkpoint at ``path`` (``weights_only``: a file carrying code fails to load)."""
+    from meshgen.neural.checkpoint import load_checkpoint
+
+    path = Path(path)
+    checkpoint = load_checkpoint(path)
+    network_layers(checkpoint["model"])  # a foreign model description fails here, before any work
+    return TrainedModel(path, checkpoint, source, record or {})
+
+
+def find_model(checkpoint_path=None, geometry_name: str | None = None, params: dict | None = None,
+               default_geometry: str = "semicylinder", runs_dir=RUNS_DIR, warn=None) -> TrainedModel:
+    """The model to mesh with.
+
+    ``checkpoint_path``: use it; ``geometry_name`` / ``params`` (what was given explicitly on the
+    command line, None / {} when not) must then agree with what it was trained on. Without it: the
+    newest ``runs_dir/*/checkpoint.pt`` (by modification time) trained on ``geometry_name`` with
+    ``params`` (any, when not given), else the bundled model of ``geometry_name`` (default
+    ``default_geometry``) when the parameters are its defaults. ``warn(text)`` hears about run
+    checkpoints that cannot be read (they are skipped). Raises MeshgenError when nothing fits.
+    """
+    params = dict(params or {})
+    if checkpoint_path is not None:
+        model = load_model(checkpoint_path)
+        reason = _disagreement(model.geometry_entry, geometry_name, params)
+        if reason is not None:
+            raise MeshgenError(
+                f"checkpoint {checkpoint_path} {reason}: leave out --geometry/--param (the checkpoint "
+                f"sets them) or pick another checkpoint"
+            )
+        return model
+    from meshgen.neural.checkpoint import CheckpointError
+
+    runs = [p for p in Path(runs_dir).glob("*/checkpoint.pt") if p.is_file()]
+    for path in sorted(runs, key=lambda p: p.stat().st_mtime, reverse=True):
+        try:
+            model = load_model(path, source="run")
+        except CheckpointError as exc:
+            if warn is not None:
+                warn(f"skipped {path}: {exc}")
+            continue
+        if _disagreement(model.geometry_entry, geometry_name, params) is None:
+            return model
+    name = geometry_name or default_geometry
+    folder = bundled_models().get(name)
+    if folder is not None:
+        record = json.loads((folder / "model.json").read_text()) if (folder / "model.json").is_file() else {}
+        model = load_model(folder / "checkpoint.pt", source="bundled", record=record)
+        defaults = _default_params(name)
+        if _disagreement(model.geometry_entry, name, {**defaults, **params}) is None:
+            return model
+    bundled = ", ".join(f"{n} (default parameters)" for n in bundled_models()) or "none"
+    given = name + (" with " + ", ".join(f"{k}={v:g}" for k, v in params.items()) if params else "")
+    raise MeshgenError(
+        f"no trained model for {given}: none in {runs_dir}{os.sep} and no bundled one (bundled: {bundled}); "
+        f"train one with `meshgen train -g {name}` or pick --method tfi or --method elliptic"
+    )
+
+
+def _default_params(name: str) -> dict:
+    from meshgen.geometry import load_geometry
+
+    return dict(load_geometry(name).defaults)
+
+
+# ---------------------------------------------------------------------------------------------
+# the method
+
+
+def build_neural(geometry, coords, model=None, snap=True):
+    """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
+    a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
+    ``coords``, boundary nodes snapped onto the geometry unless ``snap`` is False.
+    Returns (X, info) with info {"model", "snap", "warnings"}."""
+    if model is None:
+        model = find_model(geometry_name=geometry.name, params=dict(geometry.values))
+    elif not isinstance(model, TrainedModel):
+        model = find_model(model, geometry_name=geometry.name, params=dict(geometry.values))
+    if len(coords) != model.dim:
+        raise MeshgenError(f"model {model.path} is {model.dim}D: --dims needs {model.dim} numbers, got {len(coords)}")
+    X = mesh_from_model(model.checkpoint["model"], coords, geometry)
+    info = {"model": model.metadata(), "warnings": []}
+    if snap:
+        snapped = snap_boundary(X, geometry, coords)
+        info["snap"] = {"snapped": True, **snapped}
+        if snapped["inverted_by_snapping"]:
+            info["warnings"].append(
+                f"snapping the boundary nodes onto the geometry inverted {snapped['inverted_by_snapping']} cells "
+                f"(the network's boundary was up to {snapped['deviation_before']['max']:.3g} off); "
+                "--no-snap keeps the network's nodes"
+            )
+    else:
+        info["snap"] = {"snapped": False}
+    return X, info

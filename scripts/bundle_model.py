@@ -1,0 +1,140 @@
+"""Train the model that meshgen ships for a geometry and record how it was made and how it meshes.
+
+    python scripts/bundle_model.py [--geometry semicylinder] [--preset exact] [--seed 0]
+
+1. ``meshgen train -g GEOMETRY --preset PRESET --seed SEED --out <temporary run folder>``;
+2. the checkpoint, less its optimiser and scheduler state (only a resumed run needs them, and the
+   L-BFGS history is most of the file), saved with meshgen's own ``save_checkpoint`` to
+   ``meshgen/_models/GEOMETRY/checkpoint.pt``;
+3. ``model.json`` beside it: the command, preset, versions, date, training seconds, and the quality
+   of the model's 30^d and 100^d meshes (inverted cells, mean min angle, boundary deviation before
+   snapping, cells inverted by snapping) next to TFI's and elliptic's at 30^d, all computed by
+   ``meshgen.quality`` on the node arrays that ``meshgen mesh`` would write.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+def figures(X, geometry) -> dict:
+    from meshgen.quality import quality_report
+
+    report = quality_report(X, geometry)
+    deviation = report["boundary_deviation"]
+    return {
+        "cells": report["cells"],
+        "inverted": report["inverted"]["count"],
+        "min_angle_mean": report["metrics"]["min_angle"]["mean"],
+        "max_angle_mean": report["metrics"]["max_angle"]["mean"],
+        "equiangle_skewness_mean": report["metrics"]["equiangle_skewness"]["mean"],
+        "scaled_jacobian_min": report["metrics"]["scaled_jacobian"]["min"],
+        "boundary_deviation_max": deviation["max"],
+        "boundary_deviation_max_rel": deviation["max_rel"],
+        "boundary_deviation_mean": deviation["mean"],
+    }
+
+
+def neural_figures(model, geometry, cells: int) -> dict:
+    """Figures of the network's own mesh (--no-snap) and of the snapped one (the default)."""
+    from meshgen.neural.inference import mesh_from_model, snap_boundary
+    from meshgen.tfi import parametric_grid
+
+    coords = parametric_grid([cells] * geometry.dim)
+    start = time.perf_counter()
+    X = mesh_from_model(model.checkpoint["model"], coords, geometry)
+    seconds = time.perf_counter() - start
+    unsnapped = figures(X, geometry)
+    snap = snap_boundary(X, geometry, coords)
+    snapped = figures(X, geometry)
+    return {
+        "dims": [cells] * geometry.dim,
+        "meshing_seconds": seconds,
+        "no_snap": unsnapped,
+        "snapped": snapped,
+        "inverted_by_snapping": snap["inverted_by_snapping"],
+    }
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--geometry", default="semicylinder")
+    parser.add_argument("--preset", default="exact")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    import torch
+
+    from meshgen import __version__
+    from meshgen.geometry import load_geometry
+    from meshgen.methods import make_mesh
+    from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
+    from meshgen.neural.inference import MODELS_DIR, load_model
+    from meshgen.tfi import parametric_grid
+
+    folder = MODELS_DIR / args.geometry
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as run_dir:
+        command = ["meshgen", "train", "-g", args.geometry, "--preset", args.preset, "--seed", str(args.seed), "--out", "RUN", "-q"]
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "-m", *[run_dir if c == "RUN" else c for c in command]], check=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+        wall = time.perf_counter() - started
+        checkpoint = load_checkpoint(Path(run_dir) / "checkpoint.pt")
+    checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}
+    save_checkpoint(folder / "checkpoint.pt", checkpoint)
+    model = load_model(folder / "checkpoint.pt", source="bundled")
+    geometry = load_geometry(args.geometry)
+
+    coords = parametric_grid([30] * geometry.dim)
+    classical = {}
+    for method in ("tfi", "elliptic"):
+        X, _ = make_mesh(method, geometry, coords)
+        classical[method] = figures(X, geometry)
+    record = {
+        "geometry": args.geometry,
+        "params": dict(geometry.values),
+        "preset": args.preset,
+        "command": " ".join(command).replace("RUN", "<run folder>"),
+        "seed": args.seed,
+        "post_processing": "optimizer and scheduler state removed (needed only to resume training); saved with meshgen.neural.checkpoint.save_checkpoint",
+        "meshgen_version": __version__,
+        "torch_version": torch.__version__,
+        "date": datetime.date.today().isoformat(),
+        "training_seconds": checkpoint["elapsed_seconds"],
+        "training_wall_seconds": wall,
+        "steps": checkpoint["step"],
+        "widths": list(checkpoint["model"]["widths"]),
+        "exact_boundary": bool(checkpoint["model"]["exact_boundary"]),
+        "test_loss": checkpoint["test_loss"],
+        "sha256": model.sha256(),
+        "bytes": (folder / "checkpoint.pt").stat().st_size,
+        "made_by": "python scripts/bundle_model.py " + " ".join(sys.argv[1:]),
+        "quality": {
+            "definitions": "meshgen.quality (DESIGN section 7); boundary deviation: closest-point distance of boundary nodes from the geometry",
+            "neural_30": neural_figures(model, geometry, 30),
+            "neural_100": neural_figures(model, geometry, 100),
+            "tfi_30": classical["tfi"],
+            "elliptic_30": classical["elliptic"],
+        },
+    }
+    (folder / "model.json").write_text(json.dumps(record, indent=2) + "\n")
+    print(json.dumps({k: record[k] for k in ("command", "training_seconds", "bytes", "sha256")}, indent=2))
+    for name, values in record["quality"].items():
+        if name == "definitions":
+            continue
+        print(name, json.dumps(values))
+
+
+if __name__ == "__main__":
+    main()

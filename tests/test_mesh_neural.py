@@ -1,0 +1,360 @@
+"""meshgen mesh from trained models: the bundled model, --checkpoint, snapping, clustering, the
+choice of model, and the inputs that must fail without running code or writing anything."""
+
+import hashlib
+import json
+import os
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
+from meshgen.geometry import load_geometry
+from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.inference import (
+    MODELS_DIR,
+    evaluate_on_grid,
+    inverted_cells,
+    mesh_from_model,
+    snap_boundary,
+    transfinite_on_grid,
+)
+from meshgen.neural.model import bubble, network_from_description
+from meshgen.neural.train import train
+from meshgen.quality import quality_report
+from meshgen.tfi import parametric_grid, tfi
+from neural_helpers import tiny_config
+
+BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
+
+
+@pytest.fixture(scope="module")
+def semidisk():
+    return load_geometry("semidisk")
+
+
+@pytest.fixture(scope="module")
+def semicylinder():
+    return load_geometry("semicylinder")
+
+
+@pytest.fixture(scope="module")
+def soft_2d(tmp_path_factory, semidisk):
+    """A tiny soft-boundary semidisk model: its boundary nodes are visibly off the boundary."""
+    folder = tmp_path_factory.mktemp("soft2d")
+    train(tiny_config(), semidisk, folder, summary=False)
+    return folder / "checkpoint.pt"
+
+
+@pytest.fixture(scope="module")
+def soft_3d(tmp_path_factory, semicylinder):
+    folder = tmp_path_factory.mktemp("soft3d")
+    train(tiny_config("points.interior=125"), semicylinder, folder, summary=False)
+    return folder / "checkpoint.pt"
+
+
+def network_at(checkpoint, coords, geometry):
+    """The map written the slow, plain way: torch.nn layers on the full (N, d) grid of points."""
+    model = checkpoint["model"]
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)
+    network = network_from_description(model)
+    with torch.no_grad():
+        N = network(torch.from_numpy(grid.reshape(-1, len(coords))).float()).double().numpy().reshape(grid.shape)
+    if model["exact_boundary"]:
+        return tfi(geometry, None, coords) + model["scale"] * bubble(grid)[..., None] * N
+    return np.asarray(model["center"]) + model["scale"] * N
+
+
+def read_points(path, dims):
+    import meshio
+
+    return meshio.read(path).points[:, : len(dims)].reshape(*[n + 1 for n in dims], len(dims))
+
+
+def one_line_error(result):
+    return result.returncode == 2 and result.stderr.startswith("Error: ") and result.stderr.strip().count("\n") == 0
+
+
+# ---------------------------------------------------------------------------------------------
+# the bundled model
+
+
+def test_bundled_model_meshes_30_cubed_with_no_inverted_cell(run_cli, tmp_path):
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    result = run_cli("mesh", "--dims", 30, 30, 30, "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    first = result.stdout.splitlines()[0]
+    assert first.startswith("model: ") and str(BUNDLED) in first and "bundled" in first and "exact" in first
+    sidecar = json.loads((tmp_path / "m.vtu.quality.json").read_text())
+    assert sidecar["method"] == "neural" and sidecar["geometry"] == "semicylinder"
+    model = sidecar["method_info"]["model"]
+    assert model["source"] == "bundled" and model["preset"] == "exact"
+    assert model["sha256"] == hashlib.sha256(BUNDLED.read_bytes()).hexdigest()
+    # Independent check of validity: VTK's (Verdict's) scaled Jacobian of every cell is positive.
+    reader = vtk.vtkXMLUnstructuredGridReader()
+    reader.SetFileName(str(tmp_path / "m.vtu"))
+    reader.Update()
+    quality = vtk.vtkMeshQuality()
+    quality.SetInputData(reader.GetOutput())
+    quality.SetHexQualityMeasureToScaledJacobian()
+    quality.Update()
+    jacobian = vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality"))
+    assert len(jacobian) == 27000 and jacobian.min() > 0
+    assert sidecar["inverted"]["count"] == 0 and sidecar["boundary_deviation"]["max_rel"] < 1e-12
+    # The figures recorded beside the model are those of this mesh.
+    record = json.loads((BUNDLED.parent / "model.json").read_text())
+    assert record["preset"] == "exact" and record["quality"]["neural_30"]["snapped"]["inverted"] == 0
+    assert record["quality"]["neural_30"]["snapped"]["min_angle_mean"] == pytest.approx(
+        sidecar["metrics"]["min_angle"]["mean"], rel=1e-6
+    )
+    assert record["quality"]["neural_100"]["snapped"]["inverted"] == 0
+    assert BUNDLED.stat().st_size < 1 << 20 and record["sha256"] == model["sha256"]
+
+
+def test_bundled_model_loads_with_weights_only_and_is_the_recorded_run(semicylinder):
+    checkpoint = load_checkpoint(BUNDLED)
+    record = json.loads((BUNDLED.parent / "model.json").read_text())
+    assert checkpoint["stage"] == "done" and checkpoint["step"] == record["steps"]
+    assert checkpoint["geometry"]["params"] == dict(semicylinder.defaults)
+    assert checkpoint["config"]["model"]["exact_boundary"] and record["command"].startswith("meshgen train -g semicylinder --preset exact")
+
+
+# ---------------------------------------------------------------------------------------------
+# the map at the nodes
+
+
+@pytest.mark.parametrize("chunk, workers", [(7, 3), (1000, 1), (1 << 20, 2)])
+def test_chunked_evaluation_is_the_network_at_every_node(soft_3d, chunk, workers):
+    checkpoint = load_checkpoint(soft_3d)
+    coords = [np.linspace(0, 1, 6), np.array([0.0, 0.3, 1.0]), np.linspace(0, 1, 11) ** 2]
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, 3)
+    with torch.no_grad():
+        expected = network_from_description(checkpoint["model"])(torch.from_numpy(grid).float()).double().numpy()
+    got = evaluate_on_grid(checkpoint["model"], coords, chunk=chunk, workers=workers)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-6)
+    assert torch.get_num_threads() >= 1  # restored after the single-threaded workers
+
+
+@pytest.mark.parametrize("which, dims", [("soft_2d", (9, 5)), ("soft_3d", (4, 6, 5))])
+def test_mesh_from_a_checkpoint_is_the_network_at_the_same_points(run_cli, tmp_path, request, which, dims):
+    path = request.getfixturevalue(which)
+    checkpoint = load_checkpoint(path)
+    geometry = load_geometry(checkpoint["geometry"]["spec"], checkpoint["geometry"]["params"])
+    result = run_cli("mesh", "--checkpoint", path, "--no-snap", "--dims", *dims, "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    expected = network_at(checkpoint, parametric_grid(dims), geometry)
+    np.testing.assert_allclose(read_points(tmp_path / "m.vtu", dims), expected, rtol=0, atol=1e-6)
+    sidecar = json.loads((tmp_path / "m.vtu.quality.json").read_text())
+    assert sidecar["method_info"]["model"]["checkpoint"] == str(path) and sidecar["method_info"]["snap"] == {"snapped": False}
+
+
+def test_exact_boundary_map_on_a_clustered_grid(semicylinder):
+    checkpoint = load_checkpoint(BUNDLED)
+    coords = node_coordinates((5, 4, 12), ["zeta:both:1.3", "xi:0:h=0.05"])
+    X = mesh_from_model(checkpoint["model"], coords, semicylinder, chunk=64)
+    np.testing.assert_allclose(X, network_at(checkpoint, coords, semicylinder), rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("name, dims", [("semicylinder", (5, 7, 4)), ("semidisk", (9, 6)), ("canal", (3, 4, 6))])
+def test_tensor_grid_tfi_equals_the_direct_gordon_hall_form(name, dims):
+    geometry = load_geometry(name)
+    coords = node_coordinates(dims, ["eta:both:1.4"])
+    np.testing.assert_allclose(transfinite_on_grid(geometry.boundary, coords), tfi(geometry, None, coords), rtol=0, atol=1e-13)
+
+
+# ---------------------------------------------------------------------------------------------
+# snapping
+
+
+def test_snapping_puts_boundary_nodes_on_the_boundary_and_reports_the_deviation(run_cli, tmp_path, soft_3d, semicylinder):
+    dims = (6, 5, 7)
+    snapped = run_cli("mesh", "--checkpoint", soft_3d, "--dims", *dims, "-o", "s.vtu")
+    raw = run_cli("mesh", "--checkpoint", soft_3d, "--no-snap", "--dims", *dims, "-o", "r.vtu")
+    assert snapped.returncode == 0 and raw.returncode == 0, snapped.stderr + raw.stderr
+    X, X_raw = read_points(tmp_path / "s.vtu", dims), read_points(tmp_path / "r.vtu", dims)
+    grid = np.stack(np.meshgrid(*parametric_grid(dims), indexing="ij"), axis=-1)
+    on_boundary = np.zeros(X.shape[:-1], dtype=bool)
+    on_boundary[[0, -1]] = on_boundary[:, [0, -1]] = on_boundary[:, :, [0, -1]] = True
+    exact = semicylinder.boundary(grid[on_boundary])
+    np.testing.assert_allclose(X[on_boundary], exact, rtol=0, atol=1e-14)  # on the boundary to round-off
+    np.testing.assert_array_equal(X[~on_boundary], X_raw[~on_boundary])  # and nothing else moved
+    distance = np.linalg.norm(X_raw[on_boundary] - exact, axis=1)
+    info = json.loads((tmp_path / "s.vtu.quality.json").read_text())["method_info"]["snap"]
+    assert info["snapped"] and info["deviation_before"]["max"] == pytest.approx(distance.max(), rel=1e-9)
+    assert info["deviation_before"]["mean"] == pytest.approx(distance.mean(), rel=1e-9)  # each node once
+    assert info["deviation_before"]["max"] > 1e-3  # a tiny run is visibly off: the check means something
+    assert "deviation before snapping max" in snapped.stdout
+    # Only outer-layer cells change: the change in inverted cells over the whole mesh (counted by
+    # meshgen.quality) is the change the snapping report gives for the outer layer.
+    whole = {name: json.loads((tmp_path / f"{name}.vtu.quality.json").read_text())["inverted"]["count"] for name in "sr"}
+    assert whole["s"] - whole["r"] == info["inverted_after"] - info["inverted_before"]
+
+
+def test_snapping_reports_the_cells_it_inverts(semicylinder):
+    """Both outer layers of the cap zeta = 0 pushed 1.5 cells outwards: valid cells, until snapping
+    puts the boundary layer back and it passes the next one."""
+    dims = (4, 3, 6)
+    coords = parametric_grid(dims)
+    X = tfi(semicylinder, dims)
+    height = X[0, 0, 1, 2] - X[0, 0, 0, 2]
+    X[:, :, :2, 2] -= 1.5 * height
+    assert quality_report(X)["inverted"]["count"] == 0
+    info = snap_boundary(X, semicylinder, coords)
+    assert info["deviation_before"]["max"] == pytest.approx(1.5 * height, rel=1e-12)
+    assert info["inverted_before"] == 0 and info["inverted_by_snapping"] == info["inverted_after"] == 4 * 3
+    assert quality_report(X)["inverted"]["count"] == 4 * 3
+    np.testing.assert_array_equal(inverted_cells(X), quality_report_cells(X))
+
+
+def quality_report_cells(X):
+    from meshgen.quality import cell_metrics
+
+    return (cell_metrics(X)["scaled_jacobian"] <= 0).reshape(tuple(n - 1 for n in X.shape[:-1]))
+
+
+def test_snapping_warns_on_stderr_when_it_inverts_cells(run_cli, tmp_path, soft_2d):
+    """The tiny model's map blown up 1.5 times about the centre: its two outer node layers lie
+    outside the semidisk, so snapping the boundary layer back folds the cells between them."""
+    checkpoint = load_checkpoint(soft_2d)
+    last = len(checkpoint["model"]["widths"])
+    for key in (f"layers.{last}.weight", f"layers.{last}.bias"):
+        checkpoint["model"]["state_dict"][key] *= 1.5
+    torch.save(checkpoint, tmp_path / "big.pt")
+    result = run_cli("mesh", "--checkpoint", "big.pt", "--dims", 40, 40, "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    info = json.loads((tmp_path / "m.vtu.quality.json").read_text())["method_info"]["snap"]
+    assert info["inverted_by_snapping"] > 0
+    assert f"Warning: snapping the boundary nodes onto the geometry inverted {info['inverted_by_snapping']} cells" in result.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# clustering
+
+
+def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylinder):
+    dims = (4, 4, 20)
+    result = run_cli("mesh", "--dims", *dims, "--cluster", "zeta:both:1.15", "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    X = read_points(tmp_path / "m.vtu", dims)
+    coords = node_coordinates(dims, ["zeta:both:1.15"])
+    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-6)
+    # Along the axis z = 2 zeta for the exact Winslow map of a prism; the network keeps it closely,
+    # so physical cell heights grow by the ratio asked for.
+    heights = np.diff(X[2, 2, :, 2])
+    np.testing.assert_allclose(heights[1:10] / heights[:9], 1.15, rtol=0.01)
+    np.testing.assert_allclose(heights[-9:] / heights[-10:-1], 1 / 1.15, rtol=0.01)
+    # a first-cell height: h = 0.01 of the parametric edge, 0.02 of the length 2
+    result = run_cli("mesh", "--dims", *dims, "--cluster", "zeta:0:h=0.01", "-o", "h.vtu")
+    assert result.returncode == 0, result.stderr
+    X = read_points(tmp_path / "h.vtu", dims)
+    assert np.diff(X[2, 2, :, 2])[0] == pytest.approx(0.02, rel=0.01)
+    assert clustered_coordinates(20, parse_cluster("zeta:0:h=0.01"))[1] == pytest.approx(0.01, rel=1e-9)
+
+
+# ---------------------------------------------------------------------------------------------
+# which model
+
+
+def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_path, soft_2d, soft_3d):
+    runs = tmp_path / "runs"
+    for name, source, age in (("semicylinder-old", soft_3d, 200), ("semidisk-new", soft_2d, 100)):
+        (runs / name).mkdir(parents=True)
+        target = runs / name / "checkpoint.pt"
+        target.write_bytes(source.read_bytes())
+        os.utime(target, (time.time() - age, time.time() - age))
+    newest = run_cli("mesh", "--dims", 5, 5, "-o", "a.vtu")  # no --geometry: the newest run, 2D
+    assert newest.returncode == 0, newest.stderr
+    assert newest.stdout.startswith("model: runs/semidisk-new/checkpoint.pt (")
+    assert json.loads((tmp_path / "a.vtu.quality.json").read_text())["geometry"] == "semidisk"
+    chosen = run_cli("mesh", "-g", "semicylinder", "--dims", 3, 3, 3, "-o", "b.vtu")  # skips the semidisk run
+    assert chosen.returncode == 0, chosen.stderr
+    assert chosen.stdout.startswith("model: runs/semicylinder-old/checkpoint.pt (")
+    assert json.loads((tmp_path / "b.vtu.quality.json").read_text())["method_info"]["model"]["source"] == "run"
+    # a run trained with other parameters is skipped; no run and no bundled model for radius 2
+    other = run_cli("mesh", "-g", "semicylinder", "--param", "radius=2", "--dims", 3, 3, 3, "-o", "c.vtu")
+    assert one_line_error(other) and "meshgen train -g semicylinder" in other.stderr and "--method tfi" in other.stderr
+    assert not (tmp_path / "c.vtu").exists()
+    (runs / "semicylinder-old" / "checkpoint.pt").unlink()
+    bundled = run_cli("mesh", "-g", "semicylinder", "--dims", 3, 3, 3, "-o", "d.vtu")
+    assert bundled.returncode == 0 and f"model: {BUNDLED} (bundled, exact" in bundled.stdout
+
+
+def test_tfi_and_elliptic_stay_one_option_away(run_cli, tmp_path):
+    result = run_cli("mesh", "-m", "tfi", "-g", "canal", "--dims", 3, 3, 3, "-o", "t.vtu")
+    assert result.returncode == 0 and "model:" not in result.stdout
+    assert json.loads((tmp_path / "t.vtu.quality.json").read_text())["method"] == "tfi"
+
+
+# ---------------------------------------------------------------------------------------------
+# bad input
+
+
+class Payload:
+    """Unpickling this calls open(marker, "w"): creates the marker file."""
+
+    def __init__(self, marker):
+        self.marker = str(marker)
+
+    def __reduce__(self):
+        return (open, (self.marker, "w"))
+
+
+def test_a_checkpoint_carrying_code_is_refused_without_running_it(run_cli, tmp_path):
+    evil = tmp_path / "evil.pt"
+    marker = tmp_path / "pwned"
+    torch.save({"format": "meshgen-checkpoint", "model": Payload(marker)}, evil)
+    # The payload is real: a plain (unsafe) load runs it.
+    proof = tmp_path / "proof"
+    torch.save(Payload(proof), tmp_path / "proof.pt")
+    torch.load(tmp_path / "proof.pt", weights_only=False)
+    assert proof.exists()
+    before = sorted(os.listdir(tmp_path))
+    result = run_cli("mesh", "--checkpoint", evil, "--dims", 4, 4, 4, "-o", "m.vtu")
+    assert one_line_error(result) and "evil.pt" in result.stderr, result.stderr
+    assert not marker.exists() and sorted(os.listdir(tmp_path)) == before
+
+
+def write_foreign(path):
+    torch.save({"weights": torch.zeros(3)}, path)
+
+
+def write_corrupt(path):
+    path.write_bytes(BUNDLED.read_bytes()[: BUNDLED.stat().st_size // 2])
+
+
+def write_wrong_network(path):
+    checkpoint = load_checkpoint(BUNDLED)
+    checkpoint["model"]["widths"] = [7, 7]
+    torch.save(checkpoint, path)
+
+
+@pytest.mark.parametrize(
+    "setup, args, message",
+    [
+        (None, ["--checkpoint", "missing.pt", "--dims", 4, 4, 4], "missing.pt does not exist"),
+        (write_corrupt, ["--checkpoint", "x.pt", "--dims", 4, 4, 4], "truncated or not a meshgen checkpoint"),
+        (write_foreign, ["--checkpoint", "x.pt", "--dims", 4, 4, 4], "not a meshgen checkpoint"),
+        (write_wrong_network, ["--checkpoint", "x.pt", "--dims", 4, 4, 4], "not a meshgen network"),
+        (None, ["--checkpoint", BUNDLED, "--dims", 4, 4], "is 3D: --dims needs 3 numbers, got 2"),
+        (None, ["--checkpoint", BUNDLED, "-g", "semidisk", "--dims", 4, 4], "trained on 'semicylinder', not on 'semidisk'"),
+        (None, ["--checkpoint", BUNDLED, "--param", "radius=3", "--dims", 4, 4, 4], "trained with radius=1, not radius=3"),
+        (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both"], "malformed --cluster"),
+        (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both:0.5"], "growth ratio must be a number >= 1"),
+        (None, ["-g", "canal", "--dims", 4, 4, 4], "no trained model for canal"),
+        (None, ["-m", "tfi", "--checkpoint", BUNDLED, "--dims", 4, 4, 4], "--checkpoint applies to the neural method"),
+        (None, ["--tol", "1e-3", "--dims", 4, 4, 4], "--tol does not apply to method 'neural'"),
+        (None, ["-m", "tfi", "--no-snap", "--dims", 4, 4, 4], "--snap does not apply to method 'tfi'"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(run_cli, tmp_path, setup, args, message):
+    if setup is not None:
+        setup(tmp_path / "x.pt")
+    before = sorted(os.listdir(tmp_path))
+    result = run_cli("mesh", *args, "-o", "m.vtu")
+    assert one_line_error(result), result.stderr
+    assert message in result.stderr
+    assert sorted(os.listdir(tmp_path)) == before
