@@ -156,6 +156,7 @@ def run_training(run: Run, quiet: bool = False):
     from meshgen.neural.progress import LogReporter, RichReporter
     from meshgen.neural.train import train
 
+    created = not run.run_dir.exists()
     try:
         run.run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -177,5 +178,11 @@ def run_training(run: Run, quiet: bool = False):
                 run.config, run.geometry, run.run_dir, device=run.device, resume=run.resume, reporter=reporter,
                 stop=stop_requested.is_set, geometry_spec=run.geometry_spec,
             )
+    except BaseException:
+        # A run that fails before writing anything (e.g. a plugin that fails on its first points)
+        # leaves no empty folder behind.
+        if created and not any(run.run_dir.iterdir()):
+            run.run_dir.rmdir()
+        raise
     finally:
         signal.signal(signal.SIGINT, previous)
