@@ -118,8 +118,6 @@ test seen to fail, the guard restored):
 from __future__ import annotations
 
 import csv
-import errno
-import json
 import os
 import re
 import signal
@@ -159,11 +157,12 @@ def semidisk_checkpoint(tmp_path_factory) -> bytes:
 
 
 def snapshot(folder: Path) -> dict:
-    """Every file under ``folder`` with its bytes; Python's bytecode caches left out."""
+    """Every file under ``folder`` with its bytes, every folder with None; Python's bytecode
+    caches left out."""
     return {
-        str(p.relative_to(folder)): p.read_bytes()
+        str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
         for p in sorted(folder.rglob("*"))
-        if p.is_file() and "__pycache__" not in p.parts
+        if "__pycache__" not in p.parts
     }
 
 
@@ -292,7 +291,7 @@ BAD_INPUTS = {
     "compare-non-finite": (["compare", "nan.vtu", "m.vtu"], ["nan.vtu", "non-finite coordinates"]),
     "compare-wrong-cell-type": (["compare", "triangles.vtu", "m.vtu"], ["no hexahedra or quadrilaterals", "2 triangle"]),
     "compare-checkpoint-random": (COMPARE + ["--methods", "tfi,pinn", "--checkpoint", "pinn=random.pt"], ["random.pt", "not a meshgen checkpoint"]),
-    "compare-checkpoint-payload": (COMPARE + ["--methods", "tfi,pinn", "--checkpoint", "pinn=evil.pt"], ["evil.pt", "refused"]),
+    "compare-checkpoint-payload": (COMPARE + ["--methods", "tfi,pinn", "--checkpoint", "pinn=evil.pt"], ["evil.pt", "refused without running them"]),
     # train
     "train-param-malformed": (TRAIN + ["--param", "radius"], ["malformed --param 'radius'"]),
     "train-param-unknown": (TRAIN + ["--param", "radus=2"], ["no parameter 'radus'"]),
@@ -307,7 +306,7 @@ BAD_INPUTS = {
     "train-resume-random": (["train", "--resume", "random.pt"], ["random.pt", "not a meshgen checkpoint"]),
     "train-resume-future": (["train", "--resume", "future.pt"], ["format version 2, newer than this meshgen reads (1)"]),
     "train-resume-dimension": (["train", "--resume", "dimension.pt"], ["dimension.pt", "2D map", "3D geometry 'semicylinder'"]),
-    "train-resume-payload": (["train", "--resume", "evil.pt"], ["evil.pt", "refused"]),
+    "train-resume-payload": (["train", "--resume", "evil.pt"], ["evil.pt", "refused without running them"]),
     # mesh
     "mesh-checkpoint-random": (["mesh", "--checkpoint", "random.pt", "--dims", 4, 4, "-o", "out.vtu"], ["random.pt", "not a meshgen checkpoint"]),
     "mesh-checkpoint-future": (["mesh", "--checkpoint", "future.pt", "--dims", 4, 4, "-o", "out.vtu"], ["format version 2, newer"]),
