@@ -111,7 +111,8 @@ test seen to fail, the guard restored):
 - every other new row failed before the fix in meshgen/ that its commit names (evaluate's report
   paths, train's run folder, random-byte YAML, sys.exit in a plugin, inf coordinates, the file
   name of a Plot3D read error, the checkpoint messages, the resumed history's duplicated row,
-  a full disk under torch.save or at config.yaml), or passed from the start where the guard
+  a full disk under torch.save or at config.yaml, the empty run folder a failed run left), or
+  passed from the start where the guard
   already existed (e.g. [compare-dims-zero]): those rows document and keep it.
 """
 
@@ -499,7 +500,18 @@ def test_full_disk_when_a_run_writes_its_first_file(tmp_path, monkeypatch):
 # signals: real processes, the signal sent while a write is half done (hardening_helpers.py)
 
 
-def start_stalled(folder: Path, kind: str, call: int, *args) -> tuple[subprocess.Popen, Path]:
+@pytest.fixture
+def children():
+    """Child processes a test starts; any still running at its end (a failed test) are killed."""
+    started = []
+    yield started
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+
+
+def start_stalled(children, folder: Path, kind: str, call: int, *args) -> tuple[subprocess.Popen, Path]:
     """``meshgen ARGS`` in a child process whose ``call``-th write of ``kind`` stops half-way;
     returns the process and the marker file that appears (holding the half-written file's name)
     when it does."""
@@ -510,6 +522,7 @@ def start_stalled(folder: Path, kind: str, call: int, *args) -> tuple[subprocess
         [sys.executable, str(HELPERS), kind, str(marker), str(call), *map(str, args)],
         cwd=folder, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
+    children.append(process)
     deadline = time.time() + 120
     while not marker.exists():
         if process.poll() is not None or time.time() > deadline:
@@ -538,11 +551,11 @@ def resume_and_finish(folder: Path, kept_step: int) -> None:
     assert history_steps(folder / "run" / "history.csv") == list(range(kept_step + 3 + 2))
 
 
-def test_sigkill_during_a_checkpoint_write_keeps_the_last_periodic_checkpoint(tmp_path, monkeypatch):
+def test_sigkill_during_a_checkpoint_write_keeps_the_last_periodic_checkpoint(tmp_path, monkeypatch, children):
     monkeypatch.chdir(tmp_path)
     # checkpoint.every = 5: the first periodic checkpoint (step 5) is written whole, the second
     # (step 10) stops half-way, and the process is killed there.
-    process, marker = start_stalled(tmp_path, "torch-save", 2, *TRAIN_UNTIL_KILLED)
+    process, marker = start_stalled(children, tmp_path, "torch-save", 2, *TRAIN_UNTIL_KILLED)
     process.send_signal(signal.SIGKILL)
     process.communicate(timeout=30)
     assert process.returncode == -signal.SIGKILL
@@ -555,14 +568,20 @@ def test_sigkill_during_a_checkpoint_write_keeps_the_last_periodic_checkpoint(tm
     resume_and_finish(tmp_path, kept["step"])
 
 
-def test_second_ctrl_c_during_a_checkpoint_write_keeps_the_last_checkpoint(tmp_path, monkeypatch):
+def test_second_ctrl_c_during_a_checkpoint_write_keeps_the_last_checkpoint(tmp_path, monkeypatch, children):
     """The first Ctrl-C asks for a save after the step; a second one aborts at once, here in the
     middle of writing a checkpoint: the previous checkpoint stays, the partial one is removed."""
     monkeypatch.chdir(tmp_path)
-    process, marker = start_stalled(tmp_path, "torch-save", 2, *TRAIN_UNTIL_KILLED)
+    process, marker = start_stalled(children, tmp_path, "torch-save", 2, *TRAIN_UNTIL_KILLED)
     process.send_signal(signal.SIGINT)
-    time.sleep(0.5)  # two signals in quick succession can arrive as one
-    process.send_signal(signal.SIGINT)
+    time.sleep(0.5)  # two signals in quick succession can arrive as one ...
+    for _ in range(10):
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=3)
+            break
+        except subprocess.TimeoutExpired:  # ... so on a busy machine, once more
+            continue
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 130, stderr
     assert "Traceback" not in stderr and "Stopping after this step" in stderr
@@ -573,7 +592,7 @@ def test_second_ctrl_c_during_a_checkpoint_write_keeps_the_last_checkpoint(tmp_p
 
 
 @pytest.mark.parametrize("existing", [True, False], ids=["over-an-old-file", "new-file"])
-def test_sigkill_during_a_mesh_write_leaves_no_file_under_the_target_name(tmp_path, monkeypatch, existing):
+def test_sigkill_during_a_mesh_write_leaves_no_file_under_the_target_name(tmp_path, monkeypatch, children, existing):
     monkeypatch.chdir(tmp_path)
     mesh = ["mesh", "-m", "tfi", "-g", "semidisk", "--dims", 40, 30, "-o", "m.xyz", "-q"]
     if existing:
@@ -583,7 +602,7 @@ def test_sigkill_during_a_mesh_write_leaves_no_file_under_the_target_name(tmp_pa
         assert os.listdir(tmp_path) == []
     before = snapshot(tmp_path)
     # Plot3D records: block count, dimensions, coordinates; stop after the dimensions.
-    process, marker = start_stalled(tmp_path, "plot3d-record", 2, *mesh)
+    process, marker = start_stalled(children, tmp_path, "plot3d-record", 2, *mesh)
     process.send_signal(signal.SIGKILL)
     process.communicate(timeout=30)
     half_written = tmp_path / marker.read_text()  # the name the writer was given, relative to the child's folder
