@@ -7,8 +7,9 @@ instead of at a random moment.
 KIND is ``torch-save`` (the N-th ``torch.save``: a checkpoint) or ``plot3d-record`` (the N-th
 record of a Plot3D file). The stalled write puts the first half of its bytes where the real
 write would have put them (whatever file meshgen handed it: a temporary name or the target
-itself), flushes them to disk, writes MARKER (holding that file's name) and sleeps. Only the
-timing is staged: the file, the process and the signal are real.
+itself), flushes them to disk, writes MARKER (holding that file's name) and waits: for the file
+MARKER.go, after which it writes the rest, or to be killed. Only the timing is staged: the file,
+the process and the signal are real.
 """
 
 from __future__ import annotations
@@ -23,12 +24,17 @@ STALL_SECONDS = 60
 
 
 def _stall(handle, marker: str, where) -> None:
+    """Flush what is written, write ``marker``, then wait until the file ``marker``.go appears
+    (the test lets the write finish) or the process is killed; at most ``STALL_SECONDS``."""
     handle.flush()
     os.fsync(handle.fileno())
     temporary = Path(marker + ".part")
     temporary.write_text(str(where))
     os.replace(temporary, marker)  # the marker appears whole: the test never reads half a name
-    time.sleep(STALL_SECONDS)
+    go = Path(marker + ".go")
+    deadline = time.monotonic() + STALL_SECONDS
+    while not go.exists() and time.monotonic() < deadline:
+        time.sleep(0.02)  # a signal handler that raises (a second Ctrl-C) raises here
 
 
 def stall_torch_save(marker: str, call: int) -> None:

@@ -76,6 +76,7 @@ Faults:
 | row of the issue                                   | test                                                                            |
 |----------------------------------------------------|---------------------------------------------------------------------------------|
 | SIGINT during training: checkpoint, --resume       | test_neural_cli.py::test_ctrl_c_saves_a_checkpoint_and_resume_finishes_the_run  |
+| SIGINT during a checkpoint write: saves, resumes   | test_hardening.py::test_ctrl_c_during_a_checkpoint_write_saves_and_stops        |
 | SIGINT twice, during a checkpoint write            | test_hardening.py::test_second_ctrl_c_during_a_checkpoint_write_keeps_the_last_checkpoint |
 | SIGKILL during training (mid checkpoint write)     | test_hardening.py::test_sigkill_during_a_checkpoint_write_keeps_the_last_periodic_checkpoint |
 | kill during a mesh write: no file under the name   | test_hardening.py::test_sigkill_during_a_mesh_write_leaves_no_file_under_the_target_name |
@@ -565,6 +566,23 @@ def test_sigkill_during_a_checkpoint_write_keeps_the_last_periodic_checkpoint(tm
     assert half_written.name != "checkpoint.pt"  # the half-written bytes went to a temporary name
     with pytest.raises(Exception):  # and they are half a checkpoint: the kill hit mid-write
         torch.load(tmp_path / "run" / half_written.name, weights_only=True)
+    resume_and_finish(tmp_path, kept["step"])
+
+
+def test_ctrl_c_during_a_checkpoint_write_saves_and_stops(tmp_path, monkeypatch, children):
+    """Ctrl-C after the first periodic checkpoint, while the second is being written: the write
+    finishes whole, the run saves where it stopped, says how to go on, and --resume does."""
+    monkeypatch.chdir(tmp_path)
+    process, marker = start_stalled(children, tmp_path, "torch-save", 2, *TRAIN_UNTIL_KILLED)
+    process.send_signal(signal.SIGINT)
+    time.sleep(0.5)  # the handler has run: now let the write go on
+    Path(f"{marker}.go").touch()
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert "Interrupted at step 10 (adam)" in stdout and "Continue with: meshgen train --resume run/checkpoint.pt" in stdout
+    assert "Traceback" not in stderr and not [p.name for p in (tmp_path / "run").iterdir() if TEMPORARY.match(p.name)]
+    kept = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert kept["step"] == 10 and kept["stage"] == "adam"
     resume_and_finish(tmp_path, kept["step"])
 
 
