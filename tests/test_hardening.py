@@ -103,18 +103,19 @@ Repeatability (CPU, same seed):
 
 How each new test was checked against the protection it guards (the guard disabled once, the
 test seen to fail, the guard restored):
-- atomic_path writing to the target itself: the SIGKILL and Ctrl-C tests fail (a half checkpoint
-  under checkpoint.pt, or none at all; the old mesh changed), and so do the full-disk rows (the
-  write no longer goes through the temporary name, so it lands on the old file);
+- atomic_path writing to the target itself: the SIGKILL tests and the second-Ctrl-C test fail
+  (half a checkpoint under checkpoint.pt, or none at all; the old mesh changed), and so do the
+  full-disk rows (the write no longer goes through the temporary name: it lands on the old file);
+- train's SIGINT handler not installed: both Ctrl-C tests fail (nothing saved at step 10);
 - torch.load(weights_only=False) in load_checkpoint: the payload rows fail (the marker appears);
 - yaml.unsafe_load in meshgen.neural.config: the python-tag rows fail (the marker appears);
 - the sampler seeded from the clock: the repeatability test fails at the first weight;
 - every other new row failed before the fix in meshgen/ that its commit names (evaluate's report
   paths, train's run folder, random-byte YAML, sys.exit in a plugin, inf coordinates, the file
-  name of a Plot3D read error, the checkpoint messages, the resumed history's duplicated row,
-  a full disk under torch.save or at config.yaml, the empty run folder a failed run left), or
-  passed from the start where the guard
-  already existed (e.g. [compare-dims-zero]): those rows document and keep it.
+  name of a Plot3D read error, the checkpoint messages, the resumed history's duplicated row, a
+  full disk under torch.save or at config.yaml, the empty run folder a failed run left), or
+  passed from the start where the guard already existed (e.g. [compare-dims-zero]): those rows
+  document the guard and keep it.
 """
 
 from __future__ import annotations
