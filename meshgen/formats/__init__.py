@@ -43,7 +43,7 @@ def register_format(name: str, extensions, module: str, description: str) -> Non
     FORMATS.append(Format(name, tuple(extensions), module, description))
 
 
-register_format("vtu", [".vtu"], "meshgen.formats._meshio", "VTK XML unstructured grid (zlib-compressed)")
+register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
 register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone")

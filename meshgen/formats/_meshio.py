@@ -1,6 +1,9 @@
 """VTK XML (.vtu), legacy VTK (.vtk) and XDMF (.xdmf) through meshio: hexahedron (quad) cells,
 per-cell arrays, and meshgen's metadata as JSON, where VTK, ParaView and meshio read it back.
 
+meshgen writes .vtu with its own faster writer (``meshgen.formats._vtu``, which reads with meshio); the
+.vtu path of ``write`` stays as the baseline ``benchmarks/formats.py`` measures that writer against.
+
 meshio's vtu and vtk writers drop field data and its XDMF writer has no place for it, so the
 metadata is added to the file meshio wrote (still the temporary file of the atomic write):
 
