@@ -32,8 +32,8 @@ from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.neural.config import resolve_config  # noqa: E402
 from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, normalised_boundary  # noqa: E402
 from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
-from meshgen.neural.report import quality_summary, snap_boundary  # noqa: E402
-from meshgen.neural.train import Problem, adam_step, boundary_pool, make_optimizer, train  # noqa: E402
+from meshgen.neural.train import Problem, adam_step, boundary_pool, make_optimizer, snap_boundary, train  # noqa: E402
+from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import parametric_grid  # noqa: E402
 
 VARIANTS = ["default", "fd-pinn", "exact", "pinn", "mgnet", "rwgp-pinn"]
@@ -144,6 +144,18 @@ def loop_seconds_per_step(geometry, widths, steps):
     return (keeper.rows[-1]["seconds"] - keeper.rows[50]["seconds"]) / (steps - 1 - 50)
 
 
+def figures(report: dict) -> dict:
+    """The few figures of a ``meshgen.quality`` report that time-to-quality follows."""
+    deviation = report.get("boundary_deviation") or {}
+    return {
+        "inverted": report["inverted"]["count"],
+        "min_angle_mean": report["metrics"]["min_angle"]["mean"],
+        "max_angle_mean": report["metrics"]["max_angle"]["mean"],
+        "boundary_deviation_max": deviation.get("max"),
+        "boundary_deviation_mean": deviation.get("mean"),
+    }
+
+
 class QualityProbe:
     """A reporter that measures the 30^3 mesh at every saved checkpoint; its own time is excluded."""
 
@@ -164,16 +176,14 @@ class QualityProbe:
         start = time.perf_counter()
         checkpoint = load_checkpoint(self.folder / "checkpoint.pt")  # saved at this step, before this call
         X = mesh_from_checkpoint(checkpoint, self.coords, self.geometry)
-        quality = quality_summary(X, self.geometry, self.coords)
-        snapped = quality_summary(snap_boundary(X, self.geometry, self.coords), self.geometry, self.coords)
-        point = {"step": checkpoint["step"], "stage": checkpoint["stage"],
-                 "seconds": row["seconds"] - self.probe_seconds, **quality,
-                 "inverted_after_snapping": snapped["inverted"]}
+        point = {"step": checkpoint["step"], "stage": checkpoint["stage"], "seconds": row["seconds"] - self.probe_seconds,
+                 **figures(quality_report(X, self.geometry)),
+                 "inverted_after_snapping": quality_report(snap_boundary(X, self.geometry, self.coords))["inverted"]["count"]}
         self.points.append(point)
         self.probe_seconds += time.perf_counter() - start
-        print(f"    step {point['step']:5d} {point['seconds']:7.1f} s  inverted {quality['inverted']} "
-              f"(snapped {snapped['inverted']})  dev max {quality['boundary_deviation_max']:.4f} "
-              f"mean {quality['boundary_deviation_mean']:.5f}  min angle {quality['min_angle_mean']:.2f}", flush=True)
+        print(f"    step {point['step']:5d} {point['seconds']:7.1f} s  inverted {point['inverted']} "
+              f"(snapped {point['inverted_after_snapping']})  boundary deviation max {point['boundary_deviation_max']:.4f} "
+              f"mean {point['boundary_deviation_mean']:.5f}  min angle {point['min_angle_mean']:.2f}", flush=True)
 
 
 def time_to_quality(preset, geometry, overrides):
@@ -183,9 +193,10 @@ def time_to_quality(preset, geometry, overrides):
         start = time.perf_counter()
         result = train(config, geometry, folder, reporter=probe)
         wall = time.perf_counter() - start - probe.probe_seconds
-    tfi_min_angle = result.summary["tfi"]["min_angle_mean"]
+    final = {**figures(result.summary["network"]), "inverted_after_snapping": result.summary["inverted_after_snapping"]}
+    reference = figures(result.summary["tfi"])
     valid = [p for p in probe.points if p["inverted"] == 0 and p["inverted_after_snapping"] == 0
-             and p["min_angle_mean"] >= tfi_min_angle]
+             and p["min_angle_mean"] >= reference["min_angle_mean"]]
     return {
         "preset": preset,
         "overrides": list(overrides),
@@ -193,8 +204,8 @@ def time_to_quality(preset, geometry, overrides):
         "training_seconds": result.checkpoint["elapsed_seconds"] - probe.probe_seconds,
         "wall_seconds_with_summary": wall,
         "first_valid": valid[0] if valid else None,
-        "final": result.summary["network"],
-        "tfi": result.summary["tfi"],
+        "final": final,
+        "tfi": reference,
         "test_loss": result.test_loss,
         "trajectory": probe.points,
     }

@@ -47,7 +47,8 @@ def test_train_writes_a_run_folder_and_says_how_to_mesh(run_cli, tmp_path):
     assert from_dict(yaml.safe_load((run / "config.yaml").read_text())) == from_dict(checkpoint["config"])
     assert checkpoint["config"]["adam"]["steps"] == 6 and checkpoint["config"]["dim"] == 2
     lines = result.stdout.strip().splitlines()
-    assert "30 x 30 mesh" in result.stdout and "boundary deviation max" in result.stdout
+    assert "Network, 30 x 30 mesh:" in result.stdout and "TFI, 30 x 30 mesh:" in result.stdout
+    assert "boundary deviation from 'semidisk': max" in result.stdout and "snapped onto the geometry" in result.stdout
     assert lines[-2] == f"Checkpoint: {run.relative_to(tmp_path) / 'checkpoint.pt'}"
     assert lines[-1].startswith("Mesh with: meshgen mesh") and "checkpoint.pt" in lines[-1]
     assert "Adam: 6 steps" in result.stderr  # --quiet: log lines, no progress bar

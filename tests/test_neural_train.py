@@ -94,13 +94,34 @@ def test_repeated_failure_stops_and_keeps_the_last_good_checkpoint(tmp_path, sem
 
 
 def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
+    from meshgen.neural.model import mesh_from_checkpoint
+    from meshgen.quality import quality_report
+    from meshgen.tfi import parametric_grid
+
     result = train(tiny_config(), semidisk, tmp_path)
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary == json.loads(json.dumps(result.summary))
-    assert summary["dims"] == [30, 30]
-    assert summary["tfi"]["inverted"] == 0 and summary["tfi"]["boundary_deviation_max"] < 1e-12
-    assert summary["network"]["cells"] == 900
-    assert summary["network"]["boundary_deviation_max"] > summary["network"]["boundary_deviation_mean"] > 0
+    assert summary["dims"] == [30, 30] and summary["network"]["cells"] == 900
+    assert summary["tfi"]["inverted"]["count"] == 0 and summary["tfi"]["boundary_deviation"]["max"] < 1e-12
+    # the network's figures are those of its 30 x 30 mesh, deviation from the boundary included
+    X = mesh_from_checkpoint(result.checkpoint, parametric_grid((30, 30)), semidisk)
+    expected = json.loads(json.dumps(quality_report(X, semidisk)))
+    assert summary["network"]["metrics"] == expected["metrics"]
+    assert summary["network"]["boundary_deviation"]["max"] == expected["boundary_deviation"]["max"] > 0
+    assert summary["inverted_after_snapping"] >= 0
+
+
+def test_snapping_moves_exactly_the_boundary_nodes_onto_the_geometry(semidisk):
+    from meshgen.neural.train import snap_boundary
+    from meshgen.tfi import parametric_grid, tfi
+
+    coords = parametric_grid((6, 4))
+    exact = tfi(semidisk, None, coords)
+    moved = exact + 0.01
+    snapped = snap_boundary(moved, semidisk, coords)
+    for index in ((0,), (-1,), (slice(None), 0), (slice(None), -1)):
+        np.testing.assert_allclose(snapped[index], exact[index], atol=1e-14)
+    np.testing.assert_array_equal(snapped[1:-1, 1:-1], moved[1:-1, 1:-1])
 
 
 def test_losses_at_fixed_points_are_reproducible(semidisk):

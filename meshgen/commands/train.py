@@ -55,18 +55,21 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
         click.echo(f"Interrupted at step {result.step} ({result.stage}); checkpoint saved: {result.checkpoint_path}")
         click.echo(f"Continue with: meshgen train --resume {result.checkpoint_path}")
         raise click.exceptions.Exit(130)
-    from meshgen.neural.report import summary_lines
+    from meshgen.quality import summary_lines
 
     summary = result.summary
     dims = " ".join(str(n) for n in summary["dims"])
+    size = " x ".join(str(n) for n in summary["dims"])
     click.echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
                f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})")
-    click.echo(f"Quality of a {' x '.join(map(str, summary['dims']))} mesh:")
-    for line in summary_lines("  network", summary["network"]) + summary_lines("  TFI    ", summary["tfi"]):
-        click.echo(line)
+    click.echo(f"Network, {size} mesh:")
+    for line in summary_lines(summary["network"]):
+        click.echo(f"  {line}")
     if not run.config.model.exact_boundary:
-        click.echo(f"  network with boundary nodes snapped onto the geometry: "
-                   f"{summary['network']['inverted_after_snapping']} inverted cells")
+        click.echo(f"    with the boundary nodes snapped onto the geometry: {summary['inverted_after_snapping']} inverted cells")
+    click.echo(f"TFI, {size} mesh:")
+    for line in summary_lines(summary["tfi"]):
+        click.echo(f"  {line}")
     click.echo(f"Run folder: {run.run_dir}")
     click.echo(f"Checkpoint: {result.checkpoint_path}")
     click.echo("Mesh with: " + MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims))

@@ -558,28 +558,38 @@ def _finite(network) -> bool:
 # the final summary
 
 
+def snap_boundary(X: np.ndarray, geometry, coords) -> np.ndarray:
+    """A copy of node array ``X`` whose boundary nodes are moved onto the geometry's boundary map at
+    their parametric points (what a soft-boundary mesh looks like once made to conform)."""
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)
+    on_boundary = np.zeros(X.shape[:-1], dtype=bool)
+    for axis in range(X.shape[-1]):
+        on_boundary[(slice(None),) * axis + (0,)] = on_boundary[(slice(None),) * axis + (-1,)] = True
+    snapped = X.copy()
+    snapped[on_boundary] = geometry.boundary(grid[on_boundary])
+    return snapped
+
+
 def write_summary(checkpoint: dict, geometry, run_dir) -> dict:
-    """Mesh ``SUMMARY_CELLS``^d cells with the trained map and with TFI, measure both, write
-    ``summary.json`` in ``run_dir`` and return the summary."""
+    """Mesh ``SUMMARY_CELLS``^d cells with the trained map and with TFI, measure both with
+    ``meshgen.quality`` (boundary deviation included), count the cells that snapping the network's
+    boundary nodes onto the geometry inverts, write ``summary.json`` in ``run_dir`` and return it."""
     import json
 
     from meshgen.atomic import atomic_path
     from meshgen.neural.model import mesh_from_checkpoint
-    from meshgen.neural.report import quality_summary, snap_boundary
+    from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid, tfi
 
     coords = parametric_grid([SUMMARY_CELLS] * geometry.dim)
     start = time.perf_counter()
     X = mesh_from_checkpoint(checkpoint, coords, geometry)
     meshing_seconds = time.perf_counter() - start
-    network_report = quality_summary(X, geometry, coords)
-    network_report["inverted_after_snapping"] = quality_summary(snap_boundary(X, geometry, coords), geometry, coords)[
-        "inverted"
-    ]
     summary = {
         "dims": [SUMMARY_CELLS] * geometry.dim,
-        "network": network_report,
-        "tfi": quality_summary(tfi(geometry, None, coords), geometry, coords),
+        "network": quality_report(X, geometry),
+        "inverted_after_snapping": quality_report(snap_boundary(X, geometry, coords))["inverted"]["count"],
+        "tfi": quality_report(tfi(geometry, None, coords), geometry),
         "meshing_seconds": meshing_seconds,
         "test_loss": checkpoint["test_loss"],
         "step": checkpoint["step"],
