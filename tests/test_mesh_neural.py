@@ -185,6 +185,7 @@ def test_snapping_puts_boundary_nodes_on_the_boundary_and_reports_the_deviation(
     distance = np.linalg.norm(X_raw[on_boundary] - exact, axis=1)
     info = json.loads((tmp_path / "s.vtu.quality.json").read_text())["method_info"]["snap"]
     assert info["snapped"] and info["deviation_before"]["max"] == pytest.approx(distance.max(), rel=1e-9)
+    assert info["deviation_before"]["mean"] == pytest.approx(distance.mean(), rel=1e-9)  # each node once
     assert info["deviation_before"]["max"] > 1e-3  # a tiny run is visibly off: the check means something
     assert "deviation before snapping max" in snapped.stdout
     # Only outer-layer cells change: the change in inverted cells over the whole mesh (counted by

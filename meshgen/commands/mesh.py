@@ -137,9 +137,11 @@ def _snap_line(snap: dict) -> str:
     if not snap.get("snapped"):
         return "boundary nodes: the network's own (--no-snap)"
     before = snap["deviation_before"]
-    return (
+    line = (
         f"snapped boundary nodes onto the geometry: deviation before snapping max {before['max']:.3g} "
         f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g}), mean {before['mean']:.3g}; "
-        f"inverted cells of the outer layer {snap['inverted_before']} before, {snap['inverted_after']} after "
-        f"({snap['inverted_by_snapping']} inverted by snapping)"
+        f"{snap['inverted_by_snapping']} cells inverted by snapping"
     )
+    if snap["inverted_before"] or snap["inverted_after"]:
+        line += f" (outer layer: {snap['inverted_before']} inverted before, {snap['inverted_after']} after)"
+    return line

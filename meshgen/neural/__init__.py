@@ -10,7 +10,8 @@ Modules, each usable alone:
 - ``pcgrad``: gradient projection between the PDE and boundary gradients
 - ``config``: the training configuration, presets, overrides
 - ``checkpoint``: saving and loading plain-data checkpoints
-- ``train``: the training loop
+- ``train``: the training loop and the end-of-training summary
+- ``progress``: progress bar and log lines; ``session``: what ``meshgen train`` checks and runs
 
 Nothing here is imported by ``meshgen --help``; torch is imported by the modules that need it.
 """

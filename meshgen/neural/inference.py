@@ -93,7 +93,7 @@ def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: 
     coordinates ``coords`` (one array per axis, values in [0, 1]).
 
     Returns (or fills ``out`` with) an array of shape (n1 * n2 [* n3], d), float64, nodes in C order.
-    ``workers``: threads, each running a single-threaded torch on every ``workers``-th chunk
+    ``workers``: threads taking the chunks in turn, each running a single-threaded torch
     (default: torch's thread count).
     """
     import threading
@@ -305,15 +305,18 @@ def snap_boundary(X: np.ndarray, geometry, coords) -> dict:
         start += len(points)
         distance = np.linalg.norm(X[index] - target, axis=-1)
         largest = max(largest, float(distance.max()))
-        total += float(distance.sum())
-        count += distance.size
+        # For the mean, each node once: edges shared with the faces of an earlier axis are theirs.
+        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
+        fresh = tuple(slice(1, -1) if d < axis else slice(None) for d in range(X.ndim - 1) if d != axis)
+        total += float(distance[fresh].sum())
+        count += distance[fresh].size
         X[index] = target
     after = _outer_layer_inverted(X)
     length = float(geometry.characteristic_length)
     return {
         "deviation_before": {
             "max": largest,
-            "mean": total / count,  # edge and corner nodes count once per face they lie on
+            "mean": total / count,
             "max_rel": largest / length,
             "characteristic_length": length,
             "definition": "distance of each boundary node from the geometry's boundary map at the node's parametric point",
@@ -366,7 +369,7 @@ class TrainedModel:
         if isinstance(checkpoint.get("elapsed_seconds"), (int, float)):
             steps += f" in {checkpoint['elapsed_seconds']:.0f} s"
         if stage not in (None, "done"):
-            steps += f", stopped in stage {stage}"
+            steps += f", unfinished: saved in stage {stage}"
         parts.append(steps)
         loss = checkpoint.get("test_loss") or {}
         if isinstance(loss.get("total"), (int, float)):
