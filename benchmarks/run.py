@@ -1,17 +1,20 @@
 """The speed and quality figures of meshgen, measured in one run, each beside its target.
 
     python benchmarks/run.py [--quick] [--json FILE] [--markdown FILE] [--only SECTION ...]
+    python benchmarks/run.py --from-json FILE [--markdown FILE]    # the summary of an earlier run
 
 Sections, in order (all on the semicylinder, the reference shape):
 
 - ``machine``: cores, versions, memory, load average, and the float32 matrix-product rate
-  (GFLOP/s of a 4096 x 4096 product with torch, best of several: the roof for inference);
+  (GFLOP/s of a 4096 x 4096 product with torch, best of several: the roof for inference;
+  ``bench_inference.matmul_rates``);
 - ``meshing``: ``tfi``, ``elliptic`` and ``neural`` (the bundled model, boundary snapped) at 30^3
   and 100^3 cells through ``meshgen.methods.make_mesh``, median of several runs; then the network's
   forward pass alone (``evaluate_on_grid``) for the bundled model and for a [85]*4 network on
   101^3 nodes, each as a fraction of the matrix-product roof;
 - ``mesh_command``: ``meshgen mesh --dims 100 100 100 -o out.vtu`` in a fresh folder (so the bundled
-  model), a subprocess timed from start to exit: ``import torch``, meshing, quality, writing;
+  model), a subprocess timed from start to exit: ``import torch``, meshing, quality, writing
+  (``bench_inference.mesh_command``);
 - ``training``: seconds per Adam step of every variant at the same point counts (4096 interior,
   16^3 grid nodes for finite differences, and 6000 boundary points), and the autograd / finite-
   difference ratio of the pairs that differ only in the derivatives (``bench_train.py``);
@@ -23,6 +26,10 @@ Sections, in order (all on the semicylinder, the reference shape):
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
 - ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``.
+
+The summary at the end lists the headline figures with their targets (from the issues) and met /
+not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
+``cpu_seconds``, ``megabytes``, ``gflops``), ``--markdown`` writes the summary as a README section.
 
 --quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
 sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
@@ -126,26 +133,6 @@ def section_header(title: str) -> None:
 # machine
 
 
-def matmul_gflops(size: int = 4096, repeats: int = 5) -> dict:
-    """float32 GFLOP/s of a ``size`` x ``size`` matrix product with torch (its BLAS, its threads),
-    best of ``repeats``: the roof a network's forward pass is compared with. Also per CPU second
-    (all threads), the per-core rate, which the load of a shared machine changes less."""
-    import torch
-
-    a, b = torch.randn(size, size), torch.randn(size, size)
-    a @ b  # warm up: threads, allocator
-    flop = 2.0 * size**3
-    best_wall, cpu_of_best = float("inf"), float("inf")
-    for _ in range(repeats):
-        wall, cpu = time.perf_counter(), time.process_time()
-        a @ b
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        if wall < best_wall:
-            best_wall, cpu_of_best = wall, cpu
-    return {"size": size, "repeats": repeats, "threads": torch.get_num_threads(), "gflops": flop / best_wall / 1e9,
-            "gflops_per_cpu_second": flop / max(cpu_of_best, 1e-9) / 1e9, "best_seconds": best_wall}
-
-
 def processor_name() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -170,6 +157,7 @@ def git_commit() -> str | None:
 def machine(quick: bool) -> dict:
     import torch
 
+    import bench_inference
     import meshgen
 
     try:
@@ -189,7 +177,7 @@ def machine(quick: bool) -> dict:
         "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
         "meshgen": meshgen.__version__,
         "git_commit": git_commit(),
-        "matmul": matmul_gflops(4096, 3 if quick else 5),
+        "matmul": bench_inference.matmul_rates(4096, 3 if quick else 5),
     }
     roof = data["matmul"]
     print(f"{data['processor']}, {data['usable_cpus']} of {data['cpus']} cores, {memory or 0:.0f} GB; python {data['python']}, "
@@ -202,12 +190,6 @@ def machine(quick: bool) -> dict:
 
 # ---------------------------------------------------------------------------------------------
 # meshing
-
-
-def network_gflop(widths, dim: int, nodes: int) -> float:
-    """Multiply-adds of the MLP's products, x2: the flop count (tanh and bias not counted)."""
-    sizes = [dim, *widths, dim]
-    return 2.0 * nodes * sum(a * b for a, b in zip(sizes[:-1], sizes[1:])) / 1e9
 
 
 def bundled_model():
@@ -224,6 +206,7 @@ def meshing(quick: bool, roof: dict | None) -> dict:
     the network's forward pass alone against the matrix-product roof."""
     import torch
 
+    import bench_inference
     from meshgen.geometry import load_geometry
     from meshgen.methods import make_mesh
     from meshgen.neural.inference import evaluate_on_grid
@@ -266,7 +249,7 @@ def meshing(quick: bool, roof: dict | None) -> dict:
         evaluate_on_grid(description, coords)  # warm up
         timing = timed_runs(lambda: evaluate_on_grid(description, coords), 3 if quick else 5)
         timing.pop("result")
-        gflop = network_gflop(description["widths"], 3, nodes**3)
+        gflop = bench_inference.network_flops(description["widths"], 3, nodes**3) / 1e9
         roof_seconds = gflop / roof["gflops"] if roof else None
         row = {"network": label, "widths": list(description["widths"]), "nodes_per_axis": nodes, "nodes": nodes**3,
                "gflop": gflop, **timing, "roof_seconds": roof_seconds,
@@ -283,28 +266,12 @@ def meshing(quick: bool, roof: dict | None) -> dict:
 # ---------------------------------------------------------------------------------------------
 # the mesh command, end to end, and its memory
 
-_WRAPPER = """
-import json, resource, subprocess, sys, time
-start = time.perf_counter()
-subprocess.run(sys.argv[1:], check=True)
-wall = time.perf_counter() - start
-usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime, "peak_kib": usage.ru_maxrss}))
-"""
-
-
 def mesh_command(cells: int, folder: Path) -> dict:
-    """``meshgen mesh --dims cells^3 -o out.vtu -q`` run in ``folder`` by a wrapper process whose only
-    child it is: wall and CPU seconds from start to exit, and the child's peak resident memory
-    (ru_maxrss of RUSAGE_CHILDREN, which in this process would mix in earlier children)."""
-    environment = {**_USER_ENVIRONMENT, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), _USER_ENVIRONMENT.get("PYTHONPATH")]))}
-    command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q"]
-    result = subprocess.run([sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True,
-                            capture_output=True, text=True)
-    figures = json.loads(result.stdout.strip().splitlines()[-1])
-    return {"seconds": figures["seconds"], "cpu_seconds": figures["cpu_seconds"],
-            "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,
-            "megabytes_written": (folder / "out.vtu").stat().st_size / 1e6}
+    """``bench_inference.mesh_command`` in the environment this process started with (so without
+    the OMP_WAIT_POLICY set above, which ``meshgen mesh`` does not set)."""
+    import bench_inference
+
+    return bench_inference.mesh_command(cells, folder, _USER_ENVIRONMENT)
 
 
 def mesh_command_section(quick: bool) -> dict:
@@ -431,66 +398,83 @@ def formats(quick: bool) -> dict:
 # the summary
 
 
-def summary(sections: dict, quick: bool) -> list[dict]:
-    """The headline figures, each with its target (where one is set) and met / not met."""
+def summary(sections: dict) -> list[dict]:
+    """The headline figures, each with its target (where one is set) and met / not met. ``cpu``:
+    the process CPU seconds beside a wall time (all threads; on a loaded machine the wall time
+    grows more), None where not measured."""
     rows = []
 
-    def add(figure, value, unit, key=None, judged=True, note=""):
-        row = {"figure": figure, "value": value, "unit": unit, "note": note}
+    def add(figure, value, unit, key=None, judged=True, note="", cpu=None):
+        row = {"figure": figure, "value": value, "unit": unit, "cpu_seconds": cpu, "note": note}
         if key is not None:
             row.update(key=key, **{k: v for k, v in judge(key, value, judged).items() if k != "measured"})
         rows.append(row)
 
     if "machine" in sections:
-        add("float32 matrix product (the roof)", sections["machine"]["matmul"]["gflops"], "GFLOP/s")
+        roof = sections["machine"]["matmul"]
+        add(f"float32 matrix product {roof['size']}^2, {roof['threads']} threads (the roof)", roof["gflops"], "GFLOP/s",
+            note=f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second")
     if "meshing" in sections:
         for row in sections["meshing"]["methods"]:
             n = row["cells_per_axis"]
             key = {("elliptic", 100): "elliptic_100_seconds", ("elliptic", 30): "elliptic_30_seconds"}.get((row["method"], n))
-            add(f"mesh {n}^3 {row['method']} (median of {row['repeat']})", row["seconds"], "s", key)
+            note = {"elliptic": f"{row.get('iterations')} cycles", "neural": f"{row.get('model')}, snapped"}.get(row["method"], "")
+            add(f"mesh {n}^3 cells, {row['method']} (median of {row['repeat']})", row["seconds"], "s", key, note=note,
+                cpu=row["cpu_seconds"])
         for row in sections["meshing"]["forward_pass"]:
             n = row["nodes_per_axis"]
-            fraction = (f"{row['fraction_of_roof']:.0%} of the roof, {row['fraction_of_roof_per_cpu_second']:.0%} "
-                        f"per CPU second" if row["fraction_of_roof"] else "")
+            fraction = (f"{row['fraction_of_roof']:.0%} of the roof ({row['fraction_of_roof_per_cpu_second']:.0%} "
+                        f"per CPU second)" if row["fraction_of_roof"] else "")
             add(f"network forward pass, {row['network']}, {n}^3 nodes", row["seconds"], "s",
-                "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None, note=fraction)
+                "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None, note=fraction,
+                cpu=row["cpu_seconds"])
     if "mesh_command" in sections:
         data = sections["mesh_command"]
-        add(f"meshgen mesh --dims 100 100 100 -o out.vtu, end to end (median of {data['repeat']})", data["seconds"],
-            "s", "mesh_command_100_seconds")
+        add(f"`meshgen mesh --dims 100 100 100 -o out.vtu`, end to end (median of {data['repeat']})", data["seconds"],
+            "s", "mesh_command_100_seconds", cpu=data["cpu_seconds"], note=f"peak memory {data['peak_megabytes']:.0f} MB")
     if "training" in sections:
         data = sections["training"]
         for row in data["steps"]:
-            if row["variant"] in ("default", "exact", "pinn", "fd-pinn", "mgnet", "rwgp-pinn"):
-                add(f"training step, {row['variant']} {row['widths']}", row["seconds_per_step"] * 1e3, "ms")
+            if row["variant"] in bench_variants():
+                add(f"training step, {row['variant']} {row['widths']}", row["seconds_per_step"], "s",
+                    cpu=row["cpu_seconds_per_step"])
         for size, values in data["ratios"].items():
             for name in data["fd_ad_pairs"]:
-                add(f"FD/AD step ratio, {name}, {size} sizes {data['sizes'][size]}", values[name], "x", "fd_ad_step_ratio",
+                add(f"FD/AD step ratio, {name}, {data['sizes'][size]}", values[name], "x", "fd_ad_step_ratio",
                     note=f"{data['ratios_of_cpu_seconds'][size][name]:.1f}x of CPU seconds")
     if "time_to_quality" in sections:
         data = sections["time_to_quality"]
         for preset, run in data["runs"].items():
-            first = run["first_valid"]
-            capped = " (capped budget)" if run["capped"] else ""
+            first, final = run["first_valid"], run["final"]
+            capped = ", capped budget" if run["capped"] else ""
             note = (f"step {first['step']} of {run['steps']}" if first else f"not reached in {run['steps']} steps") + capped
-            note += f"; final boundary deviation {run['final']['boundary_deviation_max_rel']:.1e}, min angle {run['final']['min_angle_mean']:.2f}"
-            add(f"time to quality, {preset}, 30^3", first["seconds"] if first else None, "s", note=note)
+            note += (f"; at the end: boundary deviation {final['boundary_deviation_max_rel']:.1e} of the length, "
+                     f"{final['inverted_after_snapping']} cells inverted by snapping, min angle {final['min_angle_mean']:.2f}")
+            add(f"time to quality, {preset}, 30^3 mesh", first["seconds"] if first else None, "s", note=note)
     if "evaluate" in sections:
         data = sections["evaluate"]
         for row in data["results"]:
             headline = row["path"] == "unstructured" and "report" in row["what"]
-            add(f"evaluate {row['cells']:.0e} cells, {row['path']} {row['what']}", row["seconds"], "s",
-                "evaluate_1e6_seconds" if headline else None, judged=row["cells"] >= 1e6)
+            add(f"evaluate {row['cells']:,} cells, {row['path']} {row['what']}", row["seconds"], "s",
+                "evaluate_1e6_seconds" if headline else None, judged=row["cells"] >= 1e6, cpu=row["cpu_seconds"])
     if "formats" in sections:
         data = sections["formats"]
         for row in data["results"]:
-            add(f"write {data['cells_per_axis']}^3 {row['format']}", row["write_seconds"], "s",
-                note=f"{row['megabytes']:.1f} MB")
+            add(f"write {data['cells_per_axis']}^3 cells, {row['format']}", row["write_seconds"], "s",
+                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
     if "memory" in sections:
         data = sections["memory"]
-        add(f"peak memory, meshgen mesh --dims {data['cells_per_axis']}^3", data["peak_megabytes"], "MB",
-            "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200)
+        add(f"peak memory, `meshgen mesh --dims {data['cells_per_axis']} {data['cells_per_axis']} "
+            f"{data['cells_per_axis']} -o out.vtu`", data["peak_megabytes"], "MB",
+            "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200,
+            note=f"{format_value(data['seconds'], 's')} end to end")
     return rows
+
+
+def bench_variants():
+    import bench_train
+
+    return bench_train.VARIANTS
 
 
 def format_value(value, unit) -> str:
@@ -500,9 +484,9 @@ def format_value(value, unit) -> str:
         return f"{value:.0f} {unit}"
     if unit == "x":
         return f"{value:.1f}x"
-    if unit == "ms":
-        return f"{value:.1f} ms"
-    return f"{value:.3g} s" if value < 10 else f"{value:.1f} s"
+    if unit == "s" and value < 1:
+        return f"{value * 1e3:.3g} ms"
+    return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
 
 
 def target_text(row) -> str:
@@ -514,37 +498,53 @@ def target_text(row) -> str:
 
 def print_summary(rows: list[dict]) -> None:
     width = max(len(row["figure"]) for row in rows)
-    print(f"\n{'figure':<{width}}  {'measured':>10}  {'target':>10}  verdict     note")
-    print("-" * (width + 50))
+    print(f"\n{'figure':<{width}}  {'measured':>11}  {'CPU':>9}  {'target':>11}  {'verdict':<10}  note")
+    print("-" * (width + 60))
     for row in rows:
         verdict = mark(row["met"]) if "target" in row else ""
-        print(f"{row['figure']:<{width}}  {format_value(row['value'], row['unit']):>10}  {target_text(row):>10}  "
-              f"{verdict:<10}  {row['note']}")
+        print(f"{row['figure']:<{width}}  {format_value(row['value'], row['unit']):>11}  "
+              f"{format_value(row['cpu_seconds'], 's') if row['cpu_seconds'] is not None else '':>9}  "
+              f"{target_text(row):>11}  {verdict:<10}  {row['note']}")
 
 
 def markdown(results: dict) -> str:
-    """The summary as a README section: date, machine, a table of figures and targets, how to repeat it."""
+    """The summary as a README section: date, machine, a table of figures and targets, what the
+    figures mean, how to repeat them."""
     machine_data = results["sections"].get("machine", {})
-    roof = machine_data.get("matmul", {})
     lines = [
-        f"Measured {results['date'][:10]} with `{results['command']}` (meshgen {machine_data.get('meshgen', '?')}, "
+        f"Measured {results['date'][:10]} by `{results['command']}` (meshgen {machine_data.get('meshgen', '?')}, "
         f"commit {machine_data.get('git_commit') or '?'}) on {machine_data.get('processor', '?')}, "
         f"{machine_data.get('usable_cpus', '?')} cores, {machine_data.get('memory_gigabytes') or 0:.0f} GB, "
-        f"torch {machine_data.get('torch', '?')}, numpy {machine_data.get('numpy', '?')}; "
-        f"load average {results['load_average']['start'][0]:.1f} at the start, "
-        f"{results['load_average']['end'][0]:.1f} at the end; whole run {results['run']['wall_seconds'] / 60:.0f} min.",
+        f"Python {machine_data.get('python', '?')}, torch {machine_data.get('torch', '?')}, numpy "
+        f"{machine_data.get('numpy', '?')}; load average {results['load_average']['start'][0]:.1f} at the start and "
+        f"{results['load_average']['end'][0]:.1f} at the end (other jobs shared the machine); the whole run took "
+        f"{results['run']['wall_seconds'] / 60:.0f} min.",
         "",
-        "| figure | measured | target | met |",
-        "|---|---:|---|---|",
+        "| figure | measured | CPU | target | met | note |",
+        "|---|---:|---:|---|---|---|",
     ]
     for row in results["summary"]:
-        value = format_value(row["value"], row["unit"]) + (f" ({row['note']})" if row["note"] else "")
         verdict = mark(row["met"]) if "target" in row else ""
-        lines.append(f"| {row['figure']} | {value} | {target_text(row)} | {verdict} |")
-    if roof:
-        lines += ["", f"Roof: float32 {roof['size']}x{roof['size']} matrix product, {roof['gflops']:.0f} GFLOP/s "
-                      f"on {roof['threads']} threads."]
-    lines += ["", "Reproduce (about a quarter of an hour on 2 cores; `--quick` in a few minutes):", "",
+        cpu = format_value(row["cpu_seconds"], "s") if row["cpu_seconds"] is not None else ""
+        lines.append(f"| {row['figure']} | {format_value(row['value'], row['unit'])} | {cpu} | "
+                     f"{target_text(row).replace('<=', '≤').replace('>=', '≥')} | {verdict} | {row['note']} |")
+    lines += ["", "Times are wall seconds (medians); CPU is the process's CPU time over all threads: on a busy "
+                  "machine the wall time grows with the load, the CPU time much less. All meshes are of the "
+                  "semicylinder; the neural rows use the bundled model."]
+    quality = results["sections"].get("time_to_quality")
+    if quality:
+        bounds = quality["bounds"]
+        lines += ["", "Time to quality: training seconds (the measurements' own time left out) until the 30^3 mesh of "
+                      f"the network has no inverted cell (also after snapping its boundary nodes), boundary nodes within "
+                      f"{bounds['boundary_deviation_max_rel_at_most']:g} of the characteristic length, and a mean minimum "
+                      f"angle of at least TFI's plus {bounds['min_angle_mean_share_from_tfi_to_elliptic_at_least']:.0%} of "
+                      f"the way to the elliptic mesh's ({quality['reference']['tfi']['min_angle_mean']:.2f}° and "
+                      f"{quality['reference']['elliptic']['min_angle_mean']:.2f}°: "
+                      f"{quality['min_angle_mean_threshold_degrees']:.2f}°); measured every "
+                      + " and ".join(f"{run['probe_every_steps']} steps ({preset})" for preset, run in quality["runs"].items())
+                      + "."]
+    lines += ["", "Reproduce (about a quarter of an hour on 2 cores; `--quick`, for CI, a few minutes with smaller "
+                  "sizes and capped training):", "",
               "    python benchmarks/run.py --json benchmarks.json --markdown benchmarks.md", ""]
     return "\n".join(lines)
 
@@ -558,7 +558,17 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="write every figure to this JSON file")
     parser.add_argument("--markdown", type=Path, default=None, help="write the summary table as Markdown")
     parser.add_argument("--only", choices=SECTIONS, action="append", help="run only this section (repeatable)")
+    parser.add_argument("--from-json", type=Path, default=None, metavar="FILE",
+                        help="measure nothing: print (and with --markdown write) the summary of an earlier run's JSON")
     args = parser.parse_args(argv)
+    if args.from_json:
+        results = json.loads(args.from_json.read_text())
+        results["summary"] = summary(results["sections"])
+        print_summary(results["summary"])
+        if args.markdown:
+            args.markdown.write_text(markdown(results))
+            print(f"wrote {args.markdown}")
+        return 0
 
     chosen = [name for name in SECTIONS if not args.only or name in args.only]
     command = "python benchmarks/run.py" + (" --quick" if args.quick else "") + "".join(f" --only {s}" for s in args.only or [])
@@ -592,7 +602,7 @@ def main(argv=None) -> int:
     results["load_average"]["end"] = load_average()
     results["run"] = {"wall_seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - started_cpu,
                       "note": "cpu_seconds: this process only (subprocess commands are in their sections)"}
-    results["summary"] = summary(results["sections"], args.quick)
+    results["summary"] = summary(results["sections"])
     print_summary(results["summary"])
     print(f"\nwhole run: {results['run']['wall_seconds']:.0f} s wall, {results['run']['cpu_seconds']:.0f} s CPU; "
           f"load average {results['load_average']['start'][0]:.2f} -> {results['load_average']['end'][0]:.2f}")
