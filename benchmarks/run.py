@@ -441,7 +441,7 @@ def summary(sections: dict) -> list[dict]:
         for size, values in data["ratios"].items():
             for name in data["fd_ad_pairs"]:
                 add(f"FD/AD step ratio, {name}, {data['sizes'][size]}", values[name], "x", "fd_ad_step_ratio",
-                    note=f"{data['ratios_of_cpu_seconds'][size][name]:.1f}x of CPU seconds")
+                    note=f"{data['ratios_of_cpu_seconds'][size][name]:.2f}x of CPU seconds")
     if "time_to_quality" in sections:
         data = sections["time_to_quality"]
         for preset, run in data["runs"].items():
@@ -483,7 +483,7 @@ def format_value(value, unit) -> str:
     if unit in ("GFLOP/s", "MB"):
         return f"{value:.0f} {unit}"
     if unit == "x":
-        return f"{value:.1f}x"
+        return f"{value:.2f}x"
     if unit == "s" and value < 1:
         return f"{value * 1e3:.3g} ms"
     return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
