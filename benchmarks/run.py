@@ -579,6 +579,7 @@ def main(argv=None) -> int:
         "quick": args.quick,
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "load_average": {"start": load_average()},
+        "targets": {key: {"comparison": c, "target": t, "unit": u, "source": src} for key, (c, t, u, src) in TARGETS.items()},
         "sections": {},
     }
     print(f"{command}  ({results['date']})")
