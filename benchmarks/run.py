@@ -543,7 +543,7 @@ def markdown(results: dict) -> str:
                       f"{quality['min_angle_mean_threshold_degrees']:.2f}°); measured every "
                       + " and ".join(f"{run['probe_every_steps']} steps ({preset})" for preset, run in quality["runs"].items())
                       + "."]
-    lines += ["", "Reproduce (about a quarter of an hour on 2 cores; `--quick`, for CI, a few minutes with smaller "
+    lines += ["", "Reproduce (10 to 15 minutes on 2 cores; `--quick`, for CI, under 2 minutes with smaller "
                   "sizes and capped training):", "",
               "    python benchmarks/run.py --json benchmarks.json --markdown benchmarks.md", ""]
     return "\n".join(lines)
