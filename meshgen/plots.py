@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import MeshgenError
+from meshgen.tables import METRIC_LABELS
 
 PANEL_PX = (400, 360)
 COLORBAR_PX = 120
@@ -33,15 +34,6 @@ DPI = 100
 INSTALL_HINT = "pictures need matplotlib: pip install 'meshgen[plot]'"
 AXIS_NAMES = ("x", "y", "z")
 INDEX_NAMES = ("i", "j", "k")
-METRIC_LABELS = {
-    "min_angle": "min angle (deg)",
-    "max_angle": "max angle (deg)",
-    "equiangle_skewness": "equiangle skewness",
-    "aspect_ratio": "aspect ratio",
-    "centroid_skewness": "centroid skewness",
-    "non_orthogonality": "non-orthogonality (deg)",
-    "scaled_jacobian": "scaled Jacobian",
-}
 
 
 def sections_size(columns: int, rows: int) -> tuple[int, int]:

@@ -7,6 +7,17 @@ from __future__ import annotations
 
 import sys
 
+# How each per-cell metric of meshgen.quality is named in tables and figure labels.
+METRIC_LABELS = {
+    "min_angle": "min angle (deg)",
+    "max_angle": "max angle (deg)",
+    "equiangle_skewness": "equiangle skewness",
+    "aspect_ratio": "aspect ratio",
+    "centroid_skewness": "centroid skewness",
+    "non_orthogonality": "non-orthogonality (deg)",
+    "scaled_jacobian": "scaled Jacobian",
+}
+
 
 def number(value) -> str:
     """A figure as printed in tables: 4 significant digits, ints as they are, booleans yes / NO,

@@ -91,7 +91,6 @@ def main():
                        env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
         wall = time.perf_counter() - started
         checkpoint = load_checkpoint(Path(run_dir) / "checkpoint.pt")
-        summary = json.loads((Path(run_dir) / "summary.json").read_text())
     checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}
     save_checkpoint(folder / "checkpoint.pt", checkpoint)
     model = load_model(folder / "checkpoint.pt", source="bundled")
@@ -128,7 +127,6 @@ def main():
             "tfi_30": classical["tfi"],
             "elliptic_30": classical["elliptic"],
         },
-        "train_summary": summary,
     }
     (folder / "model.json").write_text(json.dumps(record, indent=2) + "\n")
     print(json.dumps({k: record[k] for k in ("command", "training_seconds", "bytes", "sha256")}, indent=2))

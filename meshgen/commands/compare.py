@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options
+from meshgen.tables import METRIC_LABELS
 
 EPILOG = """\b
 Columns: means of min angle, max angle, equiangle skewness, aspect ratio, centroid skewness and
@@ -171,9 +172,9 @@ def _pictures(outcome, metric, out, say) -> list:
         comparison.setdefault("notes", []).append(f"No pictures: {plots.INSTALL_HINT}.")
         return []
     if comparison["mode"] == "methods":
-        heading = f"{plots.METRIC_LABELS[metric]}: {comparison['geometry']}, {' x '.join(map(str, comparison['dims']))} cells"
+        heading = f"{METRIC_LABELS[metric]}: {comparison['geometry']}, {' x '.join(map(str, comparison['dims']))} cells"
     else:
-        heading = plots.METRIC_LABELS[metric]
+        heading = METRIC_LABELS[metric]
     written = []
     undrawable = [p.label for p in outcome.pictures if not plots.drawable(p)]
     if undrawable:

@@ -11,17 +11,9 @@ import json
 import click
 
 from meshgen.commands._options import geometry_options
+from meshgen.tables import METRIC_LABELS
 from meshgen.tables import number as _number
 
-METRIC_LABELS = {
-    "min_angle": "min angle (deg)",
-    "max_angle": "max angle (deg)",
-    "equiangle_skewness": "equiangle skewness",
-    "aspect_ratio": "aspect ratio",
-    "centroid_skewness": "centroid skewness",
-    "non_orthogonality": "non-orthogonality (deg)",
-    "scaled_jacobian": "scaled Jacobian",
-}
 STAT_LABELS = {"mean": "mean", "min": "min", "max": "max", "p01": "p01", "p99": "p99"}  # as in --json and --fail-if
 
 

@@ -54,6 +54,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         # No fall-back to TFI: a geometry without a trained model is an error that says how to get one.
         method = "neural"
     get_method(method)  # an unknown name fails before anything is loaded
+    coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
     options = {"tol": tol, "max_iter": max_iter, "snap": snap}
     model = None
     if method == "neural":
@@ -63,7 +64,6 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         if checkpoint is not None:
             raise click.UsageError(f"--checkpoint applies to the neural method, not to '{method}'")
         geometry = load_selected_geometry(geometry, params, dims)
-    coords = node_coordinates(dims, clusters)
     if model is not None and not quiet:
         click.echo(f"model: {model.describe()}")
     start = time.perf_counter()
