@@ -72,6 +72,47 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
 
 
+HEADER = (f"{'cells':>8}{'cycles':>8}{'wall [s]':>10}{'cpu [s]':>9}{'update':>10}{'residual':>10}{'inverted':>10}"
+          f"{'TFI inv.':>9}{'peak MB':>9}{'target':>14}")
+
+
+def measure_size(geometry, n: int, jacobi: bool = False) -> dict:
+    """Solve the ``n``^3-cell mesh of ``geometry`` once (default tolerance) and return its row:
+    cycles, wall and CPU seconds, final update and residual, inverted cells of it and of TFI, peak
+    memory so far, the target where the issue sets one, and (``jacobi``) the point-Jacobi sweeps."""
+    dims = (n, n, n)
+    wall, cpu = time.perf_counter(), time.process_time()
+    X, info = elliptic(geometry, dims)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    row = {
+        "cells": n,
+        "iterations": info["iterations"],
+        "seconds": wall,
+        "cpu_seconds": cpu,
+        "final_update": info["final_update"],
+        "final_residual": info["final_residual"],
+        "converged": info["converged"],
+        "levels": info["levels"],
+        "inverted_cells": inverted_cells(X),
+        "tfi_inverted_cells": inverted_cells(tfi(geometry, dims)),
+        "peak_memory_mb": peak_memory_mb(),
+    }
+    if n in TARGETS:
+        row["target_seconds"] = TARGETS[n]
+        row["target_met"] = bool(info["converged"] and wall <= TARGETS[n])
+    if jacobi:
+        row["jacobi_sweeps"] = jacobi_sweeps(geometry, dims, X, info["tol"])
+    return row
+
+
+def format_row(row: dict) -> str:
+    n = row["cells"]
+    target = f"<= {TARGETS[n]:.0f} s {'met' if row['target_met'] else 'NOT met'}" if n in TARGETS else ""
+    return (f"{n:>5}^3{row['iterations']:>8}{row['seconds']:>10.2f}{row['cpu_seconds']:>9.2f}{row['final_update']:>10.1e}"
+            f"{row['final_residual']:>10.1e}{row['inverted_cells']:>10}{row['tfi_inverted_cells']:>9}"
+            f"{row['peak_memory_mb']:>9.0f}{target:>14}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="sizes up to 50^3 only")
@@ -84,37 +125,11 @@ def main() -> None:
     load = os.getloadavg()
     rows = []
     print(f"semicylinder, default tolerance; load average {load[0]:.2f} on {os.cpu_count()} cores")
-    header = f"{'cells':>8}{'cycles':>8}{'wall [s]':>10}{'cpu [s]':>9}{'update':>10}{'residual':>10}{'inverted':>10}{'TFI inv.':>9}{'peak MB':>9}{'target':>14}"
-    print(header)
+    print(HEADER)
     for n in sizes:
-        dims = (n, n, n)
-        wall, cpu = time.perf_counter(), time.process_time()
-        X, info = elliptic(geometry, dims)
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        row = {
-            "cells": n,
-            "iterations": info["iterations"],
-            "seconds": wall,
-            "cpu_seconds": cpu,
-            "final_update": info["final_update"],
-            "final_residual": info["final_residual"],
-            "converged": info["converged"],
-            "levels": info["levels"],
-            "inverted_cells": inverted_cells(X),
-            "tfi_inverted_cells": inverted_cells(tfi(geometry, dims)),
-            "peak_memory_mb": peak_memory_mb(),
-        }
-        if n in TARGETS:
-            row["target_seconds"] = TARGETS[n]
-            row["target_met"] = bool(info["converged"] and wall <= TARGETS[n])
-        if args.jacobi and n in (16, 30):
-            row["jacobi_sweeps"] = jacobi_sweeps(geometry, dims, X, info["tol"])
+        row = measure_size(geometry, n, jacobi=args.jacobi and n in (16, 30))
         rows.append(row)
-        target = f"<= {TARGETS[n]:.0f} s {'met' if row['target_met'] else 'NOT met'}" if n in TARGETS else ""
-        print(
-            f"{n:>5}^3{row['iterations']:>8}{wall:>10.2f}{cpu:>9.2f}{row['final_update']:>10.1e}{row['final_residual']:>10.1e}"
-            f"{row['inverted_cells']:>10}{row['tfi_inverted_cells']:>9}{row['peak_memory_mb']:>9.0f}{target:>14}"
-        )
+        print(format_row(row))
     for row in rows:
         if "jacobi_sweeps" in row:
             print(f"point Jacobi at {row['cells']}^3: {row['jacobi_sweeps']} sweeps to the same tolerance (multigrid: {row['iterations']} cycles)")

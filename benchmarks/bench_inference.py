@@ -39,18 +39,29 @@ WIDTHS = [85, 85, 85, 85]
 NODES = 101
 
 
-def matmul_roof(size: int = 4096, repeats: int = 5) -> float:
-    """float32 GFLOP/s of a size x size product with torch (MKL/OpenBLAS sgemm), best of ``repeats``."""
+def matmul_rates(size: int = 4096, repeats: int = 5) -> dict:
+    """float32 GFLOP/s of a size x size product with torch (MKL/OpenBLAS sgemm, torch's threads),
+    best of ``repeats``: the roof a network's forward pass is compared with. Also per CPU second
+    (all threads) of that run: the per-core rate, which the load of a shared machine changes less."""
     import torch
 
     a, b = torch.randn(size, size), torch.randn(size, size)
-    a @ b
-    best = float("inf")
+    a @ b  # warm up: threads, allocator
+    flop = 2.0 * size**3
+    best_wall, cpu_of_best = float("inf"), float("inf")
     for _ in range(repeats):
-        start = time.perf_counter()
+        wall, cpu = time.perf_counter(), time.process_time()
         a @ b
-        best = min(best, time.perf_counter() - start)
-    return 2.0 * size**3 / best / 1e9
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        if wall < best_wall:
+            best_wall, cpu_of_best = wall, cpu
+    return {"size": size, "repeats": repeats, "threads": torch.get_num_threads(), "gflops": flop / best_wall / 1e9,
+            "gflops_per_cpu_second": flop / max(cpu_of_best, 1e-9) / 1e9, "best_seconds": best_wall}
+
+
+def matmul_roof(size: int = 4096, repeats: int = 5) -> float:
+    """float32 GFLOP/s of a size x size product, best of ``repeats`` (see ``matmul_rates``)."""
+    return matmul_rates(size, repeats)["gflops"]
 
 
 def network_flops(widths, dim: int, nodes: int) -> float:
@@ -76,28 +87,41 @@ def inference_seconds(repeats: int) -> list[float]:
     return times
 
 
+_WRAPPER = """
+import json, resource, subprocess, sys, time
+start = time.perf_counter()
+subprocess.run(sys.argv[1:], check=True)
+wall = time.perf_counter() - start
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime, "peak_kib": usage.ru_maxrss}))
+"""
+
+
+def mesh_command(cells: int, folder: Path, environment: dict | None = None) -> dict:
+    """Run ``meshgen mesh --dims cells^3 -o out.vtu -q`` in ``folder`` (with ``environment``,
+    default this process's, and this checkout first on PYTHONPATH) by a wrapper process whose only
+    child it is. Returns its wall and CPU seconds from start to exit (``import torch``, meshing,
+    quality, writing), its peak resident memory (ru_maxrss of the wrapper's RUSAGE_CHILDREN: this
+    process's would mix in earlier children) and the size of the file written."""
+    environment = dict(os.environ if environment is None else environment)
+    environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
+    command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q"]
+    result = subprocess.run([sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True,
+                            capture_output=True, text=True)
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    return {"seconds": figures["seconds"], "cpu_seconds": figures["cpu_seconds"],
+            "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,  # ru_maxrss is in KiB on Linux
+            "megabytes_written": (Path(folder) / "out.vtu").stat().st_size / 1e6}
+
+
 def run_mesh(cells: int, folder: Path) -> float:
     """Wall seconds of ``meshgen mesh --dims cells^3 -o out.vtu`` run in ``folder``."""
-    environment = {**os.environ, "PYTHONPATH": str(REPO)}
-    start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q"],
-                   cwd=folder, env=environment, check=True)
-    return time.perf_counter() - start
+    return mesh_command(cells, folder)["seconds"]
 
 
 def peak_memory_gb(cells: int, folder: Path) -> float:
-    """ru_maxrss of ``meshgen mesh --dims cells^3``, measured by a wrapper process whose only
-    child it is (RUSAGE_CHILDREN of this process would mix in the earlier runs)."""
-    wrapper = (
-        "import resource, subprocess, sys\n"
-        f"subprocess.run([sys.executable, '-m', 'meshgen', 'mesh', '--dims', '{cells}', '{cells}', '{cells}', "
-        "'-o', 'out.vtu', '-q'], check=True)\n"
-        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n"
-    )
-    environment = {**os.environ, "PYTHONPATH": str(REPO)}
-    result = subprocess.run([sys.executable, "-c", wrapper], cwd=folder, env=environment, check=True,
-                            capture_output=True, text=True)
-    return int(result.stdout.split()[-1]) * 1024 / 1e9  # ru_maxrss is in KiB on Linux
+    """Peak resident memory (GB) of ``meshgen mesh --dims cells^3`` (see ``mesh_command``)."""
+    return mesh_command(cells, folder)["peak_megabytes"] / 1e3
 
 
 def main():

@@ -1,0 +1,620 @@
+"""The speed and quality figures of meshgen, measured in one run, each beside its target.
+
+    python benchmarks/run.py [--quick] [--json FILE] [--markdown FILE] [--only SECTION ...]
+    python benchmarks/run.py --from-json FILE [--markdown FILE]    # the summary of an earlier run
+
+Sections, in order (all on the semicylinder, the reference shape):
+
+- ``machine``: cores, versions, memory, load average, and the float32 matrix-product rate
+  (GFLOP/s of a 4096 x 4096 product with torch, best of several: the roof for inference;
+  ``bench_inference.matmul_rates``);
+- ``meshing``: ``tfi``, ``elliptic`` and ``neural`` (the bundled model, boundary snapped) at 30^3
+  and 100^3 cells through ``meshgen.methods.make_mesh``, median of several runs; then the network's
+  forward pass alone (``evaluate_on_grid``) for the bundled model and for a [85]*4 network on
+  101^3 nodes, each as a fraction of the matrix-product roof;
+- ``mesh_command``: ``meshgen mesh --dims 100 100 100 -o out.vtu`` in a fresh folder (so the bundled
+  model), a subprocess timed from start to exit: ``import torch``, meshing, quality, writing
+  (``bench_inference.mesh_command``);
+- ``training``: seconds per Adam step of every variant at the same point counts (4096 interior,
+  16^3 grid nodes for finite differences, and 6000 boundary points), and the autograd / finite-
+  difference ratio of the pairs that differ only in the derivatives (``bench_train.py``);
+- ``time_to_quality``: ``exact`` and ``default`` trained from scratch, their 30^3 mesh measured
+  every few steps; the first step within ``bench_train.QUALITY_BOUNDS`` (no inverted cell, before
+  and after snapping; boundary deviation at most 1e-2 of the characteristic length before snapping;
+  mean minimum angle above TFI's), in training seconds with the probes' own time left out;
+- ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
+  (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
+- ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
+- ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``.
+
+The summary at the end lists the headline figures with their targets (from the issues) and met /
+not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
+``cpu_seconds``, ``megabytes``, ``gflops``), ``--markdown`` writes the summary as a README section.
+
+--quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
+sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
+never reaches the bounds says little), formats at 50^3, and the peak memory of the 100^3 command
+instead of 200^3. Targets are judged only on the figures they are set for.
+
+Every timing gives wall seconds and, where it helps, process CPU seconds: on a machine shared with
+other work the wall time grows with the load average (recorded before and after each section),
+the CPU time much less. Figures are printed, never asserted: the exit status is 0 whether or not
+a target is met.
+"""
+
+from __future__ import annotations
+
+import os
+
+# As ``meshgen train`` does, before torch is imported: spinning OpenMP threads waste a shared CPU.
+_USER_ENVIRONMENT = dict(os.environ)
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from datetime import datetime, timezone  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+BENCHMARKS = Path(__file__).resolve().parent
+REPO = BENCHMARKS.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(1, str(BENCHMARKS))
+
+GEOMETRY = "semicylinder"
+PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
+SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "memory"]
+
+# figure key -> (comparison, target, unit, where the target comes from)
+TARGETS = {
+    "inference_101_seconds": ("<=", 0.6, "s", "issue 5: [85]*4 network on 101^3 nodes"),
+    "mesh_command_100_seconds": ("<=", 5.0, "s", "issue 5: meshgen mesh --dims 100 100 100, end to end"),
+    "elliptic_100_seconds": ("<=", 60.0, "s", "issue 6"),
+    "elliptic_30_seconds": ("<=", 3.0, "s", "issue 6"),
+    "evaluate_1e6_seconds": ("<=", 3.0, "s", "issue 3: quality of 1e6 hexahedra"),
+    "fd_ad_step_ratio": (">=", 10.0, "x", "the training issue: autograd step / finite-difference step, same points"),
+    "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "issue 5: meshgen mesh --dims 200 200 200"),
+}
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+
+
+def load_average() -> list[float]:
+    return [round(value, 2) for value in os.getloadavg()]
+
+
+def timed_runs(function, repeat: int) -> dict:
+    """Wall and process CPU seconds of ``repeat`` calls of ``function``: median, min, max, all runs.
+    The last call's return value is kept under ``"result"`` (not for JSON)."""
+    walls, cpus, result = [], [], None
+    for _ in range(repeat):
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = function()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return {
+        "seconds": statistics.median(walls),
+        "min_seconds": min(walls),
+        "max_seconds": max(walls),
+        "cpu_seconds": statistics.median(cpus),
+        "runs_seconds": walls,
+        "result": result,
+    }
+
+
+def judge(key: str, measured, judged: bool = True) -> dict:
+    """A figure beside its target: {"measured", "target", "comparison", "unit", "source", "met"}
+    (``met`` None when ``judged`` is False: the figure was measured at another size than the target's)."""
+    comparison, target, unit, source = TARGETS[key]
+    met = None
+    if judged and measured is not None:
+        met = bool(measured <= target) if comparison == "<=" else bool(measured >= target)
+    return {"measured": measured, "comparison": comparison, "target": target, "unit": unit, "source": source, "met": met}
+
+
+def mark(met) -> str:
+    return "not judged" if met is None else ("met" if met else "NOT met")
+
+
+def section_header(title: str) -> None:
+    print(f"\n== {title} (load average {load_average()[0]:.2f})", flush=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# machine
+
+
+def processor_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def git_commit() -> str | None:
+    try:
+        result = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                text=True, timeout=10)
+        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return result.stdout.strip() + ("+modified" if dirty else "") if result.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def machine(quick: bool) -> dict:
+    import torch
+
+    import bench_inference
+    import meshgen
+
+    try:
+        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    except (ValueError, OSError, AttributeError):
+        memory = None
+    data = {
+        "cpus": os.cpu_count(),
+        "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "processor": processor_name(),
+        "platform": platform.platform(),
+        "memory_gigabytes": memory,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "torch": torch.__version__,
+        "torch_threads": torch.get_num_threads(),
+        "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
+        "meshgen": meshgen.__version__,
+        "git_commit": git_commit(),
+        "matmul": bench_inference.matmul_rates(4096, 3 if quick else 5),
+    }
+    roof = data["matmul"]
+    print(f"{data['processor']}, {data['usable_cpus']} of {data['cpus']} cores, {memory or 0:.0f} GB; python {data['python']}, "
+          f"numpy {data['numpy']}, torch {data['torch']} ({data['torch_threads']} threads), meshgen {data['meshgen']} "
+          f"({data['git_commit']})")
+    print(f"float32 matrix product {roof['size']}^2: {roof['gflops']:.0f} GFLOP/s (best of {roof['repeats']}), "
+          f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second")
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# meshing
+
+
+def bundled_model():
+    """The model bundled for the semicylinder (what ``meshgen mesh`` uses where ./runs/ has none)."""
+    from meshgen.neural.inference import bundled_models, load_model
+
+    folder = bundled_models()[GEOMETRY]
+    record = json.loads((folder / "model.json").read_text()) if (folder / "model.json").is_file() else {}
+    return load_model(folder / "checkpoint.pt", source="bundled", record=record)
+
+
+def meshing(quick: bool, roof: dict | None) -> dict:
+    """Each method through ``make_mesh`` (as ``meshgen mesh`` calls it) at 30^3 (and 100^3), then
+    the network's forward pass alone against the matrix-product roof."""
+    import torch
+
+    import bench_inference
+    from meshgen.geometry import load_geometry
+    from meshgen.methods import make_mesh
+    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.model import MLP, describe
+    from meshgen.tfi import parametric_grid
+
+    geometry = load_geometry(GEOMETRY)
+    model = bundled_model()
+    sizes = [30] if quick else [30, 100]
+    options = {"tfi": {}, "elliptic": {}, "neural": {"model": model}}
+    rows = []
+    print("method      cells  median s   min s   max s   cpu s  runs  notes")
+    for method, extra in options.items():
+        make_mesh(method, geometry, parametric_grid((8, 8, 8)), **extra)  # warm up: imports, threads
+        for n in sizes:
+            repeat = 2 if quick else (3 if method == "elliptic" and n >= 100 else 5)
+            coords = parametric_grid((n, n, n))
+            timing = timed_runs(lambda: make_mesh(method, geometry, coords, **extra), repeat)
+            X, info = timing.pop("result")
+            notes = {}
+            if method == "elliptic":
+                notes = {"iterations": info["iterations"], "converged": bool(info["converged"])}
+            elif method == "neural":
+                notes = {"model": f"bundled {model.preset()} {list(model.checkpoint['model']['widths'])}",
+                         "inverted_by_snapping": info["snap"]["inverted_by_snapping"]}
+            row = {"method": method, "cells_per_axis": n, "cells": n**3, "repeat": repeat, **timing, **notes}
+            rows.append(row)
+            print(f"{method:<10}{n:>5}^3{row['seconds']:>10.3f}{row['min_seconds']:>8.3f}{row['max_seconds']:>8.3f}"
+                  f"{row['cpu_seconds']:>8.3f}{repeat:>6}  " + ", ".join(f"{k} {v}" for k, v in notes.items()), flush=True)
+
+    # The forward pass alone: the bundled model at each size, and the [85]*4 network of the target.
+    networks = [(f"bundled {model.preset()}", model.checkpoint["model"], n + 1) for n in sizes]
+    torch.manual_seed(0)
+    paper = describe(MLP(3, PAPER_WIDTHS), PAPER_WIDTHS, False, [0.0, 0.0, 0.0], 1.0)
+    networks.append(("random [85]*4", paper, 101))
+    forward = []
+    print(f"\nforward pass alone (evaluate_on_grid){'':6}nodes  GFLOP  median s   cpu s  fraction of the roof")
+    for label, description, nodes in networks:
+        coords = [np.linspace(0.0, 1.0, nodes)] * 3
+        evaluate_on_grid(description, coords)  # warm up
+        timing = timed_runs(lambda: evaluate_on_grid(description, coords), 3 if quick else 5)
+        timing.pop("result")
+        gflop = bench_inference.network_flops(description["widths"], 3, nodes**3) / 1e9
+        roof_seconds = gflop / roof["gflops"] if roof else None
+        row = {"network": label, "widths": list(description["widths"]), "nodes_per_axis": nodes, "nodes": nodes**3,
+               "gflop": gflop, **timing, "roof_seconds": roof_seconds,
+               "fraction_of_roof": roof_seconds / timing["seconds"] if roof else None,
+               # the same per CPU second: what a busy machine changes less
+               "fraction_of_roof_per_cpu_second": gflop / timing["cpu_seconds"] / roof["gflops_per_cpu_second"] if roof else None}
+        forward.append(row)
+        fraction = f"{row['fraction_of_roof']:.0%} (per CPU second {row['fraction_of_roof_per_cpu_second']:.0%})" if roof else "-"
+        print(f"{label + ' ' + str(row['widths']):<38}{nodes:>6}^3{gflop:>7.1f}{row['seconds']:>10.3f}"
+              f"{row['cpu_seconds']:>8.3f}  {fraction}", flush=True)
+    return {"geometry": GEOMETRY, "methods": rows, "forward_pass": forward}
+
+
+# ---------------------------------------------------------------------------------------------
+# the mesh command, end to end, and its memory
+
+def mesh_command(cells: int, folder: Path) -> dict:
+    """``bench_inference.mesh_command`` in the environment this process started with (so without
+    the OMP_WAIT_POLICY set above, which ``meshgen mesh`` does not set)."""
+    import bench_inference
+
+    return bench_inference.mesh_command(cells, folder, _USER_ENVIRONMENT)
+
+
+def mesh_command_section(quick: bool) -> dict:
+    repeat = 1 if quick else 3
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        mesh_command(10, folder)  # warm the file cache (torch's libraries) for the timed runs
+        runs = [mesh_command(100, folder) for _ in range(repeat)]
+    seconds = [run["seconds"] for run in runs]
+    data = {"command": "meshgen mesh --dims 100 100 100 -o out.vtu -q (bundled model)", "cells": 100**3,
+            "repeat": repeat, "seconds": statistics.median(seconds), "min_seconds": min(seconds),
+            "max_seconds": max(seconds), "cpu_seconds": statistics.median(run["cpu_seconds"] for run in runs),
+            "peak_megabytes": max(run["peak_megabytes"] for run in runs),
+            "megabytes_written": runs[-1]["megabytes_written"], "runs": runs}
+    print(f"{data['command']}: median {data['seconds']:.2f} s of {repeat} (CPU {data['cpu_seconds']:.2f} s), "
+          f"peak memory {data['peak_megabytes']:.0f} MB, {data['megabytes_written']:.0f} MB written")
+    return data
+
+
+def memory_section(quick: bool) -> dict:
+    cells = 100 if quick else 200
+    with tempfile.TemporaryDirectory() as folder:
+        run = mesh_command(cells, Path(folder))
+    data = {"command": f"meshgen mesh --dims {cells} {cells} {cells} -o out.vtu -q (bundled model)",
+            "cells_per_axis": cells, "cells": cells**3, **run}
+    print(f"{data['command']}: peak memory {run['peak_megabytes']:.0f} MB, {run['seconds']:.1f} s "
+          f"(CPU {run['cpu_seconds']:.1f} s), {run['megabytes_written']:.0f} MB written")
+    return data
+
+
+# ---------------------------------------------------------------------------------------------
+# training
+
+
+def training(quick: bool) -> dict:
+    import torch
+
+    import bench_train
+    from meshgen.geometry import load_geometry
+
+    geometry = load_geometry(GEOMETRY)
+    sizes = {"default": bench_train.SIZES["default"]} if quick else bench_train.SIZES
+    repeats = 5 if quick else 20
+    print(f"seconds per Adam step, median of {repeats}; 4096 interior (16^3 grid nodes or random points) + "
+          f"6000 boundary points; torch {torch.get_num_threads()} threads")
+    rows = bench_train.step_table(geometry, sizes, repeats, extras=not quick)
+    ratios, cpu_ratios = bench_train.ratios(rows), bench_train.ratios(rows, "cpu_seconds_per_step")
+    for size, values in ratios.items():
+        for name, value in values.items():
+            cpu = f" (of CPU seconds {cpu_ratios[size][name]:.2f}x)" if name in cpu_ratios[size] else ""
+            print(f"  {size:8s} {name}: {value:.2f}{'' if 'overhead' in name else 'x'}{cpu}")
+    return {"geometry": GEOMETRY, "interior_points": 4096, "boundary_points": 6000, "repeat": repeats,
+            "sizes": {name: list(widths) for name, widths in sizes.items()}, "steps": rows, "ratios": ratios,
+            "ratios_of_cpu_seconds": cpu_ratios,
+            "fd_ad_pairs": {name: list(pair) for name, pair in bench_train.AD_FD_PAIRS.items()}}
+
+
+def time_to_quality(quick: bool) -> dict:
+    import bench_train
+    from meshgen.geometry import load_geometry
+
+    geometry = load_geometry(GEOMETRY)
+    if quick:  # capped budgets: a smoke test of the measurement, not the figure
+        runs = {"exact": ["checkpoint.every=25", "adam.steps=150", "lbfgs.steps=0"],
+                "default": ["checkpoint.every=25", "adam.steps=100", "lbfgs.steps=5"]}
+    else:  # the presets as they are
+        runs = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"]}
+    bounds = bench_train.QUALITY_BOUNDS
+    reference = bench_train.reference_figures(geometry)
+    threshold = bench_train.min_angle_threshold(reference, bounds)
+    print(f"30^3 mesh every few steps; bounds: {json.dumps(bounds)}")
+    print(f"mean min angle: TFI {reference['tfi']['min_angle_mean']:.2f}, elliptic "
+          f"{reference['elliptic']['min_angle_mean']:.2f} (inverted cells {reference['tfi']['inverted']} and "
+          f"{reference['elliptic']['inverted']}): a network's mesh needs {threshold:.2f}")
+    results = {}
+    for preset, overrides in runs.items():
+        run = bench_train.time_to_quality(preset, geometry, overrides, bounds, reference, verbose=False)
+        run["capped"] = quick
+        results[preset] = run
+        first, final = run["first_valid"], run["final"]
+        reached = (f"step {first['step']} ({first['stage']}) after {first['seconds']:.1f} s" if first
+                   else f"not within {run['steps']} steps")
+        print(f"{preset:<8} {' '.join(overrides)}: bounds reached {reached}; trained {run['steps']} steps in "
+              f"{run['training_seconds']:.1f} s{' (capped)' if quick else ''}")
+        print(f"{'':9}final: inverted {final['inverted']} (snapped {final['inverted_after_snapping']}), boundary "
+              f"deviation max {final['boundary_deviation_max_rel']:.2e} of the length, min angle mean "
+              f"{final['min_angle_mean']:.2f}", flush=True)
+    return {"geometry": GEOMETRY, "dims": [30, 30, 30], "bounds": bounds, "min_angle_mean_threshold_degrees": threshold,
+            "capped": quick, "reference": reference, "runs": results}
+
+
+# ---------------------------------------------------------------------------------------------
+# evaluate, formats
+
+
+def evaluate(quick: bool) -> dict:
+    import bench_quality
+
+    cases = [("unstructured", bench_quality.REPORT)] if quick else bench_quality.CASES
+    data = bench_quality.measure((100, 100, 100), 2 if quick else 5, cases)
+    bench_quality.print_table(data)
+    rows = [{"path": r["path"], "what": r["what"], "cells": r["cells"], "seconds": r["median_s"],
+             "min_seconds": r["min_s"], "max_seconds": r["max_s"], "cpu_seconds": r["median_cpu_s"],
+             "runs_seconds": r["runs_s"], "cells_per_second": r["cells"] / r["median_s"]} for r in data["results"]]
+    return {"geometry": GEOMETRY, "mesh": "TFI", "dims": data["dims"], "cells": data["cells"], "repeat": data["repeat"],
+            "results": rows}
+
+
+def formats(quick: bool) -> dict:
+    import formats as formats_benchmark
+    from meshgen.geometry import load_geometry
+    from meshgen.tfi import tfi
+
+    cells = 50 if quick else 100
+    repeat = 1 if quick else 3
+    data = formats_benchmark.formats_table(tfi(load_geometry(GEOMETRY), (cells,) * 3), repeat)
+    rows = [{"format": r["format"] + (" (baseline: meshio's own writer)" if r["format"] == "meshio vtu" else ""), "write_seconds": r["write_s"], "read_seconds": r["read_s"], "megabytes": r["size_mb"]}
+            for r in data["results"]]
+    return {"geometry": GEOMETRY, "mesh": "TFI, one cell-data array and the metadata", "cells_per_axis": cells,
+            "cells": cells**3, "repeat": repeat, "timing": f"best of {repeat}", "results": rows}
+
+
+# ---------------------------------------------------------------------------------------------
+# the summary
+
+
+def summary(sections: dict) -> list[dict]:
+    """The headline figures, each with its target (where one is set) and met / not met. ``cpu``:
+    the process CPU seconds beside a wall time (all threads; on a loaded machine the wall time
+    grows more), None where not measured."""
+    rows = []
+
+    def add(figure, value, unit, key=None, judged=True, note="", cpu=None):
+        row = {"figure": figure, "value": value, "unit": unit, "cpu_seconds": cpu, "note": note}
+        if key is not None:
+            row.update(key=key, **{k: v for k, v in judge(key, value, judged).items() if k != "measured"})
+        rows.append(row)
+
+    if "machine" in sections:
+        roof = sections["machine"]["matmul"]
+        add(f"float32 matrix product {roof['size']}^2, {roof['threads']} threads (the roof)", roof["gflops"], "GFLOP/s",
+            note=f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second")
+    if "meshing" in sections:
+        for row in sections["meshing"]["methods"]:
+            n = row["cells_per_axis"]
+            key = {("elliptic", 100): "elliptic_100_seconds", ("elliptic", 30): "elliptic_30_seconds"}.get((row["method"], n))
+            note = {"elliptic": f"{row.get('iterations')} cycles", "neural": f"{row.get('model')}, snapped"}.get(row["method"], "")
+            add(f"mesh {n}^3 cells, {row['method']} (median of {row['repeat']})", row["seconds"], "s", key, note=note,
+                cpu=row["cpu_seconds"])
+        for row in sections["meshing"]["forward_pass"]:
+            n = row["nodes_per_axis"]
+            fraction = (f"{row['fraction_of_roof']:.0%} of the roof ({row['fraction_of_roof_per_cpu_second']:.0%} "
+                        f"per CPU second)" if row["fraction_of_roof"] else "")
+            add(f"network forward pass, {row['network']}, {n}^3 nodes", row["seconds"], "s",
+                "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None, note=fraction,
+                cpu=row["cpu_seconds"])
+    if "mesh_command" in sections:
+        data = sections["mesh_command"]
+        add(f"`meshgen mesh --dims 100 100 100 -o out.vtu`, end to end (median of {data['repeat']})", data["seconds"],
+            "s", "mesh_command_100_seconds", cpu=data["cpu_seconds"], note=f"peak memory {data['peak_megabytes']:.0f} MB")
+    if "training" in sections:
+        data = sections["training"]
+        for row in data["steps"]:
+            if row["variant"] in bench_variants():
+                add(f"training step, {row['variant']} {row['widths']}", row["seconds_per_step"], "s",
+                    cpu=row["cpu_seconds_per_step"])
+        for size, values in data["ratios"].items():
+            for name in data["fd_ad_pairs"]:
+                add(f"FD/AD step ratio, {name}, {data['sizes'][size]}", values[name], "x", "fd_ad_step_ratio",
+                    note=f"{data['ratios_of_cpu_seconds'][size][name]:.2f}x of CPU seconds")
+    if "time_to_quality" in sections:
+        data = sections["time_to_quality"]
+        for preset, run in data["runs"].items():
+            first, final = run["first_valid"], run["final"]
+            capped = ", capped budget" if run["capped"] else ""
+            note = (f"step {first['step']} of {run['steps']}" if first else f"not reached in {run['steps']} steps") + capped
+            note += (f"; at the end: boundary deviation {final['boundary_deviation_max_rel']:.1e} of the length, "
+                     f"{final['inverted_after_snapping']} cells inverted by snapping, min angle {final['min_angle_mean']:.2f}")
+            add(f"time to quality, {preset}, 30^3 mesh", first["seconds"] if first else None, "s", note=note)
+    if "evaluate" in sections:
+        data = sections["evaluate"]
+        for row in data["results"]:
+            headline = row["path"] == "unstructured" and "report" in row["what"]
+            add(f"evaluate {row['cells']:,} cells, {row['path']} {row['what']}", row["seconds"], "s",
+                "evaluate_1e6_seconds" if headline else None, judged=row["cells"] >= 1e6, cpu=row["cpu_seconds"])
+    if "formats" in sections:
+        data = sections["formats"]
+        for row in data["results"]:
+            add(f"write {data['cells_per_axis']}^3 cells, {row['format']}", row["write_seconds"], "s",
+                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
+    if "memory" in sections:
+        data = sections["memory"]
+        add(f"peak memory, `meshgen mesh --dims {data['cells_per_axis']} {data['cells_per_axis']} "
+            f"{data['cells_per_axis']} -o out.vtu`", data["peak_megabytes"], "MB",
+            "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200,
+            note=f"{format_value(data['seconds'], 's')} end to end")
+    return rows
+
+
+def bench_variants():
+    import bench_train
+
+    return bench_train.VARIANTS
+
+
+def format_value(value, unit) -> str:
+    if value is None:
+        return "-"
+    if unit in ("GFLOP/s", "MB"):
+        return f"{value:.0f} {unit}"
+    if unit == "x":
+        return f"{value:.2f}x"
+    if unit == "s" and value < 1:
+        return f"{value * 1e3:.3g} ms"
+    return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
+
+
+def target_text(row) -> str:
+    if "target" not in row:
+        return ""
+    unit = "x" if row["unit"] == "x" else f" {row['unit']}"
+    return f"{row['comparison']} {row['target']:g}{unit}"
+
+
+def print_summary(rows: list[dict]) -> None:
+    width = max(len(row["figure"]) for row in rows)
+    print(f"\n{'figure':<{width}}  {'measured':>11}  {'CPU':>9}  {'target':>11}  {'verdict':<10}  note")
+    print("-" * (width + 60))
+    for row in rows:
+        verdict = mark(row["met"]) if "target" in row else ""
+        print(f"{row['figure']:<{width}}  {format_value(row['value'], row['unit']):>11}  "
+              f"{format_value(row['cpu_seconds'], 's') if row['cpu_seconds'] is not None else '':>9}  "
+              f"{target_text(row):>11}  {verdict:<10}  {row['note']}")
+
+
+def markdown(results: dict) -> str:
+    """The summary as a README section: date, machine, a table of figures and targets, what the
+    figures mean, how to repeat them."""
+    machine_data = results["sections"].get("machine", {})
+    lines = [
+        f"Measured {results['date'][:10]} by `{results['command']}` (meshgen {machine_data.get('meshgen', '?')}, "
+        f"commit {machine_data.get('git_commit') or '?'}) on {machine_data.get('processor', '?')}, "
+        f"{machine_data.get('usable_cpus', '?')} cores, {machine_data.get('memory_gigabytes') or 0:.0f} GB, "
+        f"Python {machine_data.get('python', '?')}, torch {machine_data.get('torch', '?')}, numpy "
+        f"{machine_data.get('numpy', '?')}; load average {results['load_average']['start'][0]:.1f} at the start and "
+        f"{results['load_average']['end'][0]:.1f} at the end (other jobs shared the machine); the whole run took "
+        f"{results['run']['wall_seconds'] / 60:.0f} min.",
+        "",
+        "| figure | measured | CPU | target | met | note |",
+        "|---|---:|---:|---|---|---|",
+    ]
+    for row in results["summary"]:
+        verdict = mark(row["met"]) if "target" in row else ""
+        cpu = format_value(row["cpu_seconds"], "s") if row["cpu_seconds"] is not None else ""
+        lines.append(f"| {row['figure']} | {format_value(row['value'], row['unit'])} | {cpu} | "
+                     f"{target_text(row).replace('<=', '≤').replace('>=', '≥')} | {verdict} | {row['note']} |")
+    lines += ["", "Times are wall seconds (medians); CPU is the process's CPU time over all threads: on a busy "
+                  "machine the wall time grows with the load, the CPU time much less. All meshes are of the "
+                  "semicylinder; the neural rows use the bundled model."]
+    quality = results["sections"].get("time_to_quality")
+    if quality:
+        bounds = quality["bounds"]
+        lines += ["", "Time to quality: training seconds (the measurements' own time left out) until the 30^3 mesh of "
+                      f"the network has no inverted cell (also after snapping its boundary nodes), boundary nodes within "
+                      f"{bounds['boundary_deviation_max_rel_at_most']:g} of the characteristic length, and a mean minimum "
+                      f"angle of at least TFI's plus {bounds['min_angle_mean_share_from_tfi_to_elliptic_at_least']:.0%} of "
+                      f"the way to the elliptic mesh's ({quality['reference']['tfi']['min_angle_mean']:.2f}° and "
+                      f"{quality['reference']['elliptic']['min_angle_mean']:.2f}°: "
+                      f"{quality['min_angle_mean_threshold_degrees']:.2f}°); measured every "
+                      + " and ".join(f"{run['probe_every_steps']} steps ({preset})" for preset, run in quality["runs"].items())
+                      + "."]
+    lines += ["", "Reproduce (10 to 15 minutes on 2 cores; `--quick`, for CI, under 2 minutes with smaller "
+                  "sizes and capped training):", "",
+              "    python benchmarks/run.py --json benchmarks.json --markdown benchmarks.md", ""]
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes and budgets, for CI (a few minutes)")
+    parser.add_argument("--json", type=Path, default=None, help="write every figure to this JSON file")
+    parser.add_argument("--markdown", type=Path, default=None, help="write the summary table as Markdown")
+    parser.add_argument("--only", choices=SECTIONS, action="append", help="run only this section (repeatable)")
+    parser.add_argument("--from-json", type=Path, default=None, metavar="FILE",
+                        help="measure nothing: print (and with --markdown write) the summary of an earlier run's JSON")
+    args = parser.parse_args(argv)
+    if args.from_json:
+        results = json.loads(args.from_json.read_text())
+        results["summary"] = summary(results["sections"])
+        print_summary(results["summary"])
+        if args.markdown:
+            args.markdown.write_text(markdown(results))
+            print(f"wrote {args.markdown}")
+        return 0
+
+    chosen = [name for name in SECTIONS if not args.only or name in args.only]
+    command = "python benchmarks/run.py" + (" --quick" if args.quick else "") + "".join(f" --only {s}" for s in args.only or [])
+    started, started_cpu = time.perf_counter(), time.process_time()
+    results = {
+        "benchmark": "meshgen",
+        "command": command,
+        "quick": args.quick,
+        "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "load_average": {"start": load_average()},
+        "targets": {key: {"comparison": c, "target": t, "unit": u, "source": src} for key, (c, t, u, src) in TARGETS.items()},
+        "sections": {},
+    }
+    print(f"{command}  ({results['date']})")
+    runners = {
+        "machine": lambda: machine(args.quick),
+        "meshing": lambda: meshing(args.quick, results["sections"].get("machine", {}).get("matmul")),
+        "mesh_command": lambda: mesh_command_section(args.quick),
+        "training": lambda: training(args.quick),
+        "time_to_quality": lambda: time_to_quality(args.quick),
+        "evaluate": lambda: evaluate(args.quick),
+        "formats": lambda: formats(args.quick),
+        "memory": lambda: memory_section(args.quick),
+    }
+    for name in chosen:
+        section_header(name)
+        before, wall, cpu = load_average(), time.perf_counter(), time.process_time()
+        data = runners[name]()
+        data["section"] = {"wall_seconds": time.perf_counter() - wall, "cpu_seconds": time.process_time() - cpu,
+                           "load_average_before": before, "load_average_after": load_average()}
+        results["sections"][name] = data
+    results["load_average"]["end"] = load_average()
+    results["run"] = {"wall_seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - started_cpu,
+                      "note": "cpu_seconds: this process only (subprocess commands are in their sections)"}
+    results["summary"] = summary(results["sections"])
+    print_summary(results["summary"])
+    print(f"\nwhole run: {results['run']['wall_seconds']:.0f} s wall, {results['run']['cpu_seconds']:.0f} s CPU; "
+          f"load average {results['load_average']['start'][0]:.2f} -> {results['load_average']['end'][0]:.2f}")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2, default=float) + "\n")
+        print(f"wrote {args.json}")
+    if args.markdown:
+        args.markdown.write_text(markdown(results))
+        print(f"wrote {args.markdown}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
