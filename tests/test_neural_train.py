@@ -112,7 +112,7 @@ def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
 
 
 def test_snapping_moves_exactly_the_boundary_nodes_onto_the_geometry(semidisk):
-    from meshgen.neural.train import snap_boundary
+    from meshgen.neural.train import snapped as snap_boundary
     from meshgen.tfi import parametric_grid, tfi
 
     coords = parametric_grid((6, 4))

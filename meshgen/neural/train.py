@@ -559,16 +559,14 @@ def _finite(network) -> bool:
 # the final summary
 
 
-def snap_boundary(X: np.ndarray, geometry, coords) -> np.ndarray:
-    """A copy of node array ``X`` whose boundary nodes are moved onto the geometry's boundary map at
-    their parametric points (what a soft-boundary mesh looks like once made to conform)."""
-    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)
-    on_boundary = np.zeros(X.shape[:-1], dtype=bool)
-    for axis in range(X.shape[-1]):
-        on_boundary[(slice(None),) * axis + (0,)] = on_boundary[(slice(None),) * axis + (-1,)] = True
-    snapped = X.copy()
-    snapped[on_boundary] = geometry.boundary(grid[on_boundary])
-    return snapped
+def snapped(X: np.ndarray, geometry, coords) -> np.ndarray:
+    """A copy of node array ``X`` with its boundary nodes moved onto the geometry's boundary map
+    (what a soft-boundary mesh looks like once made to conform)."""
+    from meshgen.neural.inference import snap_boundary
+
+    X = X.copy()
+    snap_boundary(X, geometry, coords)
+    return X
 
 
 def write_summary(checkpoint: dict, geometry, run_dir) -> dict:
@@ -589,7 +587,7 @@ def write_summary(checkpoint: dict, geometry, run_dir) -> dict:
     summary = {
         "dims": [SUMMARY_CELLS] * geometry.dim,
         "network": quality_report(X, geometry),
-        "inverted_after_snapping": quality_report(snap_boundary(X, geometry, coords))["inverted"]["count"],
+        "inverted_after_snapping": quality_report(snapped(X, geometry, coords))["inverted"]["count"],
         "tfi": quality_report(tfi(geometry, None, coords), geometry),
         "meshing_seconds": meshing_seconds,
         "test_loss": checkpoint["test_loss"],
