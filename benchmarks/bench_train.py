@@ -32,7 +32,7 @@ from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.neural.config import resolve_config  # noqa: E402
 from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, normalised_boundary  # noqa: E402
 from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
-from meshgen.neural.train import Problem, adam_step, boundary_pool, make_optimizer, snap_boundary, train  # noqa: E402
+from meshgen.neural.train import Problem, adam_step, boundary_pool, make_optimizer, snapped, train  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import parametric_grid  # noqa: E402
 
@@ -248,7 +248,7 @@ class QualityProbe:
         point = {"step": checkpoint["step"], "stage": checkpoint["stage"],
                  "seconds": checkpoint["elapsed_seconds"] - self.probe_seconds,
                  **figures(quality_report(X, self.geometry)),
-                 "inverted_after_snapping": quality_report(snap_boundary(X, self.geometry, self.coords))["inverted"]["count"]}
+                 "inverted_after_snapping": quality_report(snapped(X, self.geometry, self.coords))["inverted"]["count"]}
         self.points.append(point)
         self.probe_seconds += time.perf_counter() - start
         if self.verbose:
