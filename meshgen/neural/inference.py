@@ -26,7 +26,6 @@ bundled in ``meshgen/_models/`` for its geometry with default parameters.
 from __future__ import annotations
 
 import hashlib
-import itertools
 import json
 import os
 from dataclasses import dataclass, field
@@ -49,8 +48,6 @@ RUNS_DIR = "runs"
 def network_layers(model: dict):
     """The MLP of a ``checkpoint["model"]`` description as [(W^T (in, out), b (out,)), ...], float32
     torch tensors, checked against its ``dim`` and ``widths`` (a foreign description raises)."""
-    import torch
-
     from meshgen.neural.checkpoint import CheckpointError
 
     try:
@@ -182,48 +179,27 @@ def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES
 # snapping
 
 
-def inverted_cells(X: np.ndarray) -> np.ndarray:
-    """Per cell (n1, n2 [, n3]) of node array ``X``: whether the Jacobian det(e1, .., ed) of the
-    index-direction edges at one of its 2^d corners is <= 0 or not finite (DESIGN section 7: a
-    scaled Jacobian <= 0 means inverted). 2D quads count against the orientation of the mesh's
-    total signed area, as ``meshgen.quality`` does."""
-    dim = X.shape[-1]
-    cells = tuple(n - 1 for n in X.shape[:-1])
-    differences = [np.diff(X, axis=axis) for axis in range(dim)]
-    orientation = 1.0
-    if dim == 2:
-        a, b = X[1:, 1:] - X[:-1, :-1], X[:-1, 1:] - X[1:, :-1]
-        orientation = 1.0 if np.nansum(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]) >= 0 else -1.0
-    inverted = np.zeros(cells, dtype=bool)
-    for corner in itertools.product((0, 1), repeat=dim):
-        edges = []
-        for axis in range(dim):
-            index = tuple(slice(0, cells[d]) if d == axis else slice(corner[d], corner[d] + cells[d]) for d in range(dim))
-            edges.append(differences[axis][index])
-        if dim == 3:
-            e1, e2, e3 = edges
-            cross = np.cross(e2, e3)
-            jacobian = np.einsum("...c,...c->...", e1, cross)
-        else:
-            e1, e2 = edges
-            jacobian = e1[..., 0] * e2[..., 1] - e1[..., 1] * e2[..., 0]
-        inverted |= ~(orientation * jacobian > 0)
-    return inverted
+def _inverted(X: np.ndarray) -> np.ndarray:
+    """Per cell (n1, n2 [, n3]) of node array ``X``: inverted as ``meshgen.quality`` counts it
+    (scaled Jacobian <= 0 at a corner, or degenerate; 2D against the mesh's orientation)."""
+    from meshgen.quality import cell_metrics
+
+    return cell_metrics(X)["scaled_jacobian"].reshape(tuple(n - 1 for n in X.shape[:-1])) <= 0
 
 
 def _outer_layer_inverted(X: np.ndarray) -> np.ndarray:
-    """``inverted_cells`` for the cells that touch the boundary (others left False). 3D: computed
-    on the six slabs of one cell's thickness only; 2D: on the whole mesh, whose orientation decides
-    the sign (and which is small)."""
+    """``_inverted`` for the cells that touch the boundary (others left False), the only cells
+    snapping changes. 3D: computed on the six slabs of one cell's thickness only; 2D: on the whole
+    mesh, whose orientation decides the sign (and which is small)."""
     dim = X.shape[-1]
     cells = tuple(n - 1 for n in X.shape[:-1])
-    whole = inverted_cells(X) if dim == 2 else None
+    whole = _inverted(X) if dim == 2 else None
     flags = np.zeros(cells, dtype=bool)
     for axis in range(dim):
         for first in {0, cells[axis] - 1}:
             nodes = tuple(slice(first, first + 2) if d == axis else slice(None) for d in range(dim))
             layer = tuple(slice(first, first + 1) if d == axis else slice(None) for d in range(dim))
-            flags[layer] |= whole[layer] if whole is not None else inverted_cells(X[nodes])
+            flags[layer] |= whole[layer] if whole is not None else _inverted(X[nodes])
     return flags
 
 
