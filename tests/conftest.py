@@ -5,6 +5,8 @@ from pathlib import Path
 
 import pytest
 
+from meshgen.geometry import load_geometry
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -26,3 +28,13 @@ def run_cli(tmp_path):
         )
 
     return run
+
+
+@pytest.fixture(scope="session")
+def semidisk():
+    return load_geometry("semidisk")
+
+
+@pytest.fixture(scope="session")
+def semicylinder():
+    return load_geometry("semicylinder")

@@ -31,10 +31,6 @@ def write_gmsh(path, X, extra=True):
     return path
 
 
-@pytest.fixture(scope="module")
-def semicylinder():
-    return load_geometry("semicylinder")
-
 
 def evaluate_json(run_cli, tmp_path, *args):
     out = tmp_path / "report.json"

@@ -29,14 +29,6 @@ from neural_helpers import tiny_config
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
 
 
-@pytest.fixture(scope="module")
-def semidisk():
-    return load_geometry("semidisk")
-
-
-@pytest.fixture(scope="module")
-def semicylinder():
-    return load_geometry("semicylinder")
 
 
 @pytest.fixture(scope="module")

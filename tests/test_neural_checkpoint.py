@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import torch
 
-from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import from_dict
 from meshgen.neural.model import MLP, bubble, mesh_from_checkpoint
@@ -14,10 +13,6 @@ from meshgen.neural.train import train
 from meshgen.tfi import parametric_grid, tfi
 from neural_helpers import Recorder, tiny_config
 
-
-@pytest.fixture(scope="module")
-def semidisk():
-    return load_geometry("semidisk")
 
 
 @pytest.fixture(scope="module")

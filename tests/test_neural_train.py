@@ -8,15 +8,10 @@ import pytest
 import torch
 
 import meshgen.neural.train as training
-from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.train import TrainingDiverged, evaluate_losses, lbfgs_points, train
 from neural_helpers import Recorder, tiny_config
 
-
-@pytest.fixture(scope="module")
-def semidisk():
-    return load_geometry("semidisk")
 
 
 @pytest.mark.parametrize("derivatives", ["fd", "autograd"])

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from meshgen.deviation import boundary_deviation, distance_to_boundary, grid_boundary_nodes
-from meshgen.geometry import load_geometry
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.quality import (
     METRICS,
@@ -251,14 +250,6 @@ def test_face_matching_survives_hash_collisions_and_finds_non_manifold_faces():
 # boundary deviation
 
 
-@pytest.fixture(scope="module")
-def semicylinder():
-    return load_geometry("semicylinder")
-
-
-@pytest.fixture(scope="module")
-def semidisk():
-    return load_geometry("semidisk")
 
 
 def test_tfi_meshes_lie_on_the_true_boundary(semicylinder, semidisk):
