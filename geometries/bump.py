@@ -16,6 +16,13 @@ name = "bump"
 dim = 2
 description = "Channel length x height with a cos^2 bump (bump_height, bump_width, at x = bump_center) on its lower wall"
 params = {"length": 3.0, "height": 1.0, "bump_height": 0.25, "bump_width": 1.0, "bump_center": 1.5}
+# In at x = 0, out at x = length, between the bumped lower wall and the flat upper wall.
+patches = {
+    "xi0": ("inlet", "patch"),
+    "xi1": ("outlet", "patch"),
+    "eta0": ("lowerWall", "wall"),
+    "eta1": ("upperWall", "wall"),
+}
 
 
 def lower_wall(x, bump_height, bump_width, bump_center):

@@ -22,6 +22,15 @@ name = "canal"
 dim = 3
 description = "Semicircular canal: a tube of tube_radius bent along a half circle of bend_radius (an arch on z = 0)"
 params = {"tube_radius": 0.5, "bend_radius": 2.0}
+# The flow runs along the tube: in at zeta = 0, out at zeta = 1; the tube's surface is a wall.
+patches = {
+    "zeta0": ("inlet", "patch"),
+    "zeta1": ("outlet", "patch"),
+    "xi0": ("wall", "wall"),
+    "xi1": ("wall", "wall"),
+    "eta0": ("wall", "wall"),
+    "eta1": ("wall", "wall"),
+}
 
 
 # Angles (radians) of the square's corners (0, 0), (1, 0), (1, 1), (0, 1), increasing counterclockwise:

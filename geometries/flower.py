@@ -23,6 +23,15 @@ name = "flower"
 dim = 3
 description = "Prism of five-petal section r = radius (1 + amplitude cos 5t) along z, twisted by twist degrees over its length"
 params = {"radius": 1.0, "amplitude": 0.2, "length": 2.0, "twist": 90.0}
+# The flow runs along the prism's axis; its side is a wall.
+patches = {
+    "zeta0": ("inlet", "patch"),
+    "zeta1": ("outlet", "patch"),
+    "xi0": ("wall", "wall"),
+    "xi1": ("wall", "wall"),
+    "eta0": ("wall", "wall"),
+    "eta1": ("wall", "wall"),
+}
 
 # Angles (radians) of the square's corners (0, 0), (1, 0), (1, 1), (0, 1), increasing counterclockwise.
 CORNER_ANGLES = np.radians([216.0, 288.0, 432.0, 504.0])

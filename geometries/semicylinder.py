@@ -15,6 +15,15 @@ name = "semicylinder"
 dim = 3
 description = "Half-cylinder of radius R and length L (half-disk section x^2+y^2<=R^2, y>=0, along z)"
 params = {"radius": 1.0, "length": 2.0}
+# The flow runs along z: in at z = 0, out at z = length; the flat face y = 0 is a symmetry plane.
+patches = {
+    "zeta0": ("inlet", "patch"),
+    "zeta1": ("outlet", "patch"),
+    "xi0": ("wall", "wall"),
+    "eta1": ("wall", "wall"),
+    "xi1": ("wall", "wall"),
+    "eta0": ("symmetry", "symmetry"),
+}
 
 _section = load_geometry("semidisk", check=False)
 

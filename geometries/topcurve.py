@@ -16,6 +16,15 @@ name = "topcurve"
 dim = 3
 description = "Box length x width x height, its top curved to z = height + amplitude sin(pi x/length) sin(pi y/width)"
 params = {"length": 2.0, "width": 1.0, "height": 1.0, "amplitude": 0.3}
+# A channel along x under a curved roof: in at x = 0, out at x = length, flat floor, symmetric sides.
+patches = {
+    "xi0": ("inlet", "patch"),
+    "xi1": ("outlet", "patch"),
+    "eta0": ("sides", "symmetry"),
+    "eta1": ("sides", "symmetry"),
+    "zeta0": ("floor", "wall"),
+    "zeta1": ("top", "wall"),
+}
 
 
 def boundary(points, length, width, height, amplitude):

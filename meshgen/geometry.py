@@ -13,6 +13,10 @@ A plugin is a Python module (a file, or a module named by an entry point) with:
     def characteristic_length(**params):   # optional; default: bounding-box diagonal
         ...
 
+    patches = {"zeta0": ("inlet", "patch"), "xi0": ("wall", "wall"), ...}
+                                   # optional: boundary patch (name, type) per cube face
+                                   # (meshgen.patches); faces left out keep their face name
+
 The boundary map must be vectorised and continuous across the cube's edges and corners.
 Everything else (TFI, surfaces, deviation checks) is derived from it.
 
@@ -63,6 +67,7 @@ class Geometry:
     boundary_map: Callable = field(repr=False)
     length_map: Callable | None = field(default=None, repr=False)
     source: str = ""
+    patches: dict = field(default_factory=dict)  # cube face -> (patch name, type), as declared
 
     def boundary(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float)
@@ -123,7 +128,15 @@ class Geometry:
         return bind(self, values)
 
     def describe(self) -> dict:
-        return {"name": self.name, "dim": self.dim, "description": self.description, "params": dict(self.defaults)}
+        from meshgen.patches import as_records, geometry_patches
+
+        return {
+            "name": self.name,
+            "dim": self.dim,
+            "description": self.description,
+            "params": dict(self.defaults),
+            "patches": as_records(geometry_patches(self)),
+        }
 
     def surface(self, resolution: int = 64):
         """Closed boundary surface as a watertight ``trimesh.Trimesh`` (3D), or the filled
@@ -204,6 +217,7 @@ def _from_module(module, source: str) -> Geometry:
         raise GeometryError(f"geometry plugin {source}: 'params' must map names to numbers")
     defaults = {k: float(v) for k, v in params.items()}
     length_map = getattr(module, "characteristic_length", None)
+    patches = _declared_patches(getattr(module, "patches", {}), int(dim), source)
     return Geometry(
         name=name,
         dim=int(dim),
@@ -213,7 +227,25 @@ def _from_module(module, source: str) -> Geometry:
         boundary_map=boundary_map,
         length_map=length_map if callable(length_map) else None,
         source=source,
+        patches=patches,
     )
+
+
+def _declared_patches(declared, dim: int, source: str) -> dict:
+    """A plugin's ``patches`` checked (faces, names, types, shared names sharing a type)."""
+    from meshgen.errors import MeshgenError
+    from meshgen.patches import face_assignment, patches_from_assignment
+
+    if not isinstance(declared, dict) or not all(
+        isinstance(v, (tuple, list)) and len(v) == 2 and all(isinstance(x, str) for x in v) for v in declared.values()
+    ):
+        raise GeometryError(f"geometry plugin {source}: 'patches' must map cube face names to (name, type) pairs")
+    declared = {str(face): (name, kind) for face, (name, kind) in declared.items()}
+    try:
+        patches_from_assignment(face_assignment(dim, declared))
+    except MeshgenError as exc:
+        raise GeometryError(f"geometry plugin {source}: {exc}") from None
+    return declared
 
 
 def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
@@ -240,6 +272,7 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
         geometry.boundary_map,
         geometry.length_map,
         geometry.source,
+        geometry.patches,
     )
 
 

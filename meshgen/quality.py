@@ -858,17 +858,18 @@ def _nulls(data):
     return data
 
 
-def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None) -> dict:
+def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None, **write_options) -> dict:
     """Write node array ``X`` to ``path`` with the seven per-cell metrics as cell data (formats
     that carry cell data keep them), and the report plus ``metadata`` (geometry, params, method,
-    ...) to ``<path>.quality.json``. Returns the report (with ``quality_seconds``)."""
+    ...) to ``<path>.quality.json``. ``write_options`` go to ``meshgen.formats.write_mesh``
+    (``patches``, ``format``, ``binary``). Returns the report (with ``quality_seconds``)."""
     from meshgen.formats import write_mesh
 
     start = time.perf_counter()
     metrics, degenerate, info = _assess(_check_node_array(X))
     report = _report(metrics, degenerate, info, geometry)
     report["quality_seconds"] = time.perf_counter() - start
-    written = write_mesh(path, X, cell_data=metrics, metadata=metadata)
+    written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
     write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
     return report
 
@@ -910,9 +911,9 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) ->
     from meshgen.geometry import load_geometry
 
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise MeshgenError(f"mesh file {path} does not exist")
-    if path.stat().st_size == 0:
+    if path.is_file() and path.stat().st_size == 0 and path.suffix.lower() != ".foam":
         raise MeshgenError(f"mesh file {path} is empty")
     if mesh is None:
         mesh = read_mesh(path)

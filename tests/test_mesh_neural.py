@@ -252,7 +252,13 @@ def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_
         target = runs / name / "checkpoint.pt"
         target.write_bytes(source.read_bytes())
         os.utime(target, (time.time() - age, time.time() - age))
-    newest = run_cli("mesh", "--dims", 5, 5, "-o", "a.vtu")  # no --geometry: the newest run, 2D
+    # No --geometry means the semicylinder (as --help says), not the newest run of any geometry.
+    default = run_cli("mesh", "--dims", 3, 3, 3, "-o", "z.vtu")  # skips the newer semidisk run
+    assert default.returncode == 0, default.stderr
+    assert default.stdout.startswith("model: runs/semicylinder-old/checkpoint.pt (")
+    assert json.loads((tmp_path / "z.vtu.quality.json").read_text())["geometry"] == "semicylinder"
+    assert one_line_error(run_cli("mesh", "--dims", 5, 5, "-o", "y.vtu"))  # 2D dims for the 3D default
+    newest = run_cli("mesh", "-g", "semidisk", "--dims", 5, 5, "-o", "a.vtu")
     assert newest.returncode == 0, newest.stderr
     assert newest.stdout.startswith("model: runs/semidisk-new/checkpoint.pt (")
     assert json.loads((tmp_path / "a.vtu.quality.json").read_text())["geometry"] == "semidisk"

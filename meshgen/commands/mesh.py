@@ -8,7 +8,7 @@ from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 
 METHOD_HELP = (
     "Meshing method: auto, neural, tfi, elliptic. auto: the neural map of --checkpoint, else of the newest "
-    "./runs/*/checkpoint.pt for the geometry, else of the model bundled for it (semicylinder)."
+    "./runs/*/checkpoint.pt trained on the --geometry (default semicylinder), else of the model bundled for it."
 )
 
 
@@ -16,7 +16,17 @@ METHOD_HELP = (
 @click.option("--method", "-m", default="auto", show_default=True, help=METHOD_HELP)
 @geometry_options()
 @dims_option()
-@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt).")
+@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt), or a case folder with --format openfoam.")
+@click.option("--format", "format_name", default=None, metavar="NAME", help="Output format instead of the extension's: openfoam writes the case folder -o CASE (or CASE/constant/polyMesh).")
+@click.option(
+    "--patch",
+    "patch_items",
+    multiple=True,
+    metavar="FACE=NAME[:TYPE]",
+    help="Name a boundary face (xi0 xi1 eta0 eta1 zeta0 zeta1) NAME, of TYPE wall, patch, symmetry or empty (repeatable; "
+    "faces may share a name). Default: the geometry's patches (meshgen geometries).",
+)
+@click.option("--ascii", "ascii_files", is_flag=True, help="openfoam: write the polyMesh as ASCII [default: binary].")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
 @click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
@@ -29,13 +39,15 @@ METHOD_HELP = (
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, quiet):
+def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, snap, tol, max_iter, clusters, quiet):
     """Make a structured mesh of a geometry and write it.
 
-    With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
-    (of the --geometry given), else the semicylinder model bundled with meshgen; the model used is
-    printed. --dims counts cells; nodes are dims + 1. The write is atomic: an interrupted run never
-    leaves a partial file under the output name.
+    With no --method and no --checkpoint, a trained model of the --geometry (default: semicylinder)
+    meshes: the newest run under ./runs/ trained on it, else the model bundled with meshgen for it;
+    one line says which model was used. --dims counts cells; nodes are dims + 1. The write is
+    atomic: an interrupted run never leaves a partial file under the output name.
+
+    Boundary patches (named faces) go into .cgns, .vts, .su2, .msh and OpenFOAM cases.
     """
     import sys
     import time
@@ -43,11 +55,19 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     from meshgen import __version__
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
-    from meshgen.formats import check_output_path
+    from meshgen.formats import check_output_path, check_patches, format_for
     from meshgen.methods import get_method, make_mesh
+    from meshgen.patches import geometry_patches, parse_patch_options
     from meshgen.quality import summary_lines, write_mesh_with_quality
 
-    output = check_output_path(output)
+    output_format = format_for(output, format_name)
+    output = check_output_path(output, output_format.name, len(dims))
+    if patch_items and not output_format.patches:
+        carriers = ", ".join(f.name for f in _patch_formats())
+        raise click.UsageError(f"--patch: {output_format.name} files carry no boundary patches (formats that do: {carriers})")
+    if ascii_files and not output_format.folder:
+        raise click.UsageError(f"--ascii applies to --format openfoam, not to {output_format.name}")
+    patch_overrides = parse_patch_options(patch_items, len(dims))
     context = click.get_current_context()
     geometry_given = context.get_parameter_source("geometry") != click.core.ParameterSource.DEFAULT
     if method == "auto":
@@ -64,6 +84,8 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         if checkpoint is not None:
             raise click.UsageError(f"--checkpoint applies to the neural method, not to '{method}'")
         geometry = load_selected_geometry(geometry, params, dims)
+    # Patches are checked (names valid for the format) before any meshing work.
+    patches = check_patches(geometry_patches(geometry, patch_overrides), geometry.dim, output, output_format.name)
     if model is not None and not quiet:
         click.echo(f"model: {model.describe()}")
     start = time.perf_counter()
@@ -81,8 +103,13 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
+    if output_format.patches:
+        from meshgen.patches import as_records
+
+        metadata["patches"] = as_records(patches)
+    write_options = {"binary": not ascii_files} if output_format.folder else {}
     # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
-    report = write_mesh_with_quality(output, X, geometry, metadata)
+    report = write_mesh_with_quality(output, X, geometry, metadata, patches=patches, format=output_format.name, **write_options)
     for line in info.get("warnings", []):
         click.echo(f"Warning: {line}", err=True)
     if not quiet:
@@ -97,7 +124,9 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
             )
         if "snap" in info:
             click.echo(_snap_line(info["snap"]))
-        click.echo(f"wrote {output}")
+        click.echo(f"wrote {output}" + (f" ({output_format.name})" if output_format.folder else ""))
+        if output_format.patches:
+            click.echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in patches))
         for line in summary_lines(report):
             click.echo(line)
 
@@ -110,9 +139,9 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
 
     given_params = parse_params(params)
     name = None
-    if checkpoint is None and (geometry_given or given_params):
-        # --param without --geometry sets the default geometry's parameters. The geometry must
-        # exist and fit --dims before models are looked up.
+    if checkpoint is None:
+        # Without --checkpoint the model is one of the --geometry (default: semicylinder), never
+        # "the newest run of any geometry". The geometry must exist and fit --dims first.
         name = load_selected_geometry(spec, params, dims).name
     elif geometry_given:
         name = load_geometry(spec, given_params).name
@@ -131,6 +160,12 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
             param_hint="'--dims'",
         )
     return model, geometry
+
+
+def _patch_formats():
+    from meshgen.formats import FORMATS
+
+    return [fmt for fmt in FORMATS if fmt.patches]
 
 
 def _snap_line(snap: dict) -> str:

@@ -1,7 +1,11 @@
 """Mesh writers (and readers), looked up by file extension.
 
-Each format is a small module with ``write(path, X, cell_data, metadata)`` and, where meshgen can
-read it back, ``read(path) -> meshio.Mesh``. ``X`` is the node array of DESIGN section 2;
+Each format is a small module with ``write(path, X, cell_data, metadata)`` (formats that carry
+boundary patches: ``write(path, X, cell_data, metadata, patches)``, ``patches`` a list of
+``meshgen.patches.Patch`` covering every cube face, and ``read_patches(path)``; where names are
+restricted, ``check_patch_name(name)``) and, where meshgen can read it back,
+``read(path) -> meshio.Mesh``. A folder format (OpenFOAM) also has ``check_output(path)`` and writes
+atomically itself. ``X`` is the node array of DESIGN section 2;
 ``cell_data`` maps names to per-cell arrays in C order of the cells (i, j[, k]); ``metadata`` is a
 JSON-serialisable dict (geometry, parameters, method, meshgen version) stored where the format
 allows (every format but Plot3D, which has no place for it); ``metadata_of`` reads it back.
@@ -34,19 +38,23 @@ class Format:
     extensions: tuple[str, ...]
     module: str
     description: str
+    patches: bool = False  # carries named boundary patches
+    dims: tuple[int, ...] = (2, 3)  # mesh dimensions it takes
+    folder: bool = False  # writes a folder (an OpenFOAM case), chosen with --format
 
 
 FORMATS: list[Format] = []
 
 
-def register_format(name: str, extensions, module: str, description: str) -> None:
-    FORMATS.append(Format(name, tuple(extensions), module, description))
+def register_format(name: str, extensions, module: str, description: str, **options) -> None:
+    FORMATS.append(Format(name, tuple(extensions), module, description, **options))
 
 
 register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
-register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone")
+register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone, a BC_t per patch", patches=True)
+register_format("openfoam", [], "meshgen.formats._openfoam", "OpenFOAM case: constant/polyMesh (2D: extruded one cell) and CASE.foam", patches=True, folder=True)
 register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
 register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
 
@@ -57,42 +65,121 @@ def extensions() -> list[str]:
     return [ext for fmt in FORMATS for ext in fmt.extensions]
 
 
-def format_for(path: str | os.PathLike) -> Format:
-    """The registered format of ``path``'s extension; FormatError listing the valid ones otherwise."""
+def format_names() -> list[str]:
+    return [fmt.name for fmt in FORMATS]
+
+
+def format_named(name: str) -> Format:
+    for fmt in FORMATS:
+        if fmt.name == name:
+            return fmt
+    raise FormatError(f"unknown format '{name}'; pick one of {', '.join(format_names())}")
+
+
+def format_for(path: str | os.PathLike, format_name: str | None = None) -> Format:
+    """The format named ``format_name``, else the registered format of ``path``'s extension;
+    FormatError listing the valid ones otherwise."""
+    if format_name is not None:
+        return format_named(format_name)
     suffix = Path(path).suffix.lower()
     for fmt in FORMATS:
         if suffix in fmt.extensions:
             return fmt
     shown = suffix or "(none)"
-    raise FormatError(f"unknown output extension {shown} for {path}; pick one of {', '.join(extensions())}")
+    folders = ", ".join(f"--format {fmt.name}" for fmt in FORMATS if fmt.folder)
+    raise FormatError(
+        f"unknown output extension {shown} for {path}; pick one of {', '.join(extensions())} (or {folders} for a case folder)"
+    )
 
 
-def check_output_path(path: str | os.PathLike) -> Path:
-    """Validate an output path before any work is done: known extension, existing writable folder,
-    not a folder itself. Returns it as a Path."""
+def check_output_path(path: str | os.PathLike, format_name: str | None = None, dim: int | None = None) -> Path:
+    """Validate an output path before any work is done: known extension (or ``format_name``),
+    existing writable folder, not a folder itself (folder formats: their own rules), a format that
+    takes ``dim``-dimensional meshes. Returns the path to write (an OpenFOAM case: its folder)."""
     from meshgen.atomic import check_output_file
 
-    format_for(path)
-    return check_output_file(path, "mesh" + extensions()[0])
+    fmt = format_for(path, format_name)
+    if dim is not None and dim not in fmt.dims:
+        raise FormatError(f"{fmt.name} takes {' or '.join(f'{d}D' for d in fmt.dims)} meshes, not {dim}D")
+    if fmt.folder:
+        return importlib.import_module(fmt.module).check_output(path)
+    return check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
 
 
-def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dict | None = None) -> Path:
-    """Write node array ``X`` to ``path`` atomically in the format its extension names."""
+def check_patches(patches, dim: int, path=None, format_name: str | None = None):
+    """``patches`` (None: one per face, named after it) checked to cover every face once, and their
+    names against the format of ``path`` / ``format_name`` if given. Returns Patch objects."""
+    from meshgen.errors import MeshgenError
+    from meshgen.patches import check_covers
+
+    try:
+        checked = check_covers(patches, dim)
+    except MeshgenError as exc:
+        raise FormatError(str(exc)) from None
+    if path is not None or format_name is not None:
+        fmt = format_for(path or "", format_name)
+        module = importlib.import_module(fmt.module)
+        for patch in checked:
+            if hasattr(module, "check_patch_name"):
+                module.check_patch_name(patch.name)
+    return checked
+
+
+def write_mesh(
+    path,
+    X: np.ndarray,
+    cell_data: dict | None = None,
+    metadata: dict | None = None,
+    patches=None,
+    format: str | None = None,
+    **options,
+) -> Path:
+    """Write node array ``X`` to ``path`` atomically in the format ``format`` names (default: the
+    one of the extension). ``patches``: the boundary patches (``meshgen.patches.Patch`` or
+    ``{"name", "type", "faces"}`` records covering every cube face once; None: one per face, named
+    after it), written by the formats that carry them. ``options``: format options (OpenFOAM:
+    ``binary``). Returns the path written (an OpenFOAM case: its folder)."""
     from meshgen.atomic import atomic_path
 
-    path = check_output_path(path)
     X = np.asarray(X, dtype=float)
     if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
         raise FormatError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}")
+    fmt = format_for(path, format)
+    path = check_output_path(path, format, X.shape[-1])
+    patches = check_patches(patches, X.shape[-1], path, fmt.name)
     cell_data = {name: _cell_array(name, values, X.shape[:-1]) for name, values in (cell_data or {}).items()}
     metadata_json(metadata or {})  # fail before anything is written
-    writer = importlib.import_module(format_for(path).module)
+    writer = importlib.import_module(fmt.module)
+    arguments = (X, cell_data, dict(metadata or {})) + ((patches,) if fmt.patches else ())
     try:
-        with atomic_path(path) as temporary:
-            writer.write(temporary, X, cell_data, dict(metadata or {}))
+        if fmt.folder:
+            writer.write(path, *arguments, **options)
+        else:
+            if options:
+                raise FormatError(f"{fmt.name} takes no option {', '.join(options)}")
+            with atomic_path(path) as temporary:
+                writer.write(temporary, *arguments)
     except OSError as exc:
         raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
     return path
+
+
+def read_patches(path) -> list:
+    """The boundary patches (``meshgen.patches.Patch``) a mesh file or case records; FormatError
+    for a format that carries none."""
+    fmt = _reading_format(Path(path))
+    if fmt is None or not fmt.patches:
+        raise FormatError(f"{path}: this format carries no boundary patches")
+    return importlib.import_module(fmt.module).read_patches(Path(path))
+
+
+def _reading_format(path: Path) -> Format | None:
+    """The format to read ``path`` with: by extension, a folder format for a folder or its
+    ``.foam`` file, None for meshio."""
+    suffix = path.suffix.lower()
+    if path.is_dir() or suffix == ".foam":
+        return next(fmt for fmt in FORMATS if fmt.folder)
+    return next((fmt for fmt in FORMATS if suffix in fmt.extensions), None)
 
 
 def _cell_array(name, values, node_shape) -> np.ndarray:
@@ -137,13 +224,13 @@ def metadata_of(source) -> dict:
 
 
 def read_mesh(path):
-    """Read a mesh file as a ``meshio.Mesh`` (our CGNS and Plot3D readers, meshio for the rest)."""
+    """Read a mesh file (or an OpenFOAM case folder, or its ``.foam`` file) as a ``meshio.Mesh``
+    (our own readers where we have one, meshio for the rest)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise FormatError(f"mesh file {path} does not exist")
-    suffix = path.suffix.lower()
-    module = next((fmt.module for fmt in FORMATS if suffix in fmt.extensions), "meshgen.formats._meshio")
-    reader = importlib.import_module(module)
+    fmt = _reading_format(path)
+    reader = importlib.import_module(fmt.module if fmt is not None else "meshgen.formats._meshio")
     captured = io.StringIO()
     try:
         # meshio prints its own "Error:" line and calls sys.exit() on a file it cannot parse.

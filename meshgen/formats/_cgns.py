@@ -15,6 +15,18 @@ The tree (SIDS names and labels; data type and CGNS array shape after the colon)
         FlowSolution        FlowSolution_t         (only with cell data)
           GridLocation      GridLocation_t         C1: "CellCenter"
           <name>            DataArray_t            R8 (ni-1, nj-1[, nk-1])
+        ZoneBC              ZoneBC_t               (only with patches)
+          <patch>[_<face>]  BC_t                   C1: BCWall, BCInflow, ... (BC_TYPES)
+            PointRange      IndexRange_t           I4 (IndexDimension, 2): first and last vertex (1-based)
+            FamilyName      FamilyName_t           C1: the patch name
+      <patch>               Family_t               one per patch
+        FamilyBC            FamilyBC_t             C1: the patch's BC type
+        PatchType           Descriptor_t           C1: meshgen's patch type (wall, patch, symmetry, empty)
+
+A patch covers one or more faces of the structured block; PointRange describes one rectangle, so
+there is one BC_t per face, named after the patch (``<patch>_<face>`` when the patch has several
+faces), and the BC_ts of one patch share its Family: the family is the patch, as ParaView's and
+other CGNS readers group boundaries.
 
 A 3D mesh has IndexDimension = CellDimension = PhysicalDimension = 3, a 2D mesh 2 (x and y only).
 meshgen's coordinates are in the geometry's own, unstated unit: hence the data class
@@ -46,11 +58,14 @@ LENGTH_EXPONENTS = np.array([0.0, 1.0, 0.0, 0.0, 0.0], dtype="<f4")
 BASE_NAME = "Base"
 ZONE_NAME = "Zone"
 SOLUTION_NAME = "FlowSolution"
+ZONE_BC_NAME = "ZoneBC"
+INFLOW_WORDS, OUTFLOW_WORDS = ("inlet", "inflow"), ("outlet", "outflow")
 
 
-def write(path, X, cell_data, metadata):
+def write(path, X, cell_data, metadata, patches=()):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as one structured zone; ``cell_data``
-    arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor."""
+    arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor;
+    ``patches`` (``meshgen.patches.Patch``) as a ZoneBC with Families."""
     import h5py
 
     from meshgen.formats import METADATA_KEY, metadata_json
@@ -86,6 +101,95 @@ def write(path, X, cell_data, metadata):
             _node(solution, "GridLocation", "GridLocation_t", _chars("CellCenter"))
             for name, values in cell_data.items():
                 _node(solution, name, "DataArray_t", _fortran(np.reshape(values, cell_shape)))
+        if patches:
+            write_zone_bc(base, zone, node_shape, patches)
+
+
+def bc_type(patch) -> str:
+    """The CGNS BCType of a patch: walls and symmetry planes by type; a ``patch`` is BCInflow or
+    BCOutflow when its name says inlet/inflow or outlet/outflow, else BCGeneral (so is ``empty``)."""
+    if patch.type == "wall":
+        return "BCWall"
+    if patch.type == "symmetry":
+        return "BCSymmetryPlane"
+    lowered = patch.name.lower()
+    if patch.type == "patch" and any(word in lowered for word in INFLOW_WORDS):
+        return "BCInflow"
+    if patch.type == "patch" and any(word in lowered for word in OUTFLOW_WORDS):
+        return "BCOutflow"
+    return "BCGeneral"
+
+
+def write_zone_bc(base, zone, node_shape, patches) -> None:
+    """The ZoneBC of ``zone`` (one BC_t with a PointRange per patch face) and a Family_t per patch
+    under ``base``. ``node_shape``: the zone's vertex counts (ni, nj[, nk])."""
+    from meshgen import cube
+
+    dim = len(node_shape)
+    zone_bc = _node(zone, ZONE_BC_NAME, "ZoneBC_t")
+    for patch in patches:
+        kind = bc_type(patch)
+        for face_name in patch.faces:
+            face = cube.face_named(face_name, dim)
+            first = [1] * dim
+            last = list(node_shape)
+            first[face.axis] = last[face.axis] = node_shape[face.axis] if face.side else 1
+            name = patch.name if len(patch.faces) == 1 else f"{patch.name}_{face_name}"
+            bc = _node(zone_bc, name, "BC_t", _chars(kind))
+            _node(bc, "PointRange", "IndexRange_t", np.array([first, last], dtype="<i4"))
+            _node(bc, "FamilyName", "FamilyName_t", _chars(patch.name))
+        family = _node(base, patch.name, "Family_t")
+        _node(family, "FamilyBC", "FamilyBC_t", _chars(kind))
+        _node(family, "PatchType", "Descriptor_t", _chars(patch.type))
+
+
+def check_patch_name(name: str) -> None:
+    """Patch names become node names (up to 32 characters; the ``_<face>`` suffix included)."""
+    if len(name) + len("_zeta0") > NAME_LENGTH:
+        raise FormatError(f"patch name '{name}' is too long for CGNS (at most {NAME_LENGTH - len('_zeta0')} characters)")
+    _check_name(name, "patch")
+
+
+def read_patches(path) -> list:
+    """The patches of a .cgns file: its first zone's BC_ts grouped by FamilyName (or BC name), each
+    PointRange matched to the cube face it covers; the type from the Family's PatchType, else from
+    the BC type."""
+    import h5py
+
+    from meshgen import cube
+    from meshgen.patches import Patch
+
+    types = {"BCWall": "wall", "BCSymmetryPlane": "symmetry"}
+    faces_of, type_of = {}, {}
+    with h5py.File(path, "r") as root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        zone = _child_with_label(base, "Zone_t", path)
+        node_shape = tuple(int(n) for n in _data(zone)[0])
+        dim = len(node_shape)
+        families = {_name(f): f for f in _children_with_label(base, "Family_t")}
+        for zone_bc in _children_with_label(zone, "ZoneBC_t"):
+            for bc in _children_with_label(zone_bc, "BC_t"):
+                family_nodes = _children_with_label(bc, "FamilyName_t")
+                name = _text(family_nodes[0]) if family_nodes else _name(bc)
+                first, last = np.asarray(_data(_child_with_label(bc, "IndexRange_t", path)), dtype=int)
+                face = _face_of_range(first, last, node_shape, cube.faces(dim))
+                if face is None:
+                    raise FormatError(f"{path}: BC '{_name(bc)}' does not cover a whole face of the zone")
+                descriptor = families.get(name, {}).get("PatchType") if name in families else None
+                kind = _text(descriptor) if descriptor is not None else types.get(_text(bc), "patch")
+                faces_of.setdefault(name, []).append(face.name)
+                type_of[name] = kind
+    return [Patch(name, type_of[name], tuple(faces)) for name, faces in faces_of.items()]
+
+
+def _face_of_range(first, last, node_shape, faces):
+    for face in faces:
+        expected_first = [1] * len(node_shape)
+        expected_last = list(node_shape)
+        expected_first[face.axis] = expected_last[face.axis] = node_shape[face.axis] if face.side else 1
+        if list(first) == expected_first and list(last) == expected_last:
+            return face
+    return None
 
 
 def read(path):

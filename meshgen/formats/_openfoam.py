@@ -1,0 +1,474 @@
+"""OpenFOAM case (``--format openfoam -o CASE``): ``CASE/constant/polyMesh`` and an empty
+``CASE/CASE.foam`` for ParaView; and, where the case has none, ``system/controlDict``,
+``fvSchemes`` and ``fvSolution`` (set up for ``potentialFoam``), without which no OpenFOAM tool
+(checkMesh included) opens a case. Existing system files are never touched.
+
+polyMesh, as OpenFOAM's own utilities write it (label 32 bits, scalar 64 bits, little-endian):
+
+- ``points``: the nodes in C order of the node array (k fastest).
+- ``faces``: internal faces first, in upper-triangular order (by owner cell, then neighbour), then
+  the boundary faces patch by patch. Each face's nodes go round so that its right-hand normal
+  points out of its owner (the lower-numbered cell; on the boundary, out of the domain).
+- ``owner``, ``neighbour``: cells are numbered in C order of the cells (i, j, k).
+- ``boundary``: the patches with ``type`` (wall, patch, symmetry, empty), ``nFaces``, ``startFace``.
+- ``meshgen.json`` (ignored by OpenFOAM): the node-array shape, whether the mesh is a 2D one
+  extruded, and meshgen's metadata; the reader uses it to give the structured grid back.
+
+Binary files store each list as ``N (`` raw bytes ``)``; faces as OpenFOAM's faceCompactList (the
+offsets, then the node labels). ASCII files are what ``foamFormatConvert`` would make of them.
+
+A 2D mesh (n1+1, n2+1, 2) is extruded one cell along +z, as thick as its typical cell
+(sqrt(area / cells)); the front (z = 0) and back faces form the ``empty`` patch ``frontAndBack``.
+A cell's faces are oriented from the sign of the map's total volume, so a left-handed map still
+gives outward normals.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.errors import FormatError
+
+HEADER = """/*--------------------------------*- C++ -*----------------------------------*\\
+  Written by meshgen
+\\*---------------------------------------------------------------------------*/
+FoamFile
+{{
+    version     2.0;
+    format      {format};
+    arch        "LSB;label=32;scalar=64";
+    class       {class_name};
+    location    "{location}";
+    object      {object_name};{note}
+}}
+// ************************************************************************* //
+
+"""
+EXTRUDED_PATCH = "frontAndBack"
+RECORD_NAME = "meshgen.json"
+WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.:+-]*")
+LABEL_LIMIT = 2**31 - 1
+CONTROL_DICT = """application     potentialFoam;
+startFrom       latestTime;
+startTime       0;
+stopAt          endTime;
+endTime         1;
+deltaT          1;
+writeControl    timeStep;
+writeInterval   1;
+writeFormat     ascii;
+writePrecision  12;
+runTimeModifiable false;
+"""
+FV_SCHEMES = """ddtSchemes      { default steadyState; }
+gradSchemes     { default Gauss linear; }
+divSchemes      { default none; div(phi,U) bounded Gauss linearUpwind grad(U); div(div(phi,U)) Gauss linear; }
+laplacianSchemes { default Gauss linear corrected; }
+interpolationSchemes { default linear; }
+snGradSchemes   { default corrected; }
+"""
+FV_SOLUTION = """solvers
+{
+    "(Phi|p)" { solver GAMG; smoother DIC; tolerance 1e-08; relTol 0; }
+    U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-08; relTol 0.1; }
+}
+potentialFlow { nNonOrthogonalCorrectors 5; }
+"""
+
+
+# --- the target ----------------------------------------------------------------------------
+
+
+def case_folder(path) -> Path:
+    """The case folder of ``path``: ``CASE`` or ``CASE/constant/polyMesh`` or ``CASE/CASE.foam``."""
+    path = Path(path)
+    if path.parts[-2:] == ("constant", "polyMesh"):
+        return path.parent.parent
+    if path.suffix == ".foam":
+        return path.parent
+    return path
+
+
+def check_output(path) -> Path:
+    """The case folder to write, checked before any work: a folder that does not exist yet (in an
+    existing writable folder), or an existing case folder (empty, or with system/ or constant/).
+    MeshgenError otherwise."""
+    case = case_folder(path)
+    if case.exists():
+        if not case.is_dir():
+            raise FormatError(f"OpenFOAM target {case} exists and is not a folder")
+        entries = {entry.name for entry in case.iterdir()}
+        if entries and not ({"system", "constant"} & entries):
+            raise FormatError(f"OpenFOAM target {case} exists and is not a case folder (no system/ or constant/ in it)")
+        for sub in ("constant", "system", "constant/polyMesh"):
+            if (case / sub).exists() and not (case / sub).is_dir():
+                raise FormatError(f"OpenFOAM target {case}: {case / sub} is not a folder")
+        if not os.access(case, os.W_OK | os.X_OK):
+            raise FormatError(f"OpenFOAM case {case} is not writable")
+    else:
+        parent = case.parent if str(case.parent) else Path(".")
+        if not parent.is_dir():
+            raise FormatError(f"output folder {parent} does not exist")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise FormatError(f"output folder {parent} is not writable")
+    return case
+
+
+def check_patch_name(name: str) -> None:
+    if not WORD.fullmatch(name):
+        raise FormatError(
+            f"patch name '{name}' is not an OpenFOAM word (a letter or _ first, then letters, digits, _ . : + -)"
+        )
+
+
+# --- writing ---------------------------------------------------------------------------------
+
+
+def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
+    """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as ``case/constant/polyMesh`` with the
+    boundary ``patches`` (``meshgen.patches.Patch``), atomically: the new polyMesh is written beside
+    the old one and swapped in. ``cell_data`` has no place in a polyMesh and is not written."""
+    case = Path(case)
+    dim = X.shape[-1]
+    if dim == 2:
+        if any(patch.name == EXTRUDED_PATCH for patch in patches):
+            raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
+        X3 = extrude(X)
+        patches = list(patches) + [_extrusion_patch()]
+    else:
+        X3 = X
+    node_shape = X3.shape[:-1]
+    if np.prod(node_shape) * 3 > LABEL_LIMIT:
+        raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {np.prod(node_shape)} points")
+    record = {"node_shape": list(X.shape[:-1]), "extruded_2d": dim == 2, "metadata": metadata}
+
+    created = not case.exists()
+    constant = case / "constant"
+    made = [folder for folder in (case, constant, case / "system") if not folder.exists()]
+    temporary = constant / f".polyMesh.tmp-{os.getpid()}"
+    old = constant / f".polyMesh.old-{os.getpid()}"
+    try:
+        for folder in made:
+            folder.mkdir()
+        temporary.mkdir()
+        _write_poly_mesh(temporary, X3, patches, binary)
+        (temporary / RECORD_NAME).write_text(json.dumps(record, default=_plain))
+        target = constant / "polyMesh"
+        if target.exists():
+            os.replace(target, old)
+        os.replace(temporary, target)
+        shutil.rmtree(old, ignore_errors=True)
+        for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):
+            _write_if_missing(case / "system" / name, _header("dictionary", "system", name) + text)
+        _write_if_missing(case / f"{case.resolve().name}.foam", "")
+    except BaseException:
+        shutil.rmtree(temporary, ignore_errors=True)
+        if old.exists() and not (constant / "polyMesh").exists():
+            os.replace(old, constant / "polyMesh")
+        if created:
+            shutil.rmtree(case, ignore_errors=True)
+        else:
+            for folder in reversed(made):
+                with contextlib.suppress(OSError):
+                    shutil.rmtree(folder)
+        raise
+
+
+def extrude(X: np.ndarray) -> np.ndarray:
+    """A 2D node array (n1+1, n2+1, 2) as a 3D one (n1+1, n2+1, 2, 3): z = 0 and z = the typical
+    cell size sqrt(|area| / cells)."""
+    x, y = X[..., 0], X[..., 1]
+    # Shoelace area of each cell as two triangles, summed: the mesh's signed area.
+    area = 0.5 * np.sum((x[1:, 1:] - x[:-1, :-1]) * (y[:-1, 1:] - y[1:, :-1]) - (x[:-1, 1:] - x[1:, :-1]) * (y[1:, 1:] - y[:-1, :-1]))
+    cells = (X.shape[0] - 1) * (X.shape[1] - 1)
+    thickness = float(np.sqrt(abs(area) / cells)) or 1.0
+    X3 = np.empty(X.shape[:2] + (2, 3))
+    X3[..., :2] = X[:, :, None, :]
+    X3[:, :, 0, 2] = 0.0
+    X3[:, :, 1, 2] = thickness
+    return X3
+
+
+def _extrusion_patch():
+    from meshgen.patches import Patch
+
+    return Patch(EXTRUDED_PATCH, "empty", ("zeta0", "zeta1"))
+
+
+def _orientation(X3) -> float:
+    """+1 for a right-handed map (positive total volume), -1 for a left-handed one."""
+    e = [np.diff(X3, axis=axis)[tuple(slice(0, -1) if d != axis else slice(None) for d in range(3))] for axis in range(3)]
+    return 1.0 if np.sum(np.einsum("...i,...i", e[0], np.cross(e[1], e[2]))) >= 0 else -1.0
+
+
+def face_nodes(point_ids: np.ndarray, axis: int, index: int, outward_positive: bool) -> np.ndarray:
+    """Node labels of the faces on the plane ``index`` normal to ``axis`` of the (N1, N2, N3) array
+    ``point_ids``: shape (faces, 4) in C order of the face's cells, going round so that the normal
+    points along +axis (``outward_positive``) or -axis. Faces of the plane's cells (i, j, k) along the
+    other two axes b, c = axis+1, axis+2 (cyclic): o, o+e_b, o+e_b+e_c, o+e_c, normal e_b x e_c."""
+    plane = np.take(point_ids, index, axis=axis)  # the two remaining axes in increasing order
+    b, c = (axis + 1) % 3, (axis + 2) % 3
+    if b > c:  # the plane's axes are (c, b): transpose to (b, c)
+        plane = plane.T
+    corners = [plane[:-1, :-1], plane[1:, :-1], plane[1:, 1:], plane[:-1, 1:]]
+    if b > c:
+        corners = [corner.T for corner in corners]  # back to C order of the cells (increasing axes)
+    nodes = np.stack([corner.reshape(-1) for corner in corners], axis=1)
+    return nodes if outward_positive else nodes[:, ::-1]
+
+
+def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
+    node_shape = X3.shape[:-1]
+    cell_shape = tuple(n - 1 for n in node_shape)
+    point_ids = np.arange(np.prod(node_shape), dtype=np.int32).reshape(node_shape)
+    cell_ids = np.arange(np.prod(cell_shape), dtype=np.int32).reshape(cell_shape)
+    positive = _orientation(X3) > 0
+
+    # Internal faces: for each cell in order, those towards its k+1, j+1 and i+1 neighbours (the
+    # neighbours' numbers increase in that order): upper-triangular order without sorting.
+    face_blocks, owner_blocks, neighbour_blocks = [], [], []
+    for axis in (2, 1, 0):
+        inner = tuple(slice(0, n - 1) if d == axis else slice(None) for d, n in enumerate(cell_shape))
+        nodes = np.empty(tuple(n - (d == axis) for d, n in enumerate(cell_shape)) + (4,), dtype=np.int32)
+        for index in range(1, node_shape[axis] - 1):
+            where = tuple(index - 1 if d == axis else slice(None) for d in range(3))
+            nodes[where] = face_nodes(point_ids, axis, index, positive).reshape(nodes[where].shape)
+        face_blocks.append(nodes)
+        owner_blocks.append(cell_ids[inner])
+        neighbour_blocks.append(cell_ids[tuple(slice(1, None) if d == axis else slice(None) for d in range(3))])
+    # Interleave the three families cell by cell: scatter each into a (cells, 3) table.
+    cells = cell_ids.size
+    table_nodes = np.zeros((cells, 3, 4), dtype=np.int32)
+    table_neighbour = np.full((cells, 3), -1, dtype=np.int32)
+    for slot, (nodes, owners, neighbours) in enumerate(zip(face_blocks, owner_blocks, neighbour_blocks)):
+        table_nodes[owners.reshape(-1), slot] = nodes.reshape(-1, 4)
+        table_neighbour[owners.reshape(-1), slot] = neighbours.reshape(-1)
+    present = table_neighbour >= 0
+    internal_nodes = table_nodes[present]
+    internal_owner = np.broadcast_to(np.arange(cells, dtype=np.int32)[:, None], (cells, 3))[present]
+    internal_neighbour = table_neighbour[present]
+
+    boundary_nodes, boundary_owner, entries = [], [], []
+    start = len(internal_nodes)
+    for patch in patches:
+        count = 0
+        for face_name in patch.faces:
+            face = cube.face_named(face_name, 3)
+            index = -1 if face.side else 0
+            boundary_nodes.append(face_nodes(point_ids, face.axis, index, positive == bool(face.side)))
+            boundary_owner.append(np.take(cell_ids, index, axis=face.axis).reshape(-1))
+            count += len(boundary_owner[-1])
+        entries.append((patch.name, patch.type, count, start))
+        start += count
+
+    faces = np.concatenate([internal_nodes, *boundary_nodes])
+    owner = np.concatenate([internal_owner, *boundary_owner])
+    note = f"nPoints:{point_ids.size}  nCells:{cells}  nFaces:{len(faces)}  nInternalFaces:{len(internal_nodes)}"
+    fmt = "binary" if binary else "ascii"
+    points = X3.reshape(-1, 3)
+    with open(folder / "points", "wb") as file:
+        file.write(_header("vectorField", "constant/polyMesh", "points", fmt).encode())
+        _write_list(file, points, binary, "({} {} {})")
+    with open(folder / "faces", "wb") as file:
+        if binary:
+            file.write(_header("faceCompactList", "constant/polyMesh", "faces", fmt).encode())
+            _write_list(file, np.arange(0, 4 * len(faces) + 1, 4, dtype=np.int32), True)
+            _write_list(file, faces.reshape(-1), True)
+        else:
+            file.write(_header("faceList", "constant/polyMesh", "faces", fmt).encode())
+            _write_list(file, faces, False, "4({} {} {} {})")
+    for name, labels in (("owner", owner), ("neighbour", internal_neighbour)):
+        with open(folder / name, "wb") as file:
+            file.write(_header("labelList", "constant/polyMesh", name, fmt, note).encode())
+            _write_list(file, labels, binary, "{}")
+    lines = [_header("polyBoundaryMesh", "constant/polyMesh", "boundary"), f"{len(entries)}\n(\n"]
+    for name, kind, count, first in entries:
+        group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
+        lines.append(
+            f"    {name}\n    {{\n        type            {kind};\n{group}"
+            f"        nFaces          {count};\n        startFace       {first};\n    }}\n"
+        )
+    lines.append(")\n\n// ************************************************************************* //\n")
+    (folder / "boundary").write_text("".join(lines))
+
+
+def _header(class_name, location, object_name, fmt="ascii", note="") -> str:
+    note = f'\n    note        "{note}";' if note else ""
+    return HEADER.format(format=fmt, class_name=class_name, location=location, object_name=object_name, note=note)
+
+
+def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None:
+    """An OpenFOAM list: ``N`` then ``(`` raw little-endian bytes ``)`` (binary) or one row per
+    line (ASCII, ``row`` formats one entry's values)."""
+    count = len(values)
+    if binary:
+        data = np.ascontiguousarray(values, dtype="<f8" if values.dtype.kind == "f" else "<i4")
+        file.write(f"{count}\n(".encode())
+        file.write(memoryview(data).cast("B"))
+        file.write(b")\n\n")
+        return
+    file.write(f"{count}\n(\n".encode())
+    spec = row.replace("{}", "%.17g" if values.dtype.kind == "f" else "%d") + "\n"
+    chunk = 1 << 16
+    for first in range(0, count, chunk):
+        block = values[first : first + chunk]
+        file.write(((spec * len(block)) % tuple(block.reshape(-1).tolist())).encode())
+    file.write(b")\n\n")
+
+
+def _write_if_missing(path: Path, text: str) -> None:
+    from meshgen.atomic import atomic_path
+
+    if path.exists():
+        return
+    with atomic_path(path) as temporary:
+        temporary.write_text(text)
+
+
+def _plain(value):
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"{type(value).__name__} value {value!r}")
+
+
+# --- reading ---------------------------------------------------------------------------------
+
+
+def poly_mesh_folder(path) -> Path:
+    case = case_folder(path)
+    folder = case / "constant" / "polyMesh"
+    if not folder.is_dir():
+        raise FormatError(f"{path}: no constant/polyMesh in the case {case}")
+    return folder
+
+
+def read_list(path: Path, dtype) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """The list (ASCII or binary) of an OpenFOAM polyMesh file: points (N, 3) float64, labels (N,)
+    int64, faces (N, 4) int64 (quadrilaterals only; a faceCompactList is expanded)."""
+    data = path.read_bytes()
+    header_end = data.find(b"}", data.find(b"FoamFile"))
+    if header_end < 0:
+        raise FormatError(f"{path}: no FoamFile header")
+    header = data[:header_end].decode("ascii", "replace")
+    binary = re.search(r"format\s+binary\s*;", header) is not None
+    class_name = (re.search(r"class\s+(\w+)\s*;", header) or [None, ""])[1]
+    position = header_end + 1
+
+    def next_list(position):
+        match = re.compile(rb"(\d+)\s*\(").search(data, position)
+        if match is None:
+            raise FormatError(f"{path}: no list found")
+        return int(match[1]), match.end()
+
+    count, position = next_list(position)
+    if binary:
+        item = np.dtype("<f8") if dtype == "points" else np.dtype("<i4")
+        width = 3 if dtype == "points" else 1
+        values = np.frombuffer(data, dtype=item, count=count * width, offset=position)
+        if class_name == "faceCompactList":
+            offsets = values.astype(np.int64)
+            count2, position2 = next_list(position + values.nbytes + 1)
+            labels = np.frombuffer(data, dtype="<i4", count=count2, offset=position2).astype(np.int64)
+            if np.any(np.diff(offsets) != 4):
+                raise FormatError(f"{path}: faces that are not quadrilaterals (meshgen reads hexahedral meshes)")
+            return labels.reshape(-1, 4)
+        return values.reshape(-1, 3).astype(float) if width == 3 else values.astype(np.int64)
+    end = data.rfind(b")")
+    tokens = data[position:end].replace(b"(", b" ").replace(b")", b" ").split()
+    if dtype == "points":
+        return np.array(tokens, dtype=float).reshape(count, 3)
+    numbers = np.array(tokens, dtype=np.int64)
+    if dtype == "faces":
+        rows = numbers.reshape(count, 5)
+        if np.any(rows[:, 0] != 4):
+            raise FormatError(f"{path}: faces that are not quadrilaterals (meshgen reads hexahedral meshes)")
+        return rows[:, 1:]
+    return numbers.reshape(count)
+
+
+def _record(folder: Path) -> dict:
+    path = folder / RECORD_NAME
+    if not path.is_file():
+        raise FormatError(
+            f"{folder}: no {RECORD_NAME}: meshgen reads the OpenFOAM cases it wrote (their structured grid)"
+        )
+    try:
+        return json.loads(path.read_text())
+    except ValueError as exc:
+        raise FormatError(f"{path}: {exc}") from None
+
+
+def read(path):
+    """Read a case meshgen wrote (its folder, ``.foam`` file or ``constant/polyMesh``) as a
+    ``meshio.Mesh``: the points of ``points``, hexahedron cells (a 2D mesh: the quads of its
+    front, z = 0) in C order of the cells, meshgen's metadata in field data."""
+    import meshio
+
+    from meshgen.formats import METADATA_KEY, metadata_json
+    from meshgen.grid import cell_connectivity
+
+    folder = poly_mesh_folder(path)
+    record = _record(folder)
+    node_shape = tuple(int(n) for n in record["node_shape"])
+    extruded = bool(record.get("extruded_2d"))
+    points = read_list(folder / "points", "points")
+    expected = int(np.prod(node_shape)) * (2 if extruded else 1)
+    if len(points) != expected:
+        raise FormatError(f"{folder}: {len(points)} points where {RECORD_NAME} says {expected}")
+    if extruded:
+        points = np.column_stack([points[0::2, :2], np.zeros(len(points) // 2)])  # the front, z = 0
+    cell_type = "quad" if extruded else "hexahedron"
+    field_data = {}
+    if record.get("metadata"):
+        field_data[METADATA_KEY] = np.frombuffer(metadata_json(record["metadata"]).encode(), dtype=np.uint8).copy()
+    return meshio.Mesh(points, [(cell_type, cell_connectivity(node_shape))], field_data=field_data)
+
+
+def read_boundary(folder: Path) -> list[tuple[str, str, int, int]]:
+    """(name, type, nFaces, startFace) of each entry of ``boundary``."""
+    text = (folder / "boundary").read_text()
+    text = text[text.find("}", text.find("FoamFile")) + 1 :]
+    entries = []
+    for name, body in re.findall(r"([^\s{}()]+)\s*\{([^}]*)\}", text):
+        fields = dict(re.findall(r"(\w+)\s+([^;]+);", body))
+        entries.append((name, fields["type"].strip(), int(fields["nFaces"]), int(fields["startFace"])))
+    return entries
+
+
+def read_patches(path) -> list:
+    """The patches of a case meshgen wrote: each boundary entry's faces located on the cube faces
+    from their node labels (a 2D mesh: the extrusion's front and back left out)."""
+    from meshgen.patches import Patch
+
+    folder = poly_mesh_folder(path)
+    record = _record(folder)
+    node_shape = tuple(int(n) for n in record["node_shape"])
+    dim = len(node_shape)
+    shape3 = node_shape + (2,) if record.get("extruded_2d") else node_shape
+    faces = read_list(folder / "faces", "faces")
+    index = np.stack(np.unravel_index(faces, shape3), axis=-1)  # (faces, 4, 3): i, j, k of each node
+    patches = []
+    for name, kind, count, start in read_boundary(folder):
+        nodes = index[start : start + count]
+        found = []
+        for face in cube.faces(3):
+            plane = shape3[face.axis] - 1 if face.side else 0
+            on = np.all(nodes[:, :, face.axis] == plane, axis=1)
+            if on.any():
+                found.append((face, int(on.sum())))
+        if sum(n for _, n in found) != count:
+            raise FormatError(f"{folder}: patch '{name}' has faces off the grid's boundary")
+        names = tuple(face.name for face, _ in found if face.axis < dim)
+        if names:
+            patches.append(Patch(name, kind, names))
+    return patches
