@@ -245,7 +245,7 @@ def test_geometries_json_matches_the_plugins():
     listed = json.loads(result.stdout)
     assert [item["name"] for item in listed] == available_names()
     for item in listed:
-        assert list(item) == ["name", "dim", "description", "params"]
+        assert list(item) == ["name", "dim", "description", "params", "patches"]
     by_name = {item["name"]: item for item in listed}
     for stem, path in _builtin_files().items():  # read the plugin files directly, not through meshgen.geometry
         spec = importlib.util.spec_from_file_location(f"_listing_check_{stem}", path)
