@@ -14,10 +14,11 @@ class _ListOrShow(click.Group):
 
 
 @click.group("geometries", cls=_ListOrShow, invoke_without_command=True)
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of {name, dim, description, params}.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of {name, dim, description, params, patches}.")
 @click.pass_context
 def geometries(ctx, as_json):
-    """List the available geometries (built-in, installed plugins) with their parameters."""
+    """List the available geometries (built-in, installed plugins) with their parameters and
+    boundary patches (name, type: cube faces)."""
     if ctx.invoked_subcommand is not None:
         return
     from meshgen.errors import GeometryError
@@ -36,11 +37,12 @@ def geometries(ctx, as_json):
     from rich.table import Table
 
     table = Table(title="meshgen geometries")
-    for column in ("name", "dim", "description", "parameters (defaults)"):
+    for column in ("name", "dim", "description", "parameters (defaults)", "patches (type: faces)"):
         table.add_column(column)
     for item in described:
         params = ", ".join(f"{k}={v:g}" for k, v in item["params"].items()) or "-"
-        table.add_row(item["name"], f"{item['dim']}D", item["description"], params)
+        patches = "\n".join(f"{p['name']} ({p['type']}: {' '.join(p['faces'])})" for p in item["patches"])
+        table.add_row(item["name"], f"{item['dim']}D", item["description"], params, patches)
     Console().print(table)
 
 
