@@ -36,6 +36,7 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
+from meshgen.formats._structured import face_nodes, orientation, write_rows
 
 HEADER = """/*--------------------------------*- C++ -*----------------------------------*\\
   Written by meshgen
@@ -203,34 +204,12 @@ def _extrusion_patch():
     return Patch(EXTRUDED_PATCH, "empty", ("zeta0", "zeta1"))
 
 
-def _orientation(X3) -> float:
-    """+1 for a right-handed map (positive total volume), -1 for a left-handed one."""
-    e = [np.diff(X3, axis=axis)[tuple(slice(0, -1) if d != axis else slice(None) for d in range(3))] for axis in range(3)]
-    return 1.0 if np.sum(np.einsum("...i,...i", e[0], np.cross(e[1], e[2]))) >= 0 else -1.0
-
-
-def face_nodes(point_ids: np.ndarray, axis: int, index: int, outward_positive: bool) -> np.ndarray:
-    """Node labels of the faces on the plane ``index`` normal to ``axis`` of the (N1, N2, N3) array
-    ``point_ids``: shape (faces, 4) in C order of the face's cells, going round so that the normal
-    points along +axis (``outward_positive``) or -axis. Faces of the plane's cells (i, j, k) along the
-    other two axes b, c = axis+1, axis+2 (cyclic): o, o+e_b, o+e_b+e_c, o+e_c, normal e_b x e_c."""
-    plane = np.take(point_ids, index, axis=axis)  # the two remaining axes in increasing order
-    b, c = (axis + 1) % 3, (axis + 2) % 3
-    if b > c:  # the plane's axes are (c, b): transpose to (b, c)
-        plane = plane.T
-    corners = [plane[:-1, :-1], plane[1:, :-1], plane[1:, 1:], plane[:-1, 1:]]
-    if b > c:
-        corners = [corner.T for corner in corners]  # back to C order of the cells (increasing axes)
-    nodes = np.stack([corner.reshape(-1) for corner in corners], axis=1)
-    return nodes if outward_positive else nodes[:, ::-1]
-
-
 def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
     node_shape = X3.shape[:-1]
     cell_shape = tuple(n - 1 for n in node_shape)
     point_ids = np.arange(np.prod(node_shape), dtype=np.int32).reshape(node_shape)
     cell_ids = np.arange(np.prod(cell_shape), dtype=np.int32).reshape(cell_shape)
-    positive = _orientation(X3) > 0
+    positive = orientation(X3) > 0
 
     # Internal faces: for each cell in order, those towards its k+1, j+1 and i+1 neighbours (the
     # neighbours' numbers increase in that order): upper-triangular order without sorting.
@@ -316,11 +295,7 @@ def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None
         file.write(b")\n\n")
         return
     file.write(f"{count}\n(\n".encode())
-    spec = row.replace("{}", "%.17g" if values.dtype.kind == "f" else "%d") + "\n"
-    chunk = 1 << 16
-    for first in range(0, count, chunk):
-        block = values[first : first + chunk]
-        file.write(((spec * len(block)) % tuple(block.reshape(-1).tolist())).encode())
+    write_rows(file, values, row)
     file.write(b")\n\n")
 
 

@@ -1,0 +1,101 @@
+"""Gmsh MSH 4.1 (.msh, ASCII) with physical groups: ``domain`` for the cells (3D: a volume, 2D: a
+surface) and one per patch for its boundary elements (3D: quadrangles, 2D: lines).
+
+Entities: one per cube face (tags 1 .. 2*dim, in cube face order: xi0, xi1, eta0, ...), each in
+the physical group of its patch, and the domain (tag 1), bounded by them. All nodes are listed
+once, classified on the domain; elements are numbered cells first, then the faces. meshgen's
+metadata sits in a ``$meshgen`` section, which Gmsh and meshio skip.
+
+    $MeshFormat 4.1 0 8
+    $PhysicalNames   dim tag "name": the patches (dim - 1, tags 2, 3, ...), domain (dim, tag 1)
+    $Entities        0 points, then (2D) curves + a surface or (3D) 0 curves, surfaces + a volume
+    $Nodes           one block: every node, tags 1..N in C order of the node array
+    $Elements        the cells (type 5 hexahedron, 3 quadrangle; Gmsh's corner order is VTK's),
+                     then a block per cube face (type 3 quadrangle, 1 line), outward normals
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.errors import FormatError
+from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.grid import cell_connectivity
+
+DOMAIN_NAME = "domain"
+GMSH_HEXAHEDRON, GMSH_QUADRANGLE, GMSH_LINE = 5, 3, 1
+
+
+def check_patch_name(name: str) -> None:
+    if name == DOMAIN_NAME:
+        raise FormatError(f"patch name '{DOMAIN_NAME}' is the .msh file's physical group of the cells: pick another")
+
+
+def write(path, X, cell_data, metadata, patches):
+    """Write node array ``X`` with physical groups; ``cell_data`` is not written."""
+    from meshgen.formats import metadata_json
+
+    node_shape = X.shape[:-1]
+    dim = len(node_shape)
+    faces = cube.faces(dim)
+    points = X.reshape(-1, dim)
+    low, high = np.pad(points.min(axis=0), (0, 3 - dim)), np.pad(points.max(axis=0), (0, 3 - dim))
+    box = " ".join(f"{v:.17g}" for v in (*low, *high))
+    group_of = {face: 2 + number for number, patch in enumerate(patches) for face in patch.faces}
+    positive = orientation(X) > 0
+    cells = cell_connectivity(node_shape) + 1
+    with open(path, "wb") as file:
+        lines = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$PhysicalNames", str(len(patches) + 1)]
+        lines += [f'{dim - 1} {2 + n} "{patch.name}"' for n, patch in enumerate(patches)]
+        lines += [f'{dim} 1 "{DOMAIN_NAME}"', "$EndPhysicalNames", "$Entities"]
+        lines.append(f"0 {len(faces)} 1 0" if dim == 2 else f"0 0 {len(faces)} 1")
+        for number, face in enumerate(faces, start=1):  # each face entity: box, group, no bounding entities
+            lines.append(f"{number} {box} 1 {group_of[face.name]} 0")
+        bounding = " ".join(str(n) for n in range(1, len(faces) + 1))
+        lines += [f"1 {box} 1 1 {len(faces)} {bounding}", "$EndEntities", "$Nodes"]
+        lines += [f"1 {len(points)} 1 {len(points)}", f"{dim} 1 0 {len(points)}", ""]
+        file.write("\n".join(lines).encode())
+        write_rows(file, np.arange(1, len(points) + 1), "{}")
+        write_rows(file, np.pad(points, ((0, 0), (0, 3 - dim))), "{} {} {}")
+        boundary = [boundary_elements(node_shape, face.name, positive) + 1 for face in faces]
+        total = len(cells) + sum(len(b) for b in boundary)
+        file.write(f"$EndNodes\n$Elements\n{1 + len(faces)} {total} 1 {total}\n".encode())
+        file.write(f"{dim} 1 {GMSH_HEXAHEDRON if dim == 3 else GMSH_QUADRANGLE} {len(cells)}\n".encode())
+        write_rows(file, np.column_stack([np.arange(1, len(cells) + 1), cells]), " ".join(["{}"] * (cells.shape[1] + 1)))
+        first = len(cells) + 1
+        for number, elements in enumerate(boundary, start=1):
+            file.write(f"{dim - 1} {number} {GMSH_QUADRANGLE if dim == 3 else GMSH_LINE} {len(elements)}\n".encode())
+            tags = np.arange(first, first + len(elements))
+            write_rows(file, np.column_stack([tags, elements]), " ".join(["{}"] * (elements.shape[1] + 1)))
+            first += len(elements)
+        file.write(b"$EndElements\n")
+        if metadata:
+            file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
+
+
+def _section(path, name: str) -> str | None:
+    with open(path, "rb") as file:
+        data = file.read()
+    start = data.find(f"${name}\n".encode())
+    if start < 0:
+        return None
+    end = data.find(f"$End{name}".encode(), start)
+    return data[start + len(name) + 2 : end].decode().strip()
+
+
+def read(path):
+    """Read with meshio, keeping the cells (hexahedra or quads, not the patches' boundary
+    elements); meshgen's metadata from the ``$meshgen`` section."""
+    import meshio
+
+    from meshgen.formats import METADATA_KEY
+
+    mesh = meshio.read(path, file_format="gmsh")
+    volume = "hexahedron" if any(block.type == "hexahedron" for block in mesh.cells) else "quad"
+    blocks = [block.data for block in mesh.cells if block.type == volume]
+    field_data = {}
+    text = _section(path, METADATA_KEY)
+    if text:
+        field_data[METADATA_KEY] = np.frombuffer(text.encode(), dtype=np.uint8).copy()
+    return meshio.Mesh(np.asarray(mesh.points, dtype=float), [(volume, np.concatenate(blocks))], field_data=field_data)

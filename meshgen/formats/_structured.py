@@ -1,0 +1,65 @@
+"""Boundary faces of a structured grid for the formats that list them (OpenFOAM, SU2, Gmsh):
+node labels of each face, going round so that its normal points out of the domain, and rows of
+numbers written as text fast."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshgen import cube
+
+
+def orientation(X: np.ndarray) -> float:
+    """+1 for a right-handed (2D: counterclockwise) map, -1 otherwise: the sign of the total
+    volume (area) of the cells' corner parallelepipeds (parallelograms)."""
+    dim = X.shape[-1]
+    e = [np.diff(X, axis=axis)[tuple(slice(0, -1) if d != axis else slice(None) for d in range(dim))] for axis in range(dim)]
+    if dim == 2:
+        total = np.sum(e[0][..., 0] * e[1][..., 1] - e[0][..., 1] * e[1][..., 0])
+    else:
+        total = np.sum(np.einsum("...i,...i", e[0], np.cross(e[1], e[2])))
+    return 1.0 if total >= 0 else -1.0
+
+
+def face_nodes(point_ids: np.ndarray, axis: int, index: int, outward_positive: bool) -> np.ndarray:
+    """Node labels of the faces on the plane ``index`` normal to ``axis`` of the (N1, N2, N3) array
+    ``point_ids``: shape (faces, 4) in C order of the face's cells, going round so that the normal
+    points along +axis (``outward_positive``) or -axis. Along the other two axes b, c = axis+1,
+    axis+2 (cyclic) the corners are o, o+e_b, o+e_b+e_c, o+e_c: normal e_b x e_c."""
+    plane = np.take(point_ids, index, axis=axis)  # the two remaining axes in increasing order
+    b, c = (axis + 1) % 3, (axis + 2) % 3
+    if b > c:  # the plane's axes are (c, b): transpose to (b, c)
+        plane = plane.T
+    corners = [plane[:-1, :-1], plane[1:, :-1], plane[1:, 1:], plane[:-1, 1:]]
+    if b > c:
+        corners = [corner.T for corner in corners]  # back to C order of the cells (increasing axes)
+    nodes = np.stack([corner.reshape(-1) for corner in corners], axis=1)
+    return nodes if outward_positive else nodes[:, ::-1]
+
+
+def boundary_elements(node_shape, face_name: str, positive: bool = True) -> np.ndarray:
+    """The boundary elements on cube face ``face_name`` of a grid of ``node_shape`` nodes, as
+    labels of the C-order flat nodes (0-based): 3D quads (faces, 4) with outward normals, 2D lines
+    (edges, 2) running with the domain on their left (counterclockwise) for a ``positive`` map."""
+    dim = len(node_shape)
+    face = cube.face_named(face_name, dim)
+    point_ids = np.arange(int(np.prod(node_shape)), dtype=np.int64).reshape(node_shape)
+    index = -1 if face.side else 0
+    if dim == 3:
+        return face_nodes(point_ids, face.axis, index, positive == bool(face.side))
+    line = np.take(point_ids, index, axis=face.axis)
+    segments = np.stack([line[:-1], line[1:]], axis=1)
+    # Counterclockwise: eta0 and xi1 run with increasing index, eta1 and xi0 against it.
+    forward = (face.axis == 1) != bool(face.side)
+    return segments if forward == positive else segments[:, ::-1]
+
+
+def write_rows(file, values: np.ndarray, row: str) -> None:
+    """Write the rows of a 2D array (1D: one value a row) as text, one line each: ``row`` with a
+    ``{}`` per column (``%.17g`` for floats, ``%d`` for integers), in blocks for speed."""
+    values = np.asarray(values)
+    spec = row.replace("{}", "%.17g" if values.dtype.kind == "f" else "%d") + "\n"
+    block = 1 << 16
+    for first in range(0, len(values), block):
+        rows = values[first : first + block]
+        file.write(((spec * len(rows)) % tuple(rows.reshape(-1).tolist())).encode())

@@ -1,0 +1,113 @@
+"""SU2 native mesh (.su2, ASCII): the cells, the points and one marker per patch.
+
+    % meshgen: {metadata JSON}          (a comment line; only with metadata)
+    % meshgen_patches: [{"name", "type", "faces"}]
+    NDIME= 3                            (2D: 2, points x y)
+    NELEM= C
+    12 n0 .. n7 c                       hexahedron (2D: 9 quadrilateral), VTK corner order, then its index
+    NPOIN= N
+    x y z i                             the nodes in C order of the node array, then the index
+    NMARK= P
+    MARKER_TAG= inlet                   one block per patch, its boundary elements with outward
+    MARKER_ELEMS= m                     normals (2D: 3 line segments, domain on their left)
+    9 a b c d
+
+Node indices are 0-based. SU2 takes the boundary conditions from its configuration file by
+marker name (MARKER_EULER= ( wall ), ...): the patch types have no place in the mesh and are kept
+in the comment only.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import re
+
+import numpy as np
+
+from meshgen.errors import FormatError
+from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.grid import cell_connectivity, flat_points
+
+SU2_HEXAHEDRON, SU2_QUADRILATERAL, SU2_LINE = 12, 9, 3
+MARKER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.+-]*")
+
+
+def check_patch_name(name: str) -> None:
+    if not MARKER_NAME.fullmatch(name):
+        raise FormatError(f"patch name '{name}' cannot be an SU2 marker (a letter or _ first, then letters, digits, _ . + -)")
+
+
+def write(path, X, cell_data, metadata, patches):
+    """Write node array ``X`` with one marker per patch; ``cell_data`` has no place in .su2."""
+    from meshgen.formats import metadata_json
+    from meshgen.patches import as_records
+
+    node_shape = X.shape[:-1]
+    dim = len(node_shape)
+    cells = cell_connectivity(node_shape)
+    positive = orientation(X) > 0
+    with open(path, "wb") as file:
+        if metadata:
+            file.write(f"% meshgen: {metadata_json(metadata)}\n".encode())
+        file.write(f"% meshgen_patches: {json.dumps(as_records(patches))}\n".encode())
+        file.write(f"NDIME= {dim}\nNELEM= {len(cells)}\n".encode())
+        kind = SU2_HEXAHEDRON if dim == 3 else SU2_QUADRILATERAL
+        rows = np.column_stack([np.full(len(cells), kind), cells, np.arange(len(cells))])
+        write_rows(file, rows, " ".join(["{}"] * rows.shape[1]))
+        points = X.reshape(-1, dim)
+        file.write(f"NPOIN= {len(points)}\n".encode())
+        write_rows(file, points, " ".join(["{}"] * dim))
+        file.write(f"NMARK= {len(patches)}\n".encode())
+        for patch in patches:
+            elements = np.concatenate([boundary_elements(node_shape, face, positive) for face in patch.faces])
+            file.write(f"MARKER_TAG= {patch.name}\nMARKER_ELEMS= {len(elements)}\n".encode())
+            kind = SU2_QUADRILATERAL if dim == 3 else SU2_LINE
+            write_rows(file, np.column_stack([np.full(len(elements), kind), elements]), " ".join(["{}"] * (elements.shape[1] + 1)))
+
+
+def _comment(path, key: str) -> str | None:
+    with open(path, "rb") as file:
+        for line in file:
+            if not line.startswith(b"%"):
+                return None
+            text = line[1:].decode("utf-8", "replace").strip()
+            if text.startswith(f"{key}:"):
+                return text[len(key) + 1 :].strip()
+    return None
+
+
+def read(path):
+    """Read with meshio, keeping the cells (hexahedra or quads) and dropping the markers'
+    boundary elements; meshgen's metadata from the comment line."""
+    import meshio
+
+    from meshgen.formats import METADATA_KEY
+
+    # meshio warns for every marker that its tags are strings: expected here, and not the user's concern.
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        mesh = meshio.read(path, file_format="su2")
+    volume = "hexahedron" if any(block.type == "hexahedron" for block in mesh.cells) else "quad"
+    blocks = [block for block in mesh.cells if block.type == volume]
+    points = np.asarray(mesh.points, dtype=float)
+    field_data = {}
+    text = _comment(path, METADATA_KEY)
+    if text:
+        field_data[METADATA_KEY] = np.frombuffer(text.encode(), dtype=np.uint8).copy()
+    return meshio.Mesh(flat_points(points), [(volume, np.concatenate([b.data for b in blocks]))], field_data=field_data)
+
+
+def read_patches(path) -> list:
+    """The markers of a .su2 file meshgen wrote, with the patch types of its comment line."""
+    from meshgen.patches import from_records
+
+    text = _comment(path, "meshgen_patches")
+    if text is None:
+        raise FormatError(f"{path}: no meshgen_patches comment (not written by meshgen)")
+    patches = from_records(json.loads(text))
+    with open(path, "rb") as file:
+        markers = [m.decode() for m in re.findall(rb"^MARKER_TAG=\s*(\S+)", file.read(), re.M)]
+    if markers != [p.name for p in patches]:
+        raise FormatError(f"{path}: markers {markers} disagree with the recorded patches")
+    return patches

@@ -1,0 +1,240 @@
+"""VTK XML structured grid (.vts): ParaView's own format for a structured mesh. Only the points
+are stored (no connectivity, offsets or cell types), compressed in blocks on all cores as the
+.vtu writer does (``meshgen.formats._vtu``), but as raw appended data (no base64, the 4/3 of
+the .vtu's inline arrays) and with the quality arrays in Float32 (7 significant digits; the
+points stay Float64). A 100^3 neural mesh with its seven quality arrays: less than half the
+.vtu's size (benchmarks/formats.py).
+
+The file, VTK's XML format version 1.0 as ParaView writes it by default (appended, raw)::
+
+    <VTKFile type="StructuredGrid" version="1.0" byte_order="LittleEndian"
+             header_type="UInt64" compressor="vtkZLibDataCompressor">
+      <StructuredGrid WholeExtent="0 n1 0 n2 0 n3">       (2D: "0 n1 0 n2 0 0")
+        <FieldData>   UInt8 "meshgen": the metadata's JSON bytes (only with metadata)
+                      UInt8 "meshgen_patches": JSON [{"name", "type", "faces"}] of the patches
+        <Piece Extent="0 n1 0 n2 0 n3">
+          <PointData> Int32 "patch": index into meshgen_patches of the patch a boundary node
+                      lies on, -1 inside; on an edge or corner shared by several patches, the
+                      one listed first
+          <CellData>  one Float32 array per name (the quality arrays)
+          <Points>    Float64, 3 components (2D meshes: z = 0)
+        </Piece>
+      </StructuredGrid>
+      <AppendedData encoding="raw">_ then, per array at its offset: the compression header
+      (UInt64: blocks, block size, last block size or 0, compressed size of each block) and the
+      zlib streams of its blocks
+    </VTKFile>
+
+VTK's structured order runs i fastest, so points and cell arrays are written transposed from
+meshgen's C order (k fastest) and the reader transposes them back.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import zlib
+from concurrent.futures import ThreadPoolExecutor
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.errors import FormatError
+from meshgen.formats._vtu import (
+    BLOCK_BYTES,
+    HEADER_TYPE,
+    VTK_TYPES,
+    _cpu_count,
+    compress_block,
+    compress_blocks,
+    compression_header,
+)
+
+PATCHES_KEY = "meshgen_patches"
+PATCH_ARRAY = "patch"
+TYPES = {**VTK_TYPES, np.dtype("<i4"): "Int32", np.dtype("<f4"): "Float32"}
+NUMPY_TYPES = {"Float64": "<f8", "Float32": "<f4", "Int64": "<i8", "Int32": "<i4", "UInt8": "u1", "UInt64": "<u8", "UInt32": "<u4"}
+
+
+def write(path, X, cell_data, metadata, patches):
+    """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vts with ``cell_data``
+    (name -> (cells,) float64, C order of the cells), ``metadata`` and ``patches``
+    (``meshgen.patches.Patch``)."""
+    from meshgen.formats import METADATA_KEY, metadata_json
+    from meshgen.patches import as_records
+
+    node_shape = X.shape[:-1]
+    dim = len(node_shape)
+    cell_shape = tuple(n - 1 for n in node_shape)
+    extent = " ".join(f"0 {n - 1}" for n in node_shape) + (" 0 0" if dim == 2 else "")
+    order = tuple(range(dim - 1, -1, -1))  # VTK's i-fastest order
+    pool = ThreadPoolExecutor(max_workers=_cpu_count())
+    sections = {"FieldData": [], "PointData": [], "CellData": [], "Points": []}
+
+    def add(section, name, values, more=None):
+        values = np.ascontiguousarray(values)
+        sections[section].append((name, more or {}, values.dtype, values.nbytes, compress_blocks(pool, values, compress_block)))
+
+    try:
+        points = np.zeros(tuple(reversed(node_shape)) + (3,))
+        points[..., :dim] = np.transpose(X, order + (dim,))
+        add("Points", "Points", points, {"NumberOfComponents": 3})
+        for name, values in cell_data.items():
+            add("CellData", name, np.transpose(np.reshape(values, cell_shape), order).astype("<f4"))
+        add("PointData", PATCH_ARRAY, np.transpose(patch_ids(node_shape, patches), order))
+        if metadata:
+            codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
+            add("FieldData", METADATA_KEY, codes, {"NumberOfTuples": codes.size})
+        codes = np.frombuffer(json.dumps(as_records(patches)).encode("ascii"), dtype=np.uint8)
+        add("FieldData", PATCHES_KEY, codes, {"NumberOfTuples": codes.size})
+
+        # The offsets in the XML need every array's compressed size: wait for all of them.
+        parts, offset, elements = [], 0, {}
+        for section in ("FieldData", "PointData", "CellData", "Points"):
+            lines = []
+            for name, more, dtype, nbytes, blocks in sections[section]:
+                streams = [block.result() for block in blocks]
+                header = compression_header(nbytes, BLOCK_BYTES, streams)
+                attributes = "".join(f' {key}="{value}"' for key, value in more.items())
+                lines.append(
+                    f'<DataArray type="{TYPES[np.dtype(dtype)]}" Name={quoteattr(name)}{attributes} '
+                    f'format="appended" offset="{offset}"/>\n'
+                )
+                parts += [header, *streams]
+                offset += len(header) + sum(map(len, streams))
+            elements[section] = f"<{section}>\n{''.join(lines)}</{section}>\n" if lines else ""
+
+        with open(path, "wb") as file:
+            file.write(
+                (
+                    '<?xml version="1.0"?>\n<VTKFile type="StructuredGrid" version="1.0" byte_order="LittleEndian" '
+                    'header_type="UInt64" compressor="vtkZLibDataCompressor">\n'
+                    f'<StructuredGrid WholeExtent="{extent}">\n{elements["FieldData"]}<Piece Extent="{extent}">\n'
+                    f'{elements["PointData"]}{elements["CellData"]}{elements["Points"]}</Piece>\n</StructuredGrid>\n'
+                    '<AppendedData encoding="raw">\n_'
+                ).encode()
+            )
+            for part in parts:
+                file.write(part)
+            file.write(b"\n</AppendedData>\n</VTKFile>\n")
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def patch_ids(node_shape, patches) -> np.ndarray:
+    """(n1+1, n2+1[, n3+1]) int32: the index of the patch each boundary node lies on (the first
+    listed where patches meet), -1 inside."""
+    ids = np.full(node_shape, -1, dtype=np.int32)
+    for number in range(len(patches) - 1, -1, -1):  # the first listed is written last and wins
+        for face_name in patches[number].faces:
+            ids[cube.face_named(face_name, len(node_shape)).node_index] = number
+    return ids
+
+
+# --- reading ---------------------------------------------------------------------------------
+
+
+def _parse(path):
+    """(XML root, raw appended bytes or None) of a .vts file."""
+    import xml.etree.ElementTree as ET
+
+    data = open(path, "rb").read()
+    appended = None
+    start = data.find(b"<AppendedData")
+    if start >= 0:
+        tag_end = data.index(b">", start)
+        if b'encoding="raw"' not in data[start:tag_end]:
+            raise FormatError(f"{path}: base64 appended data is not read (meshgen reads raw appended or inline arrays)")
+        appended = memoryview(data)[data.index(b"_", tag_end) + 1 :]
+        data = data[:start] + b"</VTKFile>"
+    try:
+        root = ET.fromstring(data)
+    except ET.ParseError as exc:
+        raise FormatError(f"{path}: not a VTK XML file ({exc})") from None
+    if root.get("type") != "StructuredGrid":
+        raise FormatError(f"{path}: not a VTK StructuredGrid file")
+    return root, appended
+
+
+def _decode(element, root, appended=None) -> np.ndarray:
+    """The values of a DataArray: ascii, inline binary, or raw appended, with or without zlib
+    compression."""
+    dtype = np.dtype(NUMPY_TYPES[element.get("type")])
+    header_type = np.dtype(NUMPY_TYPES[root.get("header_type", "UInt32")])
+    compressed = root.get("compressor") == "vtkZLibDataCompressor"
+    if element.get("format") == "appended":
+        raw = appended[int(element.get("offset")) :]
+        if not compressed:
+            size = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
+            return np.frombuffer(raw[header_type.itemsize : header_type.itemsize + size], dtype=dtype)
+        blocks = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
+        header = np.frombuffer(raw[: (3 + blocks) * header_type.itemsize], dtype=header_type)
+        start = (3 + blocks) * header_type.itemsize
+        bounds = start + np.concatenate([[0], np.cumsum(header[3:].astype(np.int64))])
+        return np.frombuffer(b"".join(zlib.decompress(raw[bounds[n] : bounds[n + 1]]) for n in range(blocks)), dtype=dtype)
+    text = (element.text or "").strip()
+    if element.get("format") == "ascii":
+        return np.array(text.split(), dtype=dtype)
+    if not compressed:
+        raw = base64.b64decode(text)
+        size = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
+        return np.frombuffer(raw[header_type.itemsize : header_type.itemsize + size], dtype=dtype)
+    # The header and the streams are base64-encoded separately (as VTK writes them).
+    first = base64.b64decode(text[: 4 * -(-header_type.itemsize // 3)])
+    blocks = int(np.frombuffer(first[: header_type.itemsize], dtype=header_type)[0])
+    header_bytes = (3 + blocks) * header_type.itemsize
+    header_chars = 4 * -(-header_bytes // 3)
+    header = np.frombuffer(base64.b64decode(text[:header_chars])[:header_bytes], dtype=header_type)
+    sizes = header[3:].astype(np.int64)
+    data = base64.b64decode(text[header_chars:])
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    raw = b"".join(zlib.decompress(data[offsets[n] : offsets[n + 1]]) for n in range(blocks))
+    return np.frombuffer(raw, dtype=dtype)
+
+
+def read(path):
+    """Read a .vts (one piece, inline arrays) as a ``meshio.Mesh``: points and hexahedron (quad)
+    cells in meshgen's C order, cell data, point data, meshgen's metadata in field data."""
+    import meshio
+
+    from meshgen.formats import METADATA_KEY
+    from meshgen.grid import cell_connectivity
+
+    root, appended = _parse(path)
+    grid = root.find("StructuredGrid")
+    pieces = grid.findall("Piece")
+    if len(pieces) != 1:
+        raise FormatError(f"{path}: {len(pieces)} pieces; meshgen reads single-piece files")
+    bounds = [int(v) for v in pieces[0].get("Extent", grid.get("WholeExtent")).split()]
+    counts = [bounds[2 * d + 1] - bounds[2 * d] + 1 for d in range(3)]
+    node_shape = tuple(counts[:2]) if counts[2] == 1 else tuple(counts)
+    dim = len(node_shape)
+    order = tuple(range(dim - 1, -1, -1))
+
+    def c_order(values, shape, components=1):
+        array = values.reshape(tuple(reversed(shape)) + ((components,) if components > 1 else ()))
+        return np.transpose(array, order + ((dim,) if components > 1 else ())).reshape((-1, components) if components > 1 else -1)
+
+    points = c_order(_decode(pieces[0].find("Points/DataArray"), root, appended).astype(float), node_shape, 3)
+    cell_shape = tuple(n - 1 for n in node_shape)
+    cell_data = {a.get("Name"): [c_order(_decode(a, root, appended).astype(float), cell_shape)] for a in pieces[0].findall("CellData/DataArray")}
+    point_data = {a.get("Name"): c_order(_decode(a, root, appended), node_shape) for a in pieces[0].findall("PointData/DataArray")}
+    field_data = {a.get("Name"): _decode(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
+    field_data = {k: v for k, v in field_data.items() if k in (METADATA_KEY, PATCHES_KEY)}
+    return meshio.Mesh(
+        points,
+        [("hexahedron" if dim == 3 else "quad", cell_connectivity(node_shape))],
+        point_data=point_data,
+        cell_data=cell_data,
+        field_data=field_data,
+    )
+
+
+def read_patches(path) -> list:
+    from meshgen.patches import from_records
+
+    codes = read(path).field_data.get(PATCHES_KEY)
+    if codes is None:
+        raise FormatError(f"{path}: no {PATCHES_KEY} field data (not written by meshgen)")
+    return from_records(json.loads(np.asarray(codes, dtype=np.uint8).tobytes()))
