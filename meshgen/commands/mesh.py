@@ -16,7 +16,7 @@ METHOD_HELP = (
 @click.option("--method", "-m", default="auto", show_default=True, help=METHOD_HELP)
 @geometry_options()
 @dims_option()
-@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt), or a case folder with --format openfoam.")
+@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vts .vtk .xdmf .cgns .su2 .msh .xyz .fmt), or a case folder with --format openfoam.")
 @click.option("--format", "format_name", default=None, metavar="NAME", help="Output format instead of the extension's: openfoam writes the case folder -o CASE (or CASE/constant/polyMesh).")
 @click.option(
     "--patch",
