@@ -25,6 +25,9 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
+- ``solver_formats``: the 100^3 neural mesh with its quality arrays and patches written as .vtu,
+  .vts, .cgns, OpenFOAM (binary, ASCII), .su2 and .msh: seconds and MB, and the .vts against the
+  .vtu (``bench_solver_formats.py``);
 - ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``.
 
 The summary at the end lists the headline figures with their targets (from the issues) and met /
@@ -33,7 +36,7 @@ not met; ``--json`` keeps everything measured, with keys that name their units (
 
 --quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
 sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
-never reaches the bounds says little), formats at 50^3, and the peak memory of the 100^3 command
+never reaches the bounds says little), formats and solver formats at 50^3, and the peak memory of the 100^3 command
 instead of 200^3. Targets are judged only on the figures they are set for.
 
 Every timing gives wall seconds and, where it helps, process CPU seconds: on a machine shared with
@@ -70,7 +73,7 @@ sys.path.insert(1, str(BENCHMARKS))
 
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
-SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "memory"]
+SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "solver_formats", "memory"]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -81,6 +84,8 @@ TARGETS = {
     "evaluate_1e6_seconds": ("<=", 3.0, "s", "issue 3: quality of 1e6 hexahedra"),
     "fd_ad_step_ratio": (">=", 10.0, "x", "the training issue: autograd step / finite-difference step, same points"),
     "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "issue 5: meshgen mesh --dims 200 200 200"),
+    "vts_vtu_size_ratio": ("<=", 0.5, "x", "issue 12: .vts size / .vtu size, 100^3 neural mesh with its quality arrays"),
+    "vts_vtu_write_time_ratio": ("<=", 1.0, "x", "issue 12: .vts write time / .vtu write time, same mesh"),
 }
 
 
@@ -394,6 +399,16 @@ def formats(quick: bool) -> dict:
             "cells": cells**3, "repeat": repeat, "timing": f"best of {repeat}", "results": rows}
 
 
+def solver_formats(quick: bool) -> dict:
+    import bench_solver_formats
+
+    cells = 50 if quick else 100
+    geometry, X = bench_solver_formats.make_mesh("neural", cells)
+    data = bench_solver_formats.measure(X, geometry, 1 if quick else 3)
+    bench_solver_formats.print_table(data)
+    return data
+
+
 # ---------------------------------------------------------------------------------------------
 # the summary
 
@@ -462,6 +477,17 @@ def summary(sections: dict) -> list[dict]:
         for row in data["results"]:
             add(f"write {data['cells_per_axis']}^3 cells, {row['format']}", row["write_seconds"], "s",
                 note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
+    if "solver_formats" in sections:
+        data = sections["solver_formats"]
+        n = data["cells_per_axis"]
+        for row in data["results"]:
+            add(f"write {n}^3 cells with patches, {row['format']} ({data['mesh']}, median of {data['repeat']})",
+                row["write_seconds"], "s", cpu=row["write_cpu_seconds"],
+                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
+        ratios = data["vts_vs_vtu"]
+        add(f".vts size / .vtu size, {n}^3", ratios["size_ratio"], "x", "vts_vtu_size_ratio", judged=n == 100)
+        add(f".vts write time / .vtu write time, {n}^3", ratios["write_time_ratio"], "x", "vts_vtu_write_time_ratio",
+            judged=n == 100)
     if "memory" in sections:
         data = sections["memory"]
         add(f"peak memory, `meshgen mesh --dims {data['cells_per_axis']} {data['cells_per_axis']} "
@@ -591,6 +617,7 @@ def main(argv=None) -> int:
         "time_to_quality": lambda: time_to_quality(args.quick),
         "evaluate": lambda: evaluate(args.quick),
         "formats": lambda: formats(args.quick),
+        "solver_formats": lambda: solver_formats(args.quick),
         "memory": lambda: memory_section(args.quick),
     }
     for name in chosen:
