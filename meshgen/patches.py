@@ -37,6 +37,23 @@ class Patch:
     faces: tuple[str, ...]
 
 
+INFLOW_WORDS, OUTFLOW_WORDS = ("inlet", "inflow"), ("outlet", "outflow")
+
+
+def flow_role(patch) -> str | None:
+    """"inflow" or "outflow" for a ``patch``-type patch whose name says so (inlet, inflow /
+    outlet, outflow, any case), else None: how CGNS BC types and OpenFOAM's starting fields tell
+    an inlet from an outlet."""
+    if patch.type != "patch":
+        return None
+    lowered = patch.name.lower()
+    if any(word in lowered for word in INFLOW_WORDS):
+        return "inflow"
+    if any(word in lowered for word in OUTFLOW_WORDS):
+        return "outflow"
+    return None
+
+
 def face_assignment(dim: int, declared: dict | None = None, overrides: dict | None = None) -> dict[str, tuple[str, str]]:
     """Face name -> (patch name, type) for every face of the ``dim``-cube: the defaults (face name,
     ``patch``), then a plugin's ``declared`` patches, then ``overrides`` (``parse_patch_options``).

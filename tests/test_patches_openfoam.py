@@ -144,6 +144,26 @@ def test_potential_foam_converges_to_the_uniform_flow_of_a_straight_duct(tmp_pat
     np.testing.assert_allclose(U, np.tile([0.0, 0.0, 1.0], (len(U), 1)), atol=1e-6)
 
 
+@needs_openfoam
+def test_potential_foam_runs_on_the_case_as_meshgen_mesh_writes_it(run_cli, tmp_path):
+    """The README's route: mesh, checkMesh, a solver; nothing added by hand. The starting fields
+    meshgen writes (1 m/s normal to the inlet, p = 0 at the outlet, slip walls) give the uniform
+    flow U = (0, 0, 1) of the straight duct."""
+    result = run_cli("mesh", "--method", "tfi", "--dims", "4", "4", "6", "--format", "openfoam", "-o", "duct")
+    assert result.returncode == 0, result.stderr
+    assert check_mesh(tmp_path / "duct")["ok"]
+    solved = run_tool("potentialFoam", tmp_path / "duct")
+    assert solved.returncode == 0 and "\nEnd" in solved.stdout, solved.stdout[-3000:]
+    U = read_vector_field(tmp_path / "duct" / "0" / "U")
+    np.testing.assert_allclose(U, np.tile([0.0, 0.0, 1.0], (4 * 4 * 6, 1)), atol=1e-6)
+    # Re-meshing keeps the user's set-up: 0/ and system/ are not rewritten.
+    mine = "// my settings\n" + (tmp_path / "duct" / "system" / "fvSolution").read_text()
+    (tmp_path / "duct" / "system" / "fvSolution").write_text(mine)
+    assert run_cli("mesh", "--method", "tfi", "--dims", "3", "3", "3", "--format", "openfoam", "-o", "duct").returncode == 0
+    assert (tmp_path / "duct" / "system" / "fvSolution").read_text() == mine
+    assert check_mesh(tmp_path / "duct")["patches"]["inlet"] == 9
+
+
 def test_openfoam_write_is_atomic_and_replaces_an_old_poly_mesh(tmp_path, monkeypatch):
     from meshgen.formats import _openfoam
 

@@ -59,7 +59,6 @@ BASE_NAME = "Base"
 ZONE_NAME = "Zone"
 SOLUTION_NAME = "FlowSolution"
 ZONE_BC_NAME = "ZoneBC"
-INFLOW_WORDS, OUTFLOW_WORDS = ("inlet", "inflow"), ("outlet", "outflow")
 
 
 def write(path, X, cell_data, metadata, patches=()):
@@ -108,16 +107,13 @@ def write(path, X, cell_data, metadata, patches=()):
 def bc_type(patch) -> str:
     """The CGNS BCType of a patch: walls and symmetry planes by type; a ``patch`` is BCInflow or
     BCOutflow when its name says inlet/inflow or outlet/outflow, else BCGeneral (so is ``empty``)."""
+    from meshgen.patches import flow_role
+
     if patch.type == "wall":
         return "BCWall"
     if patch.type == "symmetry":
         return "BCSymmetryPlane"
-    lowered = patch.name.lower()
-    if patch.type == "patch" and any(word in lowered for word in INFLOW_WORDS):
-        return "BCInflow"
-    if patch.type == "patch" and any(word in lowered for word in OUTFLOW_WORDS):
-        return "BCOutflow"
-    return "BCGeneral"
+    return {"inflow": "BCInflow", "outflow": "BCOutflow"}.get(flow_role(patch), "BCGeneral")
 
 
 def write_zone_bc(base, zone, node_shape, patches) -> None:

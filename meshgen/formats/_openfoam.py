@@ -1,7 +1,11 @@
 """OpenFOAM case (``--format openfoam -o CASE``): ``CASE/constant/polyMesh`` and an empty
 ``CASE/CASE.foam`` for ParaView; and, where the case has none, ``system/controlDict``,
 ``fvSchemes`` and ``fvSolution`` (set up for ``potentialFoam``), without which no OpenFOAM tool
-(checkMesh included) opens a case. Existing system files are never touched.
+(checkMesh included) opens a case. Where the case has no ``0/`` and the patches include an inlet
+and an outlet (``meshgen.patches.flow_role``: ``patch``-type patches named inlet/inflow and
+outlet/outflow), ``0/U`` and ``0/p`` for potential flow too: 1 m/s into the domain normal to the
+inlet, p = 0 on the outlet, slip walls, symmetry and empty as their types, zero gradient on any
+other patch. Existing files are never touched: re-meshing a case keeps the user's set-up.
 
 polyMesh, as OpenFOAM's own utilities write it (label 32 bits, scalar 64 bits, little-endian):
 
@@ -169,6 +173,8 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
         shutil.rmtree(old, ignore_errors=True)
         for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):
             _write_if_missing(case / "system" / name, _header("dictionary", "system", name) + text)
+        if not (case / "0").exists() and _has_inlet_and_outlet(patches):
+            _write_starting_fields(case / "0", patches)
         _write_if_missing(case / f"{case.resolve().name}.foam", "")
     except BaseException:
         shutil.rmtree(temporary, ignore_errors=True)
@@ -297,6 +303,46 @@ def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None
     file.write(f"{count}\n(\n".encode())
     write_rows(file, values, row)
     file.write(b")\n\n")
+
+
+def _has_inlet_and_outlet(patches) -> bool:
+    from meshgen.patches import flow_role
+
+    roles = {flow_role(patch) for patch in patches}
+    return {"inflow", "outflow"} <= roles
+
+
+def _write_starting_fields(folder: Path, patches) -> None:
+    """``0/U`` and ``0/p`` for potential flow from the patches' types and roles (module docstring),
+    written to a temporary folder and renamed into place."""
+    from meshgen.patches import flow_role
+
+    U, p = {}, {}
+    for patch in patches:
+        role = flow_role(patch)
+        if role == "inflow":
+            U[patch.name], p[patch.name] = "type surfaceNormalFixedValue; refValue uniform -1;", "type zeroGradient;"
+        elif role == "outflow":
+            U[patch.name], p[patch.name] = "type zeroGradient;", "type fixedValue; value uniform 0;"
+        elif patch.type == "wall":
+            U[patch.name], p[patch.name] = "type slip;", "type zeroGradient;"
+        elif patch.type in ("symmetry", "empty"):
+            U[patch.name] = p[patch.name] = f"type {patch.type};"
+        else:
+            U[patch.name], p[patch.name] = "type zeroGradient;", "type zeroGradient;"
+
+    def field(entries, dimensions, internal):
+        body = "".join(f"    {name}\n    {{\n        {entry}\n    }}\n" for name, entry in entries.items())
+        return f"dimensions      {dimensions};\n\ninternalField   uniform {internal};\n\nboundaryField\n{{\n{body}}}\n"
+
+    temporary = folder.with_name(f".0.tmp-{os.getpid()}")
+    try:
+        temporary.mkdir()
+        (temporary / "U").write_text(_header("volVectorField", "0", "U") + field(U, "[0 1 -1 0 0 0 0]", "(0 0 0)"))
+        (temporary / "p").write_text(_header("volScalarField", "0", "p") + field(p, "[0 2 -2 0 0 0 0]", "0"))
+        os.replace(temporary, folder)
+    finally:
+        shutil.rmtree(temporary, ignore_errors=True)
 
 
 def _write_if_missing(path: Path, text: str) -> None:
