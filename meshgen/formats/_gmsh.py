@@ -4,7 +4,7 @@ surface) and one per patch for its boundary elements (3D: quadrangles, 2D: lines
 Entities: one per cube face (tags 1 .. 2*dim, in cube face order: xi0, xi1, eta0, ...), each in
 the physical group of its patch, and the domain (tag 1), bounded by them. All nodes are listed
 once, classified on the domain; elements are numbered cells first, then the faces. meshgen's
-metadata sits in a ``$meshgen`` section, which Gmsh and meshio skip.
+metadata sits in a ``$meshgen`` section (``{}`` without metadata), which Gmsh and meshio skip.
 
     $MeshFormat 4.1 0 8
     $PhysicalNames   dim tag "name": the patches (dim - 1, tags 2, 3, ...), domain (dim, tag 1)
@@ -70,8 +70,9 @@ def write(path, X, cell_data, metadata, patches):
             write_rows(file, np.column_stack([tags, elements]), " ".join(["{}"] * (elements.shape[1] + 1)))
             first += len(elements)
         file.write(b"$EndElements\n")
-        if metadata:
-            file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
+        # Always present (an empty {} without metadata): it marks the file as meshgen's, whose
+        # boundary elements are its patches rather than cells to evaluate.
+        file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
 
 
 def _section(path, name: str) -> str | None:
@@ -85,17 +86,19 @@ def _section(path, name: str) -> str | None:
 
 
 def read(path):
-    """Read with meshio, keeping the cells (hexahedra or quads, not the patches' boundary
-    elements); meshgen's metadata from the ``$meshgen`` section."""
+    """Read with meshio; a file meshgen wrote (it has a ``$meshgen`` section) keeps only its cells
+    (hexahedra or quads, not the patches' boundary elements) and gives its metadata back."""
     import meshio
 
     from meshgen.formats import METADATA_KEY
 
     mesh = meshio.read(path, file_format="gmsh")
+    text = _section(path, METADATA_KEY)
+    if text is None:  # a foreign file: as meshio reads it (evaluate reports other cell types as skipped)
+        return mesh
     volume = "hexahedron" if any(block.type == "hexahedron" for block in mesh.cells) else "quad"
     blocks = [block.data for block in mesh.cells if block.type == volume]
     field_data = {}
-    text = _section(path, METADATA_KEY)
-    if text:
+    if text not in ("", "{}"):
         field_data[METADATA_KEY] = np.frombuffer(text.encode(), dtype=np.uint8).copy()
     return meshio.Mesh(np.asarray(mesh.points, dtype=float), [(volume, np.concatenate(blocks))], field_data=field_data)

@@ -79,8 +79,9 @@ def _comment(path, key: str) -> str | None:
 
 
 def read(path):
-    """Read with meshio, keeping the cells (hexahedra or quads) and dropping the markers'
-    boundary elements; meshgen's metadata from the comment line."""
+    """Read with meshio; a file meshgen wrote (it has the ``meshgen_patches`` comment) keeps only
+    its cells (hexahedra or quads, not the markers' boundary elements) and gives its metadata
+    back."""
     import meshio
 
     from meshgen.formats import METADATA_KEY
@@ -88,6 +89,8 @@ def read(path):
     # meshio warns for every marker that its tags are strings: expected here, and not the user's concern.
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         mesh = meshio.read(path, file_format="su2")
+    if _comment(path, "meshgen_patches") is None:  # a foreign file: as meshio reads it
+        return mesh
     volume = "hexahedron" if any(block.type == "hexahedron" for block in mesh.cells) else "quad"
     blocks = [block for block in mesh.cells if block.type == volume]
     points = np.asarray(mesh.points, dtype=float)
