@@ -862,8 +862,14 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
     """Write node array ``X`` to ``path`` with the seven per-cell metrics as cell data (formats
     that carry cell data keep them), and the report plus ``metadata`` (geometry, params, method,
     ...) to ``<path>.quality.json``. ``write_options`` go to ``meshgen.formats.write_mesh``
-    (``patches``, ``format``, ``binary``). Returns the report (with ``quality_seconds``)."""
+    (``patches``, default the ``geometry``'s; ``format``; ``binary``). Returns the report (with
+    ``quality_seconds``)."""
     from meshgen.formats import write_mesh
+
+    if geometry is not None and "patches" not in write_options:
+        from meshgen.patches import geometry_patches
+
+        write_options["patches"] = geometry_patches(geometry)
 
     start = time.perf_counter()
     metrics, degenerate, info = _assess(_check_node_array(X))
