@@ -133,6 +133,7 @@ def test_meshio_reads_su2_and_msh_with_the_same_points_cells_and_boundary_elemen
     boundary_type = "quad" if dim == 3 else "line"
     boundary = sum(len(b.data) for b in mesh.cells if b.type == boundary_type)
     assert boundary == sum(face_count(dims, face) for face in cube.face_names(dim))
+    assert read_patches(path) == patches
 
 
 def test_su2_markers_hold_each_patchs_faces_with_outward_normals(tmp_path):

@@ -4,7 +4,8 @@ surface) and one per patch for its boundary elements (3D: quadrangles, 2D: lines
 Entities: one per cube face (tags 1 .. 2*dim, in cube face order: xi0, xi1, eta0, ...), each in
 the physical group of its patch, and the domain (tag 1), bounded by them. All nodes are listed
 once, classified on the domain; elements are numbered cells first, then the faces. meshgen's
-metadata sits in a ``$meshgen`` section (``{}`` without metadata), which Gmsh and meshio skip.
+metadata sits in a ``$meshgen`` section (``{}`` without metadata) and the patch types in
+``$meshgenPatches``, sections Gmsh and meshio skip.
 
     $MeshFormat 4.1 0 8
     $PhysicalNames   dim tag "name": the patches (dim - 1, tags 2, 3, ...), domain (dim, tag 1)
@@ -16,6 +17,8 @@ metadata sits in a ``$meshgen`` section (``{}`` without metadata), which Gmsh an
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from meshgen import cube
@@ -24,6 +27,7 @@ from meshgen.formats._structured import boundary_elements, orientation, write_ro
 from meshgen.grid import cell_connectivity
 
 DOMAIN_NAME = "domain"
+PATCHES_SECTION = "meshgenPatches"  # the patch types, which MSH has no place for
 GMSH_HEXAHEDRON, GMSH_QUADRANGLE, GMSH_LINE = 5, 3, 1
 
 
@@ -35,6 +39,7 @@ def check_patch_name(name: str) -> None:
 def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` with physical groups; ``cell_data`` is not written."""
     from meshgen.formats import metadata_json
+    from meshgen.patches import as_records
 
     node_shape = X.shape[:-1]
     dim = len(node_shape)
@@ -73,6 +78,7 @@ def write(path, X, cell_data, metadata, patches):
         # Always present (an empty {} without metadata): it marks the file as meshgen's, whose
         # boundary elements are its patches rather than cells to evaluate.
         file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
+        file.write(f"${PATCHES_SECTION}\n{json.dumps(as_records(patches))}\n$End{PATCHES_SECTION}\n".encode())
 
 
 def _section(path, name: str) -> str | None:
@@ -102,3 +108,31 @@ def read(path):
     if text not in ("", "{}"):
         field_data[METADATA_KEY] = np.frombuffer(text.encode(), dtype=np.uint8).copy()
     return meshio.Mesh(np.asarray(mesh.points, dtype=float), [(volume, np.concatenate(blocks))], field_data=field_data)
+
+
+def read_patches(path) -> list:
+    """The patches of a .msh file meshgen wrote: names from $PhysicalNames, faces from the face
+    entities' physical tags in $Entities (entity n is the n-th cube face), types from
+    ``$meshgenPatches``."""
+    from meshgen.patches import Patch
+
+    names = _section(path, "PhysicalNames")
+    entities = _section(path, "Entities")
+    recorded = _section(path, PATCHES_SECTION)
+    if names is None or entities is None or recorded is None:
+        raise FormatError(f"{path}: no $PhysicalNames, $Entities or ${PATCHES_SECTION} (not written by meshgen)")
+    groups = {}
+    for line in names.splitlines()[1:]:
+        dim, tag, name = line.split(maxsplit=2)
+        groups[(int(dim), int(tag))] = name.strip('"')
+    rows = entities.splitlines()
+    counts = [int(n) for n in rows[0].split()]
+    dim = 3 if counts[3] else 2
+    first = 1 + (counts[1] if dim == 3 else 0)  # after the counts (and, in 3D, the curves: none)
+    face_rows = rows[first : first + counts[dim - 1]]
+    types = {record["name"]: record["type"] for record in json.loads(recorded)}
+    faces_of = {}
+    for face, row in zip(cube.faces(dim), face_rows):
+        physical = int(row.split()[8])  # tag, 6 box values, number of physical tags, the tag
+        faces_of.setdefault(groups[(dim - 1, physical)], []).append(face.name)
+    return [Patch(name, types.get(name, "patch"), tuple(faces)) for name, faces in faces_of.items()]
