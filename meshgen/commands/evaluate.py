@@ -117,7 +117,8 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
 def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
-    """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads).
+    """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's
+    .vts, .cgns, .xyz, or an OpenFOAM case folder meshgen wrote).
 
     Prints per metric the mean, min, max and 1st/99th percentiles, the inverted cells and the
     validity verdict (valid: inverted cells <= 0.5% of all cells), and the boundary deviation when
