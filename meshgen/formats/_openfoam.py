@@ -40,7 +40,7 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
-from meshgen.formats._structured import face_nodes, orientation, write_rows
+from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
 
 HEADER = """/*--------------------------------*- C++ -*----------------------------------*\\
   Written by meshgen
@@ -221,14 +221,11 @@ def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
     # neighbours' numbers increase in that order): upper-triangular order without sorting.
     face_blocks, owner_blocks, neighbour_blocks = [], [], []
     for axis in (2, 1, 0):
-        inner = tuple(slice(0, n - 1) if d == axis else slice(None) for d, n in enumerate(cell_shape))
-        nodes = np.empty(tuple(n - (d == axis) for d, n in enumerate(cell_shape)) + (4,), dtype=np.int32)
-        for index in range(1, node_shape[axis] - 1):
-            where = tuple(index - 1 if d == axis else slice(None) for d in range(3))
-            nodes[where] = face_nodes(point_ids, axis, index, positive).reshape(nodes[where].shape)
-        face_blocks.append(nodes)
-        owner_blocks.append(cell_ids[inner])
-        neighbour_blocks.append(cell_ids[tuple(slice(1, None) if d == axis else slice(None) for d in range(3))])
+        before = tuple(slice(0, -1) if d == axis else slice(None) for d in range(3))
+        after = tuple(slice(1, None) if d == axis else slice(None) for d in range(3))
+        face_blocks.append(face_nodes(point_ids, axis, slice(1, -1), positive))  # planes between cells
+        owner_blocks.append(cell_ids[before])
+        neighbour_blocks.append(cell_ids[after])
     # Interleave the three families cell by cell: scatter each into a (cells, 3) table.
     cells = cell_ids.size
     table_nodes = np.zeros((cells, 3, 4), dtype=np.int32)
@@ -247,9 +244,8 @@ def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
         count = 0
         for face_name in patch.faces:
             face = cube.face_named(face_name, 3)
-            index = -1 if face.side else 0
-            boundary_nodes.append(face_nodes(point_ids, face.axis, index, positive == bool(face.side)))
-            boundary_owner.append(np.take(cell_ids, index, axis=face.axis).reshape(-1))
+            boundary_nodes.append(boundary_elements(node_shape, face_name, positive).astype(np.int32))
+            boundary_owner.append(np.take(cell_ids, -1 if face.side else 0, axis=face.axis).reshape(-1))
             count += len(boundary_owner[-1])
         entries.append((patch.name, patch.type, count, start))
         start += count

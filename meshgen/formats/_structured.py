@@ -21,20 +21,24 @@ def orientation(X: np.ndarray) -> float:
     return 1.0 if total >= 0 else -1.0
 
 
-def face_nodes(point_ids: np.ndarray, axis: int, index: int, outward_positive: bool) -> np.ndarray:
-    """Node labels of the faces on the plane ``index`` normal to ``axis`` of the (N1, N2, N3) array
-    ``point_ids``: shape (faces, 4) in C order of the face's cells, going round so that the normal
-    points along +axis (``outward_positive``) or -axis. Along the other two axes b, c = axis+1,
-    axis+2 (cyclic) the corners are o, o+e_b, o+e_b+e_c, o+e_c: normal e_b x e_c."""
-    plane = np.take(point_ids, index, axis=axis)  # the two remaining axes in increasing order
+def face_nodes(point_ids: np.ndarray, axis: int, planes: slice, outward_positive: bool) -> np.ndarray:
+    """Node labels of the quadrilateral faces on the node planes ``planes`` (a slice along
+    ``axis``) of the (N1, N2, N3) array ``point_ids``: shape (planes, cells along the other two
+    axes in their order, 4), so that ``reshape(-1, 4)`` lists the faces in C order. They go round
+    so that the normal points along +axis (``outward_positive``, for a right-handed map) or
+    -axis: with b, c = axis+1, axis+2 (cyclic) the corners are o, o+e_b, o+e_b+e_c, o+e_c, whose
+    normal is e_b x e_c."""
     b, c = (axis + 1) % 3, (axis + 2) % 3
-    if b > c:  # the plane's axes are (c, b): transpose to (b, c)
-        plane = plane.T
-    corners = [plane[:-1, :-1], plane[1:, :-1], plane[1:, 1:], plane[:-1, 1:]]
-    if b > c:
-        corners = [corner.T for corner in corners]  # back to C order of the cells (increasing axes)
-    nodes = np.stack([corner.reshape(-1) for corner in corners], axis=1)
-    return nodes if outward_positive else nodes[:, ::-1]
+
+    def corner(step_b, step_c):
+        index = [slice(None)] * 3
+        index[axis] = planes
+        index[b] = slice(step_b, point_ids.shape[b] - 1 + step_b)
+        index[c] = slice(step_c, point_ids.shape[c] - 1 + step_c)
+        return point_ids[tuple(index)]
+
+    nodes = np.stack([corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)], axis=-1)
+    return nodes if outward_positive else nodes[..., ::-1]
 
 
 def boundary_elements(node_shape, face_name: str, positive: bool = True) -> np.ndarray:
@@ -46,7 +50,8 @@ def boundary_elements(node_shape, face_name: str, positive: bool = True) -> np.n
     point_ids = np.arange(int(np.prod(node_shape)), dtype=np.int64).reshape(node_shape)
     index = -1 if face.side else 0
     if dim == 3:
-        return face_nodes(point_ids, face.axis, index, positive == bool(face.side))
+        plane = slice(-1, None) if face.side else slice(0, 1)
+        return face_nodes(point_ids, face.axis, plane, positive == bool(face.side)).reshape(-1, 4)
     line = np.take(point_ids, index, axis=face.axis)
     segments = np.stack([line[:-1], line[1:]], axis=1)
     # Counterclockwise: eta0 and xi1 run with increasing index, eta1 and xi0 against it.
