@@ -2,7 +2,7 @@
 tools' environment, ``checkMesh`` parsed, and a potential-flow set-up (``0/`` and ``system/``)
 written from the case's own ``boundary`` file, so nothing is edited by hand.
 
-    from tests.openfoam_helpers import needs_openfoam, check_mesh, write_potential_flow, run_tool
+    from openfoam_helpers import needs_openfoam, check_mesh, write_potential_flow, run_tool
 
     report = check_mesh(case)                  # {"ok": bool, "patches": {name: faces}, "log": str}
     write_potential_flow(case, inlet="inlet", outlet="outlet", velocity=(0, 0, 1))

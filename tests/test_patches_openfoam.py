@@ -15,7 +15,7 @@ from meshgen.geometry import load_geometry
 from meshgen.patches import Patch, geometry_patches, parse_patch_options
 from meshgen.quality import cell_metrics, quality_report
 from meshgen.tfi import tfi
-from tests.openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
+from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
 cgnscheck = shutil.which("cgnscheck")
 needs_cgnscheck = pytest.mark.skipif(cgnscheck is None, reason="cgnscheck not installed (Debian package cgns-convert)")
