@@ -153,7 +153,10 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     node_shape = X3.shape[:-1]
     if np.prod(node_shape) * 3 > LABEL_LIMIT:
         raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {np.prod(node_shape)} points")
-    record = {"node_shape": list(X.shape[:-1]), "extruded_2d": dim == 2, "metadata": metadata}
+    from meshgen.formats import metadata_json
+
+    shape = [int(n) for n in X.shape[:-1]]
+    record = f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "metadata": {metadata_json(metadata)}}}'
 
     created = not case.exists()
     constant = case / "constant"
@@ -165,7 +168,7 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
             folder.mkdir()
         temporary.mkdir()
         _write_poly_mesh(temporary, X3, patches, binary)
-        (temporary / RECORD_NAME).write_text(json.dumps(record, default=_plain))
+        (temporary / RECORD_NAME).write_text(record)
         target = constant / "polyMesh"
         if target.exists():
             os.replace(target, old)
@@ -350,14 +353,6 @@ def _write_if_missing(path: Path, text: str) -> None:
         temporary.write_text(text)
 
 
-def _plain(value):
-    if isinstance(value, (np.generic, np.ndarray)):
-        return value.tolist()
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    raise TypeError(f"{type(value).__name__} value {value!r}")
-
-
 # --- reading ---------------------------------------------------------------------------------
 
 
@@ -369,9 +364,10 @@ def poly_mesh_folder(path) -> Path:
     return folder
 
 
-def read_list(path: Path, dtype) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-    """The list (ASCII or binary) of an OpenFOAM polyMesh file: points (N, 3) float64, labels (N,)
-    int64, faces (N, 4) int64 (quadrilaterals only; a faceCompactList is expanded)."""
+def read_list(path: Path, dtype: str) -> np.ndarray:
+    """The list (ASCII or binary) of an OpenFOAM polyMesh file, ``dtype`` "points" (N, 3) float64,
+    "faces" (N, 4) int64 (quadrilaterals only; a faceCompactList is expanded) or "labels" (N,)
+    int64."""
     data = path.read_bytes()
     header_end = data.find(b"}", data.find(b"FoamFile"))
     if header_end < 0:
