@@ -55,10 +55,15 @@ class MeshgenGroup(click.Group):
         return super().resolve_command(ctx, args)
 
     def main(self, args=None, prog_name=None, **extra):
-        """Run with our own error reporting: one line on stderr, exit 2 for usage errors."""
+        """Run with our own error reporting: one line on stderr, exit 2 for usage errors. With no
+        arguments at all, print the help (exit 0), not an error."""
         from meshgen.errors import MeshgenError
 
         extra.pop("standalone_mode", None)
+        if args is None:
+            args = sys.argv[1:]
+        if not args:
+            args = ["--help"]
         debug = bool(os.environ.get("MESHGEN_DEBUG"))
         try:
             result = super().main(args=args, prog_name=prog_name or "meshgen", standalone_mode=False, **extra)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options, load_selected_geometry
+from meshgen.commands._text import echo
 
 METHOD_HELP = (
     "Meshing method: auto, neural, tfi, elliptic. auto: the neural map of --checkpoint, else of the newest "
@@ -19,8 +20,8 @@ METHOD_HELP = (
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt).")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
 @click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
-@click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
-@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
+@click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].")
+@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100].")
 @click.option(
     "--cluster",
     "clusters",
@@ -89,17 +90,17 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         cells = 1
         for n in dims:
             cells *= n
-        click.echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
+        echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
         if "iterations" in info:
-            click.echo(
+            echo(
                 f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
                 f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
             )
         if "snap" in info:
-            click.echo(_snap_line(info["snap"]))
-        click.echo(f"wrote {output}")
+            echo(_snap_line(info["snap"]))
+        echo(f"wrote {output}")
         for line in summary_lines(report):
-            click.echo(line)
+            echo(line)
 
 
 def _neural_model(checkpoint, spec, params, geometry_given, dims):

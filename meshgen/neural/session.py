@@ -153,7 +153,7 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-    from meshgen.neural.progress import LogReporter, RichReporter
+    from meshgen.neural.progress import LogReporter, RichReporter, shown_fields
     from meshgen.neural.train import train
 
     created = not run.run_dir.exists()
@@ -162,7 +162,8 @@ def run_training(run: Run, quiet: bool = False):
     except OSError as exc:
         raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
     # A progress bar only where someone watches it; logs (--quiet, or stderr redirected) get lines.
-    reporter = LogReporter() if quiet or not sys.stderr.isatty() else RichReporter()
+    fields = shown_fields(run.config)
+    reporter = LogReporter(fields=fields) if quiet or not sys.stderr.isatty() else RichReporter(fields=fields)
     stop_requested = threading.Event()
 
     def on_interrupt(signum, frame):
