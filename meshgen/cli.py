@@ -30,6 +30,19 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
+def flag_of(parameter: str) -> str:
+    """The command-line flag of a library parameter: ``max_iter`` -> ``--max-iter``."""
+    return "--" + parameter.replace("_", "-")
+
+
+def message_for_command_line(exc) -> str:
+    """A library error as the command line words it: a ParameterError names the flag
+    (``--tol must be positive``) where the library names the parameter (``tol must be positive``)."""
+    from meshgen.errors import ParameterError
+
+    return exc.message_for(flag_of(exc.parameter)) if isinstance(exc, ParameterError) else str(exc)
+
+
 class MeshgenGroup(click.Group):
     def list_commands(self, ctx):
         return list(COMMANDS)
@@ -47,10 +60,9 @@ class MeshgenGroup(click.Group):
     def resolve_command(self, ctx, args):
         name = args[0] if args else None
         if name is not None and name not in COMMANDS and not name.startswith("-"):
-            import difflib
+            from meshgen.errors import did_you_mean
 
-            close = difflib.get_close_matches(name, list(COMMANDS), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(name, COMMANDS)
             raise click.UsageError(f"no command '{name}' (commands: {', '.join(COMMANDS)}){hint}", ctx)
         return super().resolve_command(ctx, args)
 
@@ -86,7 +98,7 @@ class MeshgenGroup(click.Group):
         except MeshgenError as exc:
             if debug:
                 raise
-            click.echo(f"Error: {one_line(exc)}", err=True)
+            click.echo(f"Error: {one_line(message_for_command_line(exc))}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)

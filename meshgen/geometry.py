@@ -23,7 +23,6 @@ that register a module under the entry-point group ``meshgen.geometries``, and a
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import itertools
 import sys
@@ -34,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from meshgen.errors import GeometryError
+from meshgen.errors import GeometryError, did_you_mean
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
 
@@ -222,8 +221,7 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
     unknown = sorted(set(values) - set(geometry.defaults))
     if unknown:
         valid = ", ".join(geometry.defaults) or "none"
-        close = difflib.get_close_matches(unknown[0], list(geometry.defaults), n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
+        hint = did_you_mean(unknown[0], geometry.defaults)
         raise GeometryError(
             f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}"
         )
@@ -264,9 +262,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
             eps = _entry_points()
             if spec not in eps:
                 names = available_names()
-                close = difflib.get_close_matches(spec, names, n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
-                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){hint}")
+                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
             try:
                 module = eps[spec].load()
             except (Exception, SystemExit) as exc:

@@ -15,6 +15,8 @@ import itertools
 
 import numpy as np
 
+from meshgen.errors import MeshgenError
+
 
 def parametric_grid(dims) -> list[np.ndarray]:
     """Uniform parametric node coordinates: one array of ``n + 1`` values in [0, 1] per cell count."""
@@ -116,6 +118,12 @@ def _along(values, axis: int, dim: int) -> np.ndarray:
     return np.asarray(values).reshape([-1 if d == axis else 1 for d in range(dim)] + [1])
 
 
+def check_axes(geometry, coords) -> None:
+    """MeshgenError unless there is one 1D coordinate array (or cell count) per axis of ``geometry``."""
+    if len(coords) != geometry.dim:
+        raise MeshgenError(f"{len(coords)} axes given for the {geometry.dim}D geometry '{geometry.name}'")
+
+
 def tfi(geometry, dims, coords: list[np.ndarray] | None = None) -> np.ndarray:
     """Transfinite-interpolation mesh of ``geometry``.
 
@@ -125,9 +133,8 @@ def tfi(geometry, dims, coords: list[np.ndarray] | None = None) -> np.ndarray:
     """
     if coords is None:
         coords = parametric_grid(dims)
+    check_axes(geometry, coords)
     dim = len(coords)
-    if dim != geometry.dim:
-        raise ValueError(f"{dim} axes given for the {geometry.dim}D geometry '{geometry.name}'")
     coords = [np.asarray(c, dtype=float) for c in coords]
     if all(c[0] == 0.0 and c[-1] == 1.0 for c in coords):
         return transfinite_on_grid(geometry.boundary, coords)  # six face terms instead of 26
