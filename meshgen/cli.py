@@ -133,4 +133,7 @@ def cli():
 
 
 def main():
+    # Before torch starts its OpenMP threads (train, compare's neural rows, neural meshes): spinning
+    # threads make a CPU that other processes share tens of times slower; the user's setting wins.
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     cli.main()
