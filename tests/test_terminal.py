@@ -130,3 +130,35 @@ def test_train_at_a_real_terminal(columns, tmp_path):
     words = " ".join(summary).split()
     for word in ("equiangle", "skewness", "non-orthogonality", "characteristic"):
         assert word in words or word not in raw  # never split across lines
+
+
+COMPARE = ["compare", "-g", "semidisk", "--dims", "8", "5"]
+
+
+def test_compare_at_a_real_terminal_shows_training_and_fits_the_table(tmp_path):
+    budget = [a for item in TINY for a in ("--set", item)]
+    status, raw, lines = run_in_terminal([*COMPARE, "--methods", "tfi,elliptic,exact", *budget, "--steps", "30"], 100, tmp_path)
+    assert status == 0, raw
+    assert {PROGRESS.match(line).group(1) for line in lines if PROGRESS.match(line)} >= {"Adam", "L-BFGS"}
+    assert max(len(line) for line in lines) <= 100, "\n".join(lines)
+    header = next(line for line in lines if line.split()[:1] == ["method"])
+    assert header.split() == ["method", "tfi", "elliptic", "exact"]  # turned: a column per method
+    for label in ("min angle", "non-orth", "boundary dev", "test loss", "mesh (s)"):
+        assert any(line.strip().startswith(label) for line in lines), label
+
+
+def test_compare_table_keeps_its_full_width_in_a_file(run_cli):
+    from meshgen.compare import COLUMNS
+
+    result = run_cli(*COMPARE, "--methods", "tfi,elliptic")
+    assert result.returncode == 0, result.stderr
+    header = next(line for line in result.stdout.splitlines() if line.strip().startswith("method"))
+    assert re.split(r"\s{2,}", header.strip()) == ["method", *(column.short for column in COLUMNS)]
+    assert len(header.rstrip()) > 100
+
+
+def test_compare_at_80_columns(tmp_path):
+    status, raw, lines = run_in_terminal([*COMPARE, "--methods", "tfi,elliptic"], 80, tmp_path)
+    assert status == 0, raw
+    assert max(len(line) for line in lines) <= 80, "\n".join(lines)
+    assert any(line.split()[:3] == ["method", "tfi", "elliptic"] for line in lines)

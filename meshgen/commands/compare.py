@@ -34,7 +34,10 @@ Examples:
 
 
 def _methods_help() -> str:
-    return "Comma-separated methods: tfi, elliptic, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet [default: tfi,elliptic]."
+    from meshgen.compare import DEFAULT_METHODS
+    from meshgen.methods import METHODS
+
+    return f"Comma-separated methods: {', '.join(METHODS)} [default: {','.join(DEFAULT_METHODS)}]."
 
 
 @click.command("compare", cls=DimsCommand, epilog=EPILOG)
@@ -126,6 +129,7 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
             out_dir=out,
             mesh_format=mesh_format,
             say=say,
+            reporter=None if quiet else _training_reporter,
         )
     comparison = outcome.comparison
 
@@ -138,7 +142,7 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
     from meshgen.tables import print_table
 
     header, rows, highlight = comparing.table(comparison, short=True)
-    print_table(header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION)
+    print_table(header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION, fit_terminal=True)
     for row in comparison["rows"]:
         if "error" in row:
             click.echo(f"{row['name']} failed: {row['error']}", err=True)
@@ -151,6 +155,13 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
     if any("error" in row for row in comparison["rows"]):
         return 1
     return 0
+
+
+def _training_reporter(config):
+    """The training progress of a neural row, as ``meshgen train`` shows it."""
+    from meshgen.neural.progress import reporter_for
+
+    return reporter_for(config)
 
 
 def _short(path, out) -> str:

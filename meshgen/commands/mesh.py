@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options, load_selected_geometry
@@ -41,10 +43,10 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     import sys
     import time
 
-    from meshgen import __version__
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
     from meshgen.formats import check_output_path
+    from meshgen.meshing import Mesh
     from meshgen.methods import get_method, make_mesh
     from meshgen.quality import summary_lines, write_mesh_with_quality
 
@@ -54,7 +56,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     if method == "auto":
         # No fall-back to TFI: a geometry without a trained model is an error that says how to get one.
         method = "neural"
-    get_method(method)  # an unknown name fails before anything is loaded
+    _check_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
     options = {"tol": tol, "max_iter": max_iter, "snap": snap}
     model = None
@@ -72,16 +74,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     with progress_display(f"{method} mesh", show_progress) as progress:
         X, info = make_mesh(method, geometry, coords, progress=progress, **options)
     seconds = time.perf_counter() - start
-    metadata = {
-        "meshgen_version": __version__,
-        "method": method,
-        "geometry": geometry.name,
-        "params": geometry.values,
-        "dims": list(dims),
-        **({"cluster": list(clusters)} if clusters else {}),
-        "meshing_seconds": seconds,
-        **({"method_info": info} if info else {}),
-    }
+    metadata = Mesh(X, geometry, method, dims, clusters, info, seconds).metadata()
     # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
     report = write_mesh_with_quality(output, X, geometry, metadata)
     for line in info.get("warnings", []):
@@ -103,29 +96,52 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
             echo(line)
 
 
+def _check_method(name):
+    """An unknown method, or a trained method (``3dmeshnet``, ``pinn`` ...: ``meshgen compare``
+    trains those), is a usage error naming the choices."""
+    from meshgen.errors import did_you_mean
+    from meshgen.methods import METHODS
+
+    choices = ["auto", *(method for method, entry in METHODS.items() if entry.preset is None)]
+    if name in METHODS and name not in choices:
+        raise click.UsageError(
+            f"method '{name}' is a network trained with preset '{METHODS[name].preset}': train it with "
+            f"'meshgen train --preset {METHODS[name].preset}', then mesh with --method neural --checkpoint PATH"
+        )
+    if name not in choices:
+        raise click.UsageError(f"unknown method '{name}' (methods: {', '.join(choices)}){did_you_mean(name, choices)}")
+
+
 def _neural_model(checkpoint, spec, params, geometry_given, dims):
     """The model to mesh with (``meshgen.neural.inference.find_model``) and the geometry it was
-    trained on, with its parameters."""
-    from meshgen.geometry import load_geometry, parse_params
+    trained on, with its parameters. The geometry is loaded and checked once: the one given on the
+    command line when the model was trained on it, else the model's."""
+    from meshgen.geometry import _looks_like_path, bind, check_boundary, load_geometry, parse_params
     from meshgen.neural.inference import find_model
 
     given_params = parse_params(params)
-    name = None
-    if checkpoint is None and (geometry_given or given_params):
+    chosen = None
+    if geometry_given or given_params:
         # --param without --geometry sets the default geometry's parameters. The geometry must
-        # exist and fit --dims before models are looked up.
-        name = load_selected_geometry(spec, params, dims).name
-    elif geometry_given:
-        name = load_geometry(spec, given_params).name
+        # exist (and, unless a checkpoint decides, fit --dims) before models are looked up.
+        chosen = load_selected_geometry(spec, params, dims if checkpoint is None else None)
     model = find_model(
         checkpoint,
-        geometry_name=name,
+        geometry_name=chosen.name if chosen is not None else None,
         params=given_params,
         default_geometry=spec,
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
     )
     entry = model.geometry_entry
-    geometry = load_geometry(entry["spec"], dict(entry["params"]))
+    same_source = chosen is not None and chosen.name == entry["name"] and (
+        Path(spec).resolve() == Path(entry["spec"]).resolve() if _looks_like_path(spec) else spec == entry["spec"]
+    )
+    if same_source:
+        geometry = bind(chosen, dict(entry["params"]))
+        if geometry.values != chosen.values:
+            check_boundary(geometry)
+    else:
+        geometry = load_geometry(entry["spec"], dict(entry["params"]))
     if len(dims) != model.dim:
         raise click.BadParameter(
             f"model {model.path} ({geometry.name}) is {model.dim}D: --dims needs {model.dim} numbers, got {len(dims)}",

@@ -159,3 +159,12 @@ class LogReporter:
 
     def message(self, text):
         self._print(text)
+
+
+def reporter_for(config, quiet: bool = False):
+    """How a run with ``config`` reports: a progress bar where someone watches stderr, log lines
+    where it goes to a file or pipe or with ``quiet`` (the figures the config uses, either way)."""
+    fields = shown_fields(config)
+    if quiet or not sys.stderr.isatty():
+        return LogReporter(fields=fields)
+    return RichReporter(fields=fields)
