@@ -622,16 +622,13 @@ def prepare_out_dir(out_dir) -> Path:
 
 def write_tables(comparison: dict, out_dir) -> list[Path]:
     """``compare.json``, ``compare.md`` and ``compare.csv`` in ``out_dir``, each written atomically."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
     from meshgen.quality import write_json
 
     out_dir = Path(out_dir)
     written = [write_json(out_dir / "compare.json", comparison)]
     for name, text in (("compare.md", markdown(comparison)), ("compare.csv", csv_text(comparison))):
-        try:
-            with atomic_path(out_dir / name) as temporary:
-                temporary.write_text(text)
-        except OSError as exc:
-            raise MeshgenError(f"could not write {out_dir / name}: {exc.strerror or exc}") from exc
+        with atomic_write(out_dir / name) as temporary:
+            temporary.write_text(text)
         written.append(out_dir / name)
     return written

@@ -65,13 +65,10 @@ def check_surface_path(path) -> Path:
 
 def write_surface(geometry, path, resolution: int = 64):
     """Write ``boundary_surface`` to ``path`` (STL, PLY, OBJ or OFF by extension), atomically."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
 
     path = check_surface_path(path)
     surface = boundary_surface(geometry, resolution)
-    try:
-        with atomic_path(path) as temporary:
-            surface.export(temporary, file_type=path.suffix.lower().lstrip("."))
-    except OSError as exc:
-        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
+    with atomic_write(path) as temporary:
+        surface.export(temporary, file_type=path.suffix.lower().lstrip("."))
     return path, surface

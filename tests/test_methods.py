@@ -116,3 +116,22 @@ def test_a_neural_mesh_checks_its_geometry_once(monkeypatch):
         result = CliRunner().invoke(cli, [*args, "-o", "m.vtu", "-q"])
         assert result.exit_code == 0, result.output
         assert checked == ["semicylinder"]
+
+
+def test_atomic_write_keeps_the_old_file_and_says_why_in_one_line(tmp_path):
+    import errno
+
+    from meshgen.atomic import atomic_write
+    from meshgen.errors import FormatError
+
+    target = tmp_path / "a.txt"
+    target.write_text("old")
+    with pytest.raises(FormatError) as raised:
+        with atomic_write(target, FormatError) as temporary:
+            temporary.write_text("new")
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert str(raised.value) == f"could not write {target}: No space left on device"
+    assert target.read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]
+    with atomic_write(target) as temporary:
+        temporary.write_text("new")
+    assert target.read_text() == "new" and sorted(p.name for p in tmp_path.iterdir()) == ["a.txt"]

@@ -157,14 +157,10 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
         else:
             write_json(json_path, data)
     if markdown_path:
-        from meshgen.atomic import atomic_path
-        from meshgen.errors import MeshgenError
+        from meshgen.atomic import atomic_write
 
-        try:
-            with atomic_path(markdown_path) as temporary:
-                temporary.write_text(markdown(reports, gate_results))
-        except OSError as exc:
-            raise MeshgenError(f"could not write {markdown_path}: {exc.strerror or exc}") from exc
+        with atomic_write(markdown_path) as temporary:
+            temporary.write_text(markdown(reports, gate_results))
 
     if not quiet and not to_stdout:
         _print_table(reports)

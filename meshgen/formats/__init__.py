@@ -78,7 +78,7 @@ def check_output_path(path: str | os.PathLike) -> Path:
 
 def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dict | None = None) -> Path:
     """Write node array ``X`` to ``path`` atomically in the format its extension names."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
 
     path = check_output_path(path)
     X = np.asarray(X, dtype=float)
@@ -87,11 +87,8 @@ def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dic
     cell_data = {name: _cell_array(name, values, X.shape[:-1]) for name, values in (cell_data or {}).items()}
     metadata_json(metadata or {})  # fail before anything is written
     writer = importlib.import_module(format_for(path).module)
-    try:
-        with atomic_path(path) as temporary:
-            writer.write(temporary, X, cell_data, dict(metadata or {}))
-    except OSError as exc:
-        raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
+    with atomic_write(path, FormatError) as temporary:
+        writer.write(temporary, X, cell_data, dict(metadata or {}))
     return path
 
 
