@@ -33,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from meshgen import cube
 from meshgen.errors import GeometryError, did_you_mean
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
@@ -112,8 +113,7 @@ class Geometry:
                     f"number, got {length!r}"
                 )
             return length
-        corners = np.array(list(itertools.product((0.0, 1.0), repeat=self.dim)))
-        samples = np.concatenate([corners, _boundary_samples(self.dim, 9)])
+        samples = np.concatenate([cube.corners(self.dim), cube.face_samples(self.dim, 9)])
         mapped = self.boundary(samples)
         return float(np.linalg.norm(mapped.max(axis=0) - mapped.min(axis=0)))
 
@@ -130,18 +130,6 @@ class Geometry:
         from meshgen.surface import boundary_surface
 
         return boundary_surface(self, resolution)
-
-
-def _boundary_samples(dim: int, n: int) -> np.ndarray:
-    """A few points on every face of the unit cube (or edge of the unit square), shape (M, dim)."""
-    t = np.linspace(0.0, 1.0, n)
-    grids = np.stack(np.meshgrid(*([t] * (dim - 1)), indexing="ij"), axis=-1).reshape(-1, dim - 1)
-    samples = []
-    for axis in range(dim):
-        for side in (0.0, 1.0):
-            pts = np.insert(grids, axis, side, axis=1)
-            samples.append(pts)
-    return np.concatenate(samples)
 
 
 # ---------------------------------------------------------------------------------------------
