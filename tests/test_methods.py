@@ -26,15 +26,14 @@ def test_trained_methods_are_registered_neural_methods_with_existing_presets():
 def test_compare_neural_row_is_the_mesh_that_meshgen_mesh_makes(tmp_path, run_cli, semidisk):
     from meshgen.formats import read_mesh
     from meshgen.neural.train import train
-    from neural_helpers import TINY, tiny_config
+    from neural_helpers import tiny_config
 
     run = tmp_path / "run"
     run.mkdir()
     train(tiny_config("adam.steps=3"), semidisk, run, summary=False)
     coords = meshgen.node_coordinates((9, 5), ["eta:1:1.2"])
     outcome = comparing.compare_methods(
-        semidisk, coords, ["exact", "3dmeshnet"], checkpoints={"3dmeshnet": run / "checkpoint.pt"},
-        out_dir=tmp_path / "cmp", budget=comparing.Budget(steps=2, overrides=tuple(TINY), device="cpu"),
+        semidisk, coords, ["3dmeshnet"], checkpoints={"3dmeshnet": run / "checkpoint.pt"}, out_dir=tmp_path / "cmp",
     )
     rows = {row["name"]: row for row in outcome.comparison["rows"]}
     assert "error" not in rows["3dmeshnet"] and rows["3dmeshnet"]["kind"] == "neural"
