@@ -121,9 +121,10 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
 
     given_params = parse_params(params)
     chosen = None
-    if geometry_given or given_params:
-        # --param without --geometry sets the default geometry's parameters. The geometry must
-        # exist (and, unless a checkpoint decides, fit --dims) before models are looked up.
+    if geometry_given or (checkpoint is None and given_params):
+        # --param without --geometry (and without a checkpoint, which sets the geometry) sets the
+        # default geometry's parameters. The geometry must exist (and, unless a checkpoint decides,
+        # fit --dims) before models are looked up.
         chosen = load_selected_geometry(spec, params, dims if checkpoint is None else None)
     model = find_model(
         checkpoint,
