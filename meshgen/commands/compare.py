@@ -61,7 +61,7 @@ def _methods_help() -> str:
 @click.option("--seed", type=int, default=None, help="Neural methods: random seed of every training run [default: each preset's seed, 0].")
 @click.option("--checkpoint", "checkpoints", multiple=True, metavar="METHOD=PATH", help="Reuse a trained network instead of training (repeatable), e.g. pinn=runs/pinn/checkpoint.pt.")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Neural methods: where to train; auto picks cuda when available.")
-@click.option("--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help').")
+@click.option("--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help') [default: 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations [default: 100].")
 @click.option("--cluster", "clusters", multiple=True, metavar="AXIS:SIDE:RATIO", help="Cluster nodes towards a wall, for every method (as in 'meshgen mesh').")
 @click.option("--mesh-format", default=".vtu", show_default=True, metavar="EXT", help="Format of the meshes written with --out.")
@@ -158,7 +158,8 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
 
 
 def _training_reporter(config):
-    """The training progress of a neural row, as ``meshgen train`` shows it."""
+    """The training progress of a neural row, as ``meshgen train`` shows it (imported only when a
+    neural row trains)."""
     from meshgen.neural.progress import reporter_for
 
     return reporter_for(config)
