@@ -30,9 +30,13 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
+# Library parameters whose flag is not their name with dashes.
+FLAGS = {"overrides": "--set"}
+
+
 def flag_of(parameter: str) -> str:
     """The command-line flag of a library parameter: ``max_iter`` -> ``--max-iter``."""
-    return "--" + parameter.replace("_", "-")
+    return FLAGS.get(parameter, "--" + parameter.replace("_", "-"))
 
 
 def message_for_command_line(exc) -> str:

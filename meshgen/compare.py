@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, ParameterError
 from meshgen.methods import TRAINED
 
 DEFAULT_METHODS = ("tfi", "elliptic")
@@ -108,13 +108,13 @@ def parse_checkpoints(specs) -> dict[str, Path]:
         name, sep, path = spec.partition("=")
         name = name.strip().lower()
         if not sep or not name or not path.strip():
-            raise MeshgenError(f"malformed --checkpoint {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt")
+            raise ParameterError("checkpoint", f"malformed {{name}} {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt")
         if name not in TRAINED:
-            raise MeshgenError(
-                f"--checkpoint {spec!r}: '{name}' is not a neural method (neural methods: {', '.join(TRAINED)})"
+            raise ParameterError(
+                "checkpoint", f"{{name}} {spec!r}: '{name}' is not a neural method (neural methods: {', '.join(TRAINED)})"
             )
         if name in checkpoints:
-            raise MeshgenError(f"--checkpoint given twice for '{name}'")
+            raise ParameterError("checkpoint", f"{{name}} given twice for '{name}'")
         checkpoints[name] = Path(path.strip())
     return checkpoints
 
@@ -129,7 +129,8 @@ class Budget:
     device: str = "auto"  # auto: cuda when torch has it
 
     def given(self) -> list[str]:
-        return [flag for flag, value in (("--steps", self.steps), ("--set", self.overrides), ("--seed", self.seed)) if value]
+        """The parameters given (not at their defaults)."""
+        return [name for name, value in (("steps", self.steps), ("overrides", self.overrides), ("seed", self.seed)) if value]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -453,13 +454,14 @@ def compare_methods(
     neural = [name for name in methods if name in TRAINED]
     for name in checkpoints:
         if name not in methods:
-            raise MeshgenError(f"--checkpoint for '{name}', which is not among the compared methods ({', '.join(methods)})")
+            raise ParameterError("checkpoint", f"{{name}} for '{name}', which is not among the compared methods ({', '.join(methods)})")
     if not neural and (budget.given() or checkpoints):
-        raise MeshgenError(f"{budget.given()[0] if budget.given() else '--checkpoint'} applies to neural methods only ({', '.join(TRAINED)})")
+        given = (budget.given() or ["checkpoint"])[0]
+        raise ParameterError(given, f"{{name}} applies to neural methods only ({', '.join(TRAINED)})")
     classical = [name for name in methods if name not in TRAINED]
     for option in method_options:
         if not any(option in get_method(name).options for name in classical):
-            raise MeshgenError(f"--{option.replace('_', '-')} applies to none of the compared methods")
+            raise ParameterError(option, "{name} applies to none of the compared methods")
     prepared = {name: neural_method(name, geometry, budget, checkpoints.get(name), reporter) for name in neural}
 
     out_dir = prepare_out_dir(out_dir) if out_dir is not None else None
@@ -607,16 +609,16 @@ def prepare_out_dir(out_dir) -> Path:
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise MeshgenError(f"--out {out_dir} is a file, not a folder")
+        raise ParameterError("out", f"{{name}} {out_dir} is a file, not a folder")
     if not out_dir.exists():
         if not out_dir.parent.is_dir():
-            raise MeshgenError(f"--out {out_dir}: folder {out_dir.parent} does not exist")
+            raise ParameterError("out", f"{{name}} {out_dir}: folder {out_dir.parent} does not exist")
         try:
             out_dir.mkdir()
         except OSError as exc:
             raise MeshgenError(f"could not create {out_dir}: {exc.strerror or exc}") from exc
     if not os.access(out_dir, os.W_OK | os.X_OK):
-        raise MeshgenError(f"--out {out_dir} is not writable")
+        raise ParameterError("out", f"{{name}} {out_dir} is not writable")
     return out_dir
 
 

@@ -72,6 +72,12 @@ def test_mesh_command_names_its_methods_and_refuses_trained_ones(tmp_path):
          "cluster axis zeta does not exist in a 2D mesh", "--cluster axis zeta does not exist"),
         (lambda g: meshgen.node_coordinates((4, 4), ["eta:both"]), "cluster",
          "malformed cluster 'eta:both'", "malformed --cluster 'eta:both'"),
+        (lambda g: comparing.parse_checkpoints(["pinn"]), "checkpoint",
+         "malformed checkpoint 'pinn'", "malformed --checkpoint 'pinn'"),
+        (lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], budget=comparing.Budget(overrides=("adam.lr=1",))),
+         "overrides", "overrides applies to neural methods only", "--set applies to neural methods only"),
+        (lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], method_options={"max_iter": 3}),
+         "max_iter", "max_iter applies to none of the compared methods", "--max-iter applies to none"),
     ],
 )
 def test_library_errors_name_parameters_and_the_command_line_names_flags(call, parameter, library, command_line, semidisk):
