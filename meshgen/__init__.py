@@ -1,5 +1,9 @@
 """meshgen: structured hexahedral and quadrilateral meshes of parametrised geometries.
 
+    import meshgen
+    result = meshgen.mesh("semicylinder", (30, 30, 30), method="elliptic")
+    result.write("mesh.vtu")  # with the per-cell metrics, and mesh.vtu.quality.json
+
 The node array ``X`` is the one currency between the parts: shape ``(n1+1, n2+1, n3+1, 3)``
 (2D: ``(n1+1, n2+1, 2)``), float64, index order (i, j, k) = (xi, eta, zeta).
 
@@ -10,6 +14,8 @@ elliptic``); the names below are imported lazily so that ``import meshgen`` stay
 __version__ = "0.1.0"
 
 _LAZY = {
+    "mesh": "meshgen.meshing",
+    "Mesh": "meshgen.meshing",
     "load_geometry": "meshgen.geometry",
     "list_geometries": "meshgen.geometry",
     "Geometry": "meshgen.geometry",
@@ -21,9 +27,11 @@ _LAZY = {
     "write_mesh": "meshgen.formats",
     "read_mesh": "meshgen.formats",
     "cell_metrics": "meshgen.quality",
+    "write_mesh_with_quality": "meshgen.quality",
     "quality_report": "meshgen.quality",
     "boundary_deviation": "meshgen.deviation",
     "MeshgenError": "meshgen.errors",
+    "ParameterError": "meshgen.errors",
 }
 
 __all__ = ["__version__", *_LAZY]

@@ -25,6 +25,20 @@ def atomic_path(target: str | os.PathLike):
         raise
 
 
+@contextlib.contextmanager
+def atomic_write(target: str | os.PathLike, error=None, what: str = ""):
+    """``atomic_path`` for a file meshgen writes for the user: an OSError (a full disk, no
+    permission) becomes ``error`` (default MeshgenError), one line ``could not write <what><target>:
+    <reason>``, and the previous file is kept."""
+    from meshgen.errors import MeshgenError
+
+    try:
+        with atomic_path(target) as temporary:
+            yield temporary
+    except OSError as exc:
+        raise (error or MeshgenError)(f"could not write {what}{target}: {exc.strerror or exc}") from exc
+
+
 def check_output_file(path: str | os.PathLike, example_name: str) -> Path:
     """Validate an output file path before any work is done: not a folder, inside an existing,
     writable folder. ``example_name`` (e.g. "mesh.vtu") is suggested when ``path`` is a folder.

@@ -30,6 +30,23 @@ def one_line(message: str) -> str:
     return " ".join(str(message).split())
 
 
+# Library parameters whose flag is not their name with dashes.
+FLAGS = {"overrides": "--set"}
+
+
+def flag_of(parameter: str) -> str:
+    """The command-line flag of a library parameter: ``max_iter`` -> ``--max-iter``."""
+    return FLAGS.get(parameter, "--" + parameter.replace("_", "-"))
+
+
+def message_for_command_line(exc) -> str:
+    """A library error as the command line words it: a ParameterError names the flag
+    (``--tol must be positive``) where the library names the parameter (``tol must be positive``)."""
+    from meshgen.errors import ParameterError
+
+    return exc.message_for(flag_of(exc.parameter)) if isinstance(exc, ParameterError) else str(exc)
+
+
 class MeshgenGroup(click.Group):
     def list_commands(self, ctx):
         return list(COMMANDS)
@@ -47,18 +64,22 @@ class MeshgenGroup(click.Group):
     def resolve_command(self, ctx, args):
         name = args[0] if args else None
         if name is not None and name not in COMMANDS and not name.startswith("-"):
-            import difflib
+            from meshgen.errors import did_you_mean
 
-            close = difflib.get_close_matches(name, list(COMMANDS), n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
+            hint = did_you_mean(name, COMMANDS)
             raise click.UsageError(f"no command '{name}' (commands: {', '.join(COMMANDS)}){hint}", ctx)
         return super().resolve_command(ctx, args)
 
     def main(self, args=None, prog_name=None, **extra):
-        """Run with our own error reporting: one line on stderr, exit 2 for usage errors."""
+        """Run with our own error reporting: one line on stderr, exit 2 for usage errors. With no
+        arguments at all, print the help (exit 0), not an error."""
         from meshgen.errors import MeshgenError
 
         extra.pop("standalone_mode", None)
+        if args is None:
+            args = sys.argv[1:]
+        if not args:
+            args = ["--help"]
         debug = bool(os.environ.get("MESHGEN_DEBUG"))
         try:
             result = super().main(args=args, prog_name=prog_name or "meshgen", standalone_mode=False, **extra)
@@ -81,7 +102,7 @@ class MeshgenGroup(click.Group):
         except MeshgenError as exc:
             if debug:
                 raise
-            click.echo(f"Error: {one_line(exc)}", err=True)
+            click.echo(f"Error: {one_line(message_for_command_line(exc))}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
@@ -116,4 +137,7 @@ def cli():
 
 
 def main():
+    # Before torch starts its OpenMP threads (train, compare's neural rows, neural meshes): spinning
+    # threads make a CPU that other processes share tens of times slower; the user's setting wins.
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     cli.main()

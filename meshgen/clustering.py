@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import ParameterError
 
 AXES = {"xi": 0, "eta": 1, "zeta": 2, "i": 0, "j": 1, "k": 2}
 SIDES = {"0": "min", "min": "min", "1": "max", "max": "max", "both": "both"}
@@ -33,24 +33,24 @@ class Cluster:
 def parse_cluster(text: str) -> Cluster:
     """``"zeta:both:1.1"`` -> Cluster(axis=2, side="both", ratio=1.1); malformed specs raise."""
     parts = text.strip().split(":")
-    usage = f"malformed --cluster {text!r}: expected AXIS:SIDE:RATIO or AXIS:SIDE:h=HEIGHT, e.g. zeta:both:1.1"
+    usage = f"malformed {{name}} {text!r}: expected AXIS:SIDE:RATIO or AXIS:SIDE:h=HEIGHT, e.g. zeta:both:1.1"
     if len(parts) != 3:
-        raise MeshgenError(usage)
+        raise ParameterError("cluster", usage)
     axis, side, growth = (p.strip().lower() for p in parts)
     if axis not in AXES:
-        raise MeshgenError(f"{usage} (axis must be one of xi, eta, zeta)")
+        raise ParameterError("cluster", f"{usage} (axis must be one of xi, eta, zeta)")
     if side not in SIDES:
-        raise MeshgenError(f"{usage} (side must be 0, 1 or both)")
+        raise ParameterError("cluster", f"{usage} (side must be 0, 1 or both)")
     try:
         value = float(growth[2:] if growth.startswith("h=") else growth)
     except ValueError:
-        raise MeshgenError(usage) from None
+        raise ParameterError("cluster", usage) from None
     if growth.startswith("h="):
         if not 0.0 < value < 1.0:
-            raise MeshgenError(f"malformed --cluster {text!r}: the first-cell height must lie in (0, 1)")
+            raise ParameterError("cluster", f"malformed {{name}} {text!r}: the first-cell height must lie in (0, 1)")
         return Cluster(AXES[axis], SIDES[side], first_height=value)
     if not (np.isfinite(value) and value >= 1.0):
-        raise MeshgenError(f"malformed --cluster {text!r}: the growth ratio must be a number >= 1")
+        raise ParameterError("cluster", f"malformed {{name}} {text!r}: the growth ratio must be a number >= 1")
     return Cluster(AXES[axis], SIDES[side], ratio=value)
 
 
@@ -68,14 +68,14 @@ def _solve_ratio(n: int, side: str, first_height: float) -> float:
         return 1.0 / np.sum(r**exponents)
 
     if first_cell(1.0) <= first_height:
-        raise MeshgenError(
-            f"--cluster h={first_height:g} is not below the uniform cell height {1.0 / n:g}: nothing to cluster"
+        raise ParameterError(
+            "cluster", f"{{name}} h={first_height:g} is not below the uniform cell height {1.0 / n:g}: nothing to cluster"
         )
     low, high = 1.0, 2.0
     while first_cell(high) > first_height:
         low, high = high, high * 2.0
         if high > 1e6:
-            raise MeshgenError(f"--cluster h={first_height:g} cannot be reached with {n} cells")
+            raise ParameterError("cluster", f"{{name}} h={first_height:g} cannot be reached with {n} cells")
     for _ in range(200):
         middle = 0.5 * (low + high)
         low, high = (middle, high) if first_cell(middle) > first_height else (low, middle)
@@ -98,9 +98,9 @@ def node_coordinates(dims, specs=()) -> list[np.ndarray]:
     for spec in specs:
         cluster = parse_cluster(spec) if isinstance(spec, str) else spec
         if cluster.axis >= len(dims):
-            raise MeshgenError(f"--cluster axis {list(AXES)[cluster.axis]} does not exist in a {len(dims)}D mesh")
+            raise ParameterError("cluster", f"{{name}} axis {list(AXES)[cluster.axis]} does not exist in a {len(dims)}D mesh")
         if cluster.axis in seen:
-            raise MeshgenError(f"--cluster given twice for axis {list(AXES)[cluster.axis]}")
+            raise ParameterError("cluster", f"{{name}} given twice for axis {list(AXES)[cluster.axis]}")
         seen.add(cluster.axis)
         coords[cluster.axis] = clustered_coordinates(int(dims[cluster.axis]), cluster)
     return coords

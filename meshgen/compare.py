@@ -27,12 +27,15 @@ fairly. Values equal up to round-off (relative 1e-9; boundary deviation below 1e
 characteristic length) tie, and every tied row is marked. A column needs two rows with a value to
 have a best one. ``valid`` has no best.
 
-Neural methods enter through one adapter, ``neural_method``; everything else only sees a function
-that meshes given parametric coordinates.
+Every row is meshed by ``meshgen.methods.make_mesh``, as ``meshgen mesh`` meshes. The trained
+methods (``3dmeshnet``, ``exact``, ``pinn`` ...: registered methods with a training preset) first
+get their network through one adapter, ``neural_method`` (trained here, or a given checkpoint),
+and then mesh like ``meshgen mesh --method neural --checkpoint`` of that network.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
@@ -44,17 +47,9 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, ParameterError
+from meshgen.methods import TRAINED
 
-# Neural methods: compare's name -> training preset (presets/<preset>.yaml). DESIGN section 6.
-NEURAL_PRESETS = {
-    "3dmeshnet": "default",
-    "exact": "exact",
-    "pinn": "pinn",
-    "fd-pinn": "fd-pinn",
-    "rwgp-pinn": "rwgp-pinn",
-    "mgnet": "mgnet",
-}
 DEFAULT_METHODS = ("tfi", "elliptic")
 
 
@@ -87,26 +82,22 @@ TIE_RELATIVE = 1e-9
 
 
 def method_names() -> list[str]:
-    """Every method compare knows: the registered classical ones, then the neural ones."""
+    """Every method compare knows: the registered ones (``meshgen.methods``)."""
     from meshgen.methods import METHODS
 
-    return [*METHODS, *NEURAL_PRESETS]
+    return list(METHODS)
 
 
 def parse_methods(text: str) -> list[str]:
     """``"tfi,elliptic"`` -> ["tfi", "elliptic"] (repeats dropped); MeshgenError naming the valid
     ones for an unknown name."""
-    import difflib
+    from meshgen.methods import get_method
 
     names = list(dict.fromkeys(part.strip().lower() for part in text.split(",") if part.strip()))
     if not names:
         raise MeshgenError(f"no methods given (methods: {', '.join(method_names())})")
-    known = method_names()
     for name in names:
-        if name not in known:
-            close = difflib.get_close_matches(name, known, n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise MeshgenError(f"unknown method '{name}' (methods: {', '.join(known)}){hint}")
+        get_method(name)
     return names
 
 
@@ -117,13 +108,13 @@ def parse_checkpoints(specs) -> dict[str, Path]:
         name, sep, path = spec.partition("=")
         name = name.strip().lower()
         if not sep or not name or not path.strip():
-            raise MeshgenError(f"malformed --checkpoint {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt")
-        if name not in NEURAL_PRESETS:
-            raise MeshgenError(
-                f"--checkpoint {spec!r}: '{name}' is not a neural method (neural methods: {', '.join(NEURAL_PRESETS)})"
+            raise ParameterError("checkpoint", f"malformed {{name}} {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt")
+        if name not in TRAINED:
+            raise ParameterError(
+                "checkpoint", f"{{name}} {spec!r}: '{name}' is not a neural method (neural methods: {', '.join(TRAINED)})"
             )
         if name in checkpoints:
-            raise MeshgenError(f"--checkpoint given twice for '{name}'")
+            raise ParameterError("checkpoint", f"{{name}} given twice for '{name}'")
         checkpoints[name] = Path(path.strip())
     return checkpoints
 
@@ -135,49 +126,49 @@ class Budget:
     steps: int | None = None
     overrides: tuple[str, ...] = ()
     seed: int | None = None
-    device: str = "cpu"
+    device: str = "auto"  # auto: cuda when torch has it
 
     def given(self) -> list[str]:
-        return [flag for flag, value in (("--steps", self.steps), ("--set", self.overrides), ("--seed", self.seed)) if value]
+        """The parameters given (not at their defaults)."""
+        return [name for name, value in (("steps", self.steps), ("overrides", self.overrides), ("seed", self.seed)) if value]
 
 
 # ---------------------------------------------------------------------------------------------
 # the neural adapter: the one place that knows meshgen.neural
 
 
-def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None):
-    """Prepare neural method ``name`` (a key of ``NEURAL_PRESETS``) on ``geometry``.
+def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, reporter=None):
+    """Prepare trained method ``name`` (a registered method with a training preset) on ``geometry``.
 
     Checks everything that can be checked cheaply now (the neural package, the preset and the
-    overrides, the checkpoint and its geometry), so that bad input fails before any method runs.
-    Returns ``run(run_dir) -> (mesh, record)``: it trains in ``run_dir`` (or loads the checkpoint),
-    then ``mesh(coords) -> (X, info)`` evaluates the network at the parametric coordinates, and
-    ``record`` holds ``training_seconds``, ``test_loss`` (float or None), ``checkpoint`` and
-    ``history`` (path of the loss history CSV, or None).
+    overrides, the device, the checkpoint and its geometry), so that bad input fails before any
+    method runs. Returns ``run(run_dir) -> (model, record)``: it trains in ``run_dir`` (or loads the
+    checkpoint); ``model`` is the ``TrainedModel`` to give ``make_mesh(name, ..., model=model)``,
+    and ``record`` holds ``training_seconds``, ``test_loss`` (float or None), ``checkpoint`` and
+    ``history`` (path of the loss history CSV, or None). ``reporter``: a function of the training
+    configuration that returns a training reporter (``meshgen.neural.progress.reporter_for``), or None.
     """
     try:
-        from meshgen.neural.checkpoint import load_checkpoint
         from meshgen.neural.config import resolve_config
-        from meshgen.neural.model import mesh_from_checkpoint
+        from meshgen.neural.inference import load_model
+        from meshgen.neural.session import resolve_device
         from meshgen.neural.train import train
     except ImportError as exc:
         raise MeshgenError(
             f"neural methods need meshgen.neural, which this installation lacks ({exc}); "
             f"compare {', '.join(DEFAULT_METHODS)} meanwhile"
         ) from None
+    from meshgen.methods import get_method
 
     def total_loss(test_loss):
         if isinstance(test_loss, dict):
             test_loss = test_loss.get("total")
         return float(test_loss) if isinstance(test_loss, (int, float)) else None
 
-    def mesher(checkpoint):
-        return lambda coords: (mesh_from_checkpoint(checkpoint, coords, geometry), {})
-
     if checkpoint_path is not None:
         checkpoint_path = Path(checkpoint_path)
-        checkpoint = load_checkpoint(checkpoint_path)
-        trained_on = checkpoint.get("geometry", {}).get("name")
+        model = load_model(checkpoint_path)
+        trained_on = model.geometry_entry.get("name")
         if trained_on != geometry.name:
             raise MeshgenError(f"checkpoint {checkpoint_path} was trained on '{trained_on}', not on '{geometry.name}'")
         history = checkpoint_path.with_name("history.csv")
@@ -185,27 +176,30 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None):
         def run(run_dir):
             record = {
                 "checkpoint": str(checkpoint_path),
-                "training_seconds": checkpoint.get("elapsed_seconds"),
-                "test_loss": total_loss(checkpoint.get("test_loss")),
+                "training_seconds": model.checkpoint.get("elapsed_seconds"),
+                "test_loss": total_loss(model.checkpoint.get("test_loss")),
                 "history": str(history) if history.is_file() else None,
             }
-            return mesher(checkpoint), record
+            return model, record
 
         return run
 
-    config = resolve_config(NEURAL_PRESETS[name], overrides=budget.overrides, steps=budget.steps, seed=budget.seed)
+    config = resolve_config(get_method(name).preset, overrides=budget.overrides, steps=budget.steps, seed=budget.seed)
+    device = resolve_device(budget.device)
 
     def run(run_dir):
         run_dir = Path(run_dir)
         run_dir.mkdir(parents=True, exist_ok=True)
-        result = train(config, geometry, run_dir, device=budget.device, summary=False)
+        progress = reporter(config) if reporter is not None else None
+        with progress if progress is not None else contextlib.nullcontext():
+            result = train(config, geometry, run_dir, device=device, reporter=progress, summary=False)
         record = {
             "checkpoint": str(result.checkpoint_path),
             "training_seconds": float(result.seconds),
             "test_loss": total_loss(result.test_loss),
             "history": str(run_dir / "history.csv") if (run_dir / "history.csv").is_file() else None,
         }
-        return mesher(result.checkpoint), record
+        return load_model(result.checkpoint_path, source="run"), record
 
     return run
 
@@ -431,6 +425,7 @@ def compare_methods(
     out_dir=None,
     mesh_format: str = ".vtu",
     say=lambda text: None,
+    reporter=None,
 ) -> Outcome:
     """Mesh ``geometry`` at parametric node coordinates ``coords`` (one 1D array per axis) with each
     method of ``methods`` and measure the meshes.
@@ -442,6 +437,7 @@ def compare_methods(
     neural methods' run folders (``runs/<method>/``) go, created after the checks of the input
     and before any method runs; None keeps nothing. ``say`` receives a line per step. A method
     that fails with a MeshgenError gets a row with its ``error``; the others still run.
+    ``reporter``: how training shows its progress (see ``neural_method``).
     """
     from meshgen import __version__
     from meshgen.methods import get_method, make_mesh
@@ -455,39 +451,36 @@ def compare_methods(
     # Everything that can be checked is checked before anything runs.
     if len(coords) != geometry.dim:
         raise MeshgenError(f"geometry '{geometry.name}' is {geometry.dim}D: it needs {geometry.dim} coordinate axes, got {len(coords)}")
-    neural = [name for name in methods if name in NEURAL_PRESETS]
+    neural = [name for name in methods if name in TRAINED]
     for name in checkpoints:
         if name not in methods:
-            raise MeshgenError(f"--checkpoint for '{name}', which is not among the compared methods ({', '.join(methods)})")
+            raise ParameterError("checkpoint", f"{{name}} for '{name}', which is not among the compared methods ({', '.join(methods)})")
     if not neural and (budget.given() or checkpoints):
-        raise MeshgenError(f"{budget.given()[0] if budget.given() else '--checkpoint'} applies to neural methods only ({', '.join(NEURAL_PRESETS)})")
-    classical = [name for name in methods if name not in NEURAL_PRESETS]
+        given = (budget.given() or ["checkpoint"])[0]
+        raise ParameterError(given, f"{{name}} applies to neural methods only ({', '.join(TRAINED)})")
+    classical = [name for name in methods if name not in TRAINED]
     for option in method_options:
         if not any(option in get_method(name).options for name in classical):
-            raise MeshgenError(f"--{option.replace('_', '-')} applies to none of the compared methods")
-    prepared = {name: neural_method(name, geometry, budget, checkpoints.get(name)) for name in neural}
+            raise ParameterError(option, "{name} applies to none of the compared methods")
+    prepared = {name: neural_method(name, geometry, budget, checkpoints.get(name), reporter) for name in neural}
 
     out_dir = prepare_out_dir(out_dir) if out_dir is not None else None
     scratch = tempfile.TemporaryDirectory(prefix="meshgen-compare-") if neural and out_dir is None else None
     rows, pictures = [], []
     try:
         for name in methods:
-            row = {"name": name, "kind": "neural" if name in NEURAL_PRESETS else "classical"}
+            row = {"name": name, "kind": "neural" if get_method(name).neural else "classical"}
             record = {}
             try:
+                options = {k: v for k, v in method_options.items() if k in get_method(name).options}
                 if name in prepared:
                     run_dir = (out_dir if out_dir is not None else Path(scratch.name)) / "runs" / name
                     say(f"{name}: {'loading ' + str(checkpoints[name]) if name in checkpoints else 'training'} ...")
-                    mesh_at, record = prepared[name](run_dir)
+                    options["model"], record = prepared[name](run_dir)
                     row.update({k: v for k, v in record.items() if k != "history"})
 
-                    def mesh(mesh_at=mesh_at):
-                        return mesh_at(coords)
-                else:
-                    options = {k: v for k, v in method_options.items() if k in get_method(name).options}
-
-                    def mesh(name=name, options=options):
-                        return make_mesh(name, geometry, coords, **options)
+                def mesh(name=name, options=options):
+                    return make_mesh(name, geometry, coords, **options)
 
                 (X, info), timings = timed(mesh, timing_repeats)
             except MeshgenError as exc:
@@ -616,31 +609,28 @@ def prepare_out_dir(out_dir) -> Path:
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
-        raise MeshgenError(f"--out {out_dir} is a file, not a folder")
+        raise ParameterError("out", f"{{name}} {out_dir} is a file, not a folder")
     if not out_dir.exists():
         if not out_dir.parent.is_dir():
-            raise MeshgenError(f"--out {out_dir}: folder {out_dir.parent} does not exist")
+            raise ParameterError("out", f"{{name}} {out_dir}: folder {out_dir.parent} does not exist")
         try:
             out_dir.mkdir()
         except OSError as exc:
             raise MeshgenError(f"could not create {out_dir}: {exc.strerror or exc}") from exc
     if not os.access(out_dir, os.W_OK | os.X_OK):
-        raise MeshgenError(f"--out {out_dir} is not writable")
+        raise ParameterError("out", f"{{name}} {out_dir} is not writable")
     return out_dir
 
 
 def write_tables(comparison: dict, out_dir) -> list[Path]:
     """``compare.json``, ``compare.md`` and ``compare.csv`` in ``out_dir``, each written atomically."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
     from meshgen.quality import write_json
 
     out_dir = Path(out_dir)
     written = [write_json(out_dir / "compare.json", comparison)]
     for name, text in (("compare.md", markdown(comparison)), ("compare.csv", csv_text(comparison))):
-        try:
-            with atomic_path(out_dir / name) as temporary:
-                temporary.write_text(text)
-        except OSError as exc:
-            raise MeshgenError(f"could not write {out_dir / name}: {exc.strerror or exc}") from exc
+        with atomic_write(out_dir / name) as temporary:
+            temporary.write_text(text)
         written.append(out_dir / name)
     return written

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshgen.cube import faces as cube_faces
+
 COARSE_INTERVALS = {3: 16, 2: 64}  # coarse samples per face parameter, minus one
 ON_BOUNDARY = 1e-10  # relative to the characteristic length: a node this close needs no search
 FD_STEP = 1e-7  # finite-difference step of the Jacobian, in face parameters
@@ -33,8 +35,8 @@ METHOD = "closest point on the geometry's boundary map: coarse search, then proj
 
 def _faces(dim: int):
     """(axis, side) of each face of the unit cube (square), and each face's parameter axes."""
-    faces = [(axis, side) for axis in range(dim) for side in (0.0, 1.0)]
-    parameters = np.array([[d for d in range(dim) if d != axis] for axis, _ in faces])
+    faces = [(face.axis, float(face.side)) for face in cube_faces(dim)]
+    parameters = np.array([face.tangent_axes for face in cube_faces(dim)])
     return faces, parameters
 
 

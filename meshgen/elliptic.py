@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import ParameterError
 from meshgen.winslow import centre_coefficient, component_array, node_array, stencils, winslow_operator
 
 DEFAULT_TOL = 1e-6  # largest node update per cycle, relative to the characteristic length
@@ -321,9 +321,9 @@ class ConvergenceWarning(UserWarning):
 
 def _check_options(tol, max_iter):
     if not (isinstance(tol, (int, float)) and np.isfinite(tol) and tol > 0):
-        raise MeshgenError(f"--tol must be a positive number, got {tol}")
+        raise ParameterError("tol", f"{{name}} must be a positive number, got {tol}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise MeshgenError(f"--max-iter must be a positive integer, got {max_iter}")
+        raise ParameterError("max_iter", f"{{name}} must be a positive integer, got {max_iter}")
 
 
 def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None):
@@ -348,7 +348,7 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
         info["warnings"] = [
             f"elliptic solver did not converge: after {info['iterations']} cycle(s) the largest node update is "
             f"{info['final_update']:.3g} of the characteristic length (tolerance {tol:g}), residual "
-            f"{info['final_residual']:.3g}; raise --max-iter or --tol"
+            f"{info['final_residual']:.3g}; raise the iteration limit or the tolerance"
         ]
     return X, info
 
@@ -362,12 +362,11 @@ def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_
     """
     import warnings
 
-    from meshgen.tfi import parametric_grid
+    from meshgen.tfi import check_axes, parametric_grid
 
     if coords is None:
         coords = parametric_grid(dims)
-    if len(coords) != geometry.dim:
-        raise MeshgenError(f"{len(coords)} axes given for the {geometry.dim}D geometry '{geometry.name}'")
+    check_axes(geometry, coords)
     X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress)
     for line in info.get("warnings", []):
         warnings.warn(line, ConvergenceWarning, stacklevel=2)

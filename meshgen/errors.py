@@ -11,3 +11,31 @@ class GeometryError(MeshgenError):
 
 class FormatError(MeshgenError):
     """A mesh could not be written or read in the requested format."""
+
+
+class ParameterError(MeshgenError):
+    """A bad value of one parameter of a library function. The message names the parameter where
+    ``{name}`` stands in ``template``: as the parameter (``tol``) for a Python caller, as its flag
+    (``--tol``) on the command line (``message_for``)."""
+
+    def __init__(self, parameter: str, template: str):
+        self.parameter = parameter
+        self.template = template
+        super().__init__(template.replace("{name}", parameter))
+
+    def message_for(self, name: str) -> str:
+        return self.template.replace("{name}", name)
+
+
+def did_you_mean(name: str, choices) -> str:
+    """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``name``, or ``""``."""
+    import difflib
+
+    close = difflib.get_close_matches(name, list(choices), n=1)
+    return f"; did you mean '{close[0]}'?" if close else ""
+
+
+def unknown_name(kind: str, name: str, choices, error=MeshgenError) -> MeshgenError:
+    """The error for an unknown ``kind`` (method, preset, ...): ``unknown method 'x' (methods: a,
+    b); did you mean 'a'?``."""
+    return error(f"unknown {kind} '{name}' ({kind}s: {', '.join(choices)}){did_you_mean(name, choices)}")

@@ -8,12 +8,11 @@ closed.
 
 from __future__ import annotations
 
-import difflib
 import operator
 import re
 from dataclasses import dataclass
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, did_you_mean
 from meshgen.quality import METRICS, STATS
 
 OPERATORS = {"<=": operator.le, ">=": operator.ge, "==": operator.eq, "!=": operator.ne, "<": operator.lt, ">": operator.gt}
@@ -66,9 +65,7 @@ def parse_gate(text: str) -> Gate:
     name, op, raw = match.groups()
     names = gate_names()
     if name not in names:
-        close = difflib.get_close_matches(name, names, n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise GateError(f"unknown quantity {name!r} in --fail-if {text!r}{hint} Valid: {valid_names_text()}")
+        raise GateError(f"unknown quantity {name!r} in --fail-if {text!r}{did_you_mean(name, names)} Valid: {valid_names_text()}")
     lowered = raw.lower()
     if lowered in ("true", "false"):
         threshold = 1.0 if lowered == "true" else 0.0

@@ -27,7 +27,6 @@ that register a module under the entry-point group ``meshgen.geometries``, and a
 
 from __future__ import annotations
 
-import difflib
 import importlib.util
 import itertools
 import sys
@@ -38,7 +37,8 @@ from typing import Callable
 
 import numpy as np
 
-from meshgen.errors import GeometryError
+from meshgen import cube
+from meshgen.errors import GeometryError, did_you_mean
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
 
@@ -118,8 +118,7 @@ class Geometry:
                     f"number, got {length!r}"
                 )
             return length
-        corners = np.array(list(itertools.product((0.0, 1.0), repeat=self.dim)))
-        samples = np.concatenate([corners, _boundary_samples(self.dim, 9)])
+        samples = np.concatenate([cube.corners(self.dim), cube.face_samples(self.dim, 9)])
         mapped = self.boundary(samples)
         return float(np.linalg.norm(mapped.max(axis=0) - mapped.min(axis=0)))
 
@@ -144,18 +143,6 @@ class Geometry:
         from meshgen.surface import boundary_surface
 
         return boundary_surface(self, resolution)
-
-
-def _boundary_samples(dim: int, n: int) -> np.ndarray:
-    """A few points on every face of the unit cube (or edge of the unit square), shape (M, dim)."""
-    t = np.linspace(0.0, 1.0, n)
-    grids = np.stack(np.meshgrid(*([t] * (dim - 1)), indexing="ij"), axis=-1).reshape(-1, dim - 1)
-    samples = []
-    for axis in range(dim):
-        for side in (0.0, 1.0):
-            pts = np.insert(grids, axis, side, axis=1)
-            samples.append(pts)
-    return np.concatenate(samples)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -254,8 +241,7 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
     unknown = sorted(set(values) - set(geometry.defaults))
     if unknown:
         valid = ", ".join(geometry.defaults) or "none"
-        close = difflib.get_close_matches(unknown[0], list(geometry.defaults), n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
+        hint = did_you_mean(unknown[0], geometry.defaults)
         raise GeometryError(
             f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}"
         )
@@ -297,9 +283,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
             eps = _entry_points()
             if spec not in eps:
                 names = available_names()
-                close = difflib.get_close_matches(spec, names, n=1)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
-                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){hint}")
+                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
             try:
                 module = eps[spec].load()
             except (Exception, SystemExit) as exc:

@@ -1,14 +1,21 @@
-"""Meshing methods, looked up by name. Each maps a geometry and 1D parametric node coordinates to a
-node array: ``build(geometry, coords, **options) -> (X, info)``, with ``info`` a JSON-serialisable
-dict of what the method wants recorded (iterations, residual, ...)."""
+"""Meshing methods, looked up by name: one registry for ``meshgen mesh``, ``meshgen compare`` and
+``meshgen.mesh``. Each maps a geometry and 1D parametric node coordinates to a node array:
+``build(geometry, coords, **options) -> (X, info)``, with ``info`` a JSON-serialisable dict of what
+the method wants recorded (iterations, residual, ...).
+
+The neural methods are one function, ``meshgen.neural.inference.build_neural`` (a trained network
+evaluated at the nodes, its boundary corrected onto the geometry), registered once as ``neural``
+(any trained model) and once per training preset (``3dmeshnet``, ``exact``, ``pinn`` ...: the
+methods of DESIGN section 6, which ``meshgen compare`` trains with that preset). So a mesh of the
+same checkpoint is the same mesh, whichever command makes it.
+"""
 
 from __future__ import annotations
 
 import importlib
-import difflib
 from dataclasses import dataclass
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, ParameterError, unknown_name
 
 
 @dataclass(frozen=True)
@@ -17,6 +24,11 @@ class Method:
     function: str  # "module:function"
     description: str
     options: tuple[str, ...] = ()  # keyword options the function accepts beyond (geometry, coords)
+    preset: str | None = None  # neural: the training preset that makes its network (None: any model)
+
+    @property
+    def neural(self) -> bool:
+        return "model" in self.options
 
     def build(self, geometry, coords, **options):
         module_name, function_name = self.function.split(":")
@@ -30,16 +42,20 @@ def register_method(method: Method) -> None:
     METHODS[method.name] = method
 
 
+NEURAL = "meshgen.neural.inference:build_neural"
+NEURAL_OPTIONS = ("model", "snap")
 register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic"))
 register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress")))
-register_method(Method("neural", "meshgen.neural.inference:build_neural", "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=("model", "snap")))
+register_method(Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS))
+# The trained methods of DESIGN section 6: name -> training preset (presets/<preset>.yaml).
+TRAINED = {"3dmeshnet": "default", "exact": "exact", "pinn": "pinn", "fd-pinn": "fd-pinn", "rwgp-pinn": "rwgp-pinn", "mgnet": "mgnet"}
+for _name, _preset in TRAINED.items():
+    register_method(Method(_name, NEURAL, f"a network trained with preset '{_preset}'", options=NEURAL_OPTIONS, preset=_preset))
 
 
 def get_method(name: str) -> Method:
     if name not in METHODS:
-        close = difflib.get_close_matches(name, list(METHODS), n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise MeshgenError(f"unknown method '{name}' (methods: {', '.join(METHODS)}){hint}")
+        raise unknown_name("method", name, METHODS)
     return METHODS[name]
 
 
@@ -55,6 +71,5 @@ def make_mesh(method_name: str, geometry, coords, **options):
     given = {k: v for k, v in options.items() if v is not None}
     foreign = sorted(set(given) - set(method.options))
     if foreign:
-        flag = "--" + foreign[0].replace("_", "-")
-        raise MeshgenError(f"{flag} does not apply to method '{method_name}'")
+        raise ParameterError(foreign[0], f"{{name}} does not apply to method '{method_name}'")
     return method.build(geometry, coords, **given)

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
 from meshgen.tables import METRIC_LABELS
 
 PANEL_PX = (400, 360)
@@ -140,14 +139,11 @@ def _axes(figure, size, column: int, row: int, left=58, right=14, bottom=44, top
 
 
 def _save(figure, path) -> Path:
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
 
     path = Path(path)
-    try:
-        with atomic_path(path) as temporary:
-            figure.savefig(temporary, dpi=DPI, format="png")
-    except OSError as exc:
-        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
+    with atomic_write(path) as temporary:
+        figure.savefig(temporary, dpi=DPI, format="png")
     return path
 
 

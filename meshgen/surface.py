@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import check_output_file
+from meshgen.cube import faces as cube_faces
 from meshgen.errors import MeshgenError
 
 SURFACE_EXTENSIONS = (".stl", ".ply", ".obj", ".off")
@@ -37,13 +38,13 @@ def boundary_surface(geometry, resolution: int = 64):
         vertices = np.column_stack([X, np.zeros(len(X))])
         return trimesh.Trimesh(vertices, _grid_triangles(n, flip=False), process=False)
     lattice, faces = [], []
-    for axis in range(3):
-        b, c = (axis + 1) % 3, (axis + 2) % 3
-        for side in (0, n):
-            nodes = np.empty((len(u), 3), dtype=np.int64)
-            nodes[:, axis], nodes[:, b], nodes[:, c] = side, u, v
-            faces.append(_grid_triangles(n, flip=side == 0) + sum(len(x) for x in lattice))
-            lattice.append(nodes)
+    for face in cube_faces(3):
+        axis = face.axis
+        b, c = (axis + 1) % 3, (axis + 2) % 3  # cyclic, so that side 1 faces outward unflipped
+        nodes = np.empty((len(u), 3), dtype=np.int64)
+        nodes[:, axis], nodes[:, b], nodes[:, c] = face.side * n, u, v
+        faces.append(_grid_triangles(n, flip=face.side == 0) + sum(len(x) for x in lattice))
+        lattice.append(nodes)
     lattice = np.concatenate(lattice)
     # Faces share their edge nodes: merge them by integer lattice position, so the surface is closed.
     unique, inverse = np.unique(lattice, axis=0, return_inverse=True)
@@ -65,13 +66,10 @@ def check_surface_path(path) -> Path:
 
 def write_surface(geometry, path, resolution: int = 64):
     """Write ``boundary_surface`` to ``path`` (STL, PLY, OBJ or OFF by extension), atomically."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
 
     path = check_surface_path(path)
     surface = boundary_surface(geometry, resolution)
-    try:
-        with atomic_path(path) as temporary:
-            surface.export(temporary, file_type=path.suffix.lower().lstrip("."))
-    except OSError as exc:
-        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
+    with atomic_write(path) as temporary:
+        surface.export(temporary, file_type=path.suffix.lower().lstrip("."))
     return path, surface

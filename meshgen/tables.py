@@ -44,15 +44,46 @@ def markdown_table(header, rows, highlight=frozenset()) -> list[str]:
     return lines
 
 
-def print_table(header, rows, title=None, highlight=frozenset(), caption=None, file=None) -> None:
+def transposed(header, rows, highlight=frozenset()):
+    """The table turned by a quarter: a row per column of the original, a column per row (the
+    first column's entries become the header). Returns (header, rows, highlight)."""
+    new_header = [header[0], *(row[0] for row in rows)]
+    new_rows = [[header[c], *(row[c] for row in rows)] for c in range(1, len(header))]
+    return new_header, new_rows, {(c - 1, r + 1) for r, c in highlight}
+
+
+def print_table(header, rows, title=None, highlight=frozenset(), caption=None, file=None, fit_terminal=False) -> None:
     """Print a table with rich (first column left, others right-aligned; highlighted cells bold
-    green; ``caption`` below it)."""
-    from rich import box
+    green; ``caption`` below it). Full width into files and pipes; ``fit_terminal``: on a terminal
+    too narrow for the table, print it transposed (a column per row)."""
     from rich.console import Console
+
+    stream = file or sys.stdout
+    columns = _terminal_columns(stream)
+    console = Console(width=columns or 200, soft_wrap=False, file=stream)
+    table = _rich_table(header, rows, title, highlight, caption)
+    natural = console.measure(table, options=console.options.update_width(10_000)).maximum
+    if fit_terminal and columns is not None and natural > columns:
+        turned_header, turned_rows, turned_highlight = transposed(header, rows, highlight)
+        table = _rich_table(turned_header, turned_rows, title, turned_highlight, caption)
+    console.print(table)
+
+
+def _terminal_columns(stream) -> int | None:
+    """The width of the terminal ``stream`` writes to; None for a file or pipe."""
+    import shutil
+
+    try:
+        return shutil.get_terminal_size().columns if stream.isatty() else None
+    except (AttributeError, ValueError):
+        return None
+
+
+def _rich_table(header, rows, title=None, highlight=frozenset(), caption=None):
+    from rich import box
     from rich.table import Table
     from rich.text import Text
 
-    console = Console(width=200, soft_wrap=False, file=file or sys.stdout)
     table = Table(title=title, caption=caption, box=box.SIMPLE_HEAD, title_justify="left", caption_justify="left")
     table.add_column(header[0])
     for name in header[1:]:
@@ -60,4 +91,4 @@ def print_table(header, rows, title=None, highlight=frozenset(), caption=None, f
     for r, row in enumerate(rows):
         # Text, not markup: file names may hold square brackets.
         table.add_row(*(Text(str(cell), style="bold green" if (r, c) in highlight else "") for c, cell in enumerate(row)))
-    console.print(table)
+    return table

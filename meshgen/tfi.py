@@ -15,6 +15,9 @@ import itertools
 
 import numpy as np
 
+from meshgen import cube
+from meshgen.errors import MeshgenError
+
 
 def parametric_grid(dims) -> list[np.ndarray]:
     """Uniform parametric node coordinates: one array of ``n + 1`` values in [0, 1] per cell count."""
@@ -61,17 +64,7 @@ def boundary_faces(coords):
     """The parametric points of each face of the tensor grid of ``coords``: a list of
     (index, points) per face, ``index`` selecting the face's nodes of X (a tuple of slices and one
     integer), ``points`` (face nodes, d) on the unit cube's boundary."""
-    dim = len(coords)
-    faces = []
-    for axis in range(dim):
-        for end in (0, -1):
-            others = [np.asarray(c, dtype=float) for d, c in enumerate(coords) if d != axis]
-            grid = np.meshgrid(*others, indexing="ij")
-            columns = [g.reshape(-1) for g in grid]
-            columns.insert(axis, np.full(columns[0].shape, float(coords[axis][end])))
-            index = tuple(end if d == axis else slice(None) for d in range(dim))
-            faces.append((index, np.stack(columns, axis=1)))
-    return faces
+    return [(face.node_index, face.points(coords)) for face in cube.faces(len(coords))]
 
 
 def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.ndarray:
@@ -92,7 +85,8 @@ def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.n
     images = boundary(np.concatenate([points for _, points in faces]))
     corrections = []  # (axis, side, D on the face grid: shape without the axis, + (dim,))
     start = 0
-    for (index, points), (axis, side) in zip(faces, [(a, s) for a in range(dim) for s in (0, 1)]):
+    for (index, points), face in zip(faces, cube.faces(dim)):
+        axis, side = face.axis, face.side
         face_shape = tuple(n for d, n in enumerate(shape) if d != axis)
         values = images[start : start + len(points)].reshape(*face_shape, dim).copy()
         start += len(points)
@@ -116,6 +110,12 @@ def _along(values, axis: int, dim: int) -> np.ndarray:
     return np.asarray(values).reshape([-1 if d == axis else 1 for d in range(dim)] + [1])
 
 
+def check_axes(geometry, coords) -> None:
+    """MeshgenError unless there is one 1D coordinate array (or cell count) per axis of ``geometry``."""
+    if len(coords) != geometry.dim:
+        raise MeshgenError(f"{len(coords)} axes given for the {geometry.dim}D geometry '{geometry.name}'")
+
+
 def tfi(geometry, dims, coords: list[np.ndarray] | None = None) -> np.ndarray:
     """Transfinite-interpolation mesh of ``geometry``.
 
@@ -125,9 +125,8 @@ def tfi(geometry, dims, coords: list[np.ndarray] | None = None) -> np.ndarray:
     """
     if coords is None:
         coords = parametric_grid(dims)
+    check_axes(geometry, coords)
     dim = len(coords)
-    if dim != geometry.dim:
-        raise ValueError(f"{dim} axes given for the {geometry.dim}D geometry '{geometry.name}'")
     coords = [np.asarray(c, dtype=float) for c in coords]
     if all(c[0] == 0.0 and c[-1] == 1.0 for c in coords):
         return transfinite_on_grid(geometry.boundary, coords)  # six face terms instead of 26

@@ -38,3 +38,11 @@ def semidisk():
 @pytest.fixture(scope="session")
 def semicylinder():
     return load_geometry("semicylinder")
+
+
+@pytest.fixture(autouse=True)
+def _work_in_tmp_path(tmp_path, monkeypatch):
+    """Every test runs in its own temporary folder, so a command that writes beside the working
+    directory (``meshgen mesh -o m.vtu`` and its ``m.vtu.quality.json``) never writes into the
+    checkout."""
+    monkeypatch.chdir(tmp_path)

@@ -34,7 +34,10 @@ Examples:
 
 
 def _methods_help() -> str:
-    return "Comma-separated methods: tfi, elliptic, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet [default: tfi,elliptic]."
+    from meshgen.compare import DEFAULT_METHODS
+    from meshgen.methods import METHODS
+
+    return f"Comma-separated methods: {', '.join(METHODS)} [default: {','.join(DEFAULT_METHODS)}]."
 
 
 @click.command("compare", cls=DimsCommand, epilog=EPILOG)
@@ -53,13 +56,13 @@ def _methods_help() -> str:
     "centroid_skewness, non_orthogonality or scaled_jacobian.",
 )
 @click.option("--timing-repeats", type=click.IntRange(1), default=1, show_default=True, help="Time meshing as the median of N runs.")
-@click.option("--steps", type=click.IntRange(1), default=None, help="Neural methods: Adam steps of every training run.")
+@click.option("--steps", type=click.IntRange(1), default=None, help="Neural methods: Adam steps of every training run [default: each preset's adam.steps].")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Neural methods: override a training setting of every preset (repeatable), e.g. --set model.widths=[20,20].")
-@click.option("--seed", type=int, default=None, help="Neural methods: random seed of every training run.")
+@click.option("--seed", type=int, default=None, help="Neural methods: random seed of every training run [default: each preset's seed, 0].")
 @click.option("--checkpoint", "checkpoints", multiple=True, metavar="METHOD=PATH", help="Reuse a trained network instead of training (repeatable), e.g. pinn=runs/pinn/checkpoint.pt.")
-@click.option("--device", default="cpu", show_default=True, help="Neural methods: torch device for training.")
-@click.option("--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help').")
-@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations.")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Neural methods: where to train; auto picks cuda when available.")
+@click.option("--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help') [default: 1e-6].")
+@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations [default: 100].")
 @click.option("--cluster", "clusters", multiple=True, metavar="AXIS:SIDE:RATIO", help="Cluster nodes towards a wall, for every method (as in 'meshgen mesh').")
 @click.option("--mesh-format", default=".vtu", show_default=True, metavar="EXT", help="Format of the meshes written with --out.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the table and errors.")
@@ -126,6 +129,7 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
             out_dir=out,
             mesh_format=mesh_format,
             say=say,
+            reporter=None if quiet else _training_reporter,
         )
     comparison = outcome.comparison
 
@@ -138,7 +142,7 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
     from meshgen.tables import print_table
 
     header, rows, highlight = comparing.table(comparison, short=True)
-    print_table(header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION)
+    print_table(header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION, fit_terminal=True)
     for row in comparison["rows"]:
         if "error" in row:
             click.echo(f"{row['name']} failed: {row['error']}", err=True)
@@ -151,6 +155,14 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
     if any("error" in row for row in comparison["rows"]):
         return 1
     return 0
+
+
+def _training_reporter(config):
+    """The training progress of a neural row, as ``meshgen train`` shows it (imported only when a
+    neural row trains)."""
+    from meshgen.neural.progress import reporter_for
+
+    return reporter_for(config)
 
 
 def _short(path, out) -> str:

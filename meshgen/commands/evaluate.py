@@ -14,8 +14,6 @@ from meshgen.commands._options import geometry_options
 from meshgen.tables import METRIC_LABELS
 from meshgen.tables import number as _number
 
-STAT_LABELS = {"mean": "mean", "min": "min", "max": "max", "p01": "p01", "p99": "p99"}  # as in --json and --fail-if
-
 
 def _verdict_rows(report) -> list[tuple[str, str]]:
     inverted = report["inverted"]
@@ -42,12 +40,12 @@ def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
 
     if len(reports) == 1:
         report = reports[0]
-        header = ["metric", *(STAT_LABELS[s] for s in STATS)]
+        header = ["metric", *STATS]  # the statistics as --json and --fail-if name them
         rows = [[METRIC_LABELS[m], *(_number(report["metrics"][m][s]) for s in STATS)] for m in METRICS]
         return [(header, rows), (["verdict", ""], [list(row) for row in _verdict_rows(report)])]
     header = ["quantity", *(r["file"] for r in reports)]
     rows = [
-        [f"{METRIC_LABELS[m]} {STAT_LABELS[s]}", *(_number(r["metrics"][m][s]) for r in reports)]
+        [f"{METRIC_LABELS[m]} {s}", *(_number(r["metrics"][m][s]) for r in reports)]
         for m in METRICS
         for s in STATS
     ]
@@ -160,14 +158,10 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, quiet):
         else:
             write_json(json_path, data)
     if markdown_path:
-        from meshgen.atomic import atomic_path
-        from meshgen.errors import MeshgenError
+        from meshgen.atomic import atomic_write
 
-        try:
-            with atomic_path(markdown_path) as temporary:
-                temporary.write_text(markdown(reports, gate_results))
-        except OSError as exc:
-            raise MeshgenError(f"could not write {markdown_path}: {exc.strerror or exc}") from exc
+        with atomic_write(markdown_path) as temporary:
+            temporary.write_text(markdown(reports, gate_results))
 
     if not quiet and not to_stdout:
         _print_table(reports)

@@ -9,11 +9,7 @@ import click
 from meshgen.commands._options import load_selected_geometry
 
 
-class _ListOrShow(click.Group):
-    """A group that lists when called without a subcommand."""
-
-
-@click.group("geometries", cls=_ListOrShow, invoke_without_command=True)
+@click.group("geometries", invoke_without_command=True)
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list of {name, dim, description, params, patches}.")
 @click.pass_context
 def geometries(ctx, as_json):
@@ -46,7 +42,7 @@ def geometries(ctx, as_json):
     Console().print(table)
 
 
-@geometries.command("show")
+@geometries.command("show", short_help="Write a geometry's boundary surface (.stl .ply .obj .off).")
 @click.argument("name")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="Set a geometry parameter (repeatable).")
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Surface file (.stl, .ply, .obj, .off).")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options, load_selected_geometry
+from meshgen.commands._text import echo
 
 METHOD_HELP = (
     "Meshing method: auto, neural, tfi, elliptic. auto: the neural map of --checkpoint, else of the newest "
@@ -29,8 +32,8 @@ METHOD_HELP = (
 @click.option("--ascii", "ascii_files", is_flag=True, help="openfoam: write the polyMesh as ASCII [default: binary].")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
 @click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
-@click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
-@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
+@click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].")
+@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100].")
 @click.option(
     "--cluster",
     "clusters",
@@ -52,10 +55,10 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     import sys
     import time
 
-    from meshgen import __version__
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
     from meshgen.formats import check_output_path, check_patches, format_for
+    from meshgen.meshing import Mesh
     from meshgen.methods import get_method, make_mesh
     from meshgen.patches import geometry_patches, parse_patch_options
     from meshgen.quality import summary_lines, write_mesh_with_quality
@@ -73,7 +76,7 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     if method == "auto":
         # No fall-back to TFI: a geometry without a trained model is an error that says how to get one.
         method = "neural"
-    get_method(method)  # an unknown name fails before anything is loaded
+    _check_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
     options = {"tol": tol, "max_iter": max_iter, "snap": snap}
     model = None
@@ -93,16 +96,7 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     with progress_display(f"{method} mesh", show_progress) as progress:
         X, info = make_mesh(method, geometry, coords, progress=progress, **options)
     seconds = time.perf_counter() - start
-    metadata = {
-        "meshgen_version": __version__,
-        "method": method,
-        "geometry": geometry.name,
-        "params": geometry.values,
-        "dims": list(dims),
-        **({"cluster": list(clusters)} if clusters else {}),
-        "meshing_seconds": seconds,
-        **({"method_info": info} if info else {}),
-    }
+    metadata = Mesh(X, geometry, method, dims, clusters, info, seconds).metadata()
     if output_format.patches:
         from meshgen.patches import as_records
 
@@ -116,44 +110,69 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
         cells = 1
         for n in dims:
             cells *= n
-        click.echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
+        echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
         if "iterations" in info:
-            click.echo(
+            echo(
                 f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
                 f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
             )
         if "snap" in info:
-            click.echo(_snap_line(info["snap"]))
-        click.echo(f"wrote {output}" + (f" ({output_format.name})" if output_format.folder else ""))
+            echo(_snap_line(info["snap"]))
+        echo(f"wrote {output}" + (f" ({output_format.name})" if output_format.folder else ""))
         if output_format.patches:
-            click.echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in patches))
+            echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in patches))
         for line in summary_lines(report):
-            click.echo(line)
+            echo(line)
+
+
+def _check_method(name):
+    """An unknown method, or a trained method (``3dmeshnet``, ``pinn`` ...: ``meshgen compare``
+    trains those), is a usage error naming the choices."""
+    from meshgen.errors import did_you_mean
+    from meshgen.methods import METHODS
+
+    choices = ["auto", *(method for method, entry in METHODS.items() if entry.preset is None)]
+    if name in METHODS and name not in choices:
+        raise click.UsageError(
+            f"method '{name}' is a network trained with preset '{METHODS[name].preset}': train it with "
+            f"'meshgen train --preset {METHODS[name].preset}', then mesh with --method neural --checkpoint PATH"
+        )
+    if name not in choices:
+        raise click.UsageError(f"unknown method '{name}' (methods: {', '.join(choices)}){did_you_mean(name, choices)}")
 
 
 def _neural_model(checkpoint, spec, params, geometry_given, dims):
     """The model to mesh with (``meshgen.neural.inference.find_model``) and the geometry it was
-    trained on, with its parameters."""
-    from meshgen.geometry import load_geometry, parse_params
+    trained on, with its parameters. The geometry is loaded and checked once: the one given on the
+    command line when the model was trained on it, else the model's."""
+    from meshgen.geometry import _looks_like_path, bind, check_boundary, load_geometry, parse_params
     from meshgen.neural.inference import find_model
 
     given_params = parse_params(params)
-    name = None
+    chosen = None
     if checkpoint is None:
         # Without --checkpoint the model is one of the --geometry (default: semicylinder), never
         # "the newest run of any geometry". The geometry must exist and fit --dims first.
-        name = load_selected_geometry(spec, params, dims).name
+        chosen = load_selected_geometry(spec, params, dims)
     elif geometry_given:
-        name = load_geometry(spec, given_params).name
+        chosen = load_selected_geometry(spec, params, None)
     model = find_model(
         checkpoint,
-        geometry_name=name,
+        geometry_name=chosen.name if chosen is not None else None,
         params=given_params,
         default_geometry=spec,
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
     )
     entry = model.geometry_entry
-    geometry = load_geometry(entry["spec"], dict(entry["params"]))
+    same_source = chosen is not None and chosen.name == entry["name"] and (
+        Path(spec).resolve() == Path(entry["spec"]).resolve() if _looks_like_path(spec) else spec == entry["spec"]
+    )
+    if same_source:
+        geometry = bind(chosen, dict(entry["params"]))
+        if geometry.values != chosen.values:
+            check_boundary(geometry)
+    else:
+        geometry = load_geometry(entry["spec"], dict(entry["params"]))
     if len(dims) != model.dim:
         raise click.BadParameter(
             f"model {model.path} ({geometry.name}) is {model.dim}D: --dims needs {model.dim} numbers, got {len(dims)}",

@@ -5,19 +5,32 @@ from __future__ import annotations
 import click
 
 from meshgen.commands._options import geometry_options
+from meshgen.commands._text import echo
 
 MESH_HINT = "meshgen mesh --method neural --checkpoint {checkpoint} --dims {dims} -o mesh.vtu"
 
 
-@click.command("train")
+def _epilog() -> str:
+    """What the figures of the progress line mean (only those the preset uses are shown)."""
+    from meshgen.neural.progress import FIELD_HELP  # plain Python: no torch
+
+    import textwrap
+
+    lines = ["\b", "Progress line: stage, bar, step/total, ETA, then the figures the preset uses:"]
+    for name, text in FIELD_HELP.items():
+        lines += textwrap.wrap(text, 76, initial_indent=f"  {name:<9}", subsequent_indent=" " * 11)
+    return "\n".join(lines)
+
+
+@click.command("train", epilog=_epilog())
 @geometry_options(default=None)
 @click.option("--preset", "-p", default=None, metavar="NAME", help="Configuration preset [default: default]; see --list-presets.")
 @click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None, help="YAML configuration file applied over the preset (a run's config.yaml repeats that run).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Override a configuration key (repeatable), e.g. --set adam.lr=5e-4 --set model.widths=[64,64,64].")
-@click.option("--steps", type=click.IntRange(0), default=None, help="Adam steps (shortcut for --set adam.steps=N).")
+@click.option("--steps", type=click.IntRange(0), default=None, help="Adam steps (shortcut for --set adam.steps=N) [default: the preset's adam.steps; default preset: 500].")
 @click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [default: runs/<geometry>-<timestamp>/; with --resume the checkpoint's folder].")
 @click.option("--resume", type=click.Path(dir_okay=False), default=None, help="Continue training from this checkpoint.")
-@click.option("--seed", type=int, default=None, help="Random seed (a CPU run with the same seed and threads repeats exactly).")
+@click.option("--seed", type=int, default=None, help="Random seed (a CPU run with the same seed and threads repeats exactly) [default: the preset's seed, 0].")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Where to train; auto picks cuda when available.")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads for torch [default: torch's choice].")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar: a log line every tenth of each stage.")
@@ -60,16 +73,16 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     summary = result.summary
     dims = " ".join(str(n) for n in summary["dims"])
     size = " x ".join(str(n) for n in summary["dims"])
-    click.echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
-               f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})")
-    click.echo(f"Network, {size} mesh:")
+    echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
+         f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})")
+    echo(f"Network, {size} mesh:")
     for line in summary_lines(summary["network"]):
-        click.echo(f"  {line}")
+        echo(f"  {line}")
     if not run.config.model.exact_boundary:
-        click.echo(f"    with the boundary nodes snapped onto the geometry: {summary['inverted_after_snapping']} inverted cells")
-    click.echo(f"TFI, {size} mesh:")
+        echo(f"    with the boundary nodes snapped onto the geometry: {summary['inverted_after_snapping']} inverted cells")
+    echo(f"TFI, {size} mesh:")
     for line in summary_lines(summary["tfi"]):
-        click.echo(f"  {line}")
-    click.echo(f"Run folder: {run.run_dir}")
-    click.echo(f"Checkpoint: {result.checkpoint_path}")
-    click.echo("Mesh with: " + MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims))
+        echo(f"  {line}")
+    echo(f"Run folder: {run.run_dir}")
+    echo(f"Checkpoint: {result.checkpoint_path}")
+    echo("Mesh with: " + MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims))

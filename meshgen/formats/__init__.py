@@ -142,7 +142,7 @@ def write_mesh(
     ``{"name", "type", "faces"}`` records covering every cube face once; None: one per face, named
     after it), written by the formats that carry them. ``options``: format options (OpenFOAM:
     ``binary``). Returns the path written (an OpenFOAM case: its folder)."""
-    from meshgen.atomic import atomic_path
+    from meshgen.atomic import atomic_write
 
     X = np.asarray(X, dtype=float)
     if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
@@ -154,16 +154,16 @@ def write_mesh(
     metadata_json(metadata or {})  # fail before anything is written
     writer = importlib.import_module(fmt.module)
     arguments = (X, cell_data, dict(metadata or {})) + ((patches,) if fmt.patches else ())
-    try:
-        if fmt.folder:
+    if not fmt.folder and options:
+        raise FormatError(f"{fmt.name} takes no option {', '.join(options)}")
+    if fmt.folder:
+        try:
             writer.write(path, *arguments, **options)
-        else:
-            if options:
-                raise FormatError(f"{fmt.name} takes no option {', '.join(options)}")
-            with atomic_path(path) as temporary:
-                writer.write(temporary, *arguments)
-    except OSError as exc:
-        raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
+        except OSError as exc:
+            raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
+    else:
+        with atomic_write(path, FormatError) as temporary:
+            writer.write(temporary, *arguments)
     return path
 
 

@@ -1,14 +1,10 @@
-"""VTK XML (.vtu), legacy VTK (.vtk) and XDMF (.xdmf) through meshio: hexahedron (quad) cells,
-per-cell arrays, and meshgen's metadata as JSON, where VTK, ParaView and meshio read it back.
+"""Legacy VTK (.vtk) and XDMF (.xdmf) through meshio: hexahedron (quad) cells, per-cell arrays,
+and meshgen's metadata as JSON, where VTK, ParaView and meshio read it back; reading any format
+meshio knows. (.vtu is written by meshgen's own writer, ``meshgen.formats._vtu``.)
 
-meshgen writes .vtu with its own faster writer (``meshgen.formats._vtu``, which reads with meshio); the
-.vtu path of ``write`` stays as the baseline ``benchmarks/formats.py`` measures that writer against.
+meshio's vtk writer drops field data and its XDMF writer has no place for it, so the metadata is
+added to the file meshio wrote (still the temporary file of the atomic write):
 
-meshio's vtu and vtk writers drop field data and its XDMF writer has no place for it, so the
-metadata is added to the file meshio wrote (still the temporary file of the atomic write):
-
-- .vtu: a ``<FieldData>`` element, first child of ``<UnstructuredGrid>``, holding the UInt8
-  array "meshgen" (the JSON's bytes, ASCII-coded numbers): VTK's dataset field data.
 - .vtk (binary, DataFile Version 4.2): a ``FIELD FieldData 1`` block with the unsigned_char
   array "meshgen", after the cell types and before the cell data (which meshgen then appends
   itself, in meshio's layout): VTK reads it as dataset field data and meshio as ``field_data``.
@@ -34,7 +30,7 @@ HEADER_BYTES = 1 << 16
 
 
 def _file_format(path) -> str:
-    return {".vtu": "vtu", ".vtk": "vtk", ".xdmf": "xdmf"}[path.suffix.lower()]
+    return {".vtk": "vtk", ".xdmf": "xdmf"}[path.suffix.lower()]
 
 
 def write(path, X, cell_data, metadata):
@@ -49,12 +45,7 @@ def write(path, X, cell_data, metadata):
     cell_arrays = {name: np.asarray(values, dtype=float).reshape(-1) for name, values in cell_data.items()}
     text = metadata_json(metadata) if metadata else ""
     file_format = _file_format(path)
-    if file_format == "vtu":
-        mesh = meshio.Mesh(flat_points(X), cells, cell_data={name: [v] for name, v in cell_arrays.items()})
-        meshio.vtu.write(path, mesh, binary=True, compression="zlib")
-        if text:
-            _insert_after(path, rb"<UnstructuredGrid\b[^>]*>", _vtu_field_data(text))
-    elif file_format == "vtk":
+    if file_format == "vtk":
         # meshio writes points, cells and cell types; the metadata must come before the cell data.
         meshio.vtk.write(path, meshio.Mesh(flat_points(X), cells), fmt_version="4.2", binary=True)
         with open(path, "ab") as file:
@@ -82,16 +73,6 @@ def read(path):
         if text is not None:
             mesh.field_data[METADATA_KEY] = np.frombuffer(text.encode(), dtype=np.uint8).copy()
     return mesh
-
-
-def _vtu_field_data(text: str) -> bytes:
-    from meshgen.formats import METADATA_KEY
-
-    codes = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
-    return (
-        f'\n<FieldData>\n<DataArray type="UInt8" Name="{METADATA_KEY}" NumberOfTuples="{codes.size}" format="ascii">\n'
-        f"{' '.join(map(str, codes.tolist()))}\n</DataArray>\n</FieldData>"
-    ).encode("ascii")
 
 
 def _legacy_field(text: str) -> bytes:

@@ -10,12 +10,11 @@ repeats a run.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, did_you_mean, unknown_name
 
 
 class ConfigError(MeshgenError):
@@ -174,9 +173,7 @@ def _coerce(key: str, kind, value):
 
 def _unknown(key: str) -> ConfigError:
     valid = list(schema())
-    close = difflib.get_close_matches(key, valid, n=1)
-    hint = f"; did you mean '{close[0]}'?" if close else ""
-    return ConfigError(f"unknown configuration key '{key}'{hint} (valid keys: {', '.join(valid)})")
+    return ConfigError(f"unknown configuration key '{key}'{did_you_mean(key, valid)} (valid keys: {', '.join(valid)})")
 
 
 def set_key(config: TrainConfig, key: str, value) -> None:
@@ -265,9 +262,7 @@ def load_preset(name: str) -> dict:
     """The mapping of preset ``name`` (unknown names raise with the list of presets)."""
     paths = preset_paths()
     if name not in paths:
-        close = difflib.get_close_matches(name, list(paths), n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        raise ConfigError(f"unknown preset '{name}' (presets: {', '.join(paths)}){hint}")
+        raise unknown_name("preset", name, paths, ConfigError)
     return read_yaml(paths[name], "preset")
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, ParameterError
 from meshgen.tfi import boundary_faces, transfinite_on_grid
 
 CHUNK_NODES = 8192
@@ -445,7 +445,7 @@ def find_model(checkpoint_path=None, geometry_name: str | None = None, params: d
 def _default_params(name: str) -> dict:
     from meshgen.geometry import load_geometry
 
-    return dict(load_geometry(name).defaults)
+    return dict(load_geometry(name, check=False).defaults)  # the defaults need no boundary check
 
 
 # ---------------------------------------------------------------------------------------------
@@ -462,7 +462,7 @@ def build_neural(geometry, coords, model=None, snap=True):
     elif not isinstance(model, TrainedModel):
         model = find_model(model, geometry_name=geometry.name, params=dict(geometry.values))
     if len(coords) != model.dim:
-        raise MeshgenError(f"model {model.path} is {model.dim}D: --dims needs {model.dim} numbers, got {len(coords)}")
+        raise ParameterError("dims", f"model {model.path} is {model.dim}D: {{name}} needs {model.dim} numbers, got {len(coords)}")
     X = mesh_from_model(model.checkpoint["model"], coords, geometry)
     info = {"model": model.metadata(), "warnings": []}
     if snap:

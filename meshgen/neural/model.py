@@ -55,11 +55,9 @@ def bubble(xi):
 def normalisation(geometry, samples: int = 17) -> tuple[np.ndarray, float]:
     """Centre and scale that map the geometry into [-1/2, 1/2]^d: the centre of the bounding box of
     the boundary (sampled on a ``samples``-per-edge grid of every face) and its largest extent."""
-    dim = geometry.dim
-    t = np.linspace(0.0, 1.0, samples)
-    face = np.stack(np.meshgrid(*([t] * (dim - 1)), indexing="ij"), axis=-1).reshape(-1, dim - 1)
-    points = np.concatenate([np.insert(face, axis, side, axis=1) for axis in range(dim) for side in (0.0, 1.0)])
-    mapped = geometry.boundary(points)
+    from meshgen.cube import face_samples
+
+    mapped = geometry.boundary(face_samples(geometry.dim, samples))
     low, high = mapped.min(axis=0), mapped.max(axis=0)
     return (low + high) / 2.0, float(np.max(high - low))
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -91,7 +90,6 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
     unknown or ill-typed keys, a preset for the other dimension, a missing, truncated or foreign
     checkpoint, or an output folder that holds something other than a run.
     """
-    from meshgen.commands._options import load_selected_geometry
     from meshgen.geometry import load_geometry, parse_params
     from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
@@ -135,7 +133,7 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
     else:
         config = resolve_config(preset or "default", config_file, overrides, steps, seed)
         geometry = geometry or "semicylinder"
-        geometry_object = load_selected_geometry(geometry, params)
+        geometry_object = load_geometry(geometry, parse_params(params))
     if config.dim is not None and config.dim != geometry_object.dim:
         raise ConfigError(
             f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
@@ -153,7 +151,7 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-    from meshgen.neural.progress import LogReporter, RichReporter
+    from meshgen.neural.progress import reporter_for
     from meshgen.neural.train import train
 
     created = not run.run_dir.exists()
@@ -161,8 +159,7 @@ def run_training(run: Run, quiet: bool = False):
         run.run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
-    # A progress bar only where someone watches it; logs (--quiet, or stderr redirected) get lines.
-    reporter = LogReporter() if quiet or not sys.stderr.isatty() else RichReporter()
+    reporter = reporter_for(run.config, quiet)
     stop_requested = threading.Event()
 
     def on_interrupt(signum, frame):
