@@ -326,24 +326,33 @@ def _check_options(tol, max_iter):
         raise MeshgenError(f"--max-iter must be a positive integer, got {max_iter}")
 
 
-def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None):
+def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None,
+                   boundary_layout: str | None = None):
     """Method ``elliptic`` (meshgen.methods): Winslow mesh of ``geometry`` at parametric node
     coordinates ``coords`` (1D arrays per axis), starting from TFI, whose boundary nodes are the
     geometry's boundary map at the parametric boundary points and stay there.
 
+    ``boundary_layout``: "smoothed" (default) first moves the boundary points within their faces
+    (``meshgen.layout``: arc length on the edges, the surface's 2D Winslow grid on each face);
+    "fixed" keeps the geometry's own boundary map (the faces' Coons layout).
     Returns ``(X, info)``, X of shape (n1+1, n2+1[, n3+1], dim); ``info`` as ``solve_winslow``'s,
-    plus ``warnings`` (a list of lines) when the solver did not converge.
+    plus ``boundary_layout`` and ``warnings`` (a list of lines) when the solver did not converge.
     """
+    from meshgen.layout import DEFAULT_LAYOUT, with_layout
     from meshgen.tfi import tfi
 
     tol = DEFAULT_TOL if tol is None else tol
     max_iter = DEFAULT_MAX_ITER if max_iter is None else max_iter
     _check_options(tol, max_iter)
+    boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
+    geometry = with_layout(geometry, boundary_layout)
     X0 = tfi(geometry, None, coords)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
         return X0, {"iterations": 0, "final_update": 0.0, "final_residual": 0.0, "tol": float(tol),
-                    "converged": True, "seconds": 0.0, "note": "no interior nodes: the TFI mesh is the mesh"}
+                    "converged": True, "seconds": 0.0, "boundary_layout": boundary_layout,
+                    "note": "no interior nodes: the TFI mesh is the mesh"}
     X, info = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
+    info["boundary_layout"] = boundary_layout
     if not info["converged"]:
         info["warnings"] = [
             f"elliptic solver did not converge: after {info['iterations']} cycle(s) the largest node update is "
@@ -353,12 +362,14 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     return X, info
 
 
-def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, progress=None):
+def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, progress=None,
+             boundary_layout: str | None = None):
     """Elliptic (Winslow) mesh of ``geometry``: the Python entry point.
 
     ``dims``: cells per axis (n1, n2[, n3]); ``coords``: optional 1D parametric node positions per
     axis instead (e.g. clustered towards a wall). ``tol``, ``max_iter``, ``progress``: see
-    ``solve_winslow``. Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
+    ``solve_winslow``; ``boundary_layout``: see ``build_elliptic`` (default "smoothed").
+    Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
     """
     import warnings
 
@@ -368,7 +379,7 @@ def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_
         coords = parametric_grid(dims)
     if len(coords) != geometry.dim:
         raise MeshgenError(f"{len(coords)} axes given for the {geometry.dim}D geometry '{geometry.name}'")
-    X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress)
+    X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress, boundary_layout=boundary_layout)
     for line in info.get("warnings", []):
         warnings.warn(line, ConvergenceWarning, stacklevel=2)
     return X, info

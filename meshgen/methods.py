@@ -30,8 +30,8 @@ def register_method(method: Method) -> None:
     METHODS[method.name] = method
 
 
-register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic"))
-register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress")))
+register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",)))
+register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress", "boundary_layout")))
 register_method(Method("neural", "meshgen.neural.inference:build_neural", "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=("model", "snap")))
 
 
@@ -43,10 +43,15 @@ def get_method(name: str) -> Method:
     return METHODS[name]
 
 
-def build_tfi(geometry, coords):
+def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
+    """TFI of the geometry's boundary map ("fixed", the default: the algebraic reference), or of
+    the smoothed boundary layout (``meshgen.layout``)."""
+    from meshgen.layout import with_layout
     from meshgen.tfi import tfi
 
-    return tfi(geometry, None, coords), {}
+    if boundary_layout == "fixed":
+        return tfi(geometry, None, coords), {}
+    return tfi(with_layout(geometry, boundary_layout), None, coords), {"boundary_layout": boundary_layout}
 
 
 def make_mesh(method_name: str, geometry, coords, **options):
