@@ -333,12 +333,13 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     geometry's boundary map at the parametric boundary points and stay there.
 
     ``boundary_layout``: "smoothed" (default) first moves the boundary points within their faces
-    (``meshgen.layout``: arc length on the edges, the surface's 2D Winslow grid on each face);
+    (``meshgen.layout``: arc length on the edges, the surface's 2D Winslow grid on each face,
+    solved again at the mesh's resolution by ``relax_faces``);
     "fixed" keeps the geometry's own boundary map (the faces' Coons layout).
     Returns ``(X, info)``, X of shape (n1+1, n2+1[, n3+1], dim); ``info`` as ``solve_winslow``'s,
     plus ``boundary_layout`` and ``warnings`` (a list of lines) when the solver did not converge.
     """
-    from meshgen.layout import DEFAULT_LAYOUT, with_layout
+    from meshgen.layout import DEFAULT_LAYOUT, relax_faces, with_layout
     from meshgen.tfi import tfi
 
     tol = DEFAULT_TOL if tol is None else tol
@@ -347,6 +348,8 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
     geometry = with_layout(geometry, boundary_layout)
     X0 = tfi(geometry, None, coords)
+    if boundary_layout == "smoothed":
+        relax_faces(geometry, coords, X0)  # the faces' own discrete Winslow grids (see there)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
         return X0, {"iterations": 0, "final_update": 0.0, "final_residual": 0.0, "tol": float(tol),
                     "converged": True, "seconds": 0.0, "boundary_layout": boundary_layout,

@@ -174,71 +174,79 @@ def _lift(axis: int, side: int, U: np.ndarray) -> np.ndarray:
     return points
 
 
-def _scalar_operator(c11, c22, c12, cells: int):
-    """Sparse matrix of ``c11 f_pp + c22 f_qq + 2 c12 f_pq`` (central differences, spacing
-    1/cells) on the interior nodes of the fine face grid, zero Dirichlet values outside;
-    coefficients (cells - 1, cells - 1)."""
+def _scalar_operator(c11, c22, c12, grid):
+    """Sparse matrix of ``c11 f_pp + c22 f_qq + 2 c12 f_pq`` (the three-point stencils of
+    ``grid``, a 2D ``meshgen.winslow.Stencils``; f_pq the product of the first-derivative ones) on
+    the interior nodes of the face grid, zero Dirichlet values outside; coefficients (m_p, m_q)."""
     from scipy import sparse
 
-    m = cells - 1
-    h2 = 1.0 / cells**2
-    index = np.arange(m * m).reshape(m, m)
+    m_p, m_q = c11.shape
+    index = np.arange(m_p * m_q).reshape(m_p, m_q)
     rows, cols, vals = [], [], []
-
-    def add(di, dj, coefficient):
-        target = np.full((m, m), -1)
-        i0, i1 = max(0, -di), m - max(0, di)
-        j0, j1 = max(0, -dj), m - max(0, dj)
-        target[i0:i1, j0:j1] = index[i0 + di : i1 + di, j0 + dj : j1 + dj]
-        keep = target >= 0
-        rows.append(index[keep]), cols.append(target[keep]), vals.append(np.broadcast_to(coefficient, (m, m))[keep])
-
-    add(0, 0, -2.0 * (c11 + c22) / h2)
-    add(1, 0, c11 / h2), add(-1, 0, c11 / h2)
-    add(0, 1, c22 / h2), add(0, -1, c22 / h2)
-    for di, dj, sign in ((1, 1, 1.0), (-1, -1, 1.0), (1, -1, -1.0), (-1, 1, -1.0)):
-        add(di, dj, sign * 2.0 * c12 / (4.0 * h2))
+    second_p, second_q = grid.second
+    first_p, first_q = grid.first
+    for dp in (-1, 0, 1):
+        for dq in (-1, 0, 1):
+            coefficient = 2.0 * c12 * first_p[dp + 1] * first_q[dq + 1]
+            if dq == 0:
+                coefficient = coefficient + c11 * second_p[dp + 1]
+            if dp == 0:
+                coefficient = coefficient + c22 * second_q[dq + 1]
+            target = np.full((m_p, m_q), -1)
+            i0, i1 = max(0, -dp), m_p - max(0, dp)
+            j0, j1 = max(0, -dq), m_q - max(0, dq)
+            target[i0:i1, j0:j1] = index[i0 + dp : i1 + dp, j0 + dq : j1 + dq]
+            keep = target >= 0
+            rows.append(index[keep]), cols.append(target[keep])
+            vals.append(np.broadcast_to(coefficient, (m_p, m_q))[keep])
     return sparse.csc_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m * m, m * m)
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m_p * m_q, m_p * m_q)
     )
 
 
-def surface_grid(boundary, axis: int, side: int, edge_u: tuple, cells: int, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER):
-    """The Winslow surface grid of the face ``t[axis] = side``: its face parameters at the
-    (cells + 1)^2 fine nodes, (cells + 1, cells + 1, 2), and ``{"iterations", "final_update"}``.
+def coons_start(edge_u: tuple, coords) -> np.ndarray:
+    """Face parameters on the face grid of ``coords`` (t_p, t_q): the four sides' values
+    ``edge_u`` = (p0, p1, q0, q1) (the parameter along each side, the other being 0 or 1) and
+    inside their parameter-space Coons patch, (n_p, n_q, 2)."""
+    t_p, t_q = (np.asarray(c, dtype=float) for c in coords)
+    p0, p1, q0, q1 = edge_u
+    U = np.zeros((len(t_p), len(t_q), 2))
+    U[0, :, 0], U[-1, :, 0] = 0.0, 1.0
+    U[0, :, 1], U[-1, :, 1] = p0, p1
+    U[:, 0, 1], U[:, -1, 1] = 0.0, 1.0
+    U[:, 0, 0], U[:, -1, 0] = q0, q1
+    s, r = t_p[:, None], t_q[None, :]
+    for c in range(2):
+        F = U[..., c]
+        F[1:-1, 1:-1] = (
+            (1 - s) * F[0:1, :] + s * F[-1:, :] + (1 - r) * F[:, 0:1] + r * F[:, -1:]
+            - ((1 - s) * (1 - r) * F[0, 0] + s * (1 - r) * F[-1, 0] + (1 - s) * r * F[0, -1] + s * r * F[-1, -1])
+        )[1:-1, 1:-1]
+    return U
 
-    ``edge_u``: the face parameters' values on its four sides, (p0, p1, q0, q1), each (cells + 1,):
-    the parameter along the side (the other being 0 or 1). ``boundary``: the geometry's map.
+
+def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER):
+    """The Winslow surface grid of the face ``t[axis] = side`` on the tensor grid of ``coords``
+    (the parametric node coordinates along its two tangent axes, increasing order).
+
+    ``U``: (n_p, n_q, 2) face parameters: the sides' values (kept) and a start inside.
+    ``boundary``: the geometry's map. Returns the solved face parameters (same shape) and
+    ``{"iterations", "final_update"}`` (the largest parameter change of the last step).
     """
     from scipy.sparse.linalg import splu
 
     from meshgen.elliptic import ANDERSON_DEPTH, AndersonMixing
     from meshgen.winslow import stencils, winslow_operator
 
-    n = cells + 1
-    t = np.linspace(0.0, 1.0, n)
-    p0, p1, q0, q1 = edge_u
-    # Boundary values, then the parameter-space Coons patch of them as the start.
-    U = np.zeros((n, n, 2))
-    U[0, :, 0], U[-1, :, 0] = 0.0, 1.0
-    U[0, :, 1], U[-1, :, 1] = p0, p1
-    U[:, 0, 1], U[:, -1, 1] = 0.0, 1.0
-    U[:, 0, 0], U[:, -1, 0] = q0, q1
-    for c in range(2):
-        F = U[..., c]
-        s, r = t[:, None], t[None, :]
-        F[1:-1, 1:-1] = (
-            (1 - s) * F[0:1, :] + s * F[-1:, :] + (1 - r) * F[:, 0:1] + r * F[:, -1:]
-            - ((1 - s) * (1 - r) * F[0, 0] + s * (1 - r) * F[-1, 0] + (1 - s) * r * F[0, -1] + s * r * F[-1, -1])
-        )[1:-1, 1:-1]
-    grid = stencils([t, t])
+    U = np.array(U, dtype=float)
+    shape = U.shape[:-1]
+    grid = stencils(coords)
     mixing = AndersonMixing(ANDERSON_DEPTH)
     update = np.inf
     iterations = 0
     while iterations < max_iter:
-        X = boundary(_lift(axis, side, U).reshape(-1, 3)).reshape(n, n, 3)
-        R = np.moveaxis(X, -1, 0)
-        residual, _ = winslow_operator(np.ascontiguousarray(R), grid)  # (3, m, m), over the trace
+        X = boundary(_lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
+        residual, axial = winslow_operator(np.ascontiguousarray(np.moveaxis(X, -1, 0)), grid)  # over the trace
         # The surface's tangents g_u, g_v at the interior nodes, by central differences of the map.
         inner = U[1:-1, 1:-1].reshape(-1, 2)
         probes = []
@@ -258,16 +266,22 @@ def surface_grid(boundary, axis: int, side: int, edge_u: tuple, cells: int, tol:
         det_t = a11 * a22 - a12**2
         if np.any(det_t <= 0) or not np.all(np.isfinite(det_t)):
             raise GeometryError("boundary layout: the geometry's face map is singular inside a face")
-        target = np.stack([(a22 * ru - a12 * rv) / det_t, (a11 * rv - a12 * ru) / det_t], axis=-1).reshape(n - 2, n - 2, 2)
-        # The grid's metric gives the coefficients of the scalar operator.
-        x_p = (X[2:, 1:-1] - X[:-2, 1:-1]) * (0.5 * cells)
-        x_q = (X[1:-1, 2:] - X[1:-1, :-2]) * (0.5 * cells)
+        inner_shape = (shape[0] - 2, shape[1] - 2)
+        target = np.stack([(a22 * ru - a12 * rv) / det_t, (a11 * rv - a12 * ru) / det_t], axis=-1).reshape(inner_shape + (2,))
+        # The operator's own normalised coefficients: A_aa / trace on the axes, the mixed one
+        # (-g12 / trace) from the grid's metric.
+        x_p, x_q = ((X[2:, 1:-1] - X[:-2, 1:-1]), (X[1:-1, 2:] - X[1:-1, :-2]))
         g11, g12, g22 = (x_p * x_p).sum(-1), (x_p * x_q).sum(-1), (x_q * x_q).sum(-1)
         if np.any(g11 * g22 - g12**2 <= 0):
             raise GeometryError("boundary layout: a face's surface grid degenerated (zero-area cell)")
-        trace = g11 + g22
-        operator = splu(_scalar_operator(g22 / trace, g11 / trace, -g12 / trace, cells))
-        step = np.stack([operator.solve(-target[..., c].ravel()) for c in range(2)], axis=-1).reshape(n - 2, n - 2, 2)
+        c11, c22 = axial
+        # g12 / trace from the raw differences: scale by the first-derivative factors, as axial does
+        scale_p = 1.0 / (grid.coords[0][2:] - grid.coords[0][:-2])[:, None]
+        scale_q = 1.0 / (grid.coords[1][2:] - grid.coords[1][:-2])[None, :]
+        trace = g11 * scale_p**2 + g22 * scale_q**2
+        c12 = -g12 * scale_p * scale_q / trace
+        operator = splu(_scalar_operator(c11, c22, c12, grid))
+        step = np.stack([operator.solve(-target[..., c].ravel()) for c in range(2)], axis=-1).reshape(inner_shape + (2,))
         iterations += 1
         previous, update = update, float(np.abs(step).max())
         if not np.isfinite(update):
@@ -307,10 +321,39 @@ def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
 
         # sides of the face: p = 0, 1 (the tangent axis a fixed) carry the parameter along b, and vice versa
         edge_u = (side_values(a, 0), side_values(a, 1), side_values(b, 0), side_values(b, 1))
-        U, info = surface_grid(boundary, face.axis, face.side, edge_u, cells)
+        t = np.linspace(0.0, 1.0, cells + 1)
+        U, info = surface_grid(boundary, face.axis, face.side, coons_start(edge_u, (t, t)), (t, t))
         face_values[(face.axis, face.side)] = U
         face_info[face.name] = info
     return Layout(3, edge_values, face_values, face_info)
+
+
+def relax_faces(geometry, coords, X: np.ndarray, tol: float = FACE_TOL) -> dict:
+    """Solve each face's surface grid again on the mesh's own face nodes (in place in ``X``).
+
+    ``geometry``: a smoothed geometry (``smoothed``); ``coords``: the mesh's parametric node
+    coordinates per axis; ``X``: its node array (3D), whose face nodes are replaced by the
+    discrete Winslow surface grid of the face at the mesh's resolution (edges kept, the smoothed
+    layout as the start). Why: an elliptic mesh's layers next to a face then solve the same discrete
+    equations as the face itself, so an extruded shape gives an exactly extruded mesh (the layout's
+    fine-grid interpolant differs from that by the discretisation error, which a flow solver sees
+    as skewed cells). Returns the Picard iterations per face name.
+    """
+    if geometry.dim != 3:
+        return {}
+    layout = layout_of(unsmoothed(geometry))
+    plain = unsmoothed(geometry).boundary
+    iterations = {}
+    for face in faces(3):
+        a, b = face.tangent_axes
+        face_coords = (np.asarray(coords[a], dtype=float), np.asarray(coords[b], dtype=float))
+        if min(len(c) for c in face_coords) < 3:
+            continue  # no interior nodes on this face
+        start = layout.apply(face.points(coords))[:, [a, b]].reshape(len(face_coords[0]), len(face_coords[1]), 2)
+        U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol)
+        X[face.node_index] = plain(_lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
+        iterations[face.name] = info["iterations"]
+    return iterations
 
 
 _LAYOUTS: dict = {}  # (plugin map, parameter values, cells) -> Layout, for this process

@@ -49,8 +49,6 @@ def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
     from meshgen.layout import with_layout
     from meshgen.tfi import tfi
 
-    if boundary_layout == "fixed":
-        return tfi(geometry, None, coords), {}
     return tfi(with_layout(geometry, boundary_layout), None, coords), {"boundary_layout": boundary_layout}
 
 

@@ -123,3 +123,23 @@ def test_semicylinder_elliptic_beats_the_smoothed_gmsh_figure(semicylinder):
 def test_unknown_layout_is_an_error(semicylinder):
     with pytest.raises(GeometryError, match="unknown boundary layout"):
         with_layout(semicylinder, "wavy")
+
+
+def test_cli_boundary_layout_option(run_cli, tmp_path, semicylinder):
+    """--boundary-layout fixed keeps the TFI boundary nodes; the default moves them within the faces."""
+    from meshgen.formats import metadata_of, read_mesh
+
+    dims = (6, 5, 4)
+    faces_of = lambda X: np.concatenate([X[0].reshape(-1, 3), X[-1].reshape(-1, 3), X[:, :, 0].reshape(-1, 3)])  # noqa: E731
+    expected = tfi(semicylinder, dims)
+    for layout in ("fixed", None):
+        name = f"{layout}.vtu"
+        args = ("mesh", "-m", "elliptic", "-g", "semicylinder", "--dims", *map(str, dims), "-o", name, "-q")
+        result = run_cli(*args, *(("--boundary-layout", layout) if layout else ()))
+        assert result.returncode == 0, result.stderr
+        X = read_mesh(tmp_path / name).points.reshape(*(n + 1 for n in dims), 3)
+        assert metadata_of(tmp_path / name)["method_info"]["boundary_layout"] == (layout or "smoothed")
+        difference = np.abs(faces_of(X) - faces_of(expected)).max()
+        assert difference < 1e-12 if layout == "fixed" else difference > 1e-3
+    result = run_cli("mesh", "-m", "neural", "-g", "semicylinder", "--dims", "4", "4", "4", "-o", "n.vtu", "--boundary-layout", "fixed")
+    assert result.returncode == 2 and "--boundary-layout does not apply to method 'neural'" in result.stderr

@@ -28,8 +28,16 @@ METHOD_HELP = (
     metavar="AXIS:SIDE:RATIO",
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
+@click.option(
+    "--boundary-layout",
+    type=click.Choice(["smoothed", "fixed"]),
+    default=None,
+    help="tfi, elliptic: boundary nodes by arc length on the edges and the surface's own Winslow grid on each face "
+    "(smoothed), or the geometry's own map, i.e. each face the Coons layout of its edges (fixed) "
+    "[default: smoothed for elliptic, fixed for tfi; a neural model meshes with the layout it was trained on].",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, quiet):
+def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, boundary_layout, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
@@ -55,7 +63,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         method = "neural"
     get_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
-    options = {"tol": tol, "max_iter": max_iter, "snap": snap}
+    options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout}
     model = None
     if method == "neural":
         model, geometry = _neural_model(checkpoint, geometry, params, geometry_given, dims)
