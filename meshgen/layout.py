@@ -393,6 +393,12 @@ def with_layout(geometry, layout: str):
     raise GeometryError(f"unknown boundary layout '{layout}' (layouts: {', '.join(LAYOUTS)})")
 
 
+def trained_layout(checkpoint: dict) -> str:
+    """The boundary layout a network was trained on: its configuration's ``boundary_layout``;
+    checkpoints from before the key existed were trained on the fixed layout."""
+    return (checkpoint.get("config") or {}).get("boundary_layout", "fixed")
+
+
 def unsmoothed(geometry):
     """The geometry with its own boundary map (the fixed layout)."""
     base_map = getattr(geometry.boundary_map, "smoothed_from", None)
