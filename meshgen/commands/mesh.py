@@ -36,8 +36,16 @@ METHOD_HELP = (
     "(smoothed), or the geometry's own map, i.e. each face the Coons layout of its edges (fixed) "
     "[default: smoothed for elliptic, fixed for tfi; a neural model meshes with the layout it was trained on].",
 )
+@click.option(
+    "--orthogonal",
+    "orthogonal",
+    multiple=True,
+    metavar="FACE",
+    help="elliptic: the first cell layer meets this wall (xi0 xi1 eta0 eta1 zeta0 zeta1) at right angles; repeatable. "
+    "With --cluster for boundary layers.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, boundary_layout, quiet):
+def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, boundary_layout, orthogonal, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
@@ -63,7 +71,8 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         method = "neural"
     get_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
-    options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout}
+    options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout,
+               "orthogonal": orthogonal or None}
     model = None
     if method == "neural":
         model, geometry = _neural_model(checkpoint, geometry, params, geometry_given, dims)
