@@ -43,6 +43,7 @@ RESOLUTION = 64  # fine-grid cells per face side (parametric spacing 1/64)
 ARC_SAMPLES = 64  # chords per fine cell when measuring an edge's arc length
 FACE_TOL = 1e-11  # stop when the largest parameter update of a face is below this
 FACE_MAX_ITER = 200
+RELAX_TOL = 1e-9  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
 TANGENT_STEP = 1e-6  # parametric step of the central differences that give the surface's tangents
 
 
@@ -328,7 +329,7 @@ def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
     return Layout(3, edge_values, face_values, face_info)
 
 
-def relax_faces(geometry, coords, X: np.ndarray, tol: float = FACE_TOL) -> dict:
+def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict:
     """Solve each face's surface grid again on the mesh's own face nodes (in place in ``X``).
 
     ``geometry``: a smoothed geometry (``smoothed``); ``coords``: the mesh's parametric node
