@@ -12,6 +12,9 @@ Sections, in order (all on the semicylinder, the reference shape):
   and 100^3 cells through ``meshgen.methods.make_mesh``, median of several runs; then the network's
   forward pass alone (``evaluate_on_grid``) for the bundled model and for a [85]*4 network on
   101^3 nodes, each as a fraction of the matrix-product roof;
+- ``boundary_layout``: TFI and elliptic with the fixed and the smoothed boundary layout on every
+  3D built-in at 30^3 and 100^3 cells (--quick: 30^3): mean minimum angle, inverted cells, boundary
+  deviation, seconds (``bench_layout.py``);
 - ``mesh_command``: ``meshgen mesh --dims 100 100 100 -o out.vtu`` in a fresh folder (so the bundled
   model), a subprocess timed from start to exit: ``import torch``, meshing, quality, writing
   (``bench_inference.mesh_command``);
@@ -73,7 +76,8 @@ sys.path.insert(1, str(BENCHMARKS))
 
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
-SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "solver_formats", "memory"]
+SECTIONS = ["machine", "meshing", "boundary_layout", "mesh_command", "training", "time_to_quality", "evaluate", "formats",
+            "solver_formats", "memory"]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -86,6 +90,8 @@ TARGETS = {
     "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "issue 5: meshgen mesh --dims 200 200 200"),
     "vts_vtu_size_ratio": ("<=", 0.5, "x", "issue 12: .vts size / .vtu size, 100^3 neural mesh with its quality arrays"),
     "vts_vtu_write_time_ratio": ("<=", 1.0, "x", "issue 12: .vts write time / .vtu write time, same mesh"),
+    "elliptic_min_angle_30": (">=", 74.4, "deg", "issue 16: semicylinder 30^3, smoothed gmsh transfinite mesh 74.42"),
+    "elliptic_min_angle_100": (">=", 74.8, "deg", "issue 16: semicylinder 100^3, smoothed gmsh transfinite mesh 74.79"),
 }
 
 
@@ -368,6 +374,12 @@ def time_to_quality(quick: bool) -> dict:
             "capped": quick, "reference": reference, "runs": results}
 
 
+def boundary_layout(quick: bool) -> dict:
+    import bench_layout
+
+    return {"results": bench_layout.run(quick), "gmsh_smoothed_semicylinder": bench_layout.GMSH_SMOOTHED}
+
+
 # ---------------------------------------------------------------------------------------------
 # evaluate, formats
 
@@ -443,6 +455,14 @@ def summary(sections: dict) -> list[dict]:
             add(f"network forward pass, {row['network']}, {n}^3 nodes", row["seconds"], "s",
                 "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None, note=fraction,
                 cpu=row["cpu_seconds"])
+    if "boundary_layout" in sections:
+        for result in sections["boundary_layout"]["results"]:
+            n = result["cells"]
+            for method, row in result["methods"].items():
+                key = f"elliptic_min_angle_{n}" if (result["geometry"], method) == (GEOMETRY, "elliptic smoothed") else None
+                add(f"mean min angle, {result['geometry']} {n}^3, {method} layout", row["min_angle_mean"], "deg", key,
+                    note=f"{row['inverted']} inverted, deviation {row['deviation_max_rel']:.1e}, "
+                         f"{format_value(row['seconds'], 's')}")
     if "mesh_command" in sections:
         data = sections["mesh_command"]
         add(f"`meshgen mesh --dims 100 100 100 -o out.vtu`, end to end (median of {data['repeat']})", data["seconds"],
@@ -510,6 +530,8 @@ def format_value(value, unit) -> str:
         return f"{value:.0f} {unit}"
     if unit == "x":
         return f"{value:.2f}x"
+    if unit == "deg":
+        return f"{value:.3f}°"
     if unit == "s" and value < 1:
         return f"{value * 1e3:.3g} ms"
     return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
@@ -612,6 +634,7 @@ def main(argv=None) -> int:
     runners = {
         "machine": lambda: machine(args.quick),
         "meshing": lambda: meshing(args.quick, results["sections"].get("machine", {}).get("matmul")),
+        "boundary_layout": lambda: boundary_layout(args.quick),
         "mesh_command": lambda: mesh_command_section(args.quick),
         "training": lambda: training(args.quick),
         "time_to_quality": lambda: time_to_quality(args.quick),

@@ -224,6 +224,9 @@ def distance_to_boundary(points, geometry, parametric_guess=None) -> np.ndarray:
 
     ``parametric_guess`` (K, dim): optional positions on the unit cube's boundary to start from
     (for the boundary nodes of a structured block: their index positions)."""
+    from meshgen.layout import unsmoothed
+
+    geometry = unsmoothed(geometry)  # the surface is the same for every boundary layout: use its own map
     points = np.asarray(points, dtype=float)
     dim = geometry.dim
     length = geometry.characteristic_length

@@ -326,24 +326,55 @@ def _check_options(tol, max_iter):
         raise ParameterError("max_iter", f"{{name}} must be a positive integer, got {max_iter}")
 
 
-def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None):
+def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None,
+                   boundary_layout: str | None = None, orthogonal=()):
     """Method ``elliptic`` (meshgen.methods): Winslow mesh of ``geometry`` at parametric node
     coordinates ``coords`` (1D arrays per axis), starting from TFI, whose boundary nodes are the
     geometry's boundary map at the parametric boundary points and stay there.
 
+    ``boundary_layout``: "smoothed" (default) first moves the boundary points within their faces
+    (``meshgen.layout``: arc length on the edges, the surface's 2D Winslow grid on each face,
+    solved again at the mesh's resolution by ``relax_faces``);
+    "fixed" keeps the geometry's own boundary map (the faces' Coons layout).
+    ``orthogonal``: names of walls (``eta0`` ...) that the first cell layer meets at right angles
+    (``meshgen.orthogonal``).
     Returns ``(X, info)``, X of shape (n1+1, n2+1[, n3+1], dim); ``info`` as ``solve_winslow``'s,
-    plus ``warnings`` (a list of lines) when the solver did not converge.
+    plus ``boundary_layout`` and ``warnings`` (a list of lines) when the solver did not converge.
     """
+    from meshgen.layout import DEFAULT_LAYOUT, relax_faces, with_layout
     from meshgen.tfi import tfi
 
     tol = DEFAULT_TOL if tol is None else tol
     max_iter = DEFAULT_MAX_ITER if max_iter is None else max_iter
     _check_options(tol, max_iter)
+    from meshgen.orthogonal import inner_block, parse_walls, straighten_first_layer
+
+    walls = parse_walls(orthogonal or (), geometry.dim)
+    boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
+    geometry = with_layout(geometry, boundary_layout)
     X0 = tfi(geometry, None, coords)
+    if boundary_layout == "smoothed":
+        relax_faces(geometry, coords, X0)  # the faces' own discrete Winslow grids (see there)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
         return X0, {"iterations": 0, "final_update": 0.0, "final_residual": 0.0, "tol": float(tol),
-                    "converged": True, "seconds": 0.0, "note": "no interior nodes: the TFI mesh is the mesh"}
+                    "converged": True, "seconds": 0.0, "boundary_layout": boundary_layout,
+                    "note": "no interior nodes: the TFI mesh is the mesh"}
     X, info = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
+    info["boundary_layout"] = boundary_layout
+    if walls:
+        block = inner_block(walls, geometry.dim)
+        sub_coords = [np.asarray(t, dtype=float)[block[a]] for a, t in enumerate(coords)]
+        if min(len(t) for t in sub_coords) < 3:
+            raise MeshgenError("--orthogonal needs at least 3 cells across each orthogonal wall's axis")
+        for face in walls:
+            straighten_first_layer(X, face)
+        X[block], second = solve_winslow(X[block], sub_coords, tol=tol, max_iter=max_iter,
+                                         length=geometry.characteristic_length)
+        info["orthogonal"] = [face.name for face in walls]
+        info["iterations"] += second["iterations"]
+        for key in ("final_update", "final_residual", "converged"):
+            info[key] = second[key]
+        info["seconds"] += second["seconds"]
     if not info["converged"]:
         info["warnings"] = [
             f"elliptic solver did not converge: after {info['iterations']} cycle(s) the largest node update is "
@@ -353,12 +384,14 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     return X, info
 
 
-def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, progress=None):
+def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, progress=None,
+             boundary_layout: str | None = None, orthogonal=()):
     """Elliptic (Winslow) mesh of ``geometry``: the Python entry point.
 
     ``dims``: cells per axis (n1, n2[, n3]); ``coords``: optional 1D parametric node positions per
     axis instead (e.g. clustered towards a wall). ``tol``, ``max_iter``, ``progress``: see
-    ``solve_winslow``. Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
+    ``solve_winslow``; ``boundary_layout``, ``orthogonal``: see ``build_elliptic``.
+    Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
     """
     import warnings
 
@@ -367,7 +400,8 @@ def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_
     if coords is None:
         coords = parametric_grid(dims)
     check_axes(geometry, coords)
-    X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress)
+    X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress,
+                             boundary_layout=boundary_layout, orthogonal=orthogonal)
     for line in info.get("warnings", []):
         warnings.warn(line, ConvergenceWarning, stacklevel=2)
     return X, info

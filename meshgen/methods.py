@@ -44,8 +44,8 @@ def register_method(method: Method) -> None:
 
 NEURAL = "meshgen.neural.inference:build_neural"
 NEURAL_OPTIONS = ("model", "snap")
-register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic"))
-register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress")))
+register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",)))
+register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal")))
 register_method(Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS))
 # The trained methods of DESIGN section 6: name -> training preset (presets/<preset>.yaml).
 TRAINED = {"3dmeshnet": "default", "exact": "exact", "pinn": "pinn", "fd-pinn": "fd-pinn", "rwgp-pinn": "rwgp-pinn", "mgnet": "mgnet"}
@@ -59,10 +59,13 @@ def get_method(name: str) -> Method:
     return METHODS[name]
 
 
-def build_tfi(geometry, coords):
+def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
+    """TFI of the geometry's boundary map ("fixed", the default: the algebraic reference), or of
+    the smoothed boundary layout (``meshgen.layout``)."""
+    from meshgen.layout import with_layout
     from meshgen.tfi import tfi
 
-    return tfi(geometry, None, coords), {}
+    return tfi(with_layout(geometry, boundary_layout), None, coords), {"boundary_layout": boundary_layout}
 
 
 def make_mesh(method_name: str, geometry, coords, **options):

@@ -170,7 +170,7 @@ def winslow_operator(R: np.ndarray, grid: Stencils) -> tuple[np.ndarray, list[np
     A = cofactors(g)
     inverse_trace = 1.0 / sum(A[a, a] for a in axes)
 
-    residual = np.zeros((dim,) + inverse_trace.shape)
+    residual = np.zeros((R.shape[0],) + inverse_trace.shape)  # components: dim, or 3 on a surface
     for a, b in itertools.combinations(axes, 2):
         derivative_b, factor_b = along[b]  # interior along b; the stencil trims a and the third axis
         values, factor_a = _stencil(derivative_b, a, grid.first[a], tuple(c for c in axes if c not in (a, b)))

@@ -47,9 +47,11 @@ def figures(X, geometry) -> dict:
 
 def neural_figures(model, geometry, cells: int) -> dict:
     """Figures of the network's own mesh (--no-snap) and of the snapped one (the default)."""
+    from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.inference import mesh_from_model, snap_boundary
     from meshgen.tfi import parametric_grid
 
+    geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it learnt, as meshgen mesh does
     coords = parametric_grid([cells] * geometry.dim)
     start = time.perf_counter()
     X = mesh_from_model(model.checkpoint["model"], coords, geometry)

@@ -41,8 +41,25 @@ METHOD_HELP = (
     metavar="AXIS:SIDE:RATIO",
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
+@click.option(
+    "--boundary-layout",
+    type=click.Choice(["smoothed", "fixed"]),
+    default=None,
+    help="tfi, elliptic: boundary nodes by arc length on the edges and the surface's own Winslow grid on each face "
+    "(smoothed), or the geometry's own map, i.e. each face the Coons layout of its edges (fixed) "
+    "[default: smoothed for elliptic, fixed for tfi; a neural model meshes with the layout it was trained on].",
+)
+@click.option(
+    "--orthogonal",
+    "orthogonal",
+    multiple=True,
+    metavar="FACE",
+    help="elliptic: the first cell layer meets this wall (xi0 xi1 eta0 eta1 zeta0 zeta1) at right angles; repeatable. "
+    "With --cluster for boundary layers.",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, snap, tol, max_iter, clusters, quiet):
+def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, snap, tol, max_iter, clusters,
+         boundary_layout, orthogonal, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model of the --geometry (default: semicylinder)
@@ -78,7 +95,8 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
         method = "neural"
     _check_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
-    options = {"tol": tol, "max_iter": max_iter, "snap": snap}
+    options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout,
+               "orthogonal": orthogonal or None}
     model = None
     if method == "neural":
         model, geometry = _neural_model(checkpoint, geometry, params, geometry_given, dims)

@@ -93,6 +93,9 @@ class TrainConfig:
     description: str = "the full 3DMeshNet method, sized for about 5 minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
     dim: typing.Optional[int] = None  # 2 or 3 for presets made for one dimension; null: any
     seed: int = 0
+    # the boundary the network learns: "smoothed" (meshgen.layout: the faces' own Winslow grids) or
+    # "fixed" (the geometry's map: each face the Coons layout of its edges)
+    boundary_layout: str = "smoothed"
     model: ModelConfig = field(default_factory=ModelConfig)
     method: MethodConfig = field(default_factory=MethodConfig)
     points: PointsConfig = field(default_factory=PointsConfig)
@@ -333,6 +336,7 @@ def validate(config: TrainConfig) -> None:
         section, name = key.split(".")
         need(getattr(getattr(config, section), name) in choices, key, f"must be one of {', '.join(choices)}")
     need(config.dim in (None, 2, 3), "dim", "must be 2, 3 or null")
+    need(config.boundary_layout in ("smoothed", "fixed"), "boundary_layout", "must be one of smoothed, fixed")
     need(len(config.model.widths) >= 1 and min(config.model.widths) >= 1, "model.widths", "must be positive widths")
     need(config.method.point_weights >= 0, "method.point_weights", "must be >= 0")
     need(config.method.pde_weight > 0, "method.pde_weight", "must be > 0")

@@ -463,6 +463,9 @@ def build_neural(geometry, coords, model=None, snap=True):
         model = find_model(model, geometry_name=geometry.name, params=dict(geometry.values))
     if len(coords) != model.dim:
         raise ParameterError("dims", f"model {model.path} is {model.dim}D: {{name}} needs {model.dim} numbers, got {len(coords)}")
+    from meshgen.layout import trained_layout, with_layout
+
+    geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
     X = mesh_from_model(model.checkpoint["model"], coords, geometry)
     info = {"model": model.metadata(), "warnings": []}
     if snap:

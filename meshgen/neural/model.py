@@ -100,9 +100,13 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
     """
     from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
 
+    from meshgen.layout import trained_layout, with_layout
+
     model = checkpoint["model"]
     if model["exact_boundary"] and geometry is None:
         geometry = geometry_from_checkpoint(checkpoint)
+    if geometry is not None:  # the boundary the network was trained on
+        geometry = with_layout(geometry, trained_layout(checkpoint))
     return mesh_from_model(model, coords, geometry, chunk=chunk or CHUNK_NODES)
 
 

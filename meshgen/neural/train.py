@@ -391,7 +391,9 @@ def train(
     quality summary.
     """
     from meshgen import __version__
+    from meshgen.layout import with_layout
 
+    geometry = with_layout(geometry, config.boundary_layout)  # the boundary the network learns
     run_dir = Path(run_dir)
     device = torch.device(device)
     stop = stop or (lambda: False)
