@@ -33,6 +33,8 @@ order, since the library lists a node's children in that order.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from meshgen.errors import FormatError
@@ -51,14 +53,28 @@ SOLUTION_NAME = "FlowSolution"
 def write(path, X, cell_data, metadata):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as one structured zone; ``cell_data``
     arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor."""
+    node_shape = X.shape[:-1]
+    cell_shape = tuple(n - 1 for n in node_shape)
+    with stream(path, node_shape, X.shape[-1], metadata, cell_names=list(cell_data)) as zone:
+        whole = tuple(slice(0, n) for n in node_shape)
+        write_node_block(zone, X, whole)
+        for name, values in cell_data.items():
+            write_cell_block(zone, name, np.reshape(values, cell_shape), tuple(slice(0, n) for n in cell_shape))
+
+
+@contextlib.contextmanager
+def stream(path, node_shape, dim, metadata, cell_names=()):
+    """Open ``path`` with the whole tree of ``write`` and its coordinate (and cell-data) arrays
+    allocated but not filled; yield the zone's datasets for ``write_node_block`` and
+    ``write_cell_block`` (HDF5 hyperslab writes), so a mesh larger than memory is written block by
+    block. One layout for both: ``write`` is this with one block."""
     import h5py
 
     from meshgen.formats import METADATA_KEY, metadata_json
 
-    for name in cell_data:
+    for name in cell_names:
         _check_name(name, "cell data")
-    node_shape = X.shape[:-1]
-    dim = X.shape[-1]
+    node_shape = tuple(int(n) for n in node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
 
     # libver (earliest, v108): files the HDF5 1.8 and 1.10 libraries of CGNS builds can open.
@@ -78,14 +94,30 @@ def write(path, X, cell_data, metadata):
         zone = _node(base, ZONE_NAME, "Zone_t", sizes)
         _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
         coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        datasets = {"coordinates": [], "cells": {}}
         for axis in range(dim):
-            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", _fortran(X[..., axis]))
+            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", shape=node_shape[::-1])
             _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
-        if cell_data:
+            datasets["coordinates"].append(coordinate[" data"])
+        if cell_names:
             solution = _node(zone, SOLUTION_NAME, "FlowSolution_t")
             _node(solution, "GridLocation", "GridLocation_t", _chars("CellCenter"))
-            for name, values in cell_data.items():
-                _node(solution, name, "DataArray_t", _fortran(np.reshape(values, cell_shape)))
+            for name in cell_names:
+                datasets["cells"][name] = _node(solution, name, "DataArray_t", shape=cell_shape[::-1])[" data"]
+        yield datasets
+
+
+def write_node_block(zone: dict, X_block: np.ndarray, block) -> None:
+    """Write the nodes ``block`` (one slice per index axis i, j[, k]) of the zone that ``stream``
+    opened from ``X_block`` (block shape + (dim,)): one hyperslab per coordinate."""
+    hyperslab = tuple(block[::-1])
+    for axis, dataset in enumerate(zone["coordinates"]):
+        dataset[hyperslab] = _fortran(X_block[..., axis])
+
+
+def write_cell_block(zone: dict, name: str, values: np.ndarray, block) -> None:
+    """Write cell-data array ``name`` on the cells ``block`` (slices per axis) from ``values``."""
+    zone["cells"][name][tuple(block[::-1])] = _fortran(values)
 
 
 def read(path):
@@ -138,12 +170,18 @@ def read(path):
 # --- writing nodes -------------------------------------------------------------------------
 
 
-def _node(parent, name: str, label: str, data: np.ndarray | None = None):
-    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout."""
+def _node(parent, name: str, label: str, data: np.ndarray | None = None, shape=None):
+    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout,
+    or, with ``shape`` (HDF5 order), an unfilled float64 array to be written in blocks."""
     group = parent.create_group(name, track_order=True)
-    data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
+    if shape is not None:
+        data_type = "R8"
+    else:
+        data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
     _set_node_attributes(group, name, label, data_type)
-    if data is not None:
+    if shape is not None:
+        group.create_dataset(" data", shape=tuple(shape), dtype="<f8")
+    elif data is not None:
         group.create_dataset(" data", data=data)
     return group
 
