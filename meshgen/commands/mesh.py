@@ -28,24 +28,45 @@ METHOD_HELP = (
     metavar="AXIS:SIDE:RATIO",
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
+@click.option(
+    "--chunked/--in-memory",
+    default=None,
+    help="Compute the mesh in blocks on Dask and stream it into the file (tfi, neural; .cgns), for meshes "
+    "larger than memory [default: chunked when the in-memory path would need more than half of the available memory].",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    default=None,
+    help="Run the blocks on this dask.distributed scheduler (implies --chunked) [default: $DASK_SCHEDULER_ADDRESS, "
+    "else Dask's local threads].",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, quiet):
+def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, chunked, scheduler, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
     (of the --geometry given), else the semicylinder model bundled with meshgen; the model used is
     printed. --dims counts cells; nodes are dims + 1. The write is atomic: an interrupted run never
     leaves a partial file under the output name.
+
+    Meshes larger than memory (e.g. --dims 1000 1000 1000 -o big.cgns) are computed block by block
+    and streamed into a .cgns file with bounded memory; their quality report is computed block-wise
+    from the written file, and no per-cell quality arrays are attached (see README).
     """
     import sys
     import time
 
     from meshgen import __version__
+    from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
     from meshgen.clustering import node_coordinates
+    from meshgen.errors import MeshgenError
+    from meshgen.formats import streaming_writer
+    from meshgen.scheduler import connect, scheduler_address
     from meshgen.commands._progress import progress_display
     from meshgen.formats import check_output_path
     from meshgen.methods import get_method, make_mesh
-    from meshgen.quality import summary_lines, write_mesh_with_quality
+    from meshgen.quality import write_mesh_with_quality
 
     output = check_output_path(output)
     context = click.get_current_context()
@@ -55,6 +76,23 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         method = "neural"
     get_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
+    address = scheduler_address(scheduler)
+    node_count = 1
+    for n in dims:
+        node_count *= n + 1
+    if chunked is None:
+        chunked = address is not None or needs_chunking(node_count)
+    if chunked:
+        if method not in CHUNKED_METHODS:
+            raise MeshgenError(
+                f"method '{method}' cannot be computed block by block (a mesh of {node_count} nodes needs it); "
+                f"methods that can: {', '.join(CHUNKED_METHODS)}"
+            )
+        streaming_writer(output)  # a format that cannot stream fails before any work
+    elif address is not None:
+        raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
+    check_free_space(output, node_count * len(dims) * 8)
+    client = connect(address) if chunked else None  # an unreachable scheduler fails fast
     options = {"tol": tol, "max_iter": max_iter, "snap": snap}
     model = None
     if method == "neural":
@@ -66,6 +104,14 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         geometry = load_selected_geometry(geometry, params, dims)
     if model is not None and not quiet:
         click.echo(f"model: {model.describe()}")
+    if chunked:
+        try:
+            report, info, seconds = _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quiet)
+        finally:
+            if client is not None:
+                client.close()
+        _print_result(method, geometry, dims, info, seconds, output, report, quiet)
+        return
     start = time.perf_counter()
     show_progress = not quiet and sys.stdout.isatty() and "progress" in get_method(method).options
     with progress_display(f"{method} mesh", show_progress) as progress:
@@ -83,6 +129,12 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     }
     # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
     report = write_mesh_with_quality(output, X, geometry, metadata)
+    _print_result(method, geometry, dims, info, seconds, output, report, quiet)
+
+
+def _print_result(method, geometry, dims, info, seconds, output, report, quiet):
+    from meshgen.quality import summary_lines
+
     for line in info.get("warnings", []):
         click.echo(f"Warning: {line}", err=True)
     if not quiet:
@@ -97,9 +149,62 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
             )
         if "snap" in info:
             click.echo(_snap_line(info["snap"]))
+        if "boundary" in info and "deviation_before" in info["boundary"]:
+            before = info["boundary"]["deviation_before"]
+            click.echo(
+                f"boundary corrected onto the geometry (X = M + TFI[g - M]): deviation before max {before['max']:.3g} "
+                f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g})"
+            )
+        if "chunked" in info:
+            blocks = info["chunked"]
+            click.echo(
+                f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {report['write_seconds']:.1f} s, "
+                f"quality (block-wise, from the file) in {report['quality_seconds']:.1f} s"
+            )
         click.echo(f"wrote {output}")
         for line in summary_lines(report):
             click.echo(line)
+
+
+def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quiet):
+    """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
+    import sys
+    import time
+
+    from meshgen import __version__
+    from meshgen.chunked import neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
+    from meshgen.commands._progress import progress_display
+
+    start = time.perf_counter()
+    info = {}
+    if method == "tfi":
+        X = tfi_array(geometry, coords)
+    else:
+        X, boundary = neural_array(model.checkpoint["model"], geometry, coords, correct_boundary=snap is not False)
+        info = {"model": model.metadata(), "boundary": boundary}
+    info["chunked"] = {
+        "blocks": int(X.npartitions),
+        "block_shape": [int(c[0]) for c in X.chunks[:-1]],
+        "scheduler": client.scheduler.address if client is not None else "local threads",
+    }
+    metadata = {
+        "meshgen_version": __version__,
+        "method": method,
+        "geometry": geometry.name,
+        "params": geometry.values,
+        "dims": list(dims),
+        **({"cluster": list(clusters)} if clusters else {}),
+        "method_info": info,
+    }
+    with progress_display(f"{method} mesh", not quiet and sys.stdout.isatty()) as bar:
+
+        def progress(done, total, phase):
+            if bar is not None:
+                bar(done / total, phase=phase, blocks=f"{done}/{total}")
+
+        with single_threaded_torch(method == "neural" and client is None):
+            report = write_chunked_mesh(output, X, geometry, metadata, client=client, progress=progress)
+    return report, info, time.perf_counter() - start
 
 
 def _neural_model(checkpoint, spec, params, geometry_given, dims):

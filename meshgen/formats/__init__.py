@@ -34,19 +34,20 @@ class Format:
     extensions: tuple[str, ...]
     module: str
     description: str
+    streams: bool = False  # written block by block (``stream`` and ``write_node_block``): meshes larger than memory
 
 
 FORMATS: list[Format] = []
 
 
-def register_format(name: str, extensions, module: str, description: str) -> None:
-    FORMATS.append(Format(name, tuple(extensions), module, description))
+def register_format(name: str, extensions, module: str, description: str, streams: bool = False) -> None:
+    FORMATS.append(Format(name, tuple(extensions), module, description, streams))
 
 
 register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
-register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone")
+register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone", streams=True)
 register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
 register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
 
@@ -74,6 +75,19 @@ def check_output_path(path: str | os.PathLike) -> Path:
 
     format_for(path)
     return check_output_file(path, "mesh" + extensions()[0])
+
+
+def streaming_writer(path):
+    """The writer module of ``path``'s format when it can write a mesh block by block (``stream``,
+    ``write_node_block``); FormatError naming the formats that can, otherwise."""
+    fmt = format_for(path)
+    if not fmt.streams:
+        able = ", ".join(ext for f in FORMATS if f.streams for ext in f.extensions)
+        raise FormatError(
+            f"{fmt.name} ({Path(path).suffix}) cannot be written block by block, which a mesh larger than memory "
+            f"needs; formats that can: {able}"
+        )
+    return importlib.import_module(fmt.module)
 
 
 def write_mesh(path, X: np.ndarray, cell_data: dict | None = None, metadata: dict | None = None) -> Path:

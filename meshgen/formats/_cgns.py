@@ -280,3 +280,56 @@ def _c_order(data: np.ndarray, shape: tuple, path) -> np.ndarray:
     if array.shape != shape:
         raise FormatError(f"{path}: array of shape {array.shape} where {shape} was expected (rind planes are not read)")
     return array
+
+
+# --- reading in blocks (meshes larger than memory) ----------------------------------------
+
+
+def zone_header(path) -> tuple[tuple[int, ...], dict]:
+    """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of the first structured zone,
+    without reading the coordinates."""
+    import json
+
+    import h5py
+
+    from meshgen.formats import METADATA_KEY
+
+    try:
+        root = h5py.File(path, "r")
+    except OSError as exc:
+        raise FormatError(f"could not read {path}: {exc}") from None
+    with root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        zone = _child_with_label(base, "Zone_t", path)
+        zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
+        if zone_type != "Structured":
+            raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
+        node_shape = tuple(int(n) for n in _data(zone)[0])
+        metadata = {}
+        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
+            try:
+                metadata = json.loads(np.asarray(_data(base[METADATA_KEY])).view(np.uint8).tobytes().decode())
+            except (ValueError, UnicodeDecodeError):
+                metadata = {}
+    return node_shape, metadata if isinstance(metadata, dict) else {}
+
+
+def read_node_block(path, block) -> np.ndarray:
+    """The nodes ``block`` (one slice per index axis) of the first zone's coordinates: an array of
+    the block's shape + (dim,), C order (i, j[, k]), float64; one hyperslab read per coordinate."""
+    import h5py
+
+    with h5py.File(path, "r") as root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        zone = _child_with_label(base, "Zone_t", path)
+        grid = _child_with_label(zone, "GridCoordinates_t", path)
+        names = COORDINATE_NAMES[: len(block)]
+        missing = [name for name in names if name not in grid]
+        if missing:
+            raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
+        hyperslab = tuple(block[::-1])
+        shape = tuple(s.stop - s.start for s in block)
+        X = np.empty(shape + (len(names),))
+        for axis, name in enumerate(names):
+            X[..., axis] = grid[name][" data"][hyperslab].T
+    return X

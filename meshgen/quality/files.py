@@ -107,7 +107,10 @@ def recorded_metadata(path, mesh) -> dict:
     return {}
 
 
-def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) -> dict:
+EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
+
+
+def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
 
@@ -115,16 +118,26 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) ->
     sidecar) records; ``params`` override the geometry's parameters. A file that is meshgen's own
     structured grid takes the structured path. ``mesh``: the file as ``read_mesh(path)`` returned
     it, for a caller that needs it too (read once). MeshgenError when nothing can be evaluated.
+
+    ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
+    or None for automatically when the file is CGNS and the in-memory path would need more than
+    half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
     """
-    from meshgen.errors import GeometryError
     from meshgen.formats import read_mesh
-    from meshgen.geometry import load_geometry
 
     path = Path(path)
     if not path.is_file():
         raise MeshgenError(f"mesh file {path} does not exist")
     if path.stat().st_size == 0:
         raise MeshgenError(f"mesh file {path} is empty")
+    if chunked is None and mesh is None and path.suffix.lower() == ".cgns":
+        from meshgen.chunked import needs_chunking
+        from meshgen.formats._cgns import zone_header
+
+        node_shape, _ = zone_header(path)
+        chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
+    if chunked:
+        return _evaluate_file_in_blocks(path, geometry, params, client)
     if mesh is None:
         mesh = read_mesh(path)
     try:
@@ -132,23 +145,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) ->
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     metadata = recorded_metadata(path, mesh)
-    if metadata.get("source") == "sidecar" and (metadata.get("cells") != len(cells) or metadata.get("mesh") != path.name):
-        metadata = {}  # a sidecar of another mesh that once had this name
-    notes = []
-    source = "--geometry"
-    if isinstance(geometry, str):
-        geometry = load_geometry(geometry, params)
-    elif geometry is not None and params:
-        geometry = geometry.with_params(**params)
-    elif geometry is None and metadata.get("geometry"):
-        source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
-        try:
-            geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
-        except GeometryError as exc:
-            notes.append(f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation")
-            geometry = None
-    elif params:
-        raise MeshgenError(f"--param needs --geometry: {path} records no geometry")
+    geometry, source, notes = _geometry_for(path, geometry, params, metadata, len(cells))
     dims = metadata.get("dims")
     X = None
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
@@ -167,6 +164,56 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) ->
         notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation")
         geometry = None
     report = _report(metrics, degenerate, info, geometry)
+    return _finish_file_report(path, report, source, notes, metadata, X is not None)
+
+
+def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
+    """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
+    from meshgen.formats._cgns import zone_header
+    from meshgen.quality.chunked import chunked_report
+
+    if path.suffix.lower() != ".cgns":
+        raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
+    node_shape, recorded = zone_header(path)
+    metadata = {**recorded, "source": "file"} if recorded else recorded_metadata(path, None)
+    cells = int(np.prod([n - 1 for n in node_shape]))
+    geometry, source, notes = _geometry_for(path, geometry, params, metadata, cells)
+    if geometry is not None and geometry.dim != len(node_shape) and source != "--geometry":
+        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {len(node_shape)}D; no boundary deviation")
+        geometry = None
+    try:
+        report = chunked_report(path, geometry, client=client)
+    except MeshgenError as exc:
+        raise MeshgenError(f"{path}: {exc}") from None
+    return _finish_file_report(path, report, source, notes, metadata, True)
+
+
+def _geometry_for(path, geometry, params, metadata, n_cells):
+    """(geometry or None, where it came from, notes) for evaluating the file ``path``."""
+    from meshgen.errors import GeometryError
+    from meshgen.geometry import load_geometry
+
+    if metadata.get("source") == "sidecar" and (metadata.get("cells") != n_cells or metadata.get("mesh") != path.name):
+        metadata.clear()  # a sidecar of another mesh that once had this name
+    notes = []
+    source = "--geometry"
+    if isinstance(geometry, str):
+        geometry = load_geometry(geometry, params)
+    elif geometry is not None and params:
+        geometry = geometry.with_params(**params)
+    elif geometry is None and metadata.get("geometry"):
+        source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
+        try:
+            geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
+        except GeometryError as exc:
+            notes.append(f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation")
+            geometry = None
+    elif params:
+        raise MeshgenError(f"--param needs --geometry: {path} records no geometry")
+    return geometry, source, notes
+
+
+def _finish_file_report(path, report, source, notes, metadata, structured) -> dict:
     if "boundary_deviation" in report:
         report["boundary_deviation"]["source"] = source
     if notes:
@@ -174,4 +221,4 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None) ->
     for key in ("method", "dims"):
         if key in metadata:
             report.setdefault("recorded", {})[key] = metadata[key]
-    return {"file": str(path), "structured": X is not None, **report}
+    return {"file": str(path), "structured": structured, **report}

@@ -68,22 +68,36 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
 
 
 def _report(metrics, degenerate, info, geometry) -> dict:
+    inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
+    shaped = ~degenerate
+    summaries = {name: summarize(metrics[name][shaped]) for name in METRICS}
+    counts = {
+        "cells": int(len(degenerate)),
+        "inverted": int(np.count_nonzero(inverted)),
+        "degenerate": int(np.count_nonzero(degenerate)),
+    }
+    return assemble_report(summaries, counts, info, geometry)
+
+
+def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict:
+    """The report from the metric ``summaries`` ({name: {mean, min, max, p01, p99}}), ``counts``
+    (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
+    ``boundary()`` -> (boundary points, parametric guesses)); shared by the whole-mesh and the
+    block-wise (``meshgen.quality.chunked``) paths."""
     from meshgen.deviation import boundary_deviation
 
     dim = int(info["dim"])
-    n_cells = int(len(degenerate))
-    inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
-    inverted_count = int(np.count_nonzero(inverted))
-    shaped = ~degenerate
+    n_cells = counts["cells"]
+    inverted_count = counts["inverted"]
     report = {
         "cells": n_cells,
         "dim": dim,
         "cell_type": "hexahedron" if dim == 3 else "quad",
-        "metrics": {name: summarize(metrics[name][shaped]) for name in METRICS},
+        "metrics": summaries,
         "inverted": {
             "count": inverted_count,
             "fraction": inverted_count / n_cells if n_cells else 0.0,
-            "degenerate": int(np.count_nonzero(degenerate)),
+            "degenerate": counts["degenerate"],
         },
         "valid": bool(inverted_count <= VALID_FRACTION * n_cells),
         "valid_rule": VALID_RULE,

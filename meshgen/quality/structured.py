@@ -61,15 +61,20 @@ def _apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:
     sj[degenerate] = np.minimum(np.where(np.isfinite(sj[degenerate]), sj[degenerate], 0.0), 0.0)
 
 
-def _structured(X):
-    """Per-cell metrics (C order of cells) and the degenerate mask of node array ``X``."""
+def _structured(X, tolerance=None, orientation=None):
+    """Per-cell metrics (C order of cells) and the degenerate mask of node array ``X``.
+
+    ``tolerance`` (degenerate-edge length) and ``orientation`` (2D: +1 or -1) default to those of
+    ``X`` itself; a block of a larger mesh passes the whole mesh's, so its cells get the values they
+    get in the whole."""
     X = _check_node_array(X)
     dim = X.shape[-1]
     node_shape = X.shape[:-1]
     cell_shape = tuple(n - 1 for n in node_shape)
     n_cells = int(np.prod(cell_shape))
     components = tuple(np.ascontiguousarray(X[..., c]) for c in range(dim))
-    tolerance, nonfinite = _tolerance(components)
+    own_tolerance, nonfinite = _tolerance(components)
+    tolerance = own_tolerance if tolerance is None else tolerance
     offsets = HEX_CORNER if dim == 3 else QUAD_CORNER
 
     def corners(first, last):
@@ -87,7 +92,8 @@ def _structured(X):
     centroid = tuple(sum(corner[c] for corner in all_corners.values()) * weight for c in range(dim))
     # NaN margin of one cell on every side: the neighbour across a boundary face is "none".
     padded = tuple(np.pad(c, 1, constant_values=np.nan) for c in centroid)
-    orientation = _orientation_2d(all_corners) if dim == 2 else 1.0
+    if orientation is None:
+        orientation = _orientation_2d(all_corners) if dim == 2 else 1.0
     faces = HEX_FACES if dim == 3 else QUAD_FACES
 
     metrics = {name: np.empty(cell_shape) for name in METRICS}
