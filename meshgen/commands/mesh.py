@@ -41,8 +41,15 @@ METHOD_HELP = (
     help="Run the blocks on this dask.distributed scheduler (implies --chunked) [default: $DASK_SCHEDULER_ADDRESS, "
     "else Dask's local threads].",
 )
+@click.option(
+    "--quality/--no-quality",
+    default=True,
+    show_default=True,
+    help="Measure the mesh: per-cell quality arrays in the file (in-memory path) and <output>.quality.json. "
+    "--no-quality writes the mesh alone (meshgen evaluate can measure it later).",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, chunked, scheduler, quiet):
+def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, chunked, scheduler, quality, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
@@ -61,7 +68,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
     from meshgen.clustering import node_coordinates
     from meshgen.errors import MeshgenError
-    from meshgen.formats import streaming_writer
+    from meshgen.formats import streaming_writer, write_mesh
     from meshgen.scheduler import connect, scheduler_address
     from meshgen.commands._progress import progress_display
     from meshgen.formats import check_output_path
@@ -106,7 +113,9 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         click.echo(f"model: {model.describe()}")
     if chunked:
         try:
-            report, info, seconds = _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quiet)
+            report, info, seconds = _mesh_in_blocks(
+                method, geometry, coords, model, snap, output, dims, clusters, client, quality, quiet
+            )
         finally:
             if client is not None:
                 client.close()
@@ -127,8 +136,12 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
-    # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
-    report = write_mesh_with_quality(output, X, geometry, metadata)
+    if quality:
+        # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
+        report = write_mesh_with_quality(output, X, geometry, metadata)
+    else:
+        write_mesh(output, X, metadata=metadata)
+        report = None
     _print_result(method, geometry, dims, info, seconds, output, report, quiet)
 
 
@@ -157,16 +170,16 @@ def _print_result(method, geometry, dims, info, seconds, output, report, quiet):
             )
         if "chunked" in info:
             blocks = info["chunked"]
-            click.echo(
-                f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {report['write_seconds']:.1f} s, "
-                f"quality (block-wise, from the file) in {report['quality_seconds']:.1f} s"
-            )
+            line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"
+            if "quality_seconds" in blocks:
+                line += f", quality (block-wise, from the file) in {blocks['quality_seconds']:.1f} s"
+            click.echo(line)
         click.echo(f"wrote {output}")
-        for line in summary_lines(report):
+        for line in summary_lines(report) if report is not None else []:
             click.echo(line)
 
 
-def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quiet):
+def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quality, quiet):
     """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
     import sys
     import time
@@ -203,7 +216,8 @@ def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, cluster
                 bar(done / total, phase=phase, blocks=f"{done}/{total}")
 
         with single_threaded_torch(method == "neural" and client is None):
-            report = write_chunked_mesh(output, X, geometry, metadata, client=client, progress=progress)
+            report, timings = write_chunked_mesh(output, X, geometry, metadata, client=client, progress=progress, evaluate=quality)
+    info["chunked"].update(timings)
     return report, info, time.perf_counter() - start
 
 
