@@ -25,7 +25,11 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
-- ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``.
+- ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``;
+- ``chunked``: meshes larger than memory (``bench_chunked.py``): TFI to ``.cgns`` in memory and in
+  blocks at 200^3 (throughput ratio), the chunked path at 400^3 and ``meshgen evaluate --chunked``
+  of that file (peak memory), a neural mesh in blocks; the 1000^3 rows are
+  ``bench_chunked.py --big-dims 1000`` by hand; the GPU row is skipped without a CUDA device.
 
 The summary at the end lists the headline figures with their targets (from the issues) and met /
 not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
@@ -34,7 +38,7 @@ not met; ``--json`` keeps everything measured, with keys that name their units (
 --quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
 sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
 never reaches the bounds says little), formats at 50^3, and the peak memory of the 100^3 command
-instead of 200^3. Targets are judged only on the figures they are set for.
+instead of 200^3, chunked at 60^3 and 80^3. Targets are judged only on the figures they are set for.
 
 Every timing gives wall seconds and, where it helps, process CPU seconds: on a machine shared with
 other work the wall time grows with the load average (recorded before and after each section),
@@ -70,7 +74,7 @@ sys.path.insert(1, str(BENCHMARKS))
 
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
-SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "memory"]
+SECTIONS = ["machine", "meshing", "mesh_command", "training", "time_to_quality", "evaluate", "formats", "memory", "chunked"]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -81,6 +85,9 @@ TARGETS = {
     "evaluate_1e6_seconds": ("<=", 3.0, "s", "issue 3: quality of 1e6 hexahedra"),
     "fd_ad_step_ratio": (">=", 10.0, "x", "the training issue: autograd step / finite-difference step, same points"),
     "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "issue 5: meshgen mesh --dims 200 200 200"),
+    "chunked_throughput_ratio": ("<=", 1.5, "x", "issue 14: in-memory / chunked node throughput, 200^3 TFI to .cgns"),
+    "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
+    "evaluate_chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen evaluate of the 1000^3 file"),
 }
 
 
@@ -302,6 +309,12 @@ def memory_section(quick: bool) -> dict:
     return data
 
 
+def chunked_section(quick: bool) -> dict:
+    import bench_chunked
+
+    return bench_chunked.measure(quick)
+
+
 # ---------------------------------------------------------------------------------------------
 # training
 
@@ -468,6 +481,21 @@ def summary(sections: dict) -> list[dict]:
             f"{data['cells_per_axis']} -o out.vtu`", data["peak_megabytes"], "MB",
             "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200,
             note=f"{format_value(data['seconds'], 's')} end to end")
+    if "chunked" in sections:
+        data = sections["chunked"]
+        same, big = data["same_size_cells_per_axis"], data["big_cells_per_axis"]
+        for name, ratio in data["throughput_ratio_in_memory_over_chunked"].items():
+            add(f"in-memory / chunked node throughput, TFI {same}^3 to .cgns, {name.replace('_', ' ')}", ratio, "x",
+                "chunked_throughput_ratio", judged=same == 200)
+        row = data["big"]
+        add(f"peak memory, `meshgen mesh -m tfi --dims {big}^3 --chunked --no-quality -o big.cgns`", row["peak_megabytes"], "MB",
+            "chunked_1000_peak_megabytes", judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['nodes_per_second'] / 1e6:.2f} M nodes/s")
+        row = data["evaluate_big"]
+        add(f"peak memory, `meshgen evaluate --chunked` of the {big}^3 file", row["peak_megabytes"], "MB",
+            "evaluate_chunked_1000_peak_megabytes", judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['cells_per_second'] / 1e6:.2f} M cells/s")
+        add("GPU inference, 501^3 nodes, [85]*4", None, "s", note=data["gpu_inference"].get("skipped", ""))
     return rows
 
 
@@ -592,6 +620,7 @@ def main(argv=None) -> int:
         "evaluate": lambda: evaluate(args.quick),
         "formats": lambda: formats(args.quick),
         "memory": lambda: memory_section(args.quick),
+        "chunked": lambda: chunked_section(args.quick),
     }
     for name in chosen:
         section_header(name)
