@@ -226,3 +226,15 @@ def test_dask_is_not_imported_by_help():
     code = "import sys; from meshgen.cli import cli\ntry:\n    cli.main(['--help'])\nexcept SystemExit: pass\nprint('dask' in sys.modules)"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ})
     assert result.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_no_quality_writes_the_mesh_alone(tmp_path):
+    import meshio
+
+    runner = CliRunner()
+    for name, extra in (("a.vtu", []), ("b.cgns", ["--chunked"])):
+        result = runner.invoke(cli, ["mesh", "-m", "tfi", "--dims", "4", "3", "5", "--no-quality", "-q", *extra, "-o", str(tmp_path / name)])
+        assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.vtu", "b.cgns"]  # no .quality.json
+    assert meshio.read(tmp_path / "a.vtu").cell_data == {}
+    assert read_whole(tmp_path / "b.cgns").shape == (5, 4, 6, 3)
