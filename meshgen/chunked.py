@@ -180,7 +180,7 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     To use another block-local boundary treatment, replace ``_neural_block``'s last step: it sees
     the block's slices and whatever face arrays are computed here up front.
     """
-    from meshgen.tfi import boundary_faces, face_corrections
+    from meshgen.tfi import boundary_faces, face_corrections, tfi
 
     coords = [np.asarray(c, dtype=float) for c in coords]
     faces = boundary_faces(coords)
@@ -191,11 +191,8 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     if correct_boundary:
         face_maps = []
         for grid in _face_grids(coords):
-            tfi_face = None
-            if tfi_corrections is not None:
-                from meshgen.tfi import tfi as direct_tfi
-
-                tfi_face = direct_tfi(geometry, None, grid)  # a face: the direct form, face-sized
+            # On a face (one axis pinned) tfi takes the direct form, face-sized.
+            tfi_face = tfi(geometry, None, grid) if tfi_corrections is not None else None
             face_maps.append(network_map_block(model, grid, tfi_face).reshape(-1, len(coords)))
         error = boundary_images - np.concatenate(face_maps)
         distance = np.linalg.norm(error, axis=1)
