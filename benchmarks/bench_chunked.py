@@ -10,8 +10,8 @@ and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN`
   is nodes per wall second, and the ratio is in-memory over chunked throughput (the issue's goal:
   at most 1.5);
 - the chunked path at ``--big-dims`` (default 400; ``--quick`` 80), TFI to ``.cgns`` with
-  ``--no-quality``, then ``meshgen evaluate --chunked`` of that file, and a neural mesh at the
-  in-memory size;
+  ``--no-quality``, then ``meshgen evaluate --chunked`` of that file; the bundled neural model in
+  memory and in blocks at the same size (``--no-quality``);
 - the issue's 1000^3 rows are this with ``--big-dims 1000`` run by hand (about 24 GB on disk in
   ``--folder``, tens of minutes): not part of ``benchmarks/run.py``;
 - GPU inference: skipped where torch sees no CUDA device (this machine), with the reason.
@@ -93,8 +93,11 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
                 print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
                       f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
                 (temporary / f"tfi-{same}{mode}.cgns").unlink()
-        rows.append(mesh_row("neural", same, "--chunked", False, temporary))
-        print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+        for mode in ("--in-memory", "--chunked"):
+            rows.append(mesh_row("neural", same, mode, False, temporary))
+            print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+                  f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+            (temporary / f"neural-{same}{mode}.cgns").unlink()
         big_row = mesh_row("tfi", big, "--chunked", False, temporary)
         print(f"  {big_row['command']}: {big_row['seconds']:.1f} s, {big_row['nodes_per_second'] / 1e6:.2f} M nodes/s, "
               f"peak {big_row['peak_megabytes']:.0f} MB", flush=True)
@@ -102,11 +105,12 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
         evaluate_row.update(cells=big**3, cells_per_second=big**3 / evaluate_row["seconds"])
         print(f"  {evaluate_row['command']}: {evaluate_row['seconds']:.1f} s, peak {evaluate_row['peak_megabytes']:.0f} MB", flush=True)
 
-    def throughput(path, quality):
-        return next(r["nodes_per_second"] for r in rows if r["method"] == "tfi" and r["path"] == path and r["quality"] == quality)
+    def throughput(path, quality, method="tfi"):
+        return next(r["nodes_per_second"] for r in rows if r["method"] == method and r["path"] == path and r["quality"] == quality)
 
     ratios = {("with_quality" if quality else "without_quality"): throughput("in-memory", quality) / throughput("chunked", quality)
               for quality in (True, False)}
+    ratios["neural_without_quality"] = throughput("in-memory", False, "neural") / throughput("chunked", False, "neural")
     return {"same_size_cells_per_axis": same, "big_cells_per_axis": big, "rows": rows, "big": big_row,
             "evaluate_big": evaluate_row, "throughput_ratio_in_memory_over_chunked": ratios,
             "big_over_same_size_in_memory_ratio": throughput("in-memory", False) / big_row["nodes_per_second"],

@@ -485,8 +485,9 @@ def summary(sections: dict) -> list[dict]:
         data = sections["chunked"]
         same, big = data["same_size_cells_per_axis"], data["big_cells_per_axis"]
         for name, ratio in data["throughput_ratio_in_memory_over_chunked"].items():
-            add(f"in-memory / chunked node throughput, TFI {same}^3 to .cgns, {name.replace('_', ' ')}", ratio, "x",
-                "chunked_throughput_ratio", judged=same == 200)
+            method = "neural" if name.startswith("neural") else "TFI"
+            add(f"in-memory / chunked node throughput, {method} {same}^3 to .cgns, {name.replace('neural_', '').replace('_', ' ')}",
+                ratio, "x", "chunked_throughput_ratio", judged=same == 200)
         row = data["big"]
         add(f"peak memory, `meshgen mesh -m tfi --dims {big}^3 --chunked --no-quality -o big.cgns`", row["peak_megabytes"], "MB",
             "chunked_1000_peak_megabytes", judged=big == 1000,
