@@ -53,6 +53,13 @@ def test_tfi_in_blocks_streamed_to_cgns_equals_the_in_memory_mesh_bit_for_bit(tm
     write_chunked_mesh(tmp_path / "m.cgns", X, semicylinder, {"method": "tfi"}, evaluate=False)
     assert np.array_equal(read_whole(tmp_path / "m.cgns"), tfi(semicylinder, None, coords))
     assert [p.name for p in tmp_path.iterdir()] == ["m.cgns"]
+    import shutil
+    import subprocess
+
+    if shutil.which("cgnscheck"):  # the block-written file is a valid CGNS file too
+        result = subprocess.run(["cgnscheck", str(tmp_path / "m.cgns")], capture_output=True, text=True, timeout=60)
+        output = result.stdout + result.stderr
+        assert result.returncode == 0 and "ERROR" not in output and "WARNING" not in output, output
 
 
 def test_blockwise_evaluation_equals_the_whole_mesh_path(semicylinder, semidisk):
