@@ -64,7 +64,6 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
     import sys
     import time
 
-    from meshgen import __version__
     from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
     from meshgen.clustering import node_coordinates
     from meshgen.errors import MeshgenError
@@ -127,12 +126,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         X, info = make_mesh(method, geometry, coords, progress=progress, **options)
     seconds = time.perf_counter() - start
     metadata = {
-        "meshgen_version": __version__,
-        "method": method,
-        "geometry": geometry.name,
-        "params": geometry.values,
-        "dims": list(dims),
-        **({"cluster": list(clusters)} if clusters else {}),
+        **_run_metadata(method, geometry, dims, clusters),
         "meshing_seconds": seconds,
         **({"method_info": info} if info else {}),
     }
@@ -179,12 +173,25 @@ def _print_result(method, geometry, dims, info, seconds, output, report, quiet):
             click.echo(line)
 
 
+def _run_metadata(method, geometry, dims, clusters) -> dict:
+    """What every mesh file records of the run that made it."""
+    from meshgen import __version__
+
+    return {
+        "meshgen_version": __version__,
+        "method": method,
+        "geometry": geometry.name,
+        "params": geometry.values,
+        "dims": list(dims),
+        **({"cluster": list(clusters)} if clusters else {}),
+    }
+
+
 def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, clusters, client, quality, quiet):
     """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
     import sys
     import time
 
-    from meshgen import __version__
     from meshgen.chunked import neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
     from meshgen.commands._progress import progress_display
 
@@ -200,15 +207,7 @@ def _mesh_in_blocks(method, geometry, coords, model, snap, output, dims, cluster
         "block_shape": [int(c[0]) for c in X.chunks[:-1]],
         "scheduler": client.scheduler.address if client is not None else "local threads",
     }
-    metadata = {
-        "meshgen_version": __version__,
-        "method": method,
-        "geometry": geometry.name,
-        "params": geometry.values,
-        "dims": list(dims),
-        **({"cluster": list(clusters)} if clusters else {}),
-        "method_info": info,
-    }
+    metadata = {**_run_metadata(method, geometry, dims, clusters), "method_info": info}
     with progress_display(f"{method} mesh", not quiet and sys.stdout.isatty()) as bar:
 
         def progress(done, total, phase):

@@ -130,19 +130,9 @@ def read(path):
     from meshgen.formats import METADATA_KEY
 
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        zone = _child_with_label(base, "Zone_t", path)
-        zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
-        if zone_type != "Structured":
-            raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
-        node_shape = tuple(int(n) for n in _data(zone)[0])
+        base, zone, node_shape = _structured_zone(root, path)
         cell_shape = tuple(n - 1 for n in node_shape)
-        grid = _child_with_label(zone, "GridCoordinates_t", path)
-        names = COORDINATE_NAMES[: len(node_shape)]
-        missing = [name for name in names if name not in grid]
-        if missing:
-            raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
-        X = np.stack([_c_order(_data(grid[name]), node_shape, path) for name in names], axis=-1)
+        X = np.stack([_c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
 
         point_data, cell_data = {}, {}
         for solution in _children_with_label(zone, "FlowSolution_t"):
@@ -299,12 +289,7 @@ def zone_header(path) -> tuple[tuple[int, ...], dict]:
     except OSError as exc:
         raise FormatError(f"could not read {path}: {exc}") from None
     with root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        zone = _child_with_label(base, "Zone_t", path)
-        zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
-        if zone_type != "Structured":
-            raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
-        node_shape = tuple(int(n) for n in _data(zone)[0])
+        base, _, node_shape = _structured_zone(root, path)
         metadata = {}
         if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
             try:
@@ -320,16 +305,29 @@ def read_node_block(path, block) -> np.ndarray:
     import h5py
 
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        zone = _child_with_label(base, "Zone_t", path)
-        grid = _child_with_label(zone, "GridCoordinates_t", path)
-        names = COORDINATE_NAMES[: len(block)]
-        missing = [name for name in names if name not in grid]
-        if missing:
-            raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
+        _, zone, _ = _structured_zone(root, path)
         hyperslab = tuple(block[::-1])
-        shape = tuple(s.stop - s.start for s in block)
-        X = np.empty(shape + (len(names),))
-        for axis, name in enumerate(names):
-            X[..., axis] = grid[name][" data"][hyperslab].T
+        X = np.empty(tuple(s.stop - s.start for s in block) + (len(block),))
+        for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
+            X[..., axis] = array[hyperslab].T
     return X
+
+
+def _structured_zone(root, path):
+    """(base, zone, node shape) of the first zone of the first base; FormatError unless structured."""
+    base = _child_with_label(root, "CGNSBase_t", path)
+    zone = _child_with_label(base, "Zone_t", path)
+    zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
+    if zone_type != "Structured":
+        raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
+    return base, zone, tuple(int(n) for n in _data(zone)[0])
+
+
+def _coordinate_arrays(zone, dim: int, path) -> list:
+    """The HDF5 datasets of CoordinateX, Y[, Z] of ``zone`` (not read); FormatError if one is missing."""
+    grid = _child_with_label(zone, "GridCoordinates_t", path)
+    names = COORDINATE_NAMES[:dim]
+    missing = [name for name in names if name not in grid]
+    if missing:
+        raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
+    return [grid[name][" data"] for name in names]
