@@ -18,7 +18,7 @@ METHOD_HELP = (
 @dims_option()
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt).")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
-@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
+@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary (--chunked: correct the map, X = M + TFI[g - M]) [default: --snap].")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
 @click.option(
