@@ -31,7 +31,11 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``solver_formats``: the 100^3 neural mesh with its quality arrays and patches written as .vtu,
   .vts, .cgns, OpenFOAM (binary, ASCII), .su2 and .msh: seconds and MB, and the .vts against the
   .vtu (``bench_solver_formats.py``);
-- ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``.
+- ``memory``: peak resident memory of ``meshgen mesh --dims 200 200 200 -o out.vtu``;
+- ``chunked``: meshes larger than memory (``bench_chunked.py``): TFI to ``.cgns`` in memory and in
+  blocks at 200^3 (throughput ratio), the chunked path at 400^3 and ``meshgen evaluate --chunked``
+  of that file (peak memory), a neural mesh in blocks; the 1000^3 rows are
+  ``bench_chunked.py --big-dims 1000`` by hand; the GPU row is skipped without a CUDA device.
 
 The summary at the end lists the headline figures with their targets (from the issues) and met /
 not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
@@ -40,7 +44,7 @@ not met; ``--json`` keeps everything measured, with keys that name their units (
 --quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
 sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
 never reaches the bounds says little), formats and solver formats at 50^3, and the peak memory of the 100^3 command
-instead of 200^3. Targets are judged only on the figures they are set for.
+instead of 200^3, chunked at 60^3 and 80^3. Targets are judged only on the figures they are set for.
 
 Every timing gives wall seconds and, where it helps, process CPU seconds: on a machine shared with
 other work the wall time grows with the load average (recorded before and after each section),
@@ -77,7 +81,7 @@ sys.path.insert(1, str(BENCHMARKS))
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
 SECTIONS = ["machine", "meshing", "boundary_layout", "mesh_command", "training", "time_to_quality", "evaluate", "formats",
-            "solver_formats", "memory"]
+            "solver_formats", "memory", "chunked"]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -92,6 +96,9 @@ TARGETS = {
     "vts_vtu_write_time_ratio": ("<=", 1.0, "x", "issue 12: .vts write time / .vtu write time, same mesh"),
     "elliptic_min_angle_30": (">=", 74.4, "deg", "issue 16: semicylinder 30^3, smoothed gmsh transfinite mesh 74.42"),
     "elliptic_min_angle_100": (">=", 74.8, "deg", "issue 16: semicylinder 100^3, smoothed gmsh transfinite mesh 74.79"),
+    "chunked_throughput_ratio": ("<=", 1.5, "x", "issue 14: in-memory / chunked node throughput, 200^3 TFI to .cgns"),
+    "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
+    "evaluate_chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen evaluate of the 1000^3 file"),
 }
 
 
@@ -313,6 +320,12 @@ def memory_section(quick: bool) -> dict:
     return data
 
 
+def chunked_section(quick: bool) -> dict:
+    import bench_chunked
+
+    return bench_chunked.measure(quick)
+
+
 # ---------------------------------------------------------------------------------------------
 # training
 
@@ -514,6 +527,22 @@ def summary(sections: dict) -> list[dict]:
             f"{data['cells_per_axis']} -o out.vtu`", data["peak_megabytes"], "MB",
             "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200,
             note=f"{format_value(data['seconds'], 's')} end to end")
+    if "chunked" in sections:
+        data = sections["chunked"]
+        same, big = data["same_size_cells_per_axis"], data["big_cells_per_axis"]
+        for name, ratio in data["throughput_ratio_in_memory_over_chunked"].items():
+            method = "neural" if name.startswith("neural") else "TFI"
+            add(f"in-memory / chunked node throughput, {method} {same}^3 to .cgns, {name.replace('neural_', '').replace('_', ' ')}",
+                ratio, "x", "chunked_throughput_ratio", judged=same == 200)
+        row = data["big"]
+        add(f"peak memory, `meshgen mesh -m tfi --dims {big}^3 --chunked --no-quality -o big.cgns`", row["peak_megabytes"], "MB",
+            "chunked_1000_peak_megabytes", judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['nodes_per_second'] / 1e6:.2f} M nodes/s")
+        row = data["evaluate_big"]
+        add(f"peak memory, `meshgen evaluate --chunked` of the {big}^3 file", row["peak_megabytes"], "MB",
+            "evaluate_chunked_1000_peak_megabytes", judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['cells_per_second'] / 1e6:.2f} M cells/s")
+        add("GPU inference, 501^3 nodes, [85]*4", None, "s", note=data["gpu_inference"].get("skipped", ""))
     return rows
 
 
@@ -642,6 +671,7 @@ def main(argv=None) -> int:
         "formats": lambda: formats(args.quick),
         "solver_formats": lambda: solver_formats(args.quick),
         "memory": lambda: memory_section(args.quick),
+        "chunked": lambda: chunked_section(args.quick),
     }
     for name in chosen:
         section_header(name)

@@ -48,15 +48,8 @@ class Mesh:
 
     def metadata(self) -> dict:
         """What the written files record of how the mesh was made."""
-        from meshgen import __version__
-
         return {
-            "meshgen_version": __version__,
-            "method": self.method,
-            "geometry": self.geometry.name,
-            "params": self.geometry.values,
-            "dims": list(self.dims),
-            **({"cluster": list(self.cluster)} if self.cluster else {}),
+            **run_metadata(self.method, self.geometry, self.dims, self.cluster),
             "meshing_seconds": self.seconds,
             **({"method_info": self.info} if self.info else {}),
         }
@@ -67,6 +60,21 @@ class Mesh:
         from meshgen.quality import write_mesh_with_quality
 
         return write_mesh_with_quality(path, self.X, self.geometry, self.metadata())
+
+
+def run_metadata(method: str, geometry, dims, cluster=()) -> dict:
+    """What every mesh file records of the run that made it: meshgen's version, the method, the
+    geometry with its parameters, the cell counts and the clustering asked for."""
+    from meshgen import __version__
+
+    return {
+        "meshgen_version": __version__,
+        "method": method,
+        "geometry": geometry.name,
+        "params": geometry.values,
+        "dims": list(dims),
+        **({"cluster": list(cluster)} if cluster else {}),
+    }
 
 
 def mesh(geometry, dims, method: str = "tfi", *, params: dict | None = None, cluster=(), progress=None, **options) -> Mesh:

@@ -77,19 +77,36 @@ def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.n
     blended face terms (2D: four) instead of the 26 face, edge and vertex terms of the direct form.
     """
     coords = [np.asarray(c, dtype=float) for c in coords]
+    faces = boundary_faces(coords)
+    images = boundary(np.concatenate([points for _, points in faces]))
+    shape = tuple(len(c) for c in coords)
+    corrections = face_corrections(images, coords)
+    whole = tuple(slice(0, n) for n in shape)
+    return blend_face_corrections(corrections, coords, whole, out=out)
+
+
+def face_corrections(face_values: np.ndarray, coords) -> list:
+    """The face terms D_as of the axis-by-axis Boolean sum (see ``transfinite_on_grid``) from the
+    values of the map on the faces of the tensor grid of ``coords`` (first and last values 0 and 1).
+
+    ``face_values``: (sum of face node counts, d), the faces in the order of ``boundary_faces``.
+    Returns [(axis, side, D)], D of the face's grid shape + (d,): O(n^2) memory in 3D. The TFI of
+    any function given on the faces (the boundary map; a network's boundary error) is then
+    ``blend_face_corrections`` on any block of the grid, block by block.
+    """
+    coords = [np.asarray(c, dtype=float) for c in coords]
     dim = len(coords)
     if any(c[0] != 0.0 or c[-1] != 1.0 for c in coords):
         raise ValueError("transfinite_on_grid needs node coordinates from 0 to 1 on every axis")
     shape = tuple(len(c) for c in coords)
-    faces = boundary_faces(coords)
-    images = boundary(np.concatenate([points for _, points in faces]))
     corrections = []  # (axis, side, D on the face grid: shape without the axis, + (dim,))
     start = 0
-    for (index, points), face in zip(faces, cube.faces(dim)):
+    for face in cube.faces(dim):
         axis, side = face.axis, face.side
         face_shape = tuple(n for d, n in enumerate(shape) if d != axis)
-        values = images[start : start + len(points)].reshape(*face_shape, dim).copy()
-        start += len(points)
+        count = int(np.prod(face_shape))
+        values = np.array(face_values[start : start + count].reshape(*face_shape, -1), dtype=float)
+        start += count
         end = 0 if side == 0 else -1
         for earlier, earlier_side, D in [c for c in corrections if c[0] < axis]:  # minus U_(axis-1) on this face
             # D lacks its own (earlier) axis, so this axis is D's axis - 1; on the face, the earlier
@@ -98,10 +115,22 @@ def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.n
             weight = coords[earlier] if earlier_side else 1.0 - coords[earlier]
             values -= _along(weight, earlier, dim - 1) * restricted
         corrections.append((axis, side, values))
-    result = np.zeros(shape + (dim,)) if out is None else out
+    return corrections
+
+
+def blend_face_corrections(corrections, coords, block, out: np.ndarray | None = None) -> np.ndarray:
+    """sum over faces of (1 - t_a or t_a) D_as on the nodes ``block`` (one slice per axis, step 1)
+    of the tensor grid of ``coords``: the TFI there, added to ``out`` (block shape + (d,)) when
+    given, else returned. Each node sees the same arithmetic whatever the block, so a mesh made
+    block by block equals the whole-grid one bit for bit."""
+    dim = len(coords)
+    shape = tuple(len(range(*s.indices(len(c)))) for s, c in zip(block, coords))
+    result = np.zeros(shape + (corrections[0][2].shape[-1],)) if out is None else out
     for axis, side, D in corrections:
-        weight = coords[axis] if side else 1.0 - coords[axis]
-        result += _along(weight, axis, dim) * np.expand_dims(D, axis)
+        t = np.asarray(coords[axis], dtype=float)[block[axis]]
+        weight = t if side else 1.0 - t
+        face_block = tuple(s for d, s in enumerate(block) if d != axis)
+        result += _along(weight, axis, dim) * np.expand_dims(D[face_block], axis)
     return result
 
 

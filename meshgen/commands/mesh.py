@@ -31,7 +31,7 @@ METHOD_HELP = (
 )
 @click.option("--ascii", "ascii_files", is_flag=True, help="openfoam: write the polyMesh as ASCII [default: binary].")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
-@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
+@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary (--chunked: correct the map, X = M + TFI[g - M]) [default: --snap].")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100].")
 @click.option(
@@ -57,9 +57,29 @@ METHOD_HELP = (
     help="elliptic: the first cell layer meets this wall (xi0 xi1 eta0 eta1 zeta0 zeta1) at right angles; repeatable. "
     "With --cluster for boundary layers.",
 )
+@click.option(
+    "--chunked/--in-memory",
+    default=None,
+    help="Compute the mesh in blocks on Dask and stream it into the file (tfi, neural; .cgns), for meshes "
+    "larger than memory [default: chunked when the in-memory path would need more than half of the available memory].",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    default=None,
+    help="Run the blocks on this dask.distributed scheduler (implies --chunked) [default: $DASK_SCHEDULER_ADDRESS, "
+    "else Dask's local threads].",
+)
+@click.option(
+    "--quality/--no-quality",
+    default=True,
+    show_default=True,
+    help="Measure the mesh: per-cell quality arrays in the file (in-memory path) and <output>.quality.json. "
+    "--no-quality writes the mesh alone (meshgen evaluate can measure it later).",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
 def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, snap, tol, max_iter, clusters,
-         boundary_layout, orthogonal, quiet):
+         boundary_layout, orthogonal, chunked, scheduler, quality, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model of the --geometry (default: semicylinder)
@@ -68,17 +88,24 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     atomic: an interrupted run never leaves a partial file under the output name.
 
     Boundary patches (named faces) go into .cgns, .vts, .su2, .msh and OpenFOAM cases.
+
+    Meshes larger than memory (e.g. --dims 1000 1000 1000 -o big.cgns) are computed block by block
+    and streamed into a .cgns file with bounded memory; their quality report is computed block-wise
+    from the written file, and no per-cell quality arrays are attached (see README).
     """
     import sys
     import time
 
+    from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
-    from meshgen.formats import check_output_path, check_patches, format_for
+    from meshgen.errors import MeshgenError
+    from meshgen.formats import check_output_path, check_patches, format_for, streaming_writer, write_mesh
     from meshgen.meshing import Mesh
     from meshgen.methods import get_method, make_mesh
     from meshgen.patches import geometry_patches, parse_patch_options
-    from meshgen.quality import summary_lines, write_mesh_with_quality
+    from meshgen.quality import write_mesh_with_quality
+    from meshgen.scheduler import connect, scheduler_address
 
     output_format = format_for(output, format_name)
     output = check_output_path(output, output_format.name, len(dims))
@@ -95,6 +122,22 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
         method = "neural"
     _check_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
+    address = scheduler_address(scheduler)
+    node_count = 1
+    for n in dims:
+        node_count *= n + 1
+    if chunked is None:
+        chunked = address is not None or needs_chunking(node_count)
+    if chunked:
+        if method not in CHUNKED_METHODS:
+            raise MeshgenError(
+                f"method '{method}' cannot be computed block by block (a mesh of {node_count} nodes needs it); "
+                f"methods that can: {', '.join(CHUNKED_METHODS)}"
+            )
+        streaming_writer(output, output_format.name)  # a format that cannot stream fails before any work
+    elif address is not None:
+        raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
+    check_free_space(output, node_count * len(dims) * 8)
     options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout,
                "orthogonal": orthogonal or None}
     model = None
@@ -109,6 +152,17 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     patches = check_patches(geometry_patches(geometry, patch_overrides), geometry.dim, output, output_format.name)
     if model is not None and not quiet:
         click.echo(f"model: {model.describe()}")
+    if chunked:
+        client = connect(address)  # an unreachable scheduler fails fast
+        try:
+            report, info, seconds = _mesh_in_blocks(
+                method, geometry, coords, model, snap, boundary_layout, output, dims, clusters, patches, client, quality, quiet
+            )
+        finally:
+            if client is not None:
+                client.close()
+        _print_result(method, geometry, dims, info, seconds, output, output_format, patches, report, quiet)
+        return
     start = time.perf_counter()
     show_progress = not quiet and sys.stdout.isatty() and "progress" in get_method(method).options
     with progress_display(f"{method} mesh", show_progress) as progress:
@@ -120,27 +174,90 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
 
         metadata["patches"] = as_records(patches)
     write_options = {"binary": not ascii_files} if output_format.folder else {}
-    # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
-    report = write_mesh_with_quality(output, X, geometry, metadata, patches=patches, format=output_format.name, **write_options)
+    write_options.update(patches=patches, format=output_format.name)
+    if quality:
+        # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
+        report = write_mesh_with_quality(output, X, geometry, metadata, **write_options)
+    else:
+        write_mesh(output, X, metadata=metadata, **write_options)
+        report = None
+    _print_result(method, geometry, dims, info, seconds, output, output_format, patches, report, quiet)
+
+
+def _print_result(method, geometry, dims, info, seconds, output, output_format, patches, report, quiet):
+    from meshgen.quality import summary_lines
+
     for line in info.get("warnings", []):
         click.echo(f"Warning: {line}", err=True)
-    if not quiet:
-        cells = 1
-        for n in dims:
-            cells *= n
-        echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
-        if "iterations" in info:
-            echo(
-                f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
-                f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+    if quiet:
+        return
+    cells = 1
+    for n in dims:
+        cells *= n
+    echo(f"{method} mesh of {geometry.name}: {' x '.join(map(str, dims))} = {cells} cells in {seconds:.2f} s")
+    if "iterations" in info:
+        echo(
+            f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
+            f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+        )
+    if "snap" in info:
+        echo(_snap_line(info["snap"]))
+    if "boundary" in info and "deviation_before" in info["boundary"]:
+        before = info["boundary"]["deviation_before"]
+        echo(
+            f"boundary corrected onto the geometry (X = M + TFI[g - M]): deviation before max {before['max']:.3g} "
+            f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g})"
+        )
+    if "chunked" in info:
+        blocks = info["chunked"]
+        line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"
+        if "quality_seconds" in blocks:
+            line += f", quality (block-wise, from the file) in {blocks['quality_seconds']:.1f} s"
+        echo(line)
+    echo(f"wrote {output}" + (f" ({output_format.name})" if output_format.folder else ""))
+    if output_format.patches:
+        echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in patches))
+    for line in summary_lines(report) if report is not None else []:
+        echo(line)
+
+
+def _mesh_in_blocks(method, geometry, coords, model, snap, boundary_layout, output, dims, clusters, patches, client, quality, quiet):
+    """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
+    import sys
+    import time
+
+    from meshgen.chunked import neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
+    from meshgen.commands._progress import progress_display
+    from meshgen.layout import trained_layout, with_layout
+    from meshgen.meshing import run_metadata
+    from meshgen.patches import as_records
+
+    start = time.perf_counter()
+    info = {}
+    if method == "tfi":
+        X = tfi_array(with_layout(geometry, boundary_layout or "fixed"), coords)
+    else:
+        trained_on = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
+        X, boundary = neural_array(model.checkpoint["model"], trained_on, coords, correct_boundary=snap is not False)
+        info = {"model": model.metadata(), "boundary": boundary}
+    info["chunked"] = {
+        "blocks": int(X.npartitions),
+        "block_shape": [int(c[0]) for c in X.chunks[:-1]],
+        "scheduler": client.scheduler.address if client is not None else "local threads",
+    }
+    metadata = {**run_metadata(method, geometry, dims, clusters), "method_info": info, "patches": as_records(patches)}
+    with progress_display(f"{method} mesh", not quiet and sys.stdout.isatty()) as bar:
+
+        def progress(done, total, phase):
+            if bar is not None:
+                bar(done / total, phase=phase, blocks=f"{done}/{total}")
+
+        with single_threaded_torch(method == "neural" and client is None):
+            report, timings = write_chunked_mesh(
+                output, X, geometry, metadata, client=client, progress=progress, evaluate=quality, patches=patches
             )
-        if "snap" in info:
-            echo(_snap_line(info["snap"]))
-        echo(f"wrote {output}" + (f" ({output_format.name})" if output_format.folder else ""))
-        if output_format.patches:
-            echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in patches))
-        for line in summary_lines(report):
-            echo(line)
+    info["chunked"].update(timings)
+    return report, info, time.perf_counter() - start
 
 
 def _check_method(name):

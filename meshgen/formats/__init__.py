@@ -41,6 +41,7 @@ class Format:
     patches: bool = False  # carries named boundary patches
     dims: tuple[int, ...] = (2, 3)  # mesh dimensions it takes
     folder: bool = False  # writes a folder (an OpenFOAM case), chosen with --format
+    streams: bool = False  # written block by block (``stream`` and ``write_node_block``): meshes larger than memory
 
 
 FORMATS: list[Format] = []
@@ -54,7 +55,7 @@ register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured g
 register_format("vts", [".vts"], "meshgen.formats._vts", "VTK XML structured grid (zlib-compressed, no connectivity), patch ids", patches=True)
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
-register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone, a BC_t per patch", patches=True)
+register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone, a BC_t per patch", patches=True, streams=True)
 register_format("openfoam", [], "meshgen.formats._openfoam", "OpenFOAM case: constant/polyMesh (2D: extruded one cell) and CASE.foam", patches=True, folder=True)
 register_format("su2", [".su2"], "meshgen.formats._su2", "SU2 native mesh (ASCII), a MARKER_TAG per patch", patches=True)
 register_format("gmsh", [".msh"], "meshgen.formats._gmsh", "Gmsh MSH 4.1 (ASCII), a physical group per patch and one for the cells", patches=True)
@@ -107,6 +108,19 @@ def check_output_path(path: str | os.PathLike, format_name: str | None = None, d
     if fmt.folder:
         return importlib.import_module(fmt.module).check_output(path)
     return check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
+
+
+def streaming_writer(path, format_name: str | None = None):
+    """The writer module of ``path``'s format (or ``format_name``'s) when it can write a mesh block
+    by block (``stream``, ``write_node_block``); FormatError naming the formats that can, otherwise."""
+    fmt = format_for(path, format_name)
+    if not fmt.streams:
+        able = ", ".join(ext for f in FORMATS if f.streams for ext in f.extensions)
+        raise FormatError(
+            f"{fmt.name} ({Path(path).suffix}) cannot be written block by block, which a mesh larger than memory "
+            f"needs; formats that can: {able}"
+        )
+    return importlib.import_module(fmt.module)
 
 
 def check_patches(patches, dim: int, path=None, format_name: str | None = None):

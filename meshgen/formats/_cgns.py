@@ -45,6 +45,8 @@ order, since the library lists a node's children in that order.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from meshgen.errors import FormatError
@@ -65,14 +67,28 @@ def write(path, X, cell_data, metadata, patches=()):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as one structured zone; ``cell_data``
     arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor;
     ``patches`` (``meshgen.patches.Patch``) as a ZoneBC with Families."""
+    node_shape = X.shape[:-1]
+    cell_shape = tuple(n - 1 for n in node_shape)
+    with stream(path, node_shape, X.shape[-1], metadata, cell_names=list(cell_data), patches=patches) as zone:
+        whole = tuple(slice(0, n) for n in node_shape)
+        write_node_block(zone, X, whole)
+        for name, values in cell_data.items():
+            write_cell_block(zone, name, np.reshape(values, cell_shape), tuple(slice(0, n) for n in cell_shape))
+
+
+@contextlib.contextmanager
+def stream(path, node_shape, dim, metadata, cell_names=(), patches=()):
+    """Open ``path`` with the whole tree of ``write`` (the ZoneBC of ``patches`` included) and its
+    coordinate (and cell-data) arrays allocated but not filled; yield the zone's datasets for
+    ``write_node_block`` and ``write_cell_block`` (HDF5 hyperslab writes), so a mesh larger than
+    memory is written block by block. One layout for both: ``write`` is this with one block."""
     import h5py
 
     from meshgen.formats import METADATA_KEY, metadata_json
 
-    for name in cell_data:
+    for name in cell_names:
         _check_name(name, "cell data")
-    node_shape = X.shape[:-1]
-    dim = X.shape[-1]
+    node_shape = tuple(int(n) for n in node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
 
     # libver (earliest, v108): files the HDF5 1.8 and 1.10 libraries of CGNS builds can open.
@@ -92,16 +108,19 @@ def write(path, X, cell_data, metadata, patches=()):
         zone = _node(base, ZONE_NAME, "Zone_t", sizes)
         _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
         coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        datasets = {"coordinates": [], "cells": {}}
         for axis in range(dim):
-            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", _fortran(X[..., axis]))
+            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", shape=node_shape[::-1])
             _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
-        if cell_data:
+            datasets["coordinates"].append(coordinate[" data"])
+        if cell_names:
             solution = _node(zone, SOLUTION_NAME, "FlowSolution_t")
             _node(solution, "GridLocation", "GridLocation_t", _chars("CellCenter"))
-            for name, values in cell_data.items():
-                _node(solution, name, "DataArray_t", _fortran(np.reshape(values, cell_shape)))
+            for name in cell_names:
+                datasets["cells"][name] = _node(solution, name, "DataArray_t", shape=cell_shape[::-1])[" data"]
         if patches:
             write_zone_bc(base, zone, node_shape, patches)
+        yield datasets
 
 
 def bc_type(patch) -> str:
@@ -188,6 +207,19 @@ def _face_of_range(first, last, node_shape, faces):
     return None
 
 
+def write_node_block(zone: dict, X_block: np.ndarray, block) -> None:
+    """Write the nodes ``block`` (one slice per index axis i, j[, k]) of the zone that ``stream``
+    opened from ``X_block`` (block shape + (dim,)): one hyperslab per coordinate."""
+    hyperslab = tuple(block[::-1])
+    for axis, dataset in enumerate(zone["coordinates"]):
+        dataset[hyperslab] = _fortran(X_block[..., axis])
+
+
+def write_cell_block(zone: dict, name: str, values: np.ndarray, block) -> None:
+    """Write cell-data array ``name`` on the cells ``block`` (slices per axis) from ``values``."""
+    zone["cells"][name][tuple(block[::-1])] = _fortran(values)
+
+
 def read(path):
     """Read the first structured zone of the first base as a ``meshio.Mesh``: hexahedron (quad)
     cells in the C order of the cells, points in the C order of the nodes padded to 3 columns,
@@ -198,19 +230,9 @@ def read(path):
     from meshgen.formats import METADATA_KEY
 
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        zone = _child_with_label(base, "Zone_t", path)
-        zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
-        if zone_type != "Structured":
-            raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
-        node_shape = tuple(int(n) for n in _data(zone)[0])
+        base, zone, node_shape = _structured_zone(root, path)
         cell_shape = tuple(n - 1 for n in node_shape)
-        grid = _child_with_label(zone, "GridCoordinates_t", path)
-        names = COORDINATE_NAMES[: len(node_shape)]
-        missing = [name for name in names if name not in grid]
-        if missing:
-            raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
-        X = np.stack([_c_order(_data(grid[name]), node_shape, path) for name in names], axis=-1)
+        X = np.stack([_c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
 
         point_data, cell_data = {}, {}
         for solution in _children_with_label(zone, "FlowSolution_t"):
@@ -238,12 +260,18 @@ def read(path):
 # --- writing nodes -------------------------------------------------------------------------
 
 
-def _node(parent, name: str, label: str, data: np.ndarray | None = None):
-    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout."""
+def _node(parent, name: str, label: str, data: np.ndarray | None = None, shape=None):
+    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout,
+    or, with ``shape`` (HDF5 order), an unfilled float64 array to be written in blocks."""
     group = parent.create_group(name, track_order=True)
-    data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
+    if shape is not None:
+        data_type = "R8"
+    else:
+        data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
     _set_node_attributes(group, name, label, data_type)
-    if data is not None:
+    if shape is not None:
+        group.create_dataset(" data", shape=tuple(shape), dtype="<f8")
+    elif data is not None:
         group.create_dataset(" data", data=data)
     return group
 
@@ -342,3 +370,64 @@ def _c_order(data: np.ndarray, shape: tuple, path) -> np.ndarray:
     if array.shape != shape:
         raise FormatError(f"{path}: array of shape {array.shape} where {shape} was expected (rind planes are not read)")
     return array
+
+
+# --- reading in blocks (meshes larger than memory) ----------------------------------------
+
+
+def zone_header(path) -> tuple[tuple[int, ...], dict]:
+    """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of the first structured zone,
+    without reading the coordinates."""
+    import json
+
+    import h5py
+
+    from meshgen.formats import METADATA_KEY
+
+    try:
+        root = h5py.File(path, "r")
+    except OSError as exc:
+        raise FormatError(f"could not read {path}: {exc}") from None
+    with root:
+        base, _, node_shape = _structured_zone(root, path)
+        metadata = {}
+        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
+            try:
+                metadata = json.loads(np.asarray(_data(base[METADATA_KEY])).view(np.uint8).tobytes().decode())
+            except (ValueError, UnicodeDecodeError):
+                metadata = {}
+    return node_shape, metadata if isinstance(metadata, dict) else {}
+
+
+def read_node_block(path, block) -> np.ndarray:
+    """The nodes ``block`` (one slice per index axis) of the first zone's coordinates: an array of
+    the block's shape + (dim,), C order (i, j[, k]), float64; one hyperslab read per coordinate."""
+    import h5py
+
+    with h5py.File(path, "r") as root:
+        _, zone, _ = _structured_zone(root, path)
+        hyperslab = tuple(block[::-1])
+        X = np.empty(tuple(s.stop - s.start for s in block) + (len(block),))
+        for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
+            X[..., axis] = array[hyperslab].T
+    return X
+
+
+def _structured_zone(root, path):
+    """(base, zone, node shape) of the first zone of the first base; FormatError unless structured."""
+    base = _child_with_label(root, "CGNSBase_t", path)
+    zone = _child_with_label(base, "Zone_t", path)
+    zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
+    if zone_type != "Structured":
+        raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
+    return base, zone, tuple(int(n) for n in _data(zone)[0])
+
+
+def _coordinate_arrays(zone, dim: int, path) -> list:
+    """The HDF5 datasets of CoordinateX, Y[, Z] of ``zone`` (not read); FormatError if one is missing."""
+    grid = _child_with_label(zone, "GridCoordinates_t", path)
+    names = COORDINATE_NAMES[:dim]
+    missing = [name for name in names if name not in grid]
+    if missing:
+        raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
+    return [grid[name][" data"] for name in names]

@@ -1,0 +1,134 @@
+"""Meshes larger than memory: throughput and peak memory of the block-wise (chunked) path.
+
+    python benchmarks/bench_chunked.py [--quick] [--big-dims N] [--folder DIR] [--json FILE]
+
+Each figure is a ``meshgen`` command run in a subprocess by a wrapper whose only child it is (wall
+and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN``):
+
+- the in-memory path and the chunked path at the same size (``--dims 200^3``; ``--quick`` 60^3),
+  TFI to ``.cgns``, each with and without the quality report (``--no-quality``); node throughput
+  is nodes per wall second, and the ratio is in-memory over chunked throughput (the issue's goal:
+  at most 1.5);
+- the chunked path at ``--big-dims`` (default 400; ``--quick`` 80), TFI to ``.cgns`` with
+  ``--no-quality``, then ``meshgen evaluate --chunked`` of that file; the bundled neural model in
+  memory and in blocks at the same size (``--no-quality``);
+- the issue's 1000^3 rows are this with ``--big-dims 1000`` run by hand (about 24 GB on disk in
+  ``--folder``, tens of minutes): not part of ``benchmarks/run.py``;
+- GPU inference: skipped where torch sees no CUDA device (this machine), with the reason.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+BENCHMARKS = Path(__file__).resolve().parent
+REPO = BENCHMARKS.parent
+sys.path.insert(0, str(REPO))
+
+_WRAPPER = """
+import json, resource, subprocess, sys, time
+start = time.perf_counter()
+done = subprocess.run(sys.argv[1:], capture_output=True, text=True)
+wall = time.perf_counter() - start
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime, "peak_kib": usage.ru_maxrss,
+                  "returncode": done.returncode, "stderr": done.stderr[-2000:]}))
+"""
+
+
+def run_command(arguments: list[str], folder: Path) -> dict:
+    """``meshgen ARGUMENTS`` in ``folder``: wall and CPU seconds, peak resident memory (MB)."""
+    environment = dict(os.environ)
+    environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
+    command = [sys.executable, "-m", "meshgen", *arguments]
+    result = subprocess.run([sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True,
+                            capture_output=True, text=True)
+    figures = json.loads(result.stdout.strip().splitlines()[-1])
+    if figures["returncode"] != 0:
+        raise RuntimeError(f"meshgen {' '.join(arguments)} failed: {figures['stderr']}")
+    return {"command": "meshgen " + " ".join(arguments), "seconds": figures["seconds"], "cpu_seconds": figures["cpu_seconds"],
+            "peak_megabytes": figures["peak_kib"] * 1024 / 1e6}
+
+
+def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) -> dict:
+    output = folder / f"{method}-{cells}{mode}.cgns"
+    arguments = ["mesh", "-m", method, "--dims", *[str(cells)] * 3, mode, "-o", str(output), "-q"]
+    if not quality:
+        arguments.append("--no-quality")
+    row = run_command(arguments, folder)
+    nodes = (cells + 1) ** 3
+    row.update(method=method, cells_per_axis=cells, nodes=nodes, path=mode.lstrip("-"), quality=quality,
+               nodes_per_second=nodes / row["seconds"], megabytes_written=output.stat().st_size / 1e6)
+    return row
+
+
+def gpu_row() -> dict:
+    try:
+        import torch
+
+        available = torch.cuda.is_available()
+    except ImportError:
+        available = False
+    if not available:
+        return {"skipped": "no CUDA device on this machine (torch.cuda.is_available() is False); "
+                           "GPU inference of 501^3 nodes needs one, and `meshgen mesh --device` is issue 13's"}
+    return {"skipped": "a CUDA device is present but meshgen's inference runs on the CPU until `--device` lands (issue 13)"}
+
+
+def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None) -> dict:
+    same = 60 if quick else 200
+    big = big_dims or (80 if quick else 400)
+    with tempfile.TemporaryDirectory(dir=folder) as temporary:
+        temporary = Path(temporary)
+        rows = []
+        for quality in (True, False):
+            for mode in ("--in-memory", "--chunked"):
+                rows.append(mesh_row("tfi", same, mode, quality, temporary))
+                print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+                      f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+                (temporary / f"tfi-{same}{mode}.cgns").unlink()
+        for mode in ("--in-memory", "--chunked"):
+            rows.append(mesh_row("neural", same, mode, False, temporary))
+            print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+                  f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+            (temporary / f"neural-{same}{mode}.cgns").unlink()
+        big_row = mesh_row("tfi", big, "--chunked", False, temporary)
+        print(f"  {big_row['command']}: {big_row['seconds']:.1f} s, {big_row['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+              f"peak {big_row['peak_megabytes']:.0f} MB", flush=True)
+        evaluate_row = run_command(["evaluate", str(temporary / f"tfi-{big}--chunked.cgns"), "--chunked", "-q"], temporary)
+        evaluate_row.update(cells=big**3, cells_per_second=big**3 / evaluate_row["seconds"])
+        print(f"  {evaluate_row['command']}: {evaluate_row['seconds']:.1f} s, peak {evaluate_row['peak_megabytes']:.0f} MB", flush=True)
+
+    def throughput(path, quality, method="tfi"):
+        return next(r["nodes_per_second"] for r in rows if r["method"] == method and r["path"] == path and r["quality"] == quality)
+
+    ratios = {("with_quality" if quality else "without_quality"): throughput("in-memory", quality) / throughput("chunked", quality)
+              for quality in (True, False)}
+    ratios["neural_without_quality"] = throughput("in-memory", False, "neural") / throughput("chunked", False, "neural")
+    return {"same_size_cells_per_axis": same, "big_cells_per_axis": big, "rows": rows, "big": big_row,
+            "evaluate_big": evaluate_row, "throughput_ratio_in_memory_over_chunked": ratios,
+            "big_over_same_size_in_memory_ratio": throughput("in-memory", False) / big_row["nodes_per_second"],
+            "gpu_inference": gpu_row()}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="60^3 and 80^3 instead of 200^3 and 400^3")
+    parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: the issue's)")
+    parser.add_argument("--folder", type=Path, default=None, help="where the files go (needs (N+1)^3 * 24 bytes free)")
+    parser.add_argument("--json", type=Path, default=None, help="write the figures here")
+    args = parser.parse_args()
+    data = measure(args.quick, args.big_dims, args.folder)
+    print(json.dumps(data["throughput_ratio_in_memory_over_chunked"]))
+    if args.json:
+        args.json.write_text(json.dumps(data, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

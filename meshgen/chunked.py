@@ -1,0 +1,292 @@
+"""Meshes larger than memory: the node array as a ``dask.array`` of blocks, streamed into a file.
+
+A TFI or neural mesh is a map evaluated node by node, so it can be computed block by block:
+
+- TFI: the six face terms D_as of the axis-by-axis Boolean sum (``meshgen.tfi.face_corrections``,
+  O(n^2) memory) are computed once; a block is then their blend on the block's nodes
+  (``blend_face_corrections``), bit for bit the in-memory mesh.
+- neural: the network on the block's parametric coordinates (``evaluate_on_grid``), the exact-
+  boundary form's TFI from the precomputed face terms. The boundary is corrected as
+  X = M + TFI[g - M] (M the network's map, g the geometry's boundary map): the six face error
+  arrays g - M are O(n^2) and computed up front, their TFI on a block is block-local. It moves the
+  boundary nodes exactly onto g and the interior smoothly with them.
+
+Blocks are slabs along the last index axis (k in 3D), which are contiguous hyperslabs of a CGNS
+coordinate array (stored k slowest); a plane too large for one block is split along the first axis
+as well. ``BLOCK_NODES`` nodes per block keep a block's coordinates near 100 MB, so the peak
+memory is a few blocks per worker thread, whatever the mesh size.
+
+``meshgen mesh`` takes this path (``needs_chunking``) when the in-memory path's estimated peak
+(``IN_MEMORY_BYTES_PER_NODE``) exceeds half of the memory available now, with ``--chunked``, or with
+``--scheduler``. Only formats that can be written in blocks take it (CGNS); the others refuse.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+
+import numpy as np
+
+from meshgen.errors import MeshgenError
+
+BLOCK_NODES = 1 << 22  # about 4.2e6 nodes, 100 MB of float64 coordinates per block
+IN_MEMORY_BYTES_PER_NODE = 300  # measured: 200^3 in-memory mesh command peaks at about 2.2 GB
+CHUNKED_METHODS = ("tfi", "neural")
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation now (Linux MemAvailable; psutil elsewhere)."""
+    try:
+        import psutil
+
+        return int(psutil.virtual_memory().available)
+    except ImportError:  # pragma: no cover - psutil comes with distributed
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+
+
+def needs_chunking(node_count: int, bytes_per_node: int = IN_MEMORY_BYTES_PER_NODE) -> bool:
+    """True when the in-memory path would likely need more than half of the available memory."""
+    return node_count * bytes_per_node > available_memory() // 2
+
+
+def check_free_space(path, needed_bytes: int) -> None:
+    """MeshgenError when the folder of ``path`` has less free space than ``needed_bytes``."""
+    from pathlib import Path
+
+    folder = Path(path).parent if str(Path(path).parent) else Path(".")
+    free = shutil.disk_usage(folder).free
+    if needed_bytes > free:
+        raise MeshgenError(
+            f"the mesh needs at least {needed_bytes / 1e9:.3g} GB but {folder} has {free / 1e9:.3g} GB free; "
+            "pick fewer cells or another output folder"
+        )
+
+
+def block_slices(node_shape, block_nodes: int = BLOCK_NODES) -> list[list[slice]]:
+    """Per index axis, the slices of the blocks along it: slabs of the last axis holding about
+    ``block_nodes`` nodes; the first axis is split too when one plane of the last axis is larger."""
+    node_shape = tuple(int(n) for n in node_shape)
+    plane = int(np.prod(node_shape[:-1]))
+    per_axis = [[slice(0, n)] for n in node_shape]
+    if plane <= block_nodes:
+        step = max(1, block_nodes // plane)
+    else:
+        step = 1
+        rows = max(1, block_nodes // max(1, int(np.prod(node_shape[1:-1]))))
+        per_axis[0] = [slice(s, min(s + rows, node_shape[0])) for s in range(0, node_shape[0], rows)]
+    n = node_shape[-1]
+    per_axis[-1] = [slice(s, min(s + step, n)) for s in range(0, n, step)]
+    return per_axis
+
+
+def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int):
+    """A dask array of shape node_shape + (dim,) whose block at slices ``b`` is
+    ``block_function(shared, b)``; ``shared`` goes into the graph once."""
+    import itertools
+
+    import dask
+    import dask.array as da
+
+    per_axis = block_slices(node_shape, block_nodes)
+    shared = dask.delayed(shared, pure=True, traverse=False)
+    function = dask.delayed(block_function, pure=True)
+    grid = np.empty([len(s) for s in per_axis], dtype=object)
+    for position in itertools.product(*(range(len(s)) for s in per_axis)):
+        block = tuple(per_axis[axis][i] for axis, i in enumerate(position))
+        shape = tuple(s.stop - s.start for s in block) + (dim,)
+        grid[position] = da.from_delayed(function(shared, block), shape=shape, dtype=float)
+
+    def nest(array):
+        return [nest(a) for a in array] if array.ndim > 1 else [[piece] for piece in array]
+
+    return da.block(nest(grid))
+
+
+def _tfi_block(shared, block):
+    coords, corrections = shared
+    from meshgen.tfi import blend_face_corrections
+
+    return blend_face_corrections(corrections, coords, block)
+
+
+def tfi_array(geometry, coords, block_nodes: int = BLOCK_NODES):
+    """The TFI mesh of ``geometry`` on the tensor grid of ``coords`` (1D arrays from 0 to 1) as a
+    dask array (n1+1, n2+1[, n3+1], dim), blocks of about ``block_nodes`` nodes."""
+    from meshgen.tfi import boundary_faces, face_corrections
+
+    coords = [np.asarray(c, dtype=float) for c in coords]
+    faces = boundary_faces(coords)
+    images = geometry.boundary(np.concatenate([points for _, points in faces]))
+    corrections = face_corrections(images, coords)
+    shape = tuple(len(c) for c in coords)
+    return _node_array(_tfi_block, (coords, corrections), shape, len(coords), block_nodes)
+
+
+def _face_grids(coords):
+    """The 1D coordinates of each face of the tensor grid (one axis pinned to 0 or 1), in the order
+    of ``meshgen.tfi.boundary_faces``."""
+    grids = []
+    for axis in range(len(coords)):
+        for value in (0.0, 1.0):
+            grids.append([np.array([value]) if d == axis else c for d, c in enumerate(coords)])
+    return grids
+
+
+def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
+    """The map M of a trained network (``checkpoint["model"]``) on the tensor grid of
+    ``sub_coords``: center + scale N (soft boundary) or TFI + scale b N (exact boundary, whose TFI
+    on these nodes is ``tfi_block``). Shape (len(sub_coords[0]), ..., d), float64."""
+    from meshgen.neural.inference import bubble_on_grid, evaluate_on_grid
+
+    shape = tuple(len(c) for c in sub_coords)
+    dim = len(sub_coords)
+    N = evaluate_on_grid(model, sub_coords, workers=1).reshape(*shape, dim)
+    scale = float(model["scale"])
+    if not model["exact_boundary"]:
+        N *= scale
+        N += np.asarray(model["center"], dtype=float)
+        return N
+    N *= (scale * bubble_on_grid(sub_coords))[..., None]
+    N += tfi_block
+    return N
+
+
+def _neural_block(shared, block):
+    from meshgen.tfi import blend_face_corrections
+
+    model, coords, tfi_corrections, error_corrections, boundary_values = shared
+    sub_coords = [c[s] for c, s in zip(coords, block)]
+    tfi_block = blend_face_corrections(tfi_corrections, coords, block) if tfi_corrections else None
+    X = network_map_block(model, sub_coords, tfi_block)
+    if error_corrections:
+        blend_face_corrections(error_corrections, coords, block, out=X)
+        # The network's float32 values on a face differ from those of a block in the last bits (other
+        # batch sizes): the boundary nodes take the boundary map's values exactly.
+        for axis, side, values in boundary_values:
+            end = len(coords[axis]) - 1 if side else 0
+            if block[axis].start <= end < block[axis].stop:
+                index = tuple(end - s.start if d == axis else slice(None) for d, s in enumerate(block))
+                X[index] = values[tuple(s for d, s in enumerate(block) if d != axis)]
+    return X
+
+
+def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int = BLOCK_NODES):
+    """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
+    a dask array, and what the boundary correction did (JSON-ready).
+
+    ``correct_boundary``: X = M + TFI[g - M] (see the module docstring); else the network's map M.
+    To use another block-local boundary treatment, replace ``_neural_block``'s last step: it sees
+    the block's slices and whatever face arrays are computed here up front.
+    """
+    from meshgen.tfi import boundary_faces, face_corrections, tfi
+
+    coords = [np.asarray(c, dtype=float) for c in coords]
+    faces = boundary_faces(coords)
+    boundary_images = geometry.boundary(np.concatenate([points for _, points in faces]))
+    tfi_corrections = face_corrections(boundary_images, coords) if model["exact_boundary"] else None
+    info = {"boundary": "network's own"}
+    error_corrections, boundary_values = None, []
+    if correct_boundary:
+        face_maps = []
+        for grid in _face_grids(coords):
+            # On a face (one axis pinned) tfi takes the direct form, face-sized.
+            tfi_face = tfi(geometry, None, grid) if tfi_corrections is not None else None
+            face_maps.append(network_map_block(model, grid, tfi_face).reshape(-1, len(coords)))
+        error = boundary_images - np.concatenate(face_maps)
+        distance = np.linalg.norm(error, axis=1)
+        length = float(geometry.characteristic_length)
+        info = {
+            "boundary": "corrected: X = M + TFI[g - M] (M the network's map, g the boundary map)",
+            "deviation_before": {
+                "max": float(distance.max()),
+                "max_rel": float(distance.max()) / length,
+                "characteristic_length": length,
+                "definition": "distance of each boundary node from the geometry's boundary map at the node's parametric point",
+            },
+        }
+        error_corrections = face_corrections(error, coords)
+        start = 0
+        for axis, side in [(a, s) for a in range(len(coords)) for s in (0, 1)]:
+            face_shape = tuple(len(c) for d, c in enumerate(coords) if d != axis)
+            count = int(np.prod(face_shape))
+            boundary_values.append((axis, side, boundary_images[start : start + count].reshape(*face_shape, -1)))
+            start += count
+    shape = tuple(len(c) for c in coords)
+    shared = (model, coords, tfi_corrections, error_corrections, boundary_values)
+    return _node_array(_neural_block, shared, shape, len(coords), block_nodes), info
+
+
+@contextlib.contextmanager
+def single_threaded_torch(enabled: bool = True):
+    """torch with one thread while the blocks run: Dask's threads parallelise over blocks."""
+    if not enabled:
+        yield
+        return
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def write_chunked_mesh(path, X, geometry=None, metadata: dict | None = None, client=None, progress=None,
+                       evaluate: bool = True, patches=None) -> tuple[dict | None, dict]:
+    """Compute the dask node array ``X`` block by block and stream it into ``path`` (a format that
+    can be written in blocks: CGNS), atomically; then, unless ``evaluate`` is False, its quality
+    report computed block-wise from the written file (``meshgen.quality.chunked``) before the
+    file takes its name, written to ``<path>.quality.json``. No per-cell quality arrays are stored
+    (at 1e9 cells they would be 56 GB; ``meshgen evaluate`` computes them block-wise).
+
+    ``patches``: the boundary patches (``meshgen.patches.Patch``; default the ``geometry``'s, else
+    one per face). ``progress(done, total, phase)`` hears about every block. Returns (the report or None,
+    {"write_seconds", "quality_seconds"}).
+    """
+    import time
+
+    from dask.array.core import slices_from_chunks
+
+    from meshgen.atomic import atomic_path
+    from meshgen.formats import check_output_path, check_patches, streaming_writer
+    from meshgen.scheduler import compute_in_order_of_completion
+
+    path = check_output_path(path)
+    writer = streaming_writer(path)
+    if patches is None and geometry is not None:
+        from meshgen.patches import geometry_patches
+
+        patches = geometry_patches(geometry)
+    patches = check_patches(patches, X.shape[-1], path)
+    node_shape = X.shape[:-1]
+    dim = X.shape[-1]
+    check_free_space(path, int(np.prod(node_shape)) * dim * 8)
+    blocks = list(X.to_delayed().ravel())
+    slices = [s[:-1] for s in slices_from_chunks(X.chunks)]
+    report, timings = None, {}
+    try:
+        with atomic_path(path) as temporary:
+            start = time.perf_counter()
+            with writer.stream(temporary, node_shape, dim, metadata or {}, patches=patches) as zone:
+                for done, (index, block) in enumerate(compute_in_order_of_completion(blocks, client), start=1):
+                    writer.write_node_block(zone, block, slices[index])
+                    del block
+                    if progress is not None:
+                        progress(done, len(blocks), "mesh")
+            timings["write_seconds"] = time.perf_counter() - start
+            if evaluate:
+                from meshgen.quality.chunked import chunked_report
+
+                start = time.perf_counter()
+                report = chunked_report(temporary, geometry, client=client, progress=progress)
+                timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
+    except OSError as exc:
+        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
+    if report is not None:
+        from meshgen.quality import sidecar_path, write_json
+
+        write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
+    return report, timings

@@ -1,0 +1,54 @@
+"""Mesh quality (DESIGN section 7): per-cell metrics, their summaries and the validity verdict.
+
+Where things are:
+
+- ``kernels``: the metric definitions and the vectorised kernels on one block of cells;
+- ``structured``: node arrays (``cell_metrics``); ``faces``: unstructured cells, face neighbours
+  by face matching (``match_faces``, ``cell_metrics_unstructured``);
+- ``report``: summaries, inverted cells, verdict, boundary deviation (``quality_report``);
+- ``text``: the terminal lines (``summary_lines``);
+- ``files``: mesh files, the ``<mesh>.quality.json`` sidecar, JSON (``evaluate_file``,
+  ``write_mesh_with_quality``, ``write_json``);
+- ``chunked`` and ``sketch``: meshes larger than memory, block by block on Dask, percentiles by a
+  mergeable quantile sketch.
+
+This module re-exports the public names, so ``from meshgen.quality import X`` keeps working.
+"""
+
+from meshgen.quality.faces import CELL_TYPES, cell_metrics_unstructured, cells_for_quality, match_faces
+from meshgen.quality.files import (
+    as_node_array,
+    evaluate_file,
+    recorded_metadata,
+    sidecar_path,
+    write_json,
+    write_mesh_with_quality,
+)
+from meshgen.quality.files import _nulls  # noqa: F401  (used by ``meshgen evaluate --json -``)
+from meshgen.quality.kernels import (
+    BLOCK_CELLS,
+    DEFINITIONS,
+    DEGENERATE_TOLERANCE,
+    HEX_CORNER,
+    HEX_FACE_CORNERS,
+    HEX_FACES,
+    METRICS,
+    QUAD_CORNER,
+    QUAD_FACE_CORNERS,
+    QUAD_FACES,
+    STATS,
+    VALID_FRACTION,
+    VALID_RULE,
+    WORST,
+)
+from meshgen.quality.report import quality_report, summarize
+from meshgen.quality.structured import cell_metrics
+from meshgen.quality.text import summary_lines
+
+__all__ = [
+    "BLOCK_CELLS", "CELL_TYPES", "DEFINITIONS", "DEGENERATE_TOLERANCE", "HEX_CORNER", "HEX_FACE_CORNERS",
+    "HEX_FACES", "METRICS", "QUAD_CORNER", "QUAD_FACE_CORNERS", "QUAD_FACES", "STATS", "VALID_FRACTION",
+    "VALID_RULE", "WORST", "as_node_array", "cell_metrics", "cell_metrics_unstructured", "cells_for_quality",
+    "evaluate_file", "match_faces", "quality_report", "recorded_metadata", "sidecar_path", "summarize",
+    "summary_lines", "write_json", "write_mesh_with_quality",
+]

@@ -1,0 +1,231 @@
+"""Quality and files: reading meshes for evaluation (``evaluate_file``), writing a mesh with its
+per-cell metrics and the ``<mesh>.quality.json`` sidecar, JSON output."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import MeshgenError
+from meshgen.quality.faces import cells_for_quality
+from meshgen.quality.report import _assess, _report
+from meshgen.quality.structured import _check_node_array
+
+
+def as_node_array(points, cells, dims) -> np.ndarray | None:
+    """The node array of an unstructured mesh that is exactly meshgen's structured grid of ``dims``
+    cells (same node order and connectivity), else None: such files take the fast path."""
+    from meshgen.grid import cell_connectivity
+
+    dims = tuple(int(n) for n in dims)
+    node_shape = tuple(n + 1 for n in dims)
+    dim = len(dims)
+    if len(points) != int(np.prod(node_shape)) or cells.shape != (int(np.prod(dims)), 2 ** dim):
+        return None
+    if not np.array_equal(cells, cell_connectivity(node_shape)):
+        return None
+    if dim == 2 and points.shape[1] == 3:
+        if np.any(points[:, 2] != points[0, 2]):
+            return None
+    return np.ascontiguousarray(points[:, :dim]).reshape(*node_shape, dim)
+
+
+
+def sidecar_path(mesh_path) -> Path:
+    """``<mesh>.quality.json`` beside a mesh file (the full file name, extension included)."""
+    mesh_path = Path(mesh_path)
+    return mesh_path.with_name(mesh_path.name + ".quality.json")
+
+
+def write_json(path, data) -> Path:
+    """Write ``data`` as indented JSON atomically (non-finite floats as null)."""
+    from meshgen.atomic import atomic_path
+
+    path = Path(path)
+    text = json.dumps(_nulls(data), indent=2, allow_nan=False) + "\n"
+    try:
+        with atomic_path(path) as temporary:
+            temporary.write_text(text)
+    except OSError as exc:
+        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
+    return path
+
+
+def _nulls(data):
+    if isinstance(data, dict):
+        return {k: _nulls(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [_nulls(v) for v in data]
+    if isinstance(data, (float, np.floating)):
+        return float(data) if np.isfinite(data) else None
+    if isinstance(data, np.integer):
+        return int(data)
+    if isinstance(data, np.bool_):
+        return bool(data)
+    return data
+
+
+def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None, **write_options) -> dict:
+    """Write node array ``X`` to ``path`` with the seven per-cell metrics as cell data (formats
+    that carry cell data keep them), and the report plus ``metadata`` (geometry, params, method,
+    ...) to ``<path>.quality.json``. ``write_options`` go to ``meshgen.formats.write_mesh``
+    (``patches``, default the ``geometry``'s; ``format``; ``binary``). Returns the report (with
+    ``quality_seconds``)."""
+    from meshgen.formats import write_mesh
+
+    if geometry is not None and "patches" not in write_options:
+        from meshgen.patches import geometry_patches
+
+        write_options["patches"] = geometry_patches(geometry)
+
+    start = time.perf_counter()
+    metrics, degenerate, info = _assess(_check_node_array(X))
+    report = _report(metrics, degenerate, info, geometry)
+    report["quality_seconds"] = time.perf_counter() - start
+    written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
+    write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
+    return report
+
+
+# ---------------------------------------------------------------------------------------------
+# mesh files (meshgen evaluate)
+
+
+def recorded_metadata(path, mesh) -> dict:
+    """meshgen's metadata of a mesh file: what the file records (geometry, params, method, dims),
+    else its ``<mesh>.quality.json`` sidecar (marked ``"source": "sidecar"``), else {}."""
+    from meshgen.formats import metadata_of
+
+    metadata = metadata_of(mesh)
+    if metadata:
+        return {**metadata, "source": "file"}
+    sidecar = sidecar_path(path)
+    if sidecar.is_file():
+        try:
+            recorded = json.loads(sidecar.read_text())
+        except (OSError, ValueError):
+            return {}
+        if isinstance(recorded, dict):
+            return {**recorded, "source": "sidecar"}
+    return {}
+
+
+EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
+
+
+def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None) -> dict:
+    """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
+    ``file`` and ``structured`` keys added.
+
+    ``geometry``: a name or plugin path, a Geometry, or None for the geometry the file (or its
+    sidecar) records; ``params`` override the geometry's parameters. A file that is meshgen's own
+    structured grid takes the structured path. ``mesh``: the file as ``read_mesh(path)`` returned
+    it, for a caller that needs it too (read once). MeshgenError when nothing can be evaluated.
+
+    ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
+    or None for automatically when the file is CGNS and the in-memory path would need more than
+    half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
+    """
+    from meshgen.formats import read_mesh
+
+    path = Path(path)
+    if not path.exists():
+        raise MeshgenError(f"mesh file {path} does not exist")
+    if path.is_file() and path.stat().st_size == 0 and path.suffix.lower() != ".foam":
+        raise MeshgenError(f"mesh file {path} is empty")
+    if chunked is None and mesh is None and path.suffix.lower() == ".cgns":
+        from meshgen.chunked import needs_chunking
+        from meshgen.formats._cgns import zone_header
+
+        node_shape, _ = zone_header(path)
+        chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
+    if chunked:
+        return _evaluate_file_in_blocks(path, geometry, params, client)
+    if mesh is None:
+        mesh = read_mesh(path)
+    try:
+        points, cells, skipped = cells_for_quality(mesh)
+    except MeshgenError as exc:
+        raise MeshgenError(f"{path}: {exc}") from None
+    metadata = recorded_metadata(path, mesh)
+    geometry, source, notes = _geometry_for(path, geometry, params, metadata, len(cells))
+    dims = metadata.get("dims")
+    X = None
+    if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
+        X = as_node_array(points, cells, dims)
+    try:
+        metrics, degenerate, info = _assess(X if X is not None else (points, cells))
+    except MeshgenError as exc:
+        raise MeshgenError(f"{path}: {exc}") from None
+    if degenerate.all():
+        raise MeshgenError(
+            f"{path}: nothing to evaluate: all {len(degenerate)} cells are degenerate "
+            "(zero-length edges or non-finite coordinates)"
+        )
+    info["skipped"] = skipped
+    if geometry is not None and geometry.dim != info["dim"] and source != "--geometry":
+        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation")
+        geometry = None
+    report = _report(metrics, degenerate, info, geometry)
+    return _finish_file_report(path, report, source, notes, metadata, X is not None)
+
+
+def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
+    """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
+    from meshgen.formats._cgns import zone_header
+    from meshgen.quality.chunked import chunked_report
+
+    if path.suffix.lower() != ".cgns":
+        raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
+    node_shape, recorded = zone_header(path)
+    metadata = {**recorded, "source": "file"} if recorded else recorded_metadata(path, None)
+    cells = int(np.prod([n - 1 for n in node_shape]))
+    geometry, source, notes = _geometry_for(path, geometry, params, metadata, cells)
+    if geometry is not None and geometry.dim != len(node_shape) and source != "--geometry":
+        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {len(node_shape)}D; no boundary deviation")
+        geometry = None
+    try:
+        report = chunked_report(path, geometry, client=client)
+    except MeshgenError as exc:
+        raise MeshgenError(f"{path}: {exc}") from None
+    return _finish_file_report(path, report, source, notes, metadata, True)
+
+
+def _geometry_for(path, geometry, params, metadata, n_cells):
+    """(geometry or None, where it came from, notes) for evaluating the file ``path``."""
+    from meshgen.errors import GeometryError
+    from meshgen.geometry import load_geometry
+
+    if metadata.get("source") == "sidecar" and (metadata.get("cells") != n_cells or metadata.get("mesh") != path.name):
+        metadata.clear()  # a sidecar of another mesh that once had this name
+    notes = []
+    source = "--geometry"
+    if isinstance(geometry, str):
+        geometry = load_geometry(geometry, params)
+    elif geometry is not None and params:
+        geometry = geometry.with_params(**params)
+    elif geometry is None and metadata.get("geometry"):
+        source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
+        try:
+            geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
+        except GeometryError as exc:
+            notes.append(f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation")
+            geometry = None
+    elif params:
+        raise MeshgenError(f"--param needs --geometry: {path} records no geometry")
+    return geometry, source, notes
+
+
+def _finish_file_report(path, report, source, notes, metadata, structured) -> dict:
+    if "boundary_deviation" in report:
+        report["boundary_deviation"]["source"] = source
+    if notes:
+        report["warnings"] = report.get("warnings", []) + notes
+    for key in ("method", "dims"):
+        if key in metadata:
+            report.setdefault("recorded", {})[key] = metadata[key]
+    return {"file": str(path), "structured": structured, **report}

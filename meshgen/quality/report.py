@@ -1,0 +1,135 @@
+"""The quality report: per-metric summaries (mean, min, max, p01, p99), inverted cells, the
+validity verdict and the boundary deviation, as a JSON-ready dict (``meshgen evaluate --json``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshgen.errors import MeshgenError
+from meshgen.quality.faces import _unstructured, cells_for_quality
+from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
+from meshgen.quality.structured import _check_node_array, _structured
+
+
+def summarize(values: np.ndarray) -> dict:
+    """mean, min, max, p01, p99 of ``values`` (floats); all None when there are none."""
+    if values.size == 0:
+        return {stat: None for stat in STATS}
+    p01, p99 = np.percentile(values, [1.0, 99.0])
+    return {
+        "mean": float(np.mean(values)),
+        "min": float(np.min(values)),
+        "max": float(np.max(values)),
+        "p01": float(p01),
+        "p99": float(p99),
+    }
+
+
+def _assess(X_or_mesh):
+    """Per-cell metrics of any accepted input, with what the report needs besides them."""
+    # Non-finite coordinates are counted, reported and make their cells degenerate; the arithmetic
+    # on them (inf - inf) must not also print NumPy's RuntimeWarnings beside meshgen's messages.
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        return _assess_quietly(X_or_mesh)
+
+
+def _assess_quietly(X_or_mesh):
+    from meshgen.deviation import grid_boundary_nodes
+
+    if isinstance(X_or_mesh, np.ndarray):
+        X = _check_node_array(X_or_mesh)
+        metrics, degenerate, info = _structured(X)
+        info["dim"] = X.shape[-1]
+        info["boundary"] = lambda: grid_boundary_nodes(X)
+        return metrics, degenerate, info
+    skipped = {}
+    if isinstance(X_or_mesh, tuple):
+        points, cells = X_or_mesh
+    else:
+        points, cells, skipped = cells_for_quality(X_or_mesh)
+    metrics, degenerate, info = _unstructured(points, cells)
+    info["skipped"] = skipped
+    info["boundary"] = lambda: (np.asarray(points, dtype=float)[info["boundary_nodes"], : info["dim"]], None)
+    return metrics, degenerate, info
+
+
+def quality_report(X_or_mesh, geometry=None) -> dict:
+    """JSON-ready quality report of a mesh (the ``meshgen evaluate --json`` schema).
+
+    ``X_or_mesh``: a node array ``(n1+1, n2+1[, n3+1], dim)``, a ``(points, cells)`` pair, or a
+    ``meshio.Mesh`` (hexahedra, else quads; other cell types counted under ``skipped``).
+    ``geometry``: a ``meshgen.geometry.Geometry``; adds ``boundary_deviation``.
+
+    Keys: ``cells``, ``dim``, ``metrics`` ({name: {mean, min, max, p01, p99}}), ``inverted``
+    ({count, fraction, degenerate}), ``valid``, ``valid_rule``, ``units`` and, when known,
+    ``boundary_deviation``, ``skipped``, ``warnings``. Summaries leave degenerate cells out.
+    """
+    return _report(*_assess(X_or_mesh), geometry)
+
+
+def _report(metrics, degenerate, info, geometry) -> dict:
+    inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
+    shaped = ~degenerate
+    summaries = {name: summarize(metrics[name][shaped]) for name in METRICS}
+    counts = {
+        "cells": int(len(degenerate)),
+        "inverted": int(np.count_nonzero(inverted)),
+        "degenerate": int(np.count_nonzero(degenerate)),
+    }
+    return assemble_report(summaries, counts, info, geometry)
+
+
+def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict:
+    """The report from the metric ``summaries`` ({name: {mean, min, max, p01, p99}}), ``counts``
+    (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
+    ``boundary()`` -> (boundary points, parametric guesses)); shared by the whole-mesh and the
+    block-wise (``meshgen.quality.chunked``) paths."""
+    from meshgen.deviation import boundary_deviation
+
+    dim = int(info["dim"])
+    n_cells = counts["cells"]
+    inverted_count = counts["inverted"]
+    report = {
+        "cells": n_cells,
+        "dim": dim,
+        "cell_type": "hexahedron" if dim == 3 else "quad",
+        "metrics": summaries,
+        "inverted": {
+            "count": inverted_count,
+            "fraction": inverted_count / n_cells if n_cells else 0.0,
+            "degenerate": counts["degenerate"],
+        },
+        "valid": bool(inverted_count <= VALID_FRACTION * n_cells),
+        "valid_rule": VALID_RULE,
+        "units": {"angles": "degrees", "non_orthogonality": "degrees"},
+        "definitions": dict(DEFINITIONS),
+    }
+    warnings = []
+    if info.get("nonfinite_nodes"):
+        warnings.append(f"{info['nonfinite_nodes']} nodes have non-finite coordinates; their cells count as degenerate")
+    if report["inverted"]["degenerate"]:
+        warnings.append(
+            f"{report['inverted']['degenerate']} degenerate cells (zero-length edge or non-finite node) "
+            "count as inverted and are left out of the metric summaries"
+        )
+    if info.get("nonmanifold_faces"):
+        warnings.append(f"{info['nonmanifold_faces']} faces are shared by more than two cells; treated as boundary faces")
+    if info.get("skipped"):
+        report["skipped"] = dict(info["skipped"])
+    if geometry is not None:
+        if geometry.dim != dim:
+            raise MeshgenError(
+                f"geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D: "
+                "boundary deviation needs a geometry of the mesh's dimension"
+            )
+        boundary_points, guesses = info["boundary"]()
+        deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
+        report["boundary_deviation"] = deviation
+        if deviation.get("nonfinite_nodes"):
+            warnings.append(
+                f"{deviation['nonfinite_nodes']} boundary nodes are not finite: boundary deviation is undefined"
+            )
+    if warnings:
+        report["warnings"] = warnings
+    return report
+

@@ -1,0 +1,247 @@
+"""Meshes larger than memory: block-wise meshing streamed into CGNS, block-wise evaluation, Dask.
+
+Each block-wise result is checked against the in-memory path (or a second algorithm) on meshes
+small enough for both, cut into many small blocks.
+"""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from meshgen.chunked import neural_array, tfi_array, write_chunked_mesh
+from meshgen.cli import cli
+from meshgen.clustering import node_coordinates
+from meshgen.formats._cgns import read_node_block, zone_header
+from meshgen.quality import METRICS, quality_report
+from meshgen.quality import sketch as sketches
+from meshgen.quality.chunked import chunked_report
+from meshgen.tfi import tfi, transfinite
+
+pytest.importorskip("dask")
+
+
+def read_whole(path):
+    shape, _ = zone_header(path)
+    return read_node_block(path, tuple(slice(0, n) for n in shape))
+
+
+def assert_reports_agree(exact, blockwise, values):
+    """Counts, min and max equal, means to rounding, percentiles within the sketch's bound."""
+    assert blockwise["cells"] == exact["cells"]
+    assert blockwise["inverted"] == exact["inverted"]
+    for name in METRICS:
+        a, b = exact["metrics"][name], blockwise["metrics"][name]
+        assert b["min"] == a["min"] and b["max"] == a["max"], name
+        assert b["mean"] == pytest.approx(a["mean"], rel=1e-12, abs=1e-14), name
+        ordered = np.sort(values[name])
+        for q, stat in ((0.01, "p01"), (0.99, "p99")):
+            position = q * (len(ordered) - 1)
+            around = ordered[int(np.floor(position))], ordered[int(np.ceil(position))]
+            bound = sketches.RELATIVE_ACCURACY * max(abs(around[0]), abs(around[1])) + sketches.SMALLEST
+            assert abs(b[stat] - a[stat]) <= bound * (1 + 1e-9), (name, stat, a[stat], b[stat])
+    for key in ("max", "mean"):
+        assert blockwise["boundary_deviation"][key] == pytest.approx(exact["boundary_deviation"][key], rel=1e-12, abs=1e-15)
+
+
+def test_tfi_in_blocks_streamed_to_cgns_equals_the_in_memory_mesh_bit_for_bit(tmp_path, semicylinder):
+    coords = node_coordinates((11, 7, 9), ["zeta:both:1.2"])
+    X = tfi_array(semicylinder, coords, block_nodes=50)  # slabs of one k plane, split along i as well
+    assert X.numblocks[:3] == (2, 1, 10)
+    write_chunked_mesh(tmp_path / "m.cgns", X, semicylinder, {"method": "tfi"}, evaluate=False)
+    assert np.array_equal(read_whole(tmp_path / "m.cgns"), tfi(semicylinder, None, coords))
+    assert [p.name for p in tmp_path.iterdir()] == ["m.cgns"]
+    import shutil
+    import subprocess
+
+    if shutil.which("cgnscheck"):  # the block-written file is a valid CGNS file too
+        result = subprocess.run(["cgnscheck", str(tmp_path / "m.cgns")], capture_output=True, text=True, timeout=60)
+        output = result.stdout + result.stderr
+        assert result.returncode == 0 and "ERROR" not in output and "WARNING" not in output, output
+
+
+def test_blockwise_evaluation_equals_the_whole_mesh_path(semicylinder, semidisk):
+    rng = np.random.default_rng(3)
+    for geometry, dims in ((semicylinder, (9, 8, 7)), (semidisk, (23, 17))):
+        X = tfi(geometry, dims)
+        X = X + rng.normal(0.0, 0.25 / max(dims), X.shape)  # some inverted cells, a spread of values
+        exact = quality_report(X, geometry)
+        blockwise = chunked_report(X, geometry, block_nodes=60)
+        from meshgen.quality import cell_metrics
+
+        values = cell_metrics(X)
+        assert exact["inverted"]["count"] > 0
+        assert_reports_agree(exact, blockwise, values)
+
+
+def test_the_sketch_merges_exactly_and_keeps_its_relative_accuracy():
+    rng = np.random.default_rng(0)
+    values = np.concatenate([rng.normal(0.3, 1.0, 20000), np.zeros(50), rng.lognormal(0.0, 3.0, 5000)])
+    parts = np.array_split(values, 7)
+    merged = sketches.sketch_of(parts[0])
+    for part in parts[1:]:
+        merged = sketches.merge(merged, sketches.sketch_of(part))
+    whole = sketches.sketch_of(values)
+    for q in (0.0, 0.01, 0.3, 0.5, 0.99, 1.0):
+        assert sketches.quantile(merged, q) == sketches.quantile(whole, q)
+        exact = np.percentile(values, 100 * q)
+        ordered = np.sort(values)
+        position = q * (len(values) - 1)
+        around = ordered[int(np.floor(position))], ordered[int(np.ceil(position))]
+        bound = sketches.RELATIVE_ACCURACY * max(map(abs, around)) + sketches.SMALLEST
+        assert abs(sketches.quantile(merged, q) - exact) <= bound * (1 + 1e-9)
+
+
+def soft_model(rng):
+    """A random soft-boundary network (no training needed: the correction's arithmetic is tested)."""
+    import torch
+
+    sizes = [3, 6, 6, 3]
+    state = {}
+    for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        state[f"layers.{index}.weight"] = torch.tensor(rng.normal(0, 0.5, (fan_out, fan_in)), dtype=torch.float32)
+        state[f"layers.{index}.bias"] = torch.tensor(rng.normal(0, 0.1, fan_out), dtype=torch.float32)
+    return {"dim": 3, "widths": sizes[1:-1], "state_dict": state, "scale": 1.5, "center": [0.0, 0.5, 1.0],
+            "exact_boundary": False, "activation": "tanh", "input": "2*xi-1"}
+
+
+def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_the_error(semicylinder):
+    from meshgen.neural.inference import mesh_from_model
+    from meshgen.tfi import parametric_grid
+
+    model = soft_model(np.random.default_rng(1))
+    dims = (6, 5, 7)
+    coords = parametric_grid(dims)
+    X, info = neural_array(model, semicylinder, coords, block_nodes=40)
+    X = X.compute()
+    M = mesh_from_model(model, coords)  # the network's map, in memory
+    # g - M at every node (only the boundary values enter the TFI), looked up by parametric point.
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, 3)
+    on_boundary = np.any((grid == 0.0) | (grid == 1.0), axis=1)
+    error = np.zeros_like(M).reshape(-1, 3)
+    error[on_boundary] = semicylinder.boundary(grid[on_boundary]) - M.reshape(-1, 3)[on_boundary]
+    error = error.reshape(M.shape)
+
+    def error_at(points):
+        index = tuple(np.rint(points[:, d] * dims[d]).astype(int) for d in range(3))
+        return error[index]
+
+    axes = [c.reshape([-1 if d == a else 1 for d in range(3)]) for a, c in enumerate(coords)]
+    expected = M + transfinite(error_at, axes)  # the direct 26-term form, a second algorithm
+    assert np.allclose(X, expected, rtol=0, atol=1e-6)  # float32 network: blocks and faces round alike to 1e-7
+    assert info["deviation_before"]["max"] == pytest.approx(np.linalg.norm(error.reshape(-1, 3), axis=1).max(), rel=1e-5)
+    on_faces = X.reshape(-1, 3)[on_boundary]
+    assert np.array_equal(on_faces, semicylinder.boundary(grid[on_boundary]))
+    assert np.abs(X - M).max() > 0.1  # the correction did move the nodes
+
+
+def test_bundled_neural_model_in_blocks_equals_the_in_memory_map(semicylinder):
+    from meshgen.neural.inference import find_model, mesh_from_model
+    from meshgen.tfi import parametric_grid
+
+    model = find_model(geometry_name="semicylinder").checkpoint["model"]
+    coords = parametric_grid((8, 6, 10))
+    X, _ = neural_array(model, semicylinder, coords, block_nodes=100)
+    assert np.allclose(X.compute(), mesh_from_model(model, coords, semicylinder), rtol=0, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as local:
+        yield local
+
+
+def test_a_dask_distributed_cluster_gives_the_same_mesh_and_report(tmp_path, semicylinder, cluster):
+    from distributed import Client
+
+    runner = CliRunner()
+    args = ["mesh", "-m", "tfi", "--dims", "10", "9", "8", "-q"]
+    result = runner.invoke(cli, args + ["--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "d.cgns")])
+    assert result.exit_code == 0, result.output
+    local = runner.invoke(cli, args + ["--in-memory", "-o", str(tmp_path / "m.cgns")])
+    assert local.exit_code == 0, local.output
+    assert np.array_equal(read_whole(tmp_path / "d.cgns"), read_whole(tmp_path / "m.cgns"))
+    X = read_whole(tmp_path / "m.cgns")
+    with Client(cluster.scheduler_address, set_as_default=False) as client:
+        blockwise = chunked_report(str(tmp_path / "d.cgns"), semicylinder, client=client, block_nodes=100)
+    from meshgen.quality import cell_metrics
+
+    assert_reports_agree(quality_report(X, semicylinder), blockwise, cell_metrics(X))
+
+
+def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
+    runner = CliRunner()
+    path = str(tmp_path / "e.cgns")
+    assert runner.invoke(cli, ["mesh", "-m", "tfi", "--dims", "12", "10", "9", "--chunked", "-q", "-o", path]).exit_code == 0
+    sidecar = json.loads(open(path + ".quality.json").read())
+    reports = {}
+    for mode in ("--chunked", "--in-memory"):
+        result = runner.invoke(cli, ["evaluate", path, mode, "--json", "-"])
+        assert result.exit_code == 0, result.output
+        reports[mode] = json.loads(result.output)
+    from meshgen.quality import cell_metrics
+
+    X = read_whole(path)
+    assert_reports_agree(reports["--in-memory"], reports["--chunked"], cell_metrics(X))
+    assert sidecar["metrics"] == reports["--chunked"]["metrics"]  # mesh's report: the block-wise evaluate of its file
+
+
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["-m", "tfi", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.vtu"], "formats that can: .cgns"),
+        (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "formats that can: .cgns"),
+        (["-m", "elliptic", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.cgns"], "methods that can: tfi, neural"),
+        (["-m", "tfi", "--dims", "100000", "100000", "100000", "-o", "{dir}/x.cgns"], "GB free"),
+        (["-m", "tfi", "--dims", "4", "4", "4", "--scheduler", "tcp://127.0.0.1:9", "-o", "{dir}/x.cgns"], "cannot reach the Dask scheduler"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, args, expected):
+    import subprocess
+    import sys
+    import time
+
+    start = time.perf_counter()
+    command = [sys.executable, "-m", "meshgen", "mesh", *(a.format(dir=tmp_path) for a in args)]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], result.stderr
+    assert list(tmp_path.iterdir()) == []
+    assert time.perf_counter() - start < 30  # an unreachable scheduler fails fast
+
+
+def test_an_interrupted_write_leaves_no_file(tmp_path, semicylinder):
+    X = tfi_array(semicylinder, node_coordinates((8, 8, 8)), block_nodes=100)
+
+    def interrupt(done, total, phase):
+        if done == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_chunked_mesh(tmp_path / "i.cgns", X, semicylinder, progress=interrupt)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_dask_is_not_imported_by_help():
+    import subprocess
+    import sys
+
+    code = "import sys; from meshgen.cli import cli\ntry:\n    cli.main(['--help'])\nexcept SystemExit: pass\nprint('dask' in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ})
+    assert result.stdout.strip().splitlines()[-1] == "False"
+
+
+def test_no_quality_writes_the_mesh_alone(tmp_path):
+    import meshio
+
+    runner = CliRunner()
+    for name, extra in (("a.vtu", []), ("b.cgns", ["--chunked"])):
+        result = runner.invoke(cli, ["mesh", "-m", "tfi", "--dims", "4", "3", "5", "--no-quality", "-q", *extra, "-o", str(tmp_path / name)])
+        assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.vtu", "b.cgns"]  # no .quality.json
+    assert meshio.read(tmp_path / "a.vtu").cell_data == {}
+    assert read_whole(tmp_path / "b.cgns").shape == (5, 4, 6, 3)
