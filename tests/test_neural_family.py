@@ -205,3 +205,27 @@ def test_family_from_checkpoint_rebuilds_the_ranges(semicylinder_family):
     family = family_from_checkpoint(semicylinder_family)
     assert family.ranges == {"radius": (0.5, 2.0), "length": (1.0, 4.0)}
     assert family.check_values({"radius": 0.5}) == {"radius": 0.5, "length": 2.5}  # unset: the middle
+
+
+def test_an_interrupted_family_run_resumes_to_the_weights_of_an_uninterrupted_one(tmp_path):
+    family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
+    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=6", "lbfgs.steps=2", "lbfgs.max_iter=3",
+                                             "points.interior=64", "checkpoint.every=100"])
+    (tmp_path / "whole").mkdir()
+    whole = train_family(config, family, tmp_path / "whole", summary=False)
+    calls = []
+
+    def stop_after_four():
+        calls.append(1)
+        return len(calls) > 4
+
+    (tmp_path / "part").mkdir()
+    part = train_family(config, family, tmp_path / "part", stop=stop_after_four, summary=False)
+    assert part.interrupted and part.step == 4 and part.checkpoint["stage"] == "adam"
+    resumed = train_family(config, family, tmp_path / "part", resume=load_checkpoint(tmp_path / "part" / "checkpoint.pt"),
+                           summary=False)
+    assert resumed.step == whole.step == 8
+    for key, value in whole.checkpoint["model"]["state_dict"].items():
+        assert torch.equal(value, resumed.checkpoint["model"]["state_dict"][key]), key
+    rows = (tmp_path / "part" / "history.csv").read_text().splitlines()
+    assert [row.split(",")[1] for row in rows[1:]] == [str(i) for i in range(8)]
