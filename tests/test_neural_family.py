@@ -197,7 +197,7 @@ def test_the_readme_example_runs(flower_run, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scope = {}
     exec(compile(block, "README.md", "exec"), scope)
-    twist = scope["twist"]
+    twist = scope["twist"].detach()
     assert 0.0 <= float(twist) <= 180.0 and float(twist) != 60.0  # it moved, and stayed in range
 
 

@@ -45,13 +45,12 @@ from meshgen.neural.derivatives import grid_derivatives, grid_points, training_g
 from meshgen.neural.model import INPUT_MAP, bubble, normalisation
 from meshgen.neural.winslow import winslow_residual
 
-MEMBERS_PER_STEP = 8  # members sampled per training step (their residuals are one batch)
+MEMBERS_PER_STEP = 4  # members sampled per training step (their residuals are one batch)
 TEST_MEMBERS = 8  # fixed held-out members of the test loss
 TEST_SEED = 271828
 SUMMARY_CELLS = 30
 FD_STEP = 1e-5  # parameter step of the TFI's difference quotient, as a fraction of the range
 STAGES = ("adam", "lbfgs")
-HISTORY_COLUMNS = ("stage", "step", "L1", "total", "lr", "seconds")
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _VARY = re.compile(rf"^\s*([A-Za-z_]\w*)\s*=\s*({_NUMBER})\s*:\s*({_NUMBER})\s*$")
 
@@ -341,7 +340,7 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
     saved family checkpoint."""
     from meshgen import __version__
     from meshgen.neural.config import to_dict, to_yaml
-    from meshgen.neural.train import CONFIG_HEADER, TrainResult, _format_row, grid_nodes_per_axis, open_history
+    from meshgen.neural.train import CONFIG_HEADER, TrainResult, open_history
 
     run_dir = Path(run_dir)
     device = torch.device(device)
@@ -351,7 +350,7 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
     if resume is not None:
         center, scale = np.asarray(resume["model"]["center"]), float(resume["model"]["scale"])
     problem = FamilyProblem(family, center, scale, device)
-    nodes = grid_nodes_per_axis(config, dim)
+    nodes = max(1, round(config.points.interior ** (1.0 / dim)))  # per axis, as for one shape
 
     torch.manual_seed(config.seed)
     network = FamilyMLP(dim, len(family.ranges), config.model.widths)
@@ -428,13 +427,13 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
                     save(stage)
                     raise MeshgenError(f"family training diverged at step {step} ({stage}): non-finite loss; "
                                        f"the last state is in {checkpoint_path}")
-                row = {"stage": stage, "step": step, "L1": loss, "total": loss, "lr": lr,
+                row = {"stage": stage, "step": step, "L1": loss, "L2": 0.0, "total": loss, "lr": lr,
                        "seconds": elapsed + time.perf_counter() - started}
-                history.writerow(_format_row(row))
+                history.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
                 stage_step += 1
                 step += 1
                 if reporter is not None:
-                    reporter.update({**row, "L2": 0.0, "a1": 1.0, "a2": 1.0}, stage_step, total)  # as an exact run shows them
+                    reporter.update({**row, "a1": 1.0, "a2": 1.0}, stage_step, total)  # as an exact run shows them
                 if step % config.checkpoint.every == 0:
                     save(stage)
             if interrupted:
@@ -529,8 +528,18 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
                            f"leave out --geometry (the checkpoint sets it)")
     values = family.check_values(values, f" of {display_path(path)}")
     model = member_model(checkpoint["model"], family.normalised(values))
-    record = {"family": {"ranges": checkpoint["family"]["ranges"], "member": values}}
-    member = TrainedModel(path, {**checkpoint, "model": model}, "checkpoint", record)
+
+    class FamilyMember(TrainedModel):
+        """A member of a family checkpoint: described and recorded with its ranges and values."""
+
+        def describe(self) -> str:
+            at = ", ".join(f"{k}={v:g}" for k, v in values.items())
+            return f"{super().describe()}; member {at} of {' '.join(range_text(family.ranges))}"
+
+        def metadata(self) -> dict:
+            return {**super().metadata(), "family": {"ranges": checkpoint["family"]["ranges"], "member": values}}
+
+    member = FamilyMember(path, {**checkpoint, "model": model}, "checkpoint")
     entry = checkpoint["geometry"]
     return member, load_geometry(entry["spec"], {**entry["params"], **values})
 
