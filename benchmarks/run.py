@@ -511,6 +511,8 @@ def format_value(value, unit) -> str:
         return f"{value:.0f} {unit}"
     if unit == "x":
         return f"{value:.2f}x"
+    if unit == "deg":
+        return f"{value:.2f} deg"
     if unit == "s" and value < 1:
         return f"{value * 1e3:.3g} ms"
     return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
