@@ -31,7 +31,7 @@ CASES = {
     "semicylinder": {"radius": (0.5, 2.0), "length": (1.0, 4.0)},
 }
 TOLERANCE_DEGREES = 0.5  # the bound on |mean min angle - elliptic's| per member
-QUICK_OVERRIDES = ["adam.steps=150", "lbfgs.steps=0"]
+QUICK_OVERRIDES = ["adam.steps=60", "lbfgs.steps=0", "points.interior=1000"]  # a smoke test of the measurement
 
 
 def measure_case(name: str, ranges: dict, members: int, cells: int, overrides=(), seed: int = 0) -> dict:
