@@ -162,7 +162,7 @@ def semicylinder_family(tmp_path_factory):
     """An untrained two-parameter family (no steps), with a random correction term."""
     folder = tmp_path_factory.mktemp("semicylinder-family")
     family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0), "length": (1.0, 4.0)})
-    config = resolve_config("family", None, ["model.widths=[10,10]", "adam.steps=0", "points.interior=64"])
+    config = resolve_config("family", None, ["model.widths=[10,10]", "adam.steps=0", "lbfgs.steps=0", "points.interior=64"])
     result = train_family(config, family, folder, summary=False)
     return with_random_correction(result.checkpoint, seed=1)
 
