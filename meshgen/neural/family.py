@@ -28,7 +28,6 @@ TFI[dg/dp] up to the difference quotient's O(h^2); it works for any plugin, whos
 
 from __future__ import annotations
 
-import copy
 import itertools
 import math
 import re
@@ -42,7 +41,7 @@ import torch
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_derivatives, grid_points, training_grid
-from meshgen.neural.model import INPUT_MAP, bubble, normalisation
+from meshgen.neural.model import INPUT_MAP, bubble
 from meshgen.neural.winslow import winslow_residual
 
 MEMBERS_PER_STEP = 4  # members sampled per training step (their residuals are one batch)
