@@ -25,6 +25,9 @@ Sections, in order (all on the semicylinder, the reference shape):
   every few steps; the first step within ``bench_train.QUALITY_BOUNDS`` (no inverted cell, before
   and after snapping; boundary deviation at most 1e-2 of the characteristic length before snapping;
   mean minimum angle above TFI's), in training seconds with the probes' own time left out;
+- ``family``: one network per family of shapes (``meshgen train --vary``, ``bench_family.py``): flower
+  (twist 0..180) and semicylinder (radius 0.5..2, length 1..4), training time, per-member meshing
+  time at 40^3, and the worst of 10 random members against its elliptic mesh;
 - ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
@@ -80,8 +83,8 @@ sys.path.insert(1, str(BENCHMARKS))
 
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
-SECTIONS = ["machine", "meshing", "boundary_layout", "mesh_command", "training", "time_to_quality", "evaluate", "formats",
-            "solver_formats", "memory", "chunked"]
+SECTIONS = ["machine", "meshing", "boundary_layout", "mesh_command", "training", "time_to_quality", "family", "evaluate",
+            "formats", "solver_formats", "memory", "chunked"]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -99,6 +102,7 @@ TARGETS = {
     "chunked_throughput_ratio": ("<=", 1.5, "x", "issue 14: in-memory / chunked node throughput, 200^3 TFI to .cgns"),
     "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
     "evaluate_chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen evaluate of the 1000^3 file"),
+    "family_worst_degrees": ("<=", 0.5, "deg", "issue 13: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
 }
 
 
@@ -393,6 +397,12 @@ def boundary_layout(quick: bool) -> dict:
     return {"results": bench_layout.run(quick), "gmsh_smoothed_semicylinder": bench_layout.GMSH_SMOOTHED}
 
 
+def family(quick: bool) -> dict:
+    import bench_family
+
+    return bench_family.run(quick)
+
+
 # ---------------------------------------------------------------------------------------------
 # evaluate, formats
 
@@ -499,6 +509,23 @@ def summary(sections: dict) -> list[dict]:
             note += (f"; at the end: boundary deviation {final['boundary_deviation_max_rel']:.1e} of the length, "
                      f"{final['inverted_after_snapping']} cells inverted by snapping, min angle {final['min_angle_mean']:.2f}")
             add(f"time to quality, {preset}, 30^3 mesh", first["seconds"] if first else None, "s", note=note)
+    if "family" in sections:
+        data = sections["family"]
+        for name, case in data["cases"].items():
+            ranges = " ".join(f"{k}={lo:g}:{hi:g}" for k, (lo, hi) in case["ranges"].items())
+            capped = ", capped budget" if data["quick"] else ""
+            add(f"family training, {name} {ranges}", case["training"]["seconds"], "s", cpu=case["training"]["cpu_seconds"],
+                note=f"{case['training']['steps']} steps{capped}")
+            add(f"family member mesh {case['cells_per_axis']}^3, {name} (median of {len(case['members'])})",
+                case["meshing_seconds_median"], "s")
+            worst = case["worst"]
+            at = ", ".join(f"{k}={v:.3g}" for k, v in worst["params"].items())
+            add(f"family worst member, {name}: |min angle - elliptic's|", abs(worst["difference_degrees"]), "deg",
+                "family_worst_degrees", judged=not data["quick"],
+                note=f"{at}: {worst['inverted']} inverted, boundary deviation {worst['boundary_deviation_max_rel']:.1e} "
+                     f"of the length, {worst['min_angle_mean']:.2f} vs {worst['elliptic_min_angle_mean']:.2f}")
+            if worst["inverted"] and not data["quick"]:
+                rows[-1]["met"] = False  # an inverted cell fails the target whatever the angles
     if "evaluate" in sections:
         data = sections["evaluate"]
         for row in data["results"]:
@@ -667,6 +694,7 @@ def main(argv=None) -> int:
         "mesh_command": lambda: mesh_command_section(args.quick),
         "training": lambda: training(args.quick),
         "time_to_quality": lambda: time_to_quality(args.quick),
+        "family": lambda: family(args.quick),
         "evaluate": lambda: evaluate(args.quick),
         "formats": lambda: formats(args.quick),
         "solver_formats": lambda: solver_formats(args.quick),

@@ -284,6 +284,13 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
     from meshgen.neural.inference import find_model
 
     given_params = parse_params(params)
+    if checkpoint is not None:
+        from meshgen.neural.family import load_family_member
+
+        # A family checkpoint: --param picks the member (inside the trained ranges).
+        member = load_family_member(checkpoint, given_params, load_geometry(spec).name if geometry_given else None)
+        if member is not None:
+            return member
     chosen = None
     if checkpoint is None:
         # Without --checkpoint the model is one of the --geometry (default: semicylinder), never

@@ -34,8 +34,9 @@ def _epilog() -> str:
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Where to train; auto picks cuda when available.")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads for torch [default: torch's choice].")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar: a log line every tenth of each stage.")
+@click.option("--vary", "vary", multiple=True, metavar="NAME=LOW:HIGH", help="Train one network for a family of shapes: vary this geometry parameter over [LOW, HIGH] (repeatable), e.g. --vary twist=0:180; the preset defaults to family.")
 @click.option("--list-presets", is_flag=True, help="List the presets with one line each and exit.")
-def train(geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, list_presets):
+def train(geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, vary, list_presets):
     """Train a network that maps the unit cube onto a geometry (the 3DMeshNet method).
 
     Writes a run folder holding checkpoint.pt, config.yaml (the resolved configuration),
@@ -61,7 +62,7 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
 
     run = prepare_run(
         geometry=geometry, params=params, preset=preset, config_file=config_file, overrides=overrides,
-        steps=steps, out=out, resume=resume, seed=seed, device=device, threads=threads,
+        steps=steps, out=out, resume=resume, seed=seed, device=device, threads=threads, vary=vary,
     )
     result = run_training(run, quiet=quiet)
     if result.interrupted:
@@ -71,6 +72,9 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     from meshgen.quality import summary_lines
 
     summary = result.summary
+    if run.family is not None:
+        _family_report(run, result)
+        return
     dims = " ".join(str(n) for n in summary["dims"])
     size = " x ".join(str(n) for n in summary["dims"])
     echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
@@ -86,3 +90,19 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     echo(f"Run folder: {run.run_dir}")
     echo(f"Checkpoint: {result.checkpoint_path}")
     echo("Mesh with: " + MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims))
+
+
+def _family_report(run, result) -> None:
+    """What a finished family run prints: the summarised members and how to mesh one."""
+    from meshgen.neural.family import range_text, summary_table
+
+    family = run.family
+    echo(f"Trained {family.base.name} over {' '.join(range_text(family.ranges))} for {result.step} steps "
+         f"in {result.seconds:.1f} s (test-set PDE loss {result.test_loss['pde']:.3g})")
+    for line in summary_table(result.summary):
+        echo(line)
+    echo(f"Run folder: {run.run_dir}")
+    echo(f"Checkpoint: {result.checkpoint_path}")
+    member = " ".join(f"--param {name}={value:g}" for name, value in family.middle().items())
+    dims = " ".join(["30"] * family.base.dim)
+    echo(f"Mesh a member with: meshgen mesh --checkpoint {result.checkpoint_path} {member} --dims {dims} -o mesh.vtu")

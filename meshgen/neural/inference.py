@@ -385,10 +385,13 @@ def bundled_models() -> dict[str, Path]:
 
 def load_model(path, source: str = "checkpoint", record: dict | None = None) -> TrainedModel:
     """Load the checkpoint at ``path`` (``weights_only``: a file carrying code fails to load)."""
-    from meshgen.neural.checkpoint import load_checkpoint
+    from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 
     path = Path(path)
     checkpoint = load_checkpoint(path)
+    if "family" in checkpoint:  # meshgen.neural.family: a member is chosen with --param
+        raise CheckpointError(f"checkpoint {path} holds a family of shapes: mesh a member with "
+                              f"--checkpoint {path} --param name=value")
     network_layers(checkpoint["model"])  # a foreign model description fails here, before any work
     return TrainedModel(path, checkpoint, source, record or {})
 

@@ -28,6 +28,7 @@ class Run:
     device: str
     resume: dict | None = None  # the loaded checkpoint when resuming
     resume_path: Path | None = None
+    family: object | None = None  # meshgen.neural.family.Family when parameters are varied (--vary)
 
 
 def is_run_folder(path: Path) -> bool:
@@ -83,17 +84,20 @@ def _geometry_spec(spec: str) -> str:
 
 
 def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrides=(), steps=None, out=None,
-                resume=None, seed=None, device="auto", threads=None) -> Run:
+                resume=None, seed=None, device="auto", threads=None, vary=()) -> Run:
     """Check every input of ``meshgen train`` and return what to run; writes nothing.
 
     Raises MeshgenError (one line, exit 2) for an unknown geometry or preset, malformed YAML,
     unknown or ill-typed keys, a preset for the other dimension, a missing, truncated or foreign
-    checkpoint, or an output folder that holds something other than a run.
+    checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
+    name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
     """
     from meshgen.geometry import load_geometry, parse_params
     from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
-    checkpoint = resume_path = None
+    checkpoint = resume_path = family = None
+    if resume is not None and vary:
+        raise ConfigError("--vary does not apply with --resume: the checkpoint sets the ranges")
     if resume is not None:
         from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
 
@@ -130,10 +134,16 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
             )
         if geometry is None:
             geometry = spec
+        if "family" in checkpoint:
+            from meshgen.neural.family import family_from_checkpoint
+
+            family = family_from_checkpoint(checkpoint)
     else:
-        config = resolve_config(preset or "default", config_file, overrides, steps, seed)
+        config = resolve_config(preset or ("family" if vary else "default"), config_file, overrides, steps, seed)
         geometry = geometry or "semicylinder"
         geometry_object = load_geometry(geometry, parse_params(params))
+        if vary:
+            family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
     if config.dim is not None and config.dim != geometry_object.dim:
         raise ConfigError(
             f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
@@ -145,7 +155,27 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
 
         torch.set_num_threads(threads)
     run_dir = choose_run_dir(out, resume_path, geometry_object.name)
-    return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path)
+    return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
+
+
+def _family(config, geometry, spec: str, params, vary):
+    """The checked family of ``--vary`` items (``meshgen.neural.family.make_family``)."""
+    from meshgen.geometry import parse_params
+    from meshgen.neural.config import ConfigError
+    from meshgen.neural.family import make_family, parse_vary
+
+    ranges = parse_vary(vary)
+    both = sorted(set(ranges) & set(parse_params(params)))
+    if both:
+        raise ConfigError(f"--param {both[0]} and --vary {both[0]}: a parameter is either fixed or varied")
+    if not config.model.exact_boundary:
+        raise ConfigError("--vary trains the exact-boundary form (TFI + b N) alone: use --preset family or exact, "
+                          "or --set model.exact_boundary=true")
+    if config.boundary_layout != "fixed":
+        # The smoothed layout is solved per shape (seconds each): a family learns each member's own map.
+        raise ConfigError("--vary trains on each member's own boundary map: use --preset family, "
+                          "or --set boundary_layout=fixed")
+    return make_family(geometry, spec, ranges)
 
 
 def run_training(run: Run, quiet: bool = False):
@@ -171,6 +201,11 @@ def run_training(run: Run, quiet: bool = False):
     previous = signal.signal(signal.SIGINT, on_interrupt)
     try:
         with reporter:
+            if run.family is not None:
+                from meshgen.neural.family import train_family
+
+                return train_family(run.config, run.family, run.run_dir, device=run.device, resume=run.resume,
+                                    reporter=reporter, stop=stop_requested.is_set)
             return train(
                 run.config, run.geometry, run.run_dir, device=run.device, resume=run.resume, reporter=reporter,
                 stop=stop_requested.is_set, geometry_spec=run.geometry_spec,
