@@ -32,7 +32,7 @@ def register_method(method: Method) -> None:
 
 register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic"))
 register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress")))
-register_method(Method("neural", "meshgen.neural.inference:build_neural", "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=("model", "snap")))
+register_method(Method("neural", "meshgen.neural.inference:build_neural", "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=("model", "correct", "device")))
 
 
 def get_method(name: str) -> Method:

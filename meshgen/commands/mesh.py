@@ -18,7 +18,15 @@ METHOD_HELP = (
 @dims_option()
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vtk .xdmf .cgns .xyz .fmt).")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
-@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary [default: --snap].")
+@click.option(
+    "--correct/--no-correct",
+    "--snap/--no-snap",
+    "correct",
+    default=None,
+    help="neural: add TFI of the network's boundary error, X = N + TFI[g - N], so the boundary is exact and the "
+    "interior moves smoothly; --no-correct keeps the raw network [default: --correct; --snap/--no-snap: old names].",
+)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="neural: where the network is evaluated; auto picks cuda when available [default: auto].")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles).")
 @click.option(
@@ -29,7 +37,7 @@ METHOD_HELP = (
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter, clusters, quiet):
+def mesh(method, geometry, params, dims, output, checkpoint, correct, device, tol, max_iter, clusters, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model meshes: the newest run under ./runs/
@@ -55,7 +63,7 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
         method = "neural"
     get_method(method)  # an unknown name fails before anything is loaded
     coords = node_coordinates(dims, clusters)  # and so does a malformed --cluster
-    options = {"tol": tol, "max_iter": max_iter, "snap": snap}
+    options = {"tol": tol, "max_iter": max_iter, "correct": correct, "device": device}
     model = None
     if method == "neural":
         model, geometry = _neural_model(checkpoint, geometry, params, geometry_given, dims)
@@ -95,8 +103,8 @@ def mesh(method, geometry, params, dims, output, checkpoint, snap, tol, max_iter
                 f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
                 f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
             )
-        if "snap" in info:
-            click.echo(_snap_line(info["snap"]))
+        if "correction" in info:
+            click.echo(_correction_line(info["correction"]))
         click.echo(f"wrote {output}")
         for line in summary_lines(report):
             click.echo(line)
@@ -133,15 +141,13 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
     return model, geometry
 
 
-def _snap_line(snap: dict) -> str:
-    if not snap.get("snapped"):
-        return "boundary nodes: the network's own (--no-snap)"
-    before = snap["deviation_before"]
+def _correction_line(correction: dict) -> str:
+    """The network's boundary error, said the same way with and without the correction."""
+    error = correction["error_before"]
     line = (
-        f"snapped boundary nodes onto the geometry: deviation before snapping max {before['max']:.3g} "
-        f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g}), mean {before['mean']:.3g}; "
-        f"{snap['inverted_by_snapping']} cells inverted by snapping"
+        f"network's boundary error (|g(xi) - N(xi)| at the boundary nodes' parametric points): max {error['max']:.3g} "
+        f"({error['max_rel']:.3g} of L = {error['characteristic_length']:.4g}), mean {error['mean']:.3g}; "
     )
-    if snap["inverted_before"] or snap["inverted_after"]:
-        line += f" (outer layer: {snap['inverted_before']} inverted before, {snap['inverted_after']} after)"
-    return line
+    if correction["corrected"]:
+        return line + "corrected: X = N + TFI[g - N] (--no-correct keeps the raw network)"
+    return line + "not corrected (--no-correct)"

@@ -66,7 +66,9 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     for line in summary_lines(summary["network"]):
         click.echo(f"  {line}")
     if not run.config.model.exact_boundary:
-        click.echo(f"    with the boundary nodes snapped onto the geometry: {summary['inverted_after_snapping']} inverted cells")
+        click.echo(f"Network corrected to N + TFI[g - N] (what meshgen mesh writes), {size} mesh:")
+        for line in summary_lines(summary["corrected"]):
+            click.echo(f"  {line}")
     click.echo(f"TFI, {size} mesh:")
     for line in summary_lines(summary["tfi"]):
         click.echo(f"  {line}")
