@@ -255,6 +255,29 @@ def test_correction_on_blocks_equals_the_whole_grid(semicylinder):
     np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-15)
 
 
+def test_default_preset_corrected_is_valid_and_near_elliptic_at_every_resolution(tmp_path, semidisk):
+    """Issue 13 part 1 on a small case: the default preset (the paper's method: soft boundary,
+    reweighting, PCGrad), shortened and on the 2D semidisk, leaves the boundary visibly off; its
+    corrected mesh has no inverted cell, the exact boundary, and a mean minimum angle within 0.3
+    degrees of the converged elliptic mesh's, at every resolution (the same network)."""
+    from meshgen.elliptic import elliptic
+    from meshgen.neural.config import resolve_config
+
+    config = resolve_config("default", None, ["pretrain.steps=5", "adam.steps=100", "lbfgs.steps=20",
+                                              "model.widths=[24,24]", "points.interior=1000", "points.boundary=1000"])
+    model = train(config, semidisk, tmp_path, summary=False).checkpoint["model"]
+    for cells in (8, 30, 60):
+        coords = parametric_grid((cells, cells))
+        X = mesh_from_model(model, coords, semidisk)
+        info = correct_boundary(X, semidisk, coords)
+        assert info["error_before"]["max_rel"] > 1e-3  # the raw network misses the boundary
+        report = quality_report(X, semidisk)
+        reference = quality_report(elliptic(semidisk, (cells, cells))[0], semidisk)
+        assert report["inverted"]["count"] == 0 and report["boundary_deviation"]["max_rel"] < 1e-12
+        angle, elliptic_angle = report["metrics"]["min_angle"]["mean"], reference["metrics"]["min_angle"]["mean"]
+        assert abs(angle - elliptic_angle) <= 0.3, (cells, angle, elliptic_angle)
+
+
 def test_corrected_mesh_of_a_blown_up_map_stays_valid(run_cli, tmp_path, soft_2d):
     """The tiny model's map blown up 1.5 times about the centre: its two outer node layers lie
     outside the semidisk, where snapping the boundary layer back folded the cells between them.
