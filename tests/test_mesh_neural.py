@@ -255,6 +255,21 @@ def test_correction_on_blocks_equals_the_whole_grid(semicylinder):
     np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-15)
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="a GPU is present: --device cuda is valid here")
+def test_device_cuda_without_a_gpu_is_one_line_exit_2(run_cli, tmp_path):
+    result = run_cli("mesh", "--device", "cuda", "--dims", 4, 4, 4, "-o", "m.vtu")
+    assert one_line_error(result) and "no CUDA device is available" in result.stderr, result.stderr
+    assert not (tmp_path / "m.vtu").exists()
+
+
+def test_device_cpu_and_auto_give_the_same_mesh_on_a_cpu_machine(run_cli, tmp_path):
+    dims = (5, 4, 6)
+    for device in ("cpu", "auto"):
+        assert run_cli("mesh", "--device", device, "--dims", *dims, "-o", f"{device}.vtu").returncode == 0
+    if not torch.cuda.is_available():
+        np.testing.assert_array_equal(read_points(tmp_path / "cpu.vtu", dims), read_points(tmp_path / "auto.vtu", dims))
+
+
 def test_default_preset_corrected_is_valid_and_near_elliptic_at_every_resolution(tmp_path, semidisk):
     """Issue 13 part 1 on a small case: the default preset (the paper's method: soft boundary,
     reweighting, PCGrad), shortened and on the 2D semidisk, leaves the boundary visibly off; its
@@ -417,6 +432,7 @@ def write_wrong_network(path):
         (None, ["-m", "tfi", "--checkpoint", BUNDLED, "--dims", 4, 4, 4], "--checkpoint applies to the neural method"),
         (None, ["--tol", "1e-3", "--dims", 4, 4, 4], "--tol does not apply to method 'neural'"),
         (None, ["-m", "tfi", "--no-snap", "--dims", 4, 4, 4], "--correct does not apply to method 'tfi'"),
+        (None, ["-m", "tfi", "--device", "cpu", "--dims", 4, 4, 4], "--device does not apply to method 'tfi'"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(run_cli, tmp_path, setup, args, message):
