@@ -258,8 +258,8 @@ class Training:
 
 
 # ---------------------------------------------------------------------------------------------
-# one step of each stage; each returns the history row's numbers as 0-d tensors (read by the loop
-# once per step, in one transfer)
+# one step of each stage; each returns the history row's numbers, those computed on the device as
+# 0-d tensors there (the loop reads them once per step, in one transfer)
 
 
 def pretrain_step(network, problem, optimizer, pool) -> dict:
@@ -308,7 +308,7 @@ def adam_step(network, weights, problem, config, optimizer, scheduler, generator
     boundary_points = boundary_sample(config, problem, generator, pool)
     factors = weights.factors().detach()
     pde, boundary, g1, g2 = term_gradients(training, pde_sample, boundary_points, factors)
-    lr = torch.tensor(optimizer.param_groups[0]["lr"])
+    lr = optimizer.param_groups[0]["lr"]  # the rate of this step, before the decay
     finite = torch.isfinite(pde) & torch.isfinite(boundary)
     if config.method.pcgrad:
         update, conflict = project_conflicting(g1, g2)
@@ -342,7 +342,7 @@ def lbfgs_step(network, weights, problem, config, optimizer, fixed, terms=None) 
     optimizer.step(closure)
     total = weights.objective(last["L1"], last["L2"]).detach()
     a = weights.a().detach()
-    return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": torch.tensor(optimizer.param_groups[0]["lr"])}
+    return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": optimizer.param_groups[0]["lr"]}
 
 
 def evaluate_losses(network, problem, config, points) -> dict:
@@ -502,13 +502,13 @@ def _format_row(row: dict) -> dict:
 
 
 def read_row(numbers: dict, network) -> tuple[dict, bool]:
-    """A step's numbers (0-d tensors) as Python numbers, and whether the step is good (finite loss
-    and finite weights): one transfer from the device per step."""
-    keys = list(numbers)
+    """A step's numbers (0-d tensors on the device, or Python numbers) as Python numbers, and
+    whether the step is good (finite loss, finite weights): one transfer from the device per step,
+    the only wait for it in the loop outside L-BFGS (whose line search reads its losses itself)."""
+    keys = [k for k, v in numbers.items() if isinstance(v, torch.Tensor)]
     finite_weights = torch.isfinite(torch.stack([p.detach().sum() for p in network.parameters()]).sum())
-    values = torch.stack([numbers[k].detach().double().reshape(()).to(finite_weights.device) for k in keys]
-                         + [finite_weights.double()]).tolist()
-    row = {k: (int(v) if k == "conflict" else v) for k, v in zip(keys, values)}
+    values = torch.stack([numbers[k].detach().double().reshape(()) for k in keys] + [finite_weights.double()]).tolist()
+    row = {**numbers, **{k: (int(v) if k == "conflict" else v) for k, v in zip(keys, values)}}
     return row, bool(values[-1]) and math.isfinite(row["total"])
 
 
