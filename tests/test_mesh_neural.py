@@ -239,6 +239,25 @@ def test_correction_keeps_the_cells_that_snapping_folds(semicylinder):
     np.testing.assert_allclose(X, tfi(semicylinder, dims), rtol=0, atol=1e-14)
 
 
+def test_correction_block_by_block_from_the_model_equals_the_whole_mesh(soft_3d, semicylinder):
+    """What a block-wise mesher does: the boundary errors from the faces alone, then each block's
+    nodes from the network plus the correction on that block."""
+    from meshgen.neural.inference import model_boundary_errors
+
+    model = load_checkpoint(soft_3d)["model"]
+    coords = node_coordinates((9, 6, 7), ["xi:both:1.2"])
+    whole = mesh_from_model(model, coords, semicylinder)
+    correct_boundary(whole, semicylinder, coords)
+    errors = model_boundary_errors(model, semicylinder, coords)
+    blocks = np.empty_like(whole)
+    for i in (slice(0, 4), slice(4, 10)):
+        for j in (slice(0, 3), slice(3, 7)):
+            block = (i, j, slice(0, 8))
+            blocks[block] = mesh_from_model(model, [c[b] for c, b in zip(coords, block)], semicylinder)
+            add_boundary_correction(blocks[block], errors, coords, block=block)
+    np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-14)
+
+
 def test_correction_on_blocks_equals_the_whole_grid(semicylinder):
     """A block-wise caller: face errors once, the correction evaluated block by block."""
     dims = (7, 5, 6)

@@ -232,6 +232,21 @@ def boundary_errors(X: np.ndarray, geometry, coords) -> list[np.ndarray]:
     return errors
 
 
+def model_boundary_errors(model: dict, geometry, coords, device: str = "cpu") -> list[np.ndarray]:
+    """:func:`boundary_errors` of the map of ``model`` (a ``checkpoint["model"]`` description) on
+    the tensor grid of ``coords``, for a caller that never holds the whole node array: the map is
+    evaluated on each face of the grid alone (face-sized work), as :func:`mesh_from_model` would
+    evaluate those nodes in the whole grid."""
+    errors = []
+    for index, points in boundary_faces(coords):
+        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
+        face_coords = [np.asarray(c, dtype=float) for c in coords]
+        face_coords[axis] = face_coords[axis][[index[axis]]]
+        values = np.take(mesh_from_model(model, face_coords, geometry, device=device), 0, axis=axis)
+        errors.append(geometry.boundary(points).reshape(values.shape) - values)
+    return errors
+
+
 def error_figures(errors, geometry) -> dict:
     """Max and mean of |g(xi) - X(xi)| over the boundary nodes of :func:`boundary_errors`: the
     distance of each boundary node from the geometry's boundary map at the node's own parametric
