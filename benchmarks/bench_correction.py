@@ -96,13 +96,15 @@ def measure(geometry, checkpoint: dict, n: int) -> dict:
     }
 
 
-def run(quick: bool = False, checkpoints: Path | None = None, verbose: bool = True, partial: Path | None = None) -> dict:
+def run(quick: bool = False, checkpoints: Path | None = None, verbose: bool = True, partial: Path | None = None,
+        geometries=None, dims=None) -> dict:
     """The whole table: {"rows": [...], "all_met": bool, ...}; see the module docstring.
-    ``partial``: a JSON file rewritten after each row (what a long run has measured so far)."""
+    ``partial``: a JSON file rewritten after each row (what a long run has measured so far);
+    ``geometries``, ``dims``: a part of the table only (default: all of it)."""
     from meshgen.geometry import load_geometry
 
-    names = ["semicylinder"] if quick else GEOMETRIES
-    dims = [20] if quick else DIMS
+    names = geometries or (["semicylinder"] if quick else GEOMETRIES)
+    dims = dims or ([20] if quick else DIMS)
     overrides = QUICK_OVERRIDES if quick else []
     rows = []
     if verbose:
@@ -135,8 +137,11 @@ def main():
     parser.add_argument("--quick", action="store_true", help="a smoke test: semicylinder, capped training, 20^3")
     parser.add_argument("--json", type=Path, help="write the results to this JSON file")
     parser.add_argument("--checkpoints", type=Path, help="keep (and reuse) the trained checkpoints here")
+    parser.add_argument("--geometries", nargs="+", choices=GEOMETRIES, help="these geometries only")
+    parser.add_argument("--dims", nargs="+", type=int, help="these cells per axis only")
     args = parser.parse_args()
-    results = run(args.quick, args.checkpoints, partial=args.json.with_suffix(".partial.json") if args.json else None)
+    results = run(args.quick, args.checkpoints, partial=args.json.with_suffix(".partial.json") if args.json else None,
+                  geometries=args.geometries, dims=args.dims)
     print(f"all met: {results['all_met']}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=2) + "\n")

@@ -331,7 +331,7 @@ SPEED_PRESETS = ("exact", "default", "paper")
 # The runs of the speed table: the presets as they are, paper capped (12000 Adam steps are the GPU
 # target's; on a CPU the table reports how far a capped run gets)
 SPEED_OVERRIDES = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"],
-                   "paper": ["checkpoint.every=250", "adam.steps=1500", "lbfgs.steps=0"]}
+                   "paper": ["checkpoint.every=100", "adam.steps=500", "lbfgs.steps=0"]}
 QUICK_SPEED_OVERRIDES = {"exact": ["checkpoint.every=25", "adam.steps=100", "lbfgs.steps=0"],
                          "default": ["checkpoint.every=25", "pretrain.steps=5", "adam.steps=50", "lbfgs.steps=5"],
                          "paper": ["checkpoint.every=25", "adam.steps=50", "lbfgs.steps=0"]}
