@@ -444,7 +444,7 @@ def summary(sections: dict) -> list[dict]:
                 add(f"time to {label}, {name}, 30^3 corrected mesh", point["seconds"] if point else None, "s", key,
                     judged=not (row["capped"] and row["preset"] != "paper"), note=note)
         if data["cuda_skipped"]:
-            add("CUDA rows", None, "", note=f"skipped: {data['cuda_skipped']}")
+            add("CUDA rows", None, "s", note=f"skipped: {data['cuda_skipped']}")
     if "correction" in sections:
         data = sections["correction"]
         for row in data["rows"]:
@@ -487,6 +487,8 @@ def format_value(value, unit) -> str:
         return f"{value:.0f} {unit}"
     if unit == "x":
         return f"{value:.2f}x"
+    if unit == "deg":
+        return f"{value:+.2f}°"
     if unit == "s" and value < 1:
         return f"{value * 1e3:.3g} ms"
     return f"{value:.3g} s" if value < 100 else f"{value:.0f} s"
