@@ -14,9 +14,12 @@ bound on a small CPU:
 The network's inputs are made per chunk from the 1D coordinates, so no (N, d) grid of parametric
 points exists at any time; the only full-size array is the node array itself.
 
-Snapping (``snap_boundary``): the boundary nodes of a structured grid sit at known parametric
-points, so the exact boundary is the geometry's boundary map there. Moving them changes only the
-cells of the outer layer; their validity is checked before and after.
+Boundary correction (``correct_boundary``): the boundary nodes of a structured grid sit at known
+parametric points, where the exact boundary is the geometry's boundary map g. The mesh becomes
+X = N + TFI[g - N]: the error g - N at the face nodes, interpolated into the volume by the same
+Gordon-Hall sum as TFI. Exact on the boundary, smooth inside; the face terms are made once, and
+any block of the grid can be corrected from them (``add_boundary_correction``, with the errors
+from the grid's faces alone: ``model_boundary_errors``).
 
 Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/checkpoint.pt``
 (skipping runs of another geometry or other parameters than the ones given); else the model
