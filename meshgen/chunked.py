@@ -2,9 +2,9 @@
 
 A TFI or neural mesh is a map evaluated node by node, so it can be computed block by block:
 
-- TFI: the six face terms D_as of the axis-by-axis Boolean sum (``meshgen.tfi.face_corrections``,
+- TFI: the six face terms D_as of the axis-by-axis Boolean sum (``meshgen.tfi.face_terms``,
   O(n^2) memory) are computed once; a block is then their blend on the block's nodes
-  (``blend_face_corrections``), bit for bit the in-memory mesh.
+  (``add_face_terms``), bit for bit the in-memory mesh.
 - neural: the network on the block's parametric coordinates (``evaluate_on_grid``), the exact-
   boundary form's TFI from the precomputed face terms. The boundary is corrected as
   X = M + TFI[g - M] (M the network's map, g the geometry's boundary map): the six face error
@@ -105,33 +105,21 @@ def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int):
 
 
 def _tfi_block(shared, block):
-    coords, corrections = shared
-    from meshgen.tfi import blend_face_corrections
+    coords, terms = shared
+    from meshgen.tfi import add_face_terms
 
-    return blend_face_corrections(corrections, coords, block)
+    return add_face_terms(terms, coords, block=block)
 
 
 def tfi_array(geometry, coords, block_nodes: int = BLOCK_NODES):
     """The TFI mesh of ``geometry`` on the tensor grid of ``coords`` (1D arrays from 0 to 1) as a
     dask array (n1+1, n2+1[, n3+1], dim), blocks of about ``block_nodes`` nodes."""
-    from meshgen.tfi import boundary_faces, face_corrections
+    from meshgen.tfi import face_terms, face_values
 
     coords = [np.asarray(c, dtype=float) for c in coords]
-    faces = boundary_faces(coords)
-    images = geometry.boundary(np.concatenate([points for _, points in faces]))
-    corrections = face_corrections(images, coords)
+    terms = face_terms(face_values(geometry.boundary, coords), coords)
     shape = tuple(len(c) for c in coords)
-    return _node_array(_tfi_block, (coords, corrections), shape, len(coords), block_nodes)
-
-
-def _face_grids(coords):
-    """The 1D coordinates of each face of the tensor grid (one axis pinned to 0 or 1), in the order
-    of ``meshgen.tfi.boundary_faces``."""
-    grids = []
-    for axis in range(len(coords)):
-        for value in (0.0, 1.0):
-            grids.append([np.array([value]) if d == axis else c for d, c in enumerate(coords)])
-    return grids
+    return _node_array(_tfi_block, (coords, terms), shape, len(coords), block_nodes)
 
 
 def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
@@ -154,21 +142,22 @@ def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
 
 
 def _neural_block(shared, block):
-    from meshgen.tfi import blend_face_corrections
+    from meshgen import cube
+    from meshgen.tfi import add_face_terms
 
-    model, coords, tfi_corrections, error_corrections, boundary_values = shared
+    model, coords, tfi_terms, error_terms, boundary_values = shared
     sub_coords = [c[s] for c, s in zip(coords, block)]
-    tfi_block = blend_face_corrections(tfi_corrections, coords, block) if tfi_corrections else None
+    tfi_block = add_face_terms(tfi_terms, coords, block=block) if tfi_terms else None
     X = network_map_block(model, sub_coords, tfi_block)
-    if error_corrections:
-        blend_face_corrections(error_corrections, coords, block, out=X)
+    if error_terms:
+        add_face_terms(error_terms, coords, X, block)  # X + TFI[g - M] on the block
         # The network's float32 values on a face differ from those of a block in the last bits (other
         # batch sizes): the boundary nodes take the boundary map's values exactly.
-        for axis, side, values in boundary_values:
-            end = len(coords[axis]) - 1 if side else 0
-            if block[axis].start <= end < block[axis].stop:
-                index = tuple(end - s.start if d == axis else slice(None) for d, s in enumerate(block))
-                X[index] = values[tuple(s for d, s in enumerate(block) if d != axis)]
+        for face, values in zip(cube.faces(len(coords)), boundary_values):
+            end = len(coords[face.axis]) - 1 if face.side else 0
+            if block[face.axis].start <= end < block[face.axis].stop:
+                index = tuple(end - s.start if d == face.axis else slice(None) for d, s in enumerate(block))
+                X[index] = values[tuple(s for d, s in enumerate(block) if d != face.axis)]
     return X
 
 
@@ -176,45 +165,23 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
     a dask array, and what the boundary correction did (JSON-ready).
 
-    ``correct_boundary``: X = M + TFI[g - M] (see the module docstring); else the network's map M.
-    To use another block-local boundary treatment, replace ``_neural_block``'s last step: it sees
-    the block's slices and whatever face arrays are computed here up front.
+    ``correct_boundary``: X = M + TFI[g - M] (``meshgen.neural.inference.add_boundary_correction``
+    block by block, the face errors computed once on the faces alone); else the network's map M.
     """
-    from meshgen.tfi import boundary_faces, face_corrections, tfi
+    from meshgen.neural.inference import error_figures, model_boundary_errors
+    from meshgen.tfi import face_terms, face_values
 
     coords = [np.asarray(c, dtype=float) for c in coords]
-    faces = boundary_faces(coords)
-    boundary_images = geometry.boundary(np.concatenate([points for _, points in faces]))
-    tfi_corrections = face_corrections(boundary_images, coords) if model["exact_boundary"] else None
-    info = {"boundary": "network's own"}
-    error_corrections, boundary_values = None, []
+    boundary_values = face_values(geometry.boundary, coords)
+    tfi_terms = face_terms(boundary_values, coords) if model["exact_boundary"] else None
+    info = {"corrected": False}
+    error_terms = None
     if correct_boundary:
-        face_maps = []
-        for grid in _face_grids(coords):
-            # On a face (one axis pinned) tfi takes the direct form, face-sized.
-            tfi_face = tfi(geometry, None, grid) if tfi_corrections is not None else None
-            face_maps.append(network_map_block(model, grid, tfi_face).reshape(-1, len(coords)))
-        error = boundary_images - np.concatenate(face_maps)
-        distance = np.linalg.norm(error, axis=1)
-        length = float(geometry.characteristic_length)
-        info = {
-            "boundary": "corrected: X = M + TFI[g - M] (M the network's map, g the boundary map)",
-            "deviation_before": {
-                "max": float(distance.max()),
-                "max_rel": float(distance.max()) / length,
-                "characteristic_length": length,
-                "definition": "distance of each boundary node from the geometry's boundary map at the node's parametric point",
-            },
-        }
-        error_corrections = face_corrections(error, coords)
-        start = 0
-        for axis, side in [(a, s) for a in range(len(coords)) for s in (0, 1)]:
-            face_shape = tuple(len(c) for d, c in enumerate(coords) if d != axis)
-            count = int(np.prod(face_shape))
-            boundary_values.append((axis, side, boundary_images[start : start + count].reshape(*face_shape, -1)))
-            start += count
+        errors = model_boundary_errors(model, geometry, coords)
+        info = {"corrected": True, "error_before": error_figures(errors, geometry)}
+        error_terms = face_terms(errors, coords)
     shape = tuple(len(c) for c in coords)
-    shared = (model, coords, tfi_corrections, error_corrections, boundary_values)
+    shared = (model, coords, tfi_terms, error_terms, boundary_values)
     return _node_array(_neural_block, shared, shape, len(coords), block_nodes), info
 
 

@@ -365,7 +365,7 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
         block = inner_block(walls, geometry.dim)
         sub_coords = [np.asarray(t, dtype=float)[block[a]] for a, t in enumerate(coords)]
         if min(len(t) for t in sub_coords) < 3:
-            raise MeshgenError("--orthogonal needs at least 3 cells across each orthogonal wall's axis")
+            raise ParameterError("orthogonal", "{name} needs at least 3 cells across each orthogonal wall's axis")
         for face in walls:
             straighten_first_layer(X, face)
         X[block], second = solve_winslow(X[block], sub_coords, tol=tol, max_iter=max_iter,

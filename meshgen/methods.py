@@ -15,7 +15,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-from meshgen.errors import MeshgenError, ParameterError, unknown_name
+from meshgen.errors import ParameterError, unknown_name
 
 
 @dataclass(frozen=True)
@@ -43,7 +43,7 @@ def register_method(method: Method) -> None:
 
 
 NEURAL = "meshgen.neural.inference:build_neural"
-NEURAL_OPTIONS = ("model", "snap")
+NEURAL_OPTIONS = ("model", "correct", "device")
 register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",)))
 register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal")))
 register_method(Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS))

@@ -17,18 +17,18 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.cube import Face, face_named, face_names
-from meshgen.errors import MeshgenError
+from meshgen.errors import ParameterError
 
 
 def parse_walls(names, dim: int) -> list[Face]:
-    """Face names (``xi0`` .. ``zeta1``; repeats dropped) -> faces; MeshgenError for unknown ones."""
+    """Face names (``xi0`` .. ``zeta1``; repeats dropped) -> faces; ParameterError for unknown ones."""
     walls = []
     for name in names:
         try:
             face = face_named(name, dim)
         except KeyError:
-            raise MeshgenError(
-                f"--orthogonal: unknown face '{name}' (faces of a {dim}D mesh: {', '.join(face_names(dim))})"
+            raise ParameterError(
+                "orthogonal", f"{{name}}: unknown face '{name}' (faces of a {dim}D mesh: {', '.join(face_names(dim))})"
             ) from None
         if face not in walls:
             walls.append(face)

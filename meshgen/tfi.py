@@ -71,66 +71,79 @@ def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.n
     """Gordon-Hall TFI on the tensor grid of ``coords``, whose first and last
     values must be 0 and 1, added to ``out`` (n1, .., d) when given, else returned.
 
-    The Boolean sum P1 + P2 (I - P1) + P3 (I - P1)(I - P2) taken one axis at a time: with U_a the
-    interpolant of the first a axes, U_a = U_(a-1) + (1 - t_a) D_a0 + t_a D_a1, where
-    D_as = F - U_(a-1) on the face t_a = s. Each D is face-sized, so the whole grid sees six
-    blended face terms (2D: four) instead of the 26 face, edge and vertex terms of the direct form.
+    The boundary map is called once, on the grid's face nodes; :func:`face_terms` and
+    :func:`add_face_terms` do the rest.
     """
+    return add_face_terms(face_terms(face_values(boundary, coords), coords), coords, out)
+
+
+def face_values(boundary, coords) -> list[np.ndarray]:
+    """``boundary`` ((N, d) -> (N, d)) at the face nodes of the tensor grid of ``coords``, in one
+    call: per face, in :func:`boundary_faces` order, an array (face nodes..., d)."""
     coords = [np.asarray(c, dtype=float) for c in coords]
     faces = boundary_faces(coords)
     images = boundary(np.concatenate([points for _, points in faces]))
+    values, start = [], 0
     shape = tuple(len(c) for c in coords)
-    corrections = face_corrections(images, coords)
-    whole = tuple(slice(0, n) for n in shape)
-    return blend_face_corrections(corrections, coords, whole, out=out)
+    for face, (index, points) in zip(cube.faces(len(coords)), faces):
+        face_shape = tuple(n for d, n in enumerate(shape) if d != face.axis)
+        values.append(images[start : start + len(points)].reshape(*face_shape, -1))
+        start += len(points)
+    return values
 
 
-def face_corrections(face_values: np.ndarray, coords) -> list:
-    """The face terms D_as of the axis-by-axis Boolean sum (see ``transfinite_on_grid``) from the
-    values of the map on the faces of the tensor grid of ``coords`` (first and last values 0 and 1).
+def face_terms(face_values, coords) -> list:
+    """The blended face terms of the TFI of data given at the face nodes of the tensor grid of
+    ``coords`` (first and last values 0 and 1 on every axis).
 
-    ``face_values``: (sum of face node counts, d), the faces in the order of ``boundary_faces``.
-    Returns [(axis, side, D)], D of the face's grid shape + (d,): O(n^2) memory in 3D. The TFI of
-    any function given on the faces (the boundary map; a network's boundary error) is then
-    ``blend_face_corrections`` on any block of the grid, block by block.
+    ``face_values``: per face, in :func:`boundary_faces` order (axis-major, side-minor), the data
+    at its nodes, shape (face nodes..., d) or (face nodes, d) in C order. Returns [(axis, side, D)],
+    D of shape (the grid's shape without ``axis``) + (d,): the Boolean sum
+    P1 + P2 (I - P1) + P3 (I - P1)(I - P2) taken one axis at a time. With U_a the interpolant of
+    the first a axes, U_a = U_(a-1) + (1 - t_a) D_a0 + t_a D_a1, where D_as = F - U_(a-1) on the
+    face t_a = s. Each D is face-sized (O(n^2) memory in 3D), so the whole grid sees six blended
+    face terms (2D: four) instead of the 26 face, edge and vertex terms of the direct form; the TFI
+    of any data on the faces (the boundary map, a network's boundary error) is then
+    :func:`add_face_terms` on any block of the grid.
     """
     coords = [np.asarray(c, dtype=float) for c in coords]
     dim = len(coords)
     if any(c[0] != 0.0 or c[-1] != 1.0 for c in coords):
         raise ValueError("transfinite_on_grid needs node coordinates from 0 to 1 on every axis")
     shape = tuple(len(c) for c in coords)
-    corrections = []  # (axis, side, D on the face grid: shape without the axis, + (dim,))
-    start = 0
-    for face in cube.faces(dim):
+    terms = []  # (axis, side, D on the face grid: shape without the axis, + (dim,))
+    for values, face in zip(face_values, cube.faces(dim)):
         axis, side = face.axis, face.side
         face_shape = tuple(n for d, n in enumerate(shape) if d != axis)
-        count = int(np.prod(face_shape))
-        values = np.array(face_values[start : start + count].reshape(*face_shape, -1), dtype=float)
-        start += count
+        values = np.asarray(values, dtype=float).reshape(*face_shape, -1).copy()
         end = 0 if side == 0 else -1
-        for earlier, earlier_side, D in [c for c in corrections if c[0] < axis]:  # minus U_(axis-1) on this face
+        for earlier, earlier_side, D in [t for t in terms if t[0] < axis]:  # minus U_(axis-1) on this face
             # D lacks its own (earlier) axis, so this axis is D's axis - 1; on the face, the earlier
             # axis keeps its number, this one being later.
             restricted = np.expand_dims(np.take(D, end, axis=axis - 1), earlier)
             weight = coords[earlier] if earlier_side else 1.0 - coords[earlier]
             values -= _along(weight, earlier, dim - 1) * restricted
-        corrections.append((axis, side, values))
-    return corrections
+        terms.append((axis, side, values))
+    return terms
 
 
-def blend_face_corrections(corrections, coords, block, out: np.ndarray | None = None) -> np.ndarray:
-    """sum over faces of (1 - t_a or t_a) D_as on the nodes ``block`` (one slice per axis, step 1)
-    of the tensor grid of ``coords``: the TFI there, added to ``out`` (block shape + (d,)) when
-    given, else returned. Each node sees the same arithmetic whatever the block, so a mesh made
-    block by block equals the whole-grid one bit for bit."""
+def add_face_terms(terms, coords, out: np.ndarray | None = None, block=None) -> np.ndarray:
+    """Add the TFI of :func:`face_terms` ``terms`` (made on the grid of ``coords``) to ``out``, or
+    return it: on the whole grid, or with ``block`` (one slice per axis, steps of 1) on that block
+    of its nodes only, ``out`` then of the block's shape (m1, .., d). A block-wise caller makes
+    the terms once (face-sized) and evaluates any block of the grid from them; each node sees the
+    same arithmetic whatever the block, so a mesh made block by block equals the whole-grid one
+    bit for bit."""
+    coords = [np.asarray(c, dtype=float) for c in coords]
     dim = len(coords)
-    shape = tuple(len(range(*s.indices(len(c)))) for s, c in zip(block, coords))
-    result = np.zeros(shape + (corrections[0][2].shape[-1],)) if out is None else out
-    for axis, side, D in corrections:
-        t = np.asarray(coords[axis], dtype=float)[block[axis]]
-        weight = t if side else 1.0 - t
-        face_block = tuple(s for d, s in enumerate(block) if d != axis)
-        result += _along(weight, axis, dim) * np.expand_dims(D[face_block], axis)
+    block = tuple(block) if block is not None else (slice(None),) * dim
+    shape = tuple(len(np.arange(len(c))[b]) for c, b in zip(coords, block))
+    result = np.zeros(shape + (terms[0][2].shape[-1],)) if out is None else out
+    for axis, side, D in terms:
+        weight = coords[axis][block[axis]]
+        weight = weight if side else 1.0 - weight
+        on_block = D[tuple(b for d, b in enumerate(block) if d != axis)]
+        result += _along(weight, axis, dim) * np.expand_dims(on_block, axis)
     return result
 
 

@@ -1,14 +1,18 @@
 """Train the model that meshgen ships for a geometry and record how it was made and how it meshes.
 
-    python scripts/bundle_model.py [--geometry semicylinder] [--preset exact] [--seed 0]
+    python scripts/bundle_model.py [--geometry semicylinder] [--preset exact] [--seed 0] [--measure-only]
+
+``--measure-only``: keep the bundled checkpoint and its training record, measure step 3 again
+(after a change to how meshes are made from a model, e.g. the boundary correction).
 
 1. ``meshgen train -g GEOMETRY --preset PRESET --seed SEED --out <temporary run folder>``;
 2. the checkpoint, less its optimiser and scheduler state (only a resumed run needs them, and the
    L-BFGS history is most of the file), saved with meshgen's own ``save_checkpoint`` to
    ``meshgen/_models/GEOMETRY/checkpoint.pt``;
 3. ``model.json`` beside it: the command, preset, versions, date, training seconds, and the quality
-   of the model's 30^d and 100^d meshes (inverted cells, mean min angle, boundary deviation before
-   snapping, cells inverted by snapping) next to TFI's and elliptic's at 30^d, all computed by
+   of the model's 30^d and 100^d meshes, raw (--no-correct) and corrected to N + TFI[g - N] (the
+   default; inverted cells, mean min angle, boundary deviation, cells inverted by the correction)
+   next to TFI's and elliptic's at 30^d, all computed by
    ``meshgen.quality`` on the node arrays that ``meshgen mesh`` would write.
 """
 
@@ -46,9 +50,9 @@ def figures(X, geometry) -> dict:
 
 
 def neural_figures(model, geometry, cells: int) -> dict:
-    """Figures of the network's own mesh (--no-snap) and of the snapped one (the default)."""
+    """Figures of the network's own mesh (--no-correct) and of the corrected one (the default)."""
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import mesh_from_model, snap_boundary
+    from meshgen.neural.inference import correct_boundary, mesh_from_model
     from meshgen.tfi import parametric_grid
 
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it learnt, as meshgen mesh does
@@ -56,15 +60,14 @@ def neural_figures(model, geometry, cells: int) -> dict:
     start = time.perf_counter()
     X = mesh_from_model(model.checkpoint["model"], coords, geometry)
     seconds = time.perf_counter() - start
-    unsnapped = figures(X, geometry)
-    snap = snap_boundary(X, geometry, coords)
-    snapped = figures(X, geometry)
+    raw = figures(X, geometry)
+    correction = correct_boundary(X, geometry, coords, count_inverted=True)
     return {
         "dims": [cells] * geometry.dim,
         "meshing_seconds": seconds,
-        "no_snap": unsnapped,
-        "snapped": snapped,
-        "inverted_by_snapping": snap["inverted_by_snapping"],
+        "no_correction": raw,
+        "corrected": figures(X, geometry),
+        "inverted_by_correction": correction["inverted_by_correction"],
     }
 
 
@@ -73,16 +76,17 @@ def main():
     parser.add_argument("--geometry", default="semicylinder")
     parser.add_argument("--preset", default="exact")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--measure-only", action="store_true", help="keep the bundled checkpoint; measure its quality again")
     args = parser.parse_args()
+    if args.measure_only:
+        return measure_only(args.geometry)
 
     import torch
 
     from meshgen import __version__
     from meshgen.geometry import load_geometry
-    from meshgen.methods import make_mesh
     from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
     from meshgen.neural.inference import MODELS_DIR, load_model
-    from meshgen.tfi import parametric_grid
 
     folder = MODELS_DIR / args.geometry
     folder.mkdir(parents=True, exist_ok=True)
@@ -98,11 +102,6 @@ def main():
     model = load_model(folder / "checkpoint.pt", source="bundled")
     geometry = load_geometry(args.geometry)
 
-    coords = parametric_grid([30] * geometry.dim)
-    classical = {}
-    for method in ("tfi", "elliptic"):
-        X, _ = make_mesh(method, geometry, coords)
-        classical[method] = figures(X, geometry)
     record = {
         "geometry": args.geometry,
         "params": dict(geometry.values),
@@ -122,14 +121,40 @@ def main():
         "sha256": model.sha256(),
         "bytes": (folder / "checkpoint.pt").stat().st_size,
         "made_by": "python scripts/bundle_model.py " + " ".join(sys.argv[1:]),
-        "quality": {
-            "definitions": "meshgen.quality (DESIGN section 7); boundary deviation: closest-point distance of boundary nodes from the geometry",
-            "neural_30": neural_figures(model, geometry, 30),
-            "neural_100": neural_figures(model, geometry, 100),
-            "tfi_30": classical["tfi"],
-            "elliptic_30": classical["elliptic"],
-        },
+        "quality": quality(model, geometry),
     }
+    write_record(folder, record)
+
+
+def quality(model, geometry) -> dict:
+    """Step 3: the model's meshes at 30^d and 100^d next to TFI's and elliptic's at 30^d."""
+    from meshgen.methods import make_mesh
+    from meshgen.tfi import parametric_grid
+
+    coords = parametric_grid([30] * geometry.dim)
+    classical = {method: figures(make_mesh(method, geometry, coords)[0], geometry) for method in ("tfi", "elliptic")}
+    return {
+        "definitions": "meshgen.quality (DESIGN section 7); boundary deviation: closest-point distance of boundary nodes from the geometry",
+        "neural_30": neural_figures(model, geometry, 30),
+        "neural_100": neural_figures(model, geometry, 100),
+        "tfi_30": classical["tfi"],
+        "elliptic_30": classical["elliptic"],
+    }
+
+
+def measure_only(name: str) -> None:
+    from meshgen.geometry import load_geometry
+    from meshgen.neural.inference import MODELS_DIR, load_model
+
+    folder = MODELS_DIR / name
+    record = json.loads((folder / "model.json").read_text())
+    model = load_model(folder / "checkpoint.pt", source="bundled")
+    record["quality"] = quality(model, load_geometry(name))
+    record["measured_by"] = "python scripts/bundle_model.py " + " ".join(sys.argv[1:])
+    write_record(folder, record)
+
+
+def write_record(folder: Path, record: dict) -> None:
     (folder / "model.json").write_text(json.dumps(record, indent=2) + "\n")
     print(json.dumps({k: record[k] for k in ("command", "training_seconds", "bytes", "sha256")}, indent=2))
     for name, values in record["quality"].items():

@@ -131,7 +131,7 @@ def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_th
     axes = [c.reshape([-1 if d == a else 1 for d in range(3)]) for a, c in enumerate(coords)]
     expected = M + transfinite(error_at, axes)  # the direct 26-term form, a second algorithm
     assert np.allclose(X, expected, rtol=0, atol=1e-6)  # float32 network: blocks and faces round alike to 1e-7
-    assert info["deviation_before"]["max"] == pytest.approx(np.linalg.norm(error.reshape(-1, 3), axis=1).max(), rel=1e-5)
+    assert info["error_before"]["max"] == pytest.approx(np.linalg.norm(error.reshape(-1, 3), axis=1).max(), rel=1e-5)
     on_faces = X.reshape(-1, 3)[on_boundary]
     assert np.array_equal(on_faces, semicylinder.boundary(grid[on_boundary]))
     assert np.abs(X - M).max() > 0.1  # the correction did move the nodes

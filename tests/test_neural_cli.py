@@ -48,7 +48,7 @@ def test_train_writes_a_run_folder_and_says_how_to_mesh(run_cli, tmp_path):
     assert checkpoint["config"]["adam"]["steps"] == 6 and checkpoint["config"]["dim"] == 2
     lines = result.stdout.strip().splitlines()
     assert "Network, 30 x 30 mesh:" in result.stdout and "TFI, 30 x 30 mesh:" in result.stdout
-    assert "boundary deviation from 'semidisk': max" in result.stdout and "snapped onto the geometry" in result.stdout
+    assert "boundary deviation from 'semidisk': max" in result.stdout and "Network corrected to N + TFI[g - N] (what meshgen mesh writes), 30 x 30 mesh:" in result.stdout
     assert lines[-2] == f"Checkpoint: {run.relative_to(tmp_path) / 'checkpoint.pt'}"
     assert lines[-1].startswith("Mesh with: meshgen mesh") and "checkpoint.pt" in lines[-1]
     assert "Adam: 6 steps" in result.stderr  # --quiet: log lines, no progress bar

@@ -103,20 +103,20 @@ def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
     expected = json.loads(json.dumps(quality_report(X, semidisk)))
     assert summary["network"]["metrics"] == expected["metrics"]
     assert summary["network"]["boundary_deviation"]["max"] == expected["boundary_deviation"]["max"] > 0
-    assert summary["inverted_after_snapping"] >= 0
+    # and of its corrected mesh (what meshgen mesh writes): on the boundary to round-off
+    assert summary["corrected"]["boundary_deviation"]["max"] < 1e-12
+    assert summary["corrected"]["cells"] == 900
 
 
-def test_snapping_moves_exactly_the_boundary_nodes_onto_the_geometry(semidisk):
-    from meshgen.neural.train import snapped as snap_boundary
+def test_correction_of_a_shifted_mesh_shifts_it_back(semidisk):
+    """An error field that is the same at every boundary node: its TFI is that constant, so the
+    correction moves every node, not only the boundary ones, back by the shift."""
+    from meshgen.neural.train import corrected
     from meshgen.tfi import parametric_grid, tfi
 
     coords = parametric_grid((6, 4))
     exact = tfi(semidisk, None, coords)
-    moved = exact + 0.01
-    snapped = snap_boundary(moved, semidisk, coords)
-    for index in ((0,), (-1,), (slice(None), 0), (slice(None), -1)):
-        np.testing.assert_allclose(snapped[index], exact[index], atol=1e-14)
-    np.testing.assert_array_equal(snapped[1:-1, 1:-1], moved[1:-1, 1:-1])
+    np.testing.assert_allclose(corrected(exact + 0.01, semidisk, coords), exact, rtol=0, atol=1e-14)
 
 
 def test_losses_at_fixed_points_are_reproducible(semidisk):

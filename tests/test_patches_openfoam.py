@@ -12,7 +12,7 @@ from meshgen import cube
 from meshgen.errors import MeshgenError
 from meshgen.formats import read_mesh, read_patches, write_mesh
 from meshgen.geometry import load_geometry
-from meshgen.patches import Patch, geometry_patches, parse_patch_options
+from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import cell_metrics, quality_report
 from meshgen.tfi import tfi
 from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow

@@ -31,7 +31,15 @@ METHOD_HELP = (
 )
 @click.option("--ascii", "ascii_files", is_flag=True, help="openfoam: write the polyMesh as ASCII [default: binary].")
 @click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
-@click.option("--snap/--no-snap", default=None, help="neural: move the boundary nodes onto the exact boundary (--chunked: correct the map, X = M + TFI[g - M]) [default: --snap].")
+@click.option(
+    "--correct/--no-correct",
+    "--snap/--no-snap",
+    "correct",
+    default=None,
+    help="neural: add TFI of the network's boundary error, X = N + TFI[g - N], so the boundary is exact and the "
+    "interior moves smoothly (also block by block with --chunked); --no-correct keeps the raw network [default: --correct; --snap/--no-snap: old names].",
+)
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="neural: where the network is evaluated; auto picks cuda when available [default: auto].")
 @click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].")
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100].")
 @click.option(
@@ -78,8 +86,8 @@ METHOD_HELP = (
     "--no-quality writes the mesh alone (meshgen evaluate can measure it later).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, snap, tol, max_iter, clusters,
-         boundary_layout, orthogonal, chunked, scheduler, quality, quiet):
+def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, correct, device, tol, max_iter,
+         clusters, boundary_layout, orthogonal, chunked, scheduler, quality, quiet):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model of the --geometry (default: semicylinder)
@@ -138,7 +146,7 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     elif address is not None:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     check_free_space(output, node_count * len(dims) * 8)
-    options = {"tol": tol, "max_iter": max_iter, "snap": snap, "boundary_layout": boundary_layout,
+    options = {"tol": tol, "max_iter": max_iter, "correct": correct, "device": device, "boundary_layout": boundary_layout,
                "orthogonal": orthogonal or None}
     model = None
     if method == "neural":
@@ -156,7 +164,7 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
         client = connect(address)  # an unreachable scheduler fails fast
         try:
             report, info, seconds = _mesh_in_blocks(
-                method, geometry, coords, model, snap, boundary_layout, output, dims, clusters, patches, client, quality, quiet
+                method, geometry, coords, model, correct, boundary_layout, output, dims, clusters, patches, client, quality, quiet
             )
         finally:
             if client is not None:
@@ -200,14 +208,8 @@ def _print_result(method, geometry, dims, info, seconds, output, output_format, 
             f"{info['iterations']} iterations, final update {info['final_update']:.2e}, "
             f"residual {info['final_residual']:.2e} ({'converged' if info['converged'] else 'not converged'})"
         )
-    if "snap" in info:
-        echo(_snap_line(info["snap"]))
-    if "boundary" in info and "deviation_before" in info["boundary"]:
-        before = info["boundary"]["deviation_before"]
-        echo(
-            f"boundary corrected onto the geometry (X = M + TFI[g - M]): deviation before max {before['max']:.3g} "
-            f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g})"
-        )
+    if "correction" in info:
+        echo(_correction_line(info["correction"]))
     if "chunked" in info:
         blocks = info["chunked"]
         line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"
@@ -221,7 +223,7 @@ def _print_result(method, geometry, dims, info, seconds, output, output_format, 
         echo(line)
 
 
-def _mesh_in_blocks(method, geometry, coords, model, snap, boundary_layout, output, dims, clusters, patches, client, quality, quiet):
+def _mesh_in_blocks(method, geometry, coords, model, correct, boundary_layout, output, dims, clusters, patches, client, quality, quiet):
     """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
     import sys
     import time
@@ -238,8 +240,8 @@ def _mesh_in_blocks(method, geometry, coords, model, snap, boundary_layout, outp
         X = tfi_array(with_layout(geometry, boundary_layout or "fixed"), coords)
     else:
         trained_on = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
-        X, boundary = neural_array(model.checkpoint["model"], trained_on, coords, correct_boundary=snap is not False)
-        info = {"model": model.metadata(), "boundary": boundary}
+        X, correction = neural_array(model.checkpoint["model"], trained_on, coords, correct_boundary=correct is not False)
+        info = {"model": model.metadata(), "correction": correction}
     info["chunked"] = {
         "blocks": int(X.npartitions),
         "block_shape": [int(c[0]) for c in X.chunks[:-1]],
@@ -329,15 +331,13 @@ def _patch_formats():
     return [fmt for fmt in FORMATS if fmt.patches]
 
 
-def _snap_line(snap: dict) -> str:
-    if not snap.get("snapped"):
-        return "boundary nodes: the network's own (--no-snap)"
-    before = snap["deviation_before"]
+def _correction_line(correction: dict) -> str:
+    """The network's boundary error, said the same way with and without the correction."""
+    error = correction["error_before"]
     line = (
-        f"snapped boundary nodes onto the geometry: deviation before snapping max {before['max']:.3g} "
-        f"({before['max_rel']:.3g} of L = {before['characteristic_length']:.4g}), mean {before['mean']:.3g}; "
-        f"{snap['inverted_by_snapping']} cells inverted by snapping"
+        f"network's boundary error (|g(xi) - N(xi)| at the boundary nodes' parametric points): max {error['max']:.3g} "
+        f"({error['max_rel']:.3g} of L = {error['characteristic_length']:.4g}), mean {error['mean']:.3g}; "
     )
-    if snap["inverted_before"] or snap["inverted_after"]:
-        line += f" (outer layer: {snap['inverted_before']} inverted before, {snap['inverted_after']} after)"
-    return line
+    if correction["corrected"]:
+        return line + "corrected: X = N + TFI[g - N] (--no-correct keeps the raw network)"
+    return line + "not corrected (--no-correct)"

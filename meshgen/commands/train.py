@@ -83,7 +83,9 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     for line in summary_lines(summary["network"]):
         echo(f"  {line}")
     if not run.config.model.exact_boundary:
-        echo(f"    with the boundary nodes snapped onto the geometry: {summary['inverted_after_snapping']} inverted cells")
+        echo(f"Network corrected to N + TFI[g - N] (what meshgen mesh writes), {size} mesh:")
+        for line in summary_lines(summary["corrected"]):
+            echo(f"  {line}")
     echo(f"TFI, {size} mesh:")
     for line in summary_lines(summary["tfi"]):
         echo(f"  {line}")

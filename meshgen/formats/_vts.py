@@ -43,7 +43,6 @@ from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._vtu import (
     BLOCK_BYTES,
-    HEADER_TYPE,
     VTK_TYPES,
     _cpu_count,
     compress_block,

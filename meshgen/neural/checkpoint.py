@@ -7,12 +7,16 @@ Layout (``FORMAT_VERSION`` 1)::
     model       plain description of the map (see meshgen.neural.model)
     geometry    {"name", "spec", "dim", "params"}: what to load to mesh it again
     config      the resolved training configuration (meshgen.neural.config)
-    stage, step, elapsed_seconds       where training stands ("pretrain" | "adam" | "lbfgs" | "done")
-    optimizer, scheduler, reweighting  state dicts of the current stage
+    stage, stage_step, step, elapsed_seconds, history, guard
+                where training stands (``meshgen.neural.train.TrainState``, written and read by
+                ``state_to_checkpoint`` / ``state_from_checkpoint``): the stage ("pretrain" |
+                "adam" | "lbfgs" | "done"), the steps done in it and in all, the training
+                seconds, history {"rows", "last": the last history row}, guard {"lr_reductions"}
+    optimizer, scheduler   state dicts of the current stage's (empty when none, e.g. bundled models)
+    reweighting            state dict of the weights a1, a2 (``log_a``)
     rng         {"torch": ByteTensor, "sampler": ByteTensor}
-    history     summary: {"rows", "last": {...}, "best_total"}
     test_loss   {"pde", "boundary", "total"} on the fixed held-out points
-    guard       {"lr_reductions"}
+    device      where it was trained ("cpu", "cuda")
 """
 
 from __future__ import annotations

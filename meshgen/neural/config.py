@@ -49,7 +49,7 @@ class PointsConfig:
 
 @dataclass
 class PretrainConfig:
-    steps: int = 50  # L-BFGS steps fitting the network to TFI before training (0: start from random weights)
+    steps: int = 20  # L-BFGS steps fitting the network to TFI before training (0: start from random weights)
     lr: float = 1.0
     points: int = 4000  # fixed interior points (and as many boundary points) of the fit
 
@@ -65,7 +65,7 @@ class AdamConfig:
 
 @dataclass
 class LbfgsConfig:
-    steps: int = 400  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
+    steps: int = 200  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
     max_iter: int = 20  # iterations per step
     history_size: int = 50
     lr: float = 1.0
@@ -90,7 +90,7 @@ class TestConfig:
 
 @dataclass
 class TrainConfig:
-    description: str = "the full 3DMeshNet method, sized for about 5 minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
+    description: str = "the full 3DMeshNet method, sized for a few minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
     dim: typing.Optional[int] = None  # 2 or 3 for presets made for one dimension; null: any
     seed: int = 0
     # the boundary the network learns: "smoothed" (meshgen.layout: the faces' own Winslow grids) or

@@ -636,10 +636,7 @@ def write_family_summary(checkpoint: dict, run_dir) -> dict:
     with TFI, measure them (``meshgen.quality``, boundary deviation included), write
     ``summary.json`` in ``run_dir`` and return it; ``worst`` indexes the member of the lowest mean
     minimum angle."""
-    import json
-
-    from meshgen.atomic import atomic_path
-    from meshgen.quality import quality_report
+    from meshgen.quality import quality_report, write_json
     from meshgen.tfi import parametric_grid, tfi
 
     family = family_from_checkpoint(checkpoint)
@@ -662,8 +659,7 @@ def write_family_summary(checkpoint: dict, run_dir) -> dict:
         "step": checkpoint["step"],
         "training_seconds": checkpoint["elapsed_seconds"],
     }
-    with atomic_path(Path(run_dir) / "summary.json") as temporary:
-        temporary.write_text(json.dumps(summary, indent=2) + "\n")
+    write_json(Path(run_dir) / "summary.json", summary)  # atomic; non-finite figures as null
     return summary
 
 

@@ -14,9 +14,12 @@ bound on a small CPU:
 The network's inputs are made per chunk from the 1D coordinates, so no (N, d) grid of parametric
 points exists at any time; the only full-size array is the node array itself.
 
-Snapping (``snap_boundary``): the boundary nodes of a structured grid sit at known parametric
-points, so the exact boundary is the geometry's boundary map there. Moving them changes only the
-cells of the outer layer; their validity is checked before and after.
+Boundary correction (``correct_boundary``): the boundary nodes of a structured grid sit at known
+parametric points, where the exact boundary is the geometry's boundary map g. The mesh becomes
+X = N + TFI[g - N]: the error g - N at the face nodes, interpolated into the volume by the same
+Gordon-Hall sum as TFI. Exact on the boundary, smooth inside; the face terms are made once, and
+any block of the grid can be corrected from them (``add_boundary_correction``, with the errors
+from the grid's faces alone: ``model_boundary_errors``).
 
 Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/checkpoint.pt``
 (skipping runs of another geometry or other parameters than the ones given); else the model
@@ -34,9 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import MeshgenError, ParameterError
-from meshgen.tfi import boundary_faces, transfinite_on_grid
+from meshgen.tfi import add_face_terms, boundary_faces, face_terms, transfinite_on_grid
 
 CHUNK_NODES = 8192
+GPU_CHUNK_NODES = 1 << 20  # 85-wide float32 activations: 350 MB per layer
 MODELS_DIR = Path(__file__).resolve().parents[1] / "_models"
 RUNS_DIR = "runs"
 
@@ -78,7 +82,7 @@ def _grid_inputs(axes, start: int, stop: int):
     ``axes`` (1D float32 tensors of u per axis): (stop - start, d) float32."""
     import torch
 
-    flat = torch.arange(start, stop)
+    flat = torch.arange(start, stop, device=axes[0].device)
     columns = []
     for axis in reversed(axes):  # the last axis varies fastest
         columns.append(axis[flat % len(axis)])
@@ -86,13 +90,28 @@ def _grid_inputs(axes, start: int, stop: int):
     return torch.stack(columns[::-1], dim=1)
 
 
-def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers=None) -> np.ndarray:
+def inference_device(device: str = "auto") -> str:
+    """``"cpu"`` or ``"cuda"``: ``auto`` picks cuda when torch sees a GPU; cuda without one raises."""
+    import torch
+
+    if device not in ("auto", "cpu", "cuda"):
+        raise MeshgenError(f"unknown device {device!r}: pick auto, cpu or cuda")
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if device == "cuda" and not torch.cuda.is_available():
+        raise MeshgenError("device cuda: no CUDA device is available to torch here; use cpu")
+    return device
+
+
+def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers=None,
+                     device: str = "cpu") -> np.ndarray:
     """The network N(xi) of ``model`` (normalised units) at the tensor grid of the 1D parametric
     coordinates ``coords`` (one array per axis, values in [0, 1]).
 
     Returns (or fills ``out`` with) an array of shape (n1 * n2 [* n3], d), float64, nodes in C order.
     ``workers``: threads taking the chunks in turn, each running a single-threaded torch
-    (default: torch's thread count).
+    (default: torch's thread count). ``device``: "cpu", "cuda" or "auto" (:func:`inference_device`);
+    on a GPU the grid goes through in chunks of ``GPU_CHUNK_NODES``.
     """
     import threading
     from concurrent.futures import ThreadPoolExecutor
@@ -108,6 +127,8 @@ def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: 
     count = int(np.prod([len(c) for c in coords]))
     if out is None:
         out = np.empty((count, dim))
+    if inference_device(device) == "cuda":
+        return _evaluate_on_gpu(layers, axes, count, out)
     widths = [bias.shape[0] for _, bias in layers]
     local = threading.local()
 
@@ -137,6 +158,26 @@ def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: 
     return out
 
 
+def _evaluate_on_gpu(layers, axes, count: int, out: np.ndarray) -> np.ndarray:
+    """:func:`evaluate_on_grid` on the GPU: large chunks (a GPU needs many rows per product to be
+    busy), each copied back into ``out`` as it is done."""
+    import torch
+
+    device = torch.device("cuda")
+    layers = [(weight.to(device), bias.to(device)) for weight, bias in layers]
+    axes = [axis.to(device) for axis in axes]
+    with torch.inference_mode():
+        for start in range(0, count, GPU_CHUNK_NODES):
+            stop = min(count, start + GPU_CHUNK_NODES)
+            hidden = _grid_inputs(axes, start, stop)
+            for index, (weight, bias) in enumerate(layers):
+                hidden = torch.addmm(bias, hidden, weight)
+                if index < len(layers) - 1:
+                    hidden = torch.tanh(hidden)
+            out[start:stop] = hidden.double().cpu().numpy()
+    return out
+
+
 def bubble_on_grid(coords) -> np.ndarray:
     """b(xi) = 4^d prod_i xi_i (1 - xi_i) on the tensor grid of ``coords``: (n1, n2 [, n3])."""
     dim = len(coords)
@@ -147,7 +188,7 @@ def bubble_on_grid(coords) -> np.ndarray:
     return result
 
 
-def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None) -> np.ndarray:
+def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu") -> np.ndarray:
     """The physical map of ``model`` (a ``checkpoint["model"]`` description) on the tensor grid of
     ``coords``: the node array X, shape (len(coords[0]), ..., d), float64.
 
@@ -157,7 +198,7 @@ def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES
     coords = [np.asarray(c, dtype=float) for c in coords]
     shape = tuple(len(c) for c in coords)
     dim = len(coords)
-    X = evaluate_on_grid(model, coords, chunk=chunk, workers=workers).reshape(*shape, dim)
+    X = evaluate_on_grid(model, coords, chunk=chunk, workers=workers, device=device).reshape(*shape, dim)
     scale = float(model["scale"])
     if not model["exact_boundary"]:
         X *= scale
@@ -176,7 +217,93 @@ def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES
 
 
 # ---------------------------------------------------------------------------------------------
-# snapping
+# boundary correction
+
+
+def boundary_errors(X: np.ndarray, geometry, coords) -> list[np.ndarray]:
+    """The boundary error field g - X at the face nodes of the tensor grid of ``coords`` (1D
+    parametric node coordinates per axis, from 0 to 1): per face, in ``meshgen.cube`` order, an
+    array (face nodes..., d), g the geometry's boundary map at the nodes' parametric points.
+
+    ``X`` (n1+1, .., d) need only hold the face nodes (a block-wise caller may fill just those)."""
+    faces = boundary_faces(coords)
+    images = geometry.boundary(np.concatenate([points for _, points in faces]))
+    errors, start = [], 0
+    for index, points in faces:
+        errors.append(images[start : start + len(points)].reshape(X[index].shape) - X[index])
+        start += len(points)
+    return errors
+
+
+def model_boundary_errors(model: dict, geometry, coords, device: str = "cpu") -> list[np.ndarray]:
+    """:func:`boundary_errors` of the map of ``model`` (a ``checkpoint["model"]`` description) on
+    the tensor grid of ``coords``, for a caller that never holds the whole node array: the map is
+    evaluated on each face of the grid alone (face-sized work), as :func:`mesh_from_model` would
+    evaluate those nodes in the whole grid."""
+    errors = []
+    for index, points in boundary_faces(coords):
+        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
+        face_coords = [np.asarray(c, dtype=float) for c in coords]
+        face_coords[axis] = face_coords[axis][[index[axis]]]
+        values = np.take(mesh_from_model(model, face_coords, geometry, device=device), 0, axis=axis)
+        errors.append(geometry.boundary(points).reshape(values.shape) - values)
+    return errors
+
+
+def error_figures(errors, geometry) -> dict:
+    """Max and mean of |g(xi) - X(xi)| over the boundary nodes of :func:`boundary_errors`: the
+    distance of each boundary node from the geometry's boundary map at the node's own parametric
+    point (an upper bound of its distance from the surface). JSON-ready."""
+    dim = len(errors) // 2
+    largest, total, count = 0.0, 0.0, 0
+    for number, error in enumerate(errors):
+        distance = np.linalg.norm(error, axis=-1)
+        largest = max(largest, float(distance.max()))
+        # For the mean, each node once: edges shared with the faces of an earlier axis are theirs.
+        axis = number // 2
+        fresh = tuple(slice(1, -1) if d < axis else slice(None) for d in range(dim) if d != axis)
+        total += float(distance[fresh].sum())
+        count += distance[fresh].size
+    length = float(geometry.characteristic_length)
+    return {
+        "max": largest,
+        "mean": total / count,
+        "max_rel": largest / length,
+        "characteristic_length": length,
+        "definition": ERROR_DEFINITION,
+    }
+
+
+ERROR_DEFINITION = "distance of each boundary node from the geometry's boundary map at the node's parametric point"
+
+
+def add_boundary_correction(out: np.ndarray, errors, coords, block=None) -> np.ndarray:
+    """Add TFI[g - N], the transfinite interpolation of the boundary error field ``errors`` (from
+    :func:`boundary_errors`, on the grid of ``coords``), to ``out`` in place: the whole node array
+    (n1+1, .., d), or with ``block`` (one slice per axis) the nodes ``X[block]`` of a block of the
+    grid, ``out`` then of that block's shape. Returns ``out``.
+
+    The correction equals the error on the boundary, so the corrected nodes lie on the geometry's
+    boundary map to round-off, and blends it smoothly to zero inside: a small boundary error moves
+    the outer layers by a small, smooth amount instead of folding the outer cells."""
+    return add_face_terms(face_terms(errors, coords), coords, out, block)
+
+
+def correct_boundary(X: np.ndarray, geometry, coords, count_inverted: bool = False) -> dict:
+    """Correct node array ``X`` (n1+1, .., d) of the tensor grid ``coords`` in place to
+    X + TFI[g - X] (:func:`add_boundary_correction`). Returns what it did, JSON-ready:
+    ``error_before`` (:func:`error_figures` of the uncorrected nodes); with ``count_inverted``
+    also ``inverted_before`` / ``inverted_after`` / ``inverted_by_correction``: inverted cells of
+    the whole mesh (two quality passes over it)."""
+    errors = boundary_errors(X, geometry, coords)
+    before = _inverted(X) if count_inverted else None
+    add_boundary_correction(X, errors, coords)
+    info = {"corrected": True, "error_before": error_figures(errors, geometry)}
+    if count_inverted:
+        after = _inverted(X)
+        info.update(inverted_before=int(np.count_nonzero(before)), inverted_after=int(np.count_nonzero(after)),
+                    inverted_by_correction=int(np.count_nonzero(after & ~before)))
+    return info
 
 
 def _inverted(X: np.ndarray) -> np.ndarray:
@@ -185,64 +312,6 @@ def _inverted(X: np.ndarray) -> np.ndarray:
     from meshgen.quality import cell_metrics
 
     return cell_metrics(X)["scaled_jacobian"].reshape(tuple(n - 1 for n in X.shape[:-1])) <= 0
-
-
-def _outer_layer_inverted(X: np.ndarray) -> np.ndarray:
-    """``_inverted`` for the cells that touch the boundary (others left False), the only cells
-    snapping changes. 3D: computed on the six slabs of one cell's thickness only; 2D: on the whole
-    mesh, whose orientation decides the sign (and which is small)."""
-    dim = X.shape[-1]
-    cells = tuple(n - 1 for n in X.shape[:-1])
-    whole = _inverted(X) if dim == 2 else None
-    flags = np.zeros(cells, dtype=bool)
-    for axis in range(dim):
-        for first in {0, cells[axis] - 1}:
-            nodes = tuple(slice(first, first + 2) if d == axis else slice(None) for d in range(dim))
-            layer = tuple(slice(first, first + 1) if d == axis else slice(None) for d in range(dim))
-            flags[layer] |= whole[layer] if whole is not None else _inverted(X[nodes])
-    return flags
-
-
-def snap_boundary(X: np.ndarray, geometry, coords) -> dict:
-    """Move the boundary nodes of ``X`` (n1+1, ..., d), in place, onto the geometry's boundary map
-    at their parametric points ``coords`` (1D arrays per axis). Returns what it did, JSON-ready:
-
-    ``deviation_before``: distance of the boundary nodes from those points before the move (max,
-    mean, max relative to the characteristic length): the boundary deviation of the unsnapped mesh
-    measured at each node's own parametric point, an upper bound of its distance from the surface;
-    ``inverted_before`` / ``inverted_after``: inverted cells of the outer layer (the only cells
-    that change); ``inverted_by_snapping``: cells valid before and inverted after.
-    """
-    faces = boundary_faces(coords)
-    images = geometry.boundary(np.concatenate([points for _, points in faces]))
-    before = _outer_layer_inverted(X)
-    largest, total, count = 0.0, 0.0, 0
-    start = 0
-    for index, points in faces:
-        target = images[start : start + len(points)].reshape(X[index].shape)
-        start += len(points)
-        distance = np.linalg.norm(X[index] - target, axis=-1)
-        largest = max(largest, float(distance.max()))
-        # For the mean, each node once: edges shared with the faces of an earlier axis are theirs.
-        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
-        fresh = tuple(slice(1, -1) if d < axis else slice(None) for d in range(X.ndim - 1) if d != axis)
-        total += float(distance[fresh].sum())
-        count += distance[fresh].size
-        X[index] = target
-    after = _outer_layer_inverted(X)
-    length = float(geometry.characteristic_length)
-    return {
-        "deviation_before": {
-            "max": largest,
-            "mean": total / count,
-            "max_rel": largest / length,
-            "characteristic_length": length,
-            "definition": "distance of each boundary node from the geometry's boundary map at the node's parametric point",
-        },
-        "inverted_before": int(np.count_nonzero(before)),
-        "inverted_after": int(np.count_nonzero(after)),
-        "inverted_by_snapping": int(np.count_nonzero(after & ~before)),
-    }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -455,11 +524,13 @@ def _default_params(name: str) -> dict:
 # the method
 
 
-def build_neural(geometry, coords, model=None, snap=True):
+def build_neural(geometry, coords, model=None, correct=True, device="auto"):
     """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
     a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
-    ``coords``, boundary nodes snapped onto the geometry unless ``snap`` is False.
-    Returns (X, info) with info {"model", "snap", "warnings"}."""
+    ``coords``, evaluated on ``device`` ("cpu", "cuda" or "auto"), then corrected to
+    X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False. Returns (X, info) with info {"model", "correction",
+    "warnings"}; ``info["correction"]["error_before"]`` is the network's boundary error, reported
+    the same way whether or not the mesh is corrected."""
     if model is None:
         model = find_model(geometry_name=geometry.name, params=dict(geometry.values))
     elif not isinstance(model, TrainedModel):
@@ -469,17 +540,11 @@ def build_neural(geometry, coords, model=None, snap=True):
     from meshgen.layout import trained_layout, with_layout
 
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
-    X = mesh_from_model(model.checkpoint["model"], coords, geometry)
+    X = mesh_from_model(model.checkpoint["model"], coords, geometry, device=device)
     info = {"model": model.metadata(), "warnings": []}
-    if snap:
-        snapped = snap_boundary(X, geometry, coords)
-        info["snap"] = {"snapped": True, **snapped}
-        if snapped["inverted_by_snapping"]:
-            info["warnings"].append(
-                f"snapping the boundary nodes onto the geometry inverted {snapped['inverted_by_snapping']} cells "
-                f"(the network's boundary was up to {snapped['deviation_before']['max']:.3g} off); "
-                "--no-snap keeps the network's nodes"
-            )
+    if correct:
+        info["correction"] = correct_boundary(X, geometry, coords)
     else:
-        info["snap"] = {"snapped": False}
+        info["correction"] = {"corrected": False,
+                              "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
     return X, info

@@ -24,8 +24,9 @@ import copy
 import csv
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
@@ -46,7 +47,6 @@ from meshgen.neural.pcgrad import assign, flatten, project_conflicting
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.winslow import winslow_residual
 
-STAGES = ("pretrain", "adam", "lbfgs")
 HISTORY_COLUMNS = ("stage", "step", "L1", "L2", "total", "a1", "a2", "conflict", "lr", "seconds")
 TEST_SEED = 271828  # the held-out points are the same for every run, whatever its seed
 TEST_STENCIL_H = 1e-3  # test-set residual: per-point stencils in float64, truncation error ~ h^2
@@ -215,7 +215,51 @@ def test_loss(network: MLP, problem: Problem, test_set: dict) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
-# one step of each stage; each returns the history row's numbers
+# both cores: the two terms of a step side by side
+
+
+class TermRunner:
+    """Runs the PDE and the boundary term of a step (two disjoint forward and backward passes) side
+    by side on a CPU with ``parallel`` set, one in a worker thread, each with a single-threaded
+    torch: the networks are too small for torch to split one product well over two cores (measured:
+    2 threads per product gave no gain), but two independent passes keep both cores busy. Else (one
+    core, or a GPU, which queues both anyway) one after the other. The same arithmetic either way,
+    so a run repeats bit for bit with the same seed and threads."""
+
+    def __init__(self, parallel: bool):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.pool = ThreadPoolExecutor(max_workers=1) if parallel else None
+
+    def __call__(self, first, second):
+        """(first(), second()): ``first`` in the worker thread when parallel."""
+        if self.pool is None:
+            return first(), second()
+        pending = self.pool.submit(first)
+        result = second()
+        return pending.result(), result
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
+@dataclass
+class Training:
+    """What the stages' steps work on: the network, the reweighting weights, the problem, the
+    configuration, the sampler's generator and the term runner."""
+
+    network: MLP
+    weights: UncertaintyWeights
+    problem: Problem
+    config: TrainConfig
+    generator: torch.Generator
+    terms: TermRunner
+
+
+# ---------------------------------------------------------------------------------------------
+# one step of each stage; each returns the history row's numbers, those computed on the device as
+# 0-d tensors there (the loop reads them once per step, in one transfer)
 
 
 def pretrain_step(network, problem, optimizer, pool) -> dict:
@@ -229,60 +273,76 @@ def pretrain_step(network, problem, optimizer, pool) -> dict:
         return loss
 
     optimizer.step(closure)
-    return {"total": closure().item()}
+    with torch.no_grad():
+        return {"total": (network(pool["points"]) - pool["targets"]).square().sum(-1).mean()}
 
 
-def adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool=None) -> dict:
-    """One step of the method: losses, g1 and g2, (PCGrad), the a-gradients of L, Adam, decay."""
+def term_gradients(training: Training, pde_sample, boundary_sample_, factors):
+    """L1 and L2 on one sample each, and g1, g2: the gradients of the weighted terms on the
+    network's weights (flat), computed side by side (``Training.terms``)."""
+    network, problem, config = training.network, training.problem, training.config
     parameters = list(network.parameters())
-    pde = pde_term(network, problem, config, sample_pde_points(config, problem.dim, generator))
-    boundary = boundary_term(network, problem, config, boundary_sample(config, problem, generator, pool))
-    factor_pde, factor_boundary = weights.factors()
-    if not (torch.isfinite(pde) and torch.isfinite(boundary)):
-        return {"L1": pde.item(), "L2": boundary.item(), "total": math.nan}
-    # The two terms come from disjoint forward passes: two backward passes cost one joint pass.
-    # materialize_grads: with autograd derivatives the output bias does not enter L1 at all.
-    g1 = flatten(torch.autograd.grad(factor_pde * pde, parameters, allow_unused=True, materialize_grads=True))
-    if problem.exact:
-        g2 = torch.zeros_like(g1)
-    else:
-        g2 = flatten(torch.autograd.grad(factor_boundary * boundary, parameters))
+
+    def pde_part():
+        pde = pde_term(network, problem, config, pde_sample)
+        # materialize_grads: with autograd derivatives the output bias does not enter L1 at all.
+        return pde, flatten(torch.autograd.grad(factors[0] * pde, parameters, allow_unused=True, materialize_grads=True))
+
+    def boundary_part():
+        if problem.exact:
+            zero = torch.zeros((), device=problem.device)
+            return zero, torch.zeros(sum(p.numel() for p in parameters), device=problem.device)
+        boundary = boundary_term(network, problem, config, boundary_sample_)
+        return boundary, flatten(torch.autograd.grad(factors[1] * boundary, parameters))
+
+    (pde, g1), (boundary, g2) = training.terms(pde_part, boundary_part)
+    return pde, boundary, g1, g2
+
+
+def adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool=None, terms=None) -> dict:
+    """One step of the method: losses, g1 and g2, (PCGrad), the a-gradients of L, Adam, decay.
+    Non-finite losses return the row without a step (the loop's divergence guard takes over)."""
+    training = Training(network, weights, problem, config, generator, terms or TermRunner(False))
+    parameters = list(network.parameters())
+    pde_sample = sample_pde_points(config, problem.dim, generator)
+    boundary_points = boundary_sample(config, problem, generator, pool)
+    factors = weights.factors().detach()
+    pde, boundary, g1, g2 = term_gradients(training, pde_sample, boundary_points, factors)
+    lr = optimizer.param_groups[0]["lr"]  # the rate of this step, before the decay
+    finite = torch.isfinite(pde) & torch.isfinite(boundary)
     if config.method.pcgrad:
         update, conflict = project_conflicting(g1, g2)
     else:
         update, conflict = g1 + g2, (g1 @ g2) < 0
-    assign(parameters, update)
+    # A non-finite loss gives a zero update, and the loop restores the last good state.
+    assign(parameters, torch.where(finite, update, torch.zeros_like(update)))
     total = weights.objective(pde.detach(), boundary.detach())
     if weights.learned:  # the a take their gradient from L itself, outside the projection
         (weights.log_a.grad,) = torch.autograd.grad(total, weights.log_a)
-    lr = optimizer.param_groups[0]["lr"]
     optimizer.step()
     scheduler.step()
-    a1, a2 = weights.a().tolist()
-    return {"L1": pde.item(), "L2": boundary.item(), "total": total.item(), "a1": a1, "a2": a2,
-            "conflict": int(conflict), "lr": lr}
+    a = weights.a().detach()
+    return {"L1": pde.detach(), "L2": boundary.detach(), "total": torch.where(finite, total.detach(), torch.nan),
+            "a1": a[0], "a2": a[1], "conflict": conflict.int(), "lr": lr}
 
 
-def lbfgs_step(network, weights, problem, config, optimizer, fixed) -> dict:
+def lbfgs_step(network, weights, problem, config, optimizer, fixed, terms=None) -> dict:
     """One L-BFGS step (``lbfgs.max_iter`` iterations) on the fixed points, a1 and a2 frozen."""
-    factor_pde, factor_boundary = weights.factors()
+    training = Training(network, weights, problem, config, None, terms or TermRunner(False))
+    parameters = list(network.parameters())
+    factors = weights.factors().detach()
     last = {}
 
     def closure():
-        optimizer.zero_grad(set_to_none=True)
-        pde = pde_term(network, problem, config, fixed["pde"])
-        boundary = boundary_term(network, problem, config, fixed["boundary"])
-        loss = factor_pde * pde + factor_boundary * boundary
-        if torch.isfinite(loss):
-            loss.backward()
-        last.update(L1=pde.item(), L2=boundary.item())
-        return loss
+        pde, boundary, g1, g2 = term_gradients(training, fixed["pde"], fixed["boundary"], factors)
+        assign(parameters, g1 + g2)
+        last.update(L1=pde.detach(), L2=boundary.detach())
+        return (factors[0] * pde + factors[1] * boundary).detach()
 
     optimizer.step(closure)
-    losses = torch.tensor([last["L1"], last["L2"]], device=weights.log_a.device)
-    total = weights.objective(losses[0], losses[1]).item()
-    a1, a2 = weights.a().tolist()
-    return {**last, "total": total, "a1": a1, "a2": a2, "lr": optimizer.param_groups[0]["lr"]}
+    total = weights.objective(last["L1"], last["L2"]).detach()
+    a = weights.a().detach()
+    return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": optimizer.param_groups[0]["lr"]}
 
 
 def evaluate_losses(network, problem, config, points) -> dict:
@@ -342,6 +402,83 @@ def lbfgs_points(problem: Problem, config: TrainConfig) -> dict:
 
 
 # ---------------------------------------------------------------------------------------------
+# the stages: a table, so the loop never branches on a stage's name
+
+
+def balance_start(training: Training, say) -> None:
+    """``method.balance_start``: a1, a2 from the stationary point of L for the first losses."""
+    weights, config = training.weights, training.config
+    if not (weights.learned and config.method.balance_start):
+        return
+    losses = evaluate_losses(training.network, training.problem, config, lbfgs_points(training.problem, config))
+    weights.balance(losses["L1"], losses["L2"])
+    say(f"reweighting started at the balance of L1 {losses['L1']:.3g}, L2 {losses['L2']:.3g}: "
+        f"a1 {weights.a()[0]:.3g}, a2 {weights.a()[1]:.3g}")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of training: how to make its optimiser, the fixed points it uses, one step, and
+    what to do before its first step."""
+
+    name: str
+    optimizer: Callable  # (Training) -> (optimizer, scheduler or None)
+    points: Callable  # (Training) -> the stage's fixed points (or None)
+    step: Callable  # (Training, optimizer, scheduler, points) -> the history row's numbers
+    start: Callable = lambda training, say: None  # (Training, say) before the stage's first step
+
+
+STAGE_TABLE = (
+    Stage("pretrain",
+          optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config),
+          points=lambda t: pretrain_pool(t.problem, t.config),
+          step=lambda t, optimizer, scheduler, points: pretrain_step(t.network, t.problem, optimizer, points)),
+    Stage("adam",
+          optimizer=lambda t: make_optimizer("adam", t.network, t.weights, t.config),
+          points=lambda t: boundary_pool(t.problem, t.config),
+          step=lambda t, optimizer, scheduler, pool: adam_step(t.network, t.weights, t.problem, t.config, optimizer,
+                                                               scheduler, t.generator, pool, t.terms),
+          start=balance_start),
+    Stage("lbfgs",
+          optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
+          points=lambda t: lbfgs_points(t.problem, t.config),
+          step=lambda t, optimizer, scheduler, fixed: lbfgs_step(t.network, t.weights, t.problem, t.config, optimizer,
+                                                                 fixed, t.terms)),
+)
+STAGES = tuple(stage.name for stage in STAGE_TABLE)
+
+
+# ---------------------------------------------------------------------------------------------
+# the state a checkpoint keeps
+
+
+@dataclass
+class TrainState:
+    """Where training stands: the part of a checkpoint that is not the network, the weights, the
+    optimiser or the random state (see ``checkpoint.py`` for the whole layout)."""
+
+    stage: str = STAGES[0]  # or "done"
+    stage_step: int = 0  # steps done in this stage
+    step: int = 0  # steps done in all stages (= history rows)
+    elapsed: float = 0.0  # training seconds before this process
+    lr_reductions: int = 0  # by the divergence guard, over the whole run
+    last_row: dict = field(default_factory=dict)  # the last history row
+
+
+def state_from_checkpoint(checkpoint: dict) -> TrainState:
+    return TrainState(checkpoint["stage"], checkpoint["stage_step"], checkpoint["step"],
+                      checkpoint["elapsed_seconds"], checkpoint["guard"]["lr_reductions"],
+                      dict(checkpoint["history"]["last"]))
+
+
+def state_to_checkpoint(state: TrainState, seconds: float) -> dict:
+    """The checkpoint entries of ``state``; ``seconds``: training seconds of this process so far."""
+    return {"stage": state.stage, "stage_step": state.stage_step, "step": state.step,
+            "elapsed_seconds": state.elapsed + seconds, "history": {"rows": state.step, "last": dict(state.last_row)},
+            "guard": {"lr_reductions": state.lr_reductions}}
+
+
+# ---------------------------------------------------------------------------------------------
 # history file
 
 
@@ -362,6 +499,65 @@ def open_history(path: Path, keep_until_step: int | None):
 
 def _format_row(row: dict) -> dict:
     return {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
+
+
+def read_row(numbers: dict, network) -> tuple[dict, bool]:
+    """A step's numbers (0-d tensors on the device, or Python numbers) as Python numbers, and
+    whether the step is good (finite loss, finite weights): one transfer from the device per step,
+    the only wait for it in the loop outside L-BFGS (whose line search reads its losses itself)."""
+    keys = [k for k, v in numbers.items() if isinstance(v, torch.Tensor)]
+    finite_weights = torch.isfinite(torch.stack([p.detach().sum() for p in network.parameters()]).sum())
+    values = torch.stack([numbers[k].detach().double().reshape(()) for k in keys] + [finite_weights.double()]).tolist()
+    row = {**numbers, **{k: (int(v) if k == "conflict" else v) for k, v in zip(keys, values)}}
+    return row, bool(values[-1]) and math.isfinite(row["total"])
+
+
+# ---------------------------------------------------------------------------------------------
+# the divergence guard
+
+
+class DivergenceGuard:
+    """Keeps the last good state of a stage; after a non-finite step, restores it with a lower
+    learning rate (``guard.lr_factor``), at most ``guard.max_retries`` times in a row."""
+
+    def __init__(self, training: Training, optimizer, scheduler, state: TrainState):
+        self.training, self.optimizer, self.scheduler, self.state = training, optimizer, scheduler, state
+        self.failures = 0
+        self.good = self._snapshot()
+
+    def _snapshot(self) -> dict:
+        """Deep copies of everything a step changes (cheap next to a step: a few small tensors)."""
+        return copy.deepcopy({
+            "network": self.training.network.state_dict(),
+            "weights": self.training.weights.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict() if self.scheduler is not None else None,
+        })
+
+    def accept(self) -> None:
+        """The step was good: it becomes the state to come back to."""
+        self.failures = 0
+        self.good = self._snapshot()
+
+    def reject(self, stage: str, say) -> bool:
+        """The step was not finite: restore the last good state with a lower learning rate. Returns
+        False when the retries are spent (the good state restored, the learning rate not lowered)."""
+        config = self.training.config.guard
+        self.failures += 1
+        lowered = [group["lr"] * config.lr_factor for group in self.optimizer.param_groups]
+        self.training.network.load_state_dict(self.good["network"])
+        self.training.weights.load_state_dict(self.good["weights"])
+        self.optimizer.load_state_dict(copy.deepcopy(self.good["optimizer"]))
+        if self.scheduler is not None:
+            self.scheduler.load_state_dict(self.good["scheduler"])
+        if self.failures > config.max_retries:
+            return False
+        for group, lr in zip(self.optimizer.param_groups, lowered):
+            group["lr"] = lr
+        self.state.lr_reductions += 1
+        say(f"non-finite loss at step {self.state.step} ({stage}): restored the last good state, "
+            f"learning rate lowered to {self.optimizer.param_groups[0]['lr']:.3g}")
+        return True
 
 
 # ---------------------------------------------------------------------------------------------
@@ -388,23 +584,85 @@ def train(
     ``stop``: a callable polled before each step; when it returns True the state is saved and the
     run returns with ``interrupted=True``. ``geometry_spec``: how to load the geometry again (its
     name or plugin path; default its name). ``summary``: mesh 30^d cells at the end and write the
-    quality summary.
+    quality summary. On a CPU with two or more torch threads, the two terms of a step run side by
+    side (:class:`TermRunner`), torch single-threaded meanwhile.
     """
-    from meshgen import __version__
     from meshgen.layout import with_layout
 
     geometry = with_layout(geometry, config.boundary_layout)  # the boundary the network learns
-    run_dir = Path(run_dir)
-    device = torch.device(device)
-    stop = stop or (lambda: False)
+    run_dir, stop = Path(run_dir), stop or (lambda: False)
     say = reporter.message if reporter is not None else (lambda text: None)
+    training, state = start_training(config, geometry, torch.device(device), resume)
+    saver = CheckpointWriter(training, geometry, geometry_spec, run_dir / "checkpoint.pt", state)
+    (run_dir / "config.yaml").write_text(CONFIG_HEADER + to_yaml(config))
+    history_file, history = open_history(run_dir / "history.csv", state.step if resume is not None else None)
+    threads = torch.get_num_threads()
+    if training.terms.pool is not None:
+        torch.set_num_threads(1)
+    interrupted = False
+    try:
+        for stage in STAGE_TABLE[STAGES.index(state.stage):] if state.stage != "done" else ():
+            total = getattr(config, stage.name).steps
+            state.stage = stage.name
+            if state.stage_step >= total:
+                state.stage_step = 0
+                continue
+            optimizer, scheduler = stage.optimizer(training)
+            saver.optimizer, saver.scheduler = optimizer, scheduler
+            if resume is not None and resume["stage"] == stage.name:
+                optimizer.load_state_dict(resume["optimizer"])
+                if scheduler is not None:
+                    scheduler.load_state_dict(resume["scheduler"])
+            points = stage.points(training)
+            if state.stage_step == 0:
+                stage.start(training, say)
+            if reporter is not None:
+                reporter.stage(stage.name, state.stage_step, total)
+            guard = DivergenceGuard(training, optimizer, scheduler, state)
+            while state.stage_step < total and not (interrupted := stop()):
+                row, good = read_row(stage.step(training, optimizer, scheduler, points), training.network)
+                if not good:
+                    if not guard.reject(stage.name, say):
+                        saver.save(history_file)
+                        raise TrainingDiverged(
+                            f"training diverged: the loss stayed non-finite at step {state.step} after "
+                            f"{config.guard.max_retries} learning-rate reductions; the last good state is "
+                            f"saved in {saver.path}")
+                    continue
+                guard.accept()
+                row = {"stage": stage.name, "step": state.step, **row, "seconds": saver.seconds()}
+                row.setdefault("lr", optimizer.param_groups[0]["lr"])
+                row.setdefault("a1", training.weights.a()[0].item())  # the TFI fit leaves them as they are
+                row.setdefault("a2", training.weights.a()[1].item())
+                history.writerow(_format_row(row))
+                state.last_row, state.stage_step, state.step = row, state.stage_step + 1, state.step + 1
+                if reporter is not None:
+                    reporter.update(row, state.stage_step, total)
+                if state.step % config.checkpoint.every == 0:
+                    saver.save(history_file)
+            if interrupted:
+                break
+            state.stage_step = 0
+        if not interrupted:
+            state.stage = "done"
+        checkpoint = saver.save(history_file)
+    finally:
+        history_file.close()
+        training.terms.close()
+        torch.set_num_threads(threads)
+    quality = write_summary(checkpoint, geometry, run_dir) if summary and not interrupted else None
+    return TrainResult(saver.path, state.stage, state.step, interrupted, checkpoint["elapsed_seconds"],
+                       checkpoint["test_loss"], checkpoint, quality)
+
+
+def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None):
+    """The Training (network initialised from the seed, or from ``resume``) and its TrainState."""
     dim = geometry.dim
     center, scale = normalisation(geometry)
     if resume is not None:  # the checkpoint's normalisation, bit for bit
         center, scale = np.asarray(resume["model"]["center"]), float(resume["model"]["scale"])
     problem = Problem(dim, normalised_boundary(geometry, center, scale), center, scale,
                       config.model.exact_boundary, device)
-
     torch.manual_seed(config.seed)
     network = MLP(dim, config.model.widths)
     if problem.exact:  # N = 0: training starts from TFI itself
@@ -414,172 +672,77 @@ def train(
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
     weights.to(device)
     generator = torch.Generator().manual_seed(config.seed)
-    stage, stage_step, step, elapsed = STAGES[0], 0, 0, 0.0
-    lr_reductions = 0
+    state = TrainState()
     if resume is not None:
         network.load_state_dict(resume["model"]["state_dict"])
         weights.load_state_dict(resume["reweighting"])
         generator.set_state(resume["rng"]["sampler"])
-        stage, stage_step, step = resume["stage"], resume["stage_step"], resume["step"]
-        elapsed, lr_reductions = resume["elapsed_seconds"], resume["guard"]["lr_reductions"]
-    test_set = make_test_set(problem, config)
-    checkpoint_path = run_dir / "checkpoint.pt"
-    (run_dir / "config.yaml").write_text(CONFIG_HEADER + to_yaml(config))
-    history_file, history = open_history(run_dir / "history.csv", step if resume is not None else None)
-    last_row: dict = dict(resume["history"]["last"]) if resume is not None else {}
-    optimizer = scheduler = None
-    started = time.perf_counter()
+        state = state_from_checkpoint(resume)
+    parallel = device.type == "cpu" and torch.get_num_threads() >= 2
+    return Training(network, weights, problem, config, generator, TermRunner(parallel)), state
 
-    def save(stage_name):
+
+class CheckpointWriter:
+    """Saves the whole checkpoint of a run (layout: ``checkpoint.py``): the network's description,
+    the geometry, the configuration, the TrainState, the current stage's optimiser, the random
+    state and the test-set loss. Keeps the clock of this process's training seconds."""
+
+    def __init__(self, training: Training, geometry, geometry_spec, path: Path, state: TrainState):
+        self.training, self.geometry, self.spec, self.path, self.state = training, geometry, geometry_spec, path, state
+        self.optimizer = self.scheduler = None
+        self.test_set = make_test_set(training.problem, training.config)
+        self.started = time.perf_counter()
+
+    def seconds(self) -> float:
+        """Training seconds so far, earlier processes of a resumed run included."""
+        return self.state.elapsed + time.perf_counter() - self.started
+
+    def save(self, history_file) -> dict:
+        from meshgen import __version__
+
         history_file.flush()
-        state = {
+        t, geometry = self.training, self.geometry
+        problem = t.problem
+        checkpoint = {
             "format": checkpoints.FORMAT,
             "format_version": checkpoints.FORMAT_VERSION,
             "meshgen_version": __version__,
-            "model": describe(network, config.model.widths, problem.exact, center, scale),
-            "geometry": {"name": geometry.name, "spec": geometry_spec or geometry.name, "dim": dim,
+            "model": describe(t.network, t.config.model.widths, problem.exact, problem.center, problem.scale),
+            "geometry": {"name": geometry.name, "spec": self.spec or geometry.name, "dim": geometry.dim,
                          "params": dict(geometry.values)},
-            "config": to_dict(config),
-            "stage": stage_name,
-            "stage_step": stage_step,
-            "step": step,
-            "elapsed_seconds": elapsed + (time.perf_counter() - started),
-            "optimizer": optimizer.state_dict() if optimizer is not None else {},
-            "scheduler": scheduler.state_dict() if scheduler is not None else {},
-            "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
-            "rng": {"sampler": generator.get_state(), "torch": torch.get_rng_state()},
-            "history": {"rows": step, "last": dict(last_row)},
-            "test_loss": test_loss(network, problem, test_set),
-            "guard": {"lr_reductions": lr_reductions},
-            "device": str(device),
+            "config": to_dict(t.config),
+            **state_to_checkpoint(self.state, time.perf_counter() - self.started),
+            "optimizer": self.optimizer.state_dict() if self.optimizer is not None else {},
+            "scheduler": self.scheduler.state_dict() if self.scheduler is not None else {},
+            "reweighting": {k: v.detach().cpu() for k, v in t.weights.state_dict().items()},
+            "rng": {"sampler": t.generator.get_state(), "torch": torch.get_rng_state()},
+            "test_loss": test_loss(t.network, problem, self.test_set),
+            "device": str(problem.device),
         }
-        checkpoints.save_checkpoint(checkpoint_path, state)
-        return state
-
-    interrupted = False
-    try:
-        for stage in STAGES[STAGES.index(stage) :] if stage != "done" else ():
-            total = getattr(config, stage).steps
-            if stage_step >= total:
-                stage_step = 0
-                continue
-            optimizer, scheduler = make_optimizer(stage, network, weights, config)
-            if resume is not None and resume["stage"] == stage:
-                optimizer.load_state_dict(resume["optimizer"])
-                if scheduler is not None:
-                    scheduler.load_state_dict(resume["scheduler"])
-            fit_points = pretrain_pool(problem, config) if stage == "pretrain" else None
-            pool = boundary_pool(problem, config) if stage == "adam" else None
-            fixed = lbfgs_points(problem, config) if stage == "lbfgs" else None
-            if stage == "adam" and stage_step == 0 and weights.learned and config.method.balance_start:
-                losses = evaluate_losses(network, problem, config, lbfgs_points(problem, config))
-                weights.balance(losses["L1"], losses["L2"])
-                say(f"reweighting started at the balance of L1 {losses['L1']:.3g}, L2 {losses['L2']:.3g}: "
-                    f"a1 {weights.a()[0]:.3g}, a2 {weights.a()[1]:.3g}")
-            if reporter is not None:
-                reporter.stage(stage, stage_step, total)
-            good = _snapshot(network, weights, optimizer, scheduler)
-            failures = 0
-            while stage_step < total:
-                if stop():
-                    interrupted = True
-                    break
-                if stage == "pretrain":
-                    row = pretrain_step(network, problem, optimizer, fit_points)
-                elif stage == "adam":
-                    row = adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool)
-                else:
-                    row = lbfgs_step(network, weights, problem, config, optimizer, fixed)
-                if not (math.isfinite(row["total"]) and _finite(network)):
-                    # Divergence guard: back to the last good state, a smaller learning rate.
-                    failures += 1
-                    lowered = [group["lr"] * config.guard.lr_factor for group in optimizer.param_groups]
-                    _restore(good, network, weights, optimizer, scheduler)
-                    if failures > config.guard.max_retries:
-                        save(stage)
-                        raise TrainingDiverged(
-                            f"training diverged: the loss stayed non-finite at step {step} after "
-                            f"{config.guard.max_retries} learning-rate reductions; the last good state is "
-                            f"saved in {checkpoint_path}"
-                        )
-                    for group, lr in zip(optimizer.param_groups, lowered):
-                        group["lr"] = lr
-                    lr_reductions += 1
-                    say(f"non-finite loss at step {step} ({stage}): restored the last good state, "
-                        f"learning rate lowered to {optimizer.param_groups[0]['lr']:.3g}")
-                    continue
-                failures = 0
-                good = _snapshot(network, weights, optimizer, scheduler)
-                row = {"stage": stage, "step": step, **row, "seconds": elapsed + time.perf_counter() - started}
-                row.setdefault("lr", optimizer.param_groups[0]["lr"])
-                if stage == "pretrain":
-                    row.update(a1=weights.a()[0].item(), a2=weights.a()[1].item())
-                history.writerow(_format_row(row))
-                last_row = row
-                stage_step += 1
-                step += 1
-                if reporter is not None:
-                    reporter.update(row, stage_step, total)
-                if step % config.checkpoint.every == 0:
-                    save(stage)
-            if interrupted:
-                break
-            stage_step = 0
-        final_stage = stage if interrupted else "done"
-        state = save(final_stage)
-    finally:
-        history_file.close()
-    seconds = elapsed + time.perf_counter() - started
-    quality = write_summary(state, geometry, run_dir) if summary and not interrupted else None
-    return TrainResult(checkpoint_path, final_stage, step, interrupted, seconds, state["test_loss"], state, quality)
-
-
-def _snapshot(network, weights, optimizer, scheduler) -> dict:
-    """Deep copies of everything a step changes (cheap next to a step: a few small tensors)."""
-    return copy.deepcopy({
-        "network": network.state_dict(),
-        "weights": weights.state_dict(),
-        "optimizer": optimizer.state_dict(),
-        "scheduler": scheduler.state_dict() if scheduler is not None else None,
-    })
-
-
-def _restore(snapshot, network, weights, optimizer, scheduler) -> None:
-    network.load_state_dict(snapshot["network"])
-    weights.load_state_dict(snapshot["weights"])
-    optimizer.load_state_dict(copy.deepcopy(snapshot["optimizer"]))
-    if scheduler is not None:
-        scheduler.load_state_dict(snapshot["scheduler"])
-
-
-def _finite(network) -> bool:
-    """Whether every weight is finite (a sum is non-finite as soon as one term is)."""
-    return bool(torch.isfinite(torch.stack([p.sum() for p in network.parameters()]).sum()))
+        checkpoints.save_checkpoint(self.path, checkpoint)
+        return checkpoint
 
 
 # ---------------------------------------------------------------------------------------------
 # the final summary
 
 
-def snapped(X: np.ndarray, geometry, coords) -> np.ndarray:
-    """A copy of node array ``X`` with its boundary nodes moved onto the geometry's boundary map
-    (what a soft-boundary mesh looks like once made to conform)."""
-    from meshgen.neural.inference import snap_boundary
+def corrected(X: np.ndarray, geometry, coords) -> np.ndarray:
+    """A copy of node array ``X`` corrected to X + TFI[g - X] (what ``meshgen mesh`` makes of a
+    network's mesh by default; ``meshgen.neural.inference.correct_boundary``)."""
+    from meshgen.neural.inference import correct_boundary
 
     X = X.copy()
-    snap_boundary(X, geometry, coords)
+    correct_boundary(X, geometry, coords)
     return X
 
 
 def write_summary(checkpoint: dict, geometry, run_dir) -> dict:
     """Mesh ``SUMMARY_CELLS``^d cells with the trained map and with TFI, measure both with
-    ``meshgen.quality`` (boundary deviation included), count the cells that snapping the network's
-    boundary nodes onto the geometry inverts, write ``summary.json`` in ``run_dir`` and return it."""
-    import json
-
-    from meshgen.atomic import atomic_path
+    ``meshgen.quality`` (boundary deviation included), and the network's mesh after the boundary
+    correction X + TFI[g - X] (``corrected``: what ``meshgen mesh`` writes), write ``summary.json`` in ``run_dir`` and return it."""
     from meshgen.neural.model import mesh_from_checkpoint
-    from meshgen.quality import quality_report
+    from meshgen.quality import quality_report, write_json
     from meshgen.tfi import parametric_grid, tfi
 
     coords = parametric_grid([SUMMARY_CELLS] * geometry.dim)
@@ -589,13 +752,12 @@ def write_summary(checkpoint: dict, geometry, run_dir) -> dict:
     summary = {
         "dims": [SUMMARY_CELLS] * geometry.dim,
         "network": quality_report(X, geometry),
-        "inverted_after_snapping": quality_report(snapped(X, geometry, coords))["inverted"]["count"],
+        "corrected": quality_report(corrected(X, geometry, coords), geometry),
         "tfi": quality_report(tfi(geometry, None, coords), geometry),
         "meshing_seconds": meshing_seconds,
         "test_loss": checkpoint["test_loss"],
         "step": checkpoint["step"],
         "training_seconds": checkpoint["elapsed_seconds"],
     }
-    with atomic_path(Path(run_dir) / "summary.json") as temporary:
-        temporary.write_text(json.dumps(summary, indent=2) + "\n")
+    write_json(Path(run_dir) / "summary.json", summary)  # atomic; non-finite figures as null
     return summary
