@@ -361,11 +361,80 @@ _LAYOUTS: dict = {}  # (plugin map, parameter values, cells) -> Layout, for this
 
 
 def layout_of(geometry, cells: int = RESOLUTION) -> Layout:
-    """``compute_layout`` remembered per plugin map, parameter values and resolution."""
+    """``compute_layout`` remembered per plugin map, parameter values and resolution: in this
+    process, and between runs in the cache folder (``cache_path``), since solving the six face
+    grids takes a second or more and every neural mesh of a smoothed-layout model needs them."""
     key = (geometry.boundary_map, tuple(sorted(geometry.values.items())), cells)
     if key not in _LAYOUTS:
-        _LAYOUTS[key] = compute_layout(geometry, cells)
+        path = cache_path(geometry, cells)
+        layout = _read_layout(path) if path is not None else None
+        if layout is None:
+            layout = compute_layout(geometry, cells)
+            if path is not None:
+                _write_layout(path, layout)
+        _LAYOUTS[key] = layout
     return _LAYOUTS[key]
+
+
+def cache_path(geometry, cells: int = RESOLUTION):
+    """The file that keeps the layout of ``geometry`` between runs: in ``$MESHGEN_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/meshgen``, else ``~/.cache/meshgen``, under ``layouts/``, named by a hash of
+    meshgen's version, the plugin's name and source text, its parameter values and ``cells``.
+    None for a plugin whose source file cannot be read (its layout is then computed every run)."""
+    import hashlib
+    import json
+    import os
+    from pathlib import Path
+
+    from meshgen import __version__
+
+    try:
+        source = Path(geometry.source).read_bytes()
+    except (OSError, TypeError, ValueError):
+        return None
+    identity = json.dumps([__version__, geometry.name, sorted(geometry.values.items()), cells]).encode()
+    digest = hashlib.sha256(identity + b"\0" + source).hexdigest()[:32]
+    folder = os.environ.get("MESHGEN_CACHE_DIR") or Path(
+        os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    ) / "meshgen"
+    return Path(folder) / "layouts" / f"{geometry.name}-{digest}.npz"
+
+
+def _read_layout(path):
+    """The Layout stored at ``path``, or None when there is none or it cannot be read (a damaged or
+    foreign file is ignored and recomputed; no pickles are loaded)."""
+    import json
+
+    try:
+        with np.load(path, allow_pickle=False) as stored:
+            dim = int(stored["dim"])
+            edge_values = {
+                (tuple(int(a) for a in key[0]), tuple(int(s) for s in key[1])): stored[f"edge{i}"]
+                for i, key in enumerate(json.loads(str(stored["edge_keys"])))
+            }
+            face_values = {tuple(key): stored[f"face{i}"] for i, key in enumerate(json.loads(str(stored["face_keys"])))}
+            face_info = json.loads(str(stored["face_info"]))
+    except (OSError, KeyError, ValueError, TypeError):
+        return None
+    return Layout(dim, edge_values, face_values, face_info)
+
+
+def _write_layout(path, layout: Layout) -> None:
+    """Store ``layout`` at ``path`` atomically; a cache that cannot be written is skipped."""
+    import json
+
+    from meshgen.atomic import atomic_path
+
+    arrays = {f"edge{i}": values for i, values in enumerate(layout.edge_values.values())}
+    arrays.update({f"face{i}": values for i, values in enumerate(layout.face_values.values())})
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as temporary:
+            with open(temporary, "wb") as file:
+                np.savez(file, dim=layout.dim, edge_keys=json.dumps(list(layout.edge_values)),
+                         face_keys=json.dumps(list(layout.face_values)), face_info=json.dumps(layout.face_info), **arrays)
+    except OSError:
+        pass
 
 
 def smoothed(geometry, cells: int = RESOLUTION):

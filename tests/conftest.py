@@ -46,3 +46,16 @@ def _work_in_tmp_path(tmp_path, monkeypatch):
     directory (``meshgen mesh -o m.vtu`` and its ``m.vtu.quality.json``) never writes into the
     checkout."""
     monkeypatch.chdir(tmp_path)
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _layout_cache_in_tmp(tmp_path_factory):
+    """The boundary-layout cache (``meshgen.layout.cache_path``) of the whole session, commands run
+    by ``run_cli`` included, in a temporary folder rather than the user's ~/.cache."""
+    previous = os.environ.get("MESHGEN_CACHE_DIR")
+    os.environ["MESHGEN_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+    if previous is None:
+        os.environ.pop("MESHGEN_CACHE_DIR", None)
+    else:
+        os.environ["MESHGEN_CACHE_DIR"] = previous

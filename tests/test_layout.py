@@ -142,3 +142,27 @@ def test_cli_boundary_layout_option(run_cli, tmp_path, semicylinder):
         assert metadata_of(tmp_path / name)["method_info"]["boundary_layout"] == (layout or "smoothed")
         difference = np.abs(faces_of(X) - faces_of(expected)).max()
         assert difference < 1e-12 if layout == "fixed" else difference > 1e-3
+
+
+def test_the_layout_cache_gives_back_the_computed_layout_and_ignores_a_damaged_file(semicylinder, monkeypatch, tmp_path):
+    from meshgen import layout
+
+    monkeypatch.setenv("MESHGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(layout, "_LAYOUTS", {})
+    computed = layout.compute_layout(semicylinder)
+    first = layout.layout_of(semicylinder)  # computes and stores
+    path = layout.cache_path(semicylinder)
+    assert path.is_file() and path.parent.parent == tmp_path / "cache"
+    monkeypatch.setattr(layout, "_LAYOUTS", {})
+    monkeypatch.setattr(layout, "compute_layout", lambda *args: pytest.fail("the cached layout was not used"))
+    cached = layout.layout_of(semicylinder)
+    for name in ("edge_values", "face_values"):
+        stored, direct = getattr(cached, name), getattr(computed, name)
+        assert stored.keys() == direct.keys() and all(np.array_equal(stored[k], direct[k]) for k in direct)
+    points = np.random.default_rng(0).random((50, 3))
+    points[:, 2] = 1.0  # on the face zeta1
+    np.testing.assert_array_equal(cached.apply(points), first.apply(points))
+    # Other parameters, another file; a damaged file is recomputed, not trusted.
+    assert layout.cache_path(semicylinder.with_params(radius=2.0)) != path
+    path.write_bytes(b"not a layout")
+    assert layout._read_layout(path) is None
