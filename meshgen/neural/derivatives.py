@@ -71,17 +71,20 @@ def training_grid(dim: int, nodes: int, generator: torch.Generator | None = None
     cube's faces. The whole grid, halo included, stays inside the cube, so the boundary map and
     TFI are only ever evaluated where they are defined.
     Returns (axes, spacing): ``dim`` 1D float64 tensors of ``nodes + 2`` coordinates, and the
-    ``dim`` spacings h_i = s_i / (nodes + 1).
+    ``dim`` spacings h_i = s_i / (nodes + 1) as 0-d float64 tensors.
     """
-    draws = torch.rand(2 * dim, generator=generator, dtype=torch.float64)
-    axes, spacing = [], []
-    for axis in range(dim):
-        scale = min_scale + (1.0 - min_scale) * float(draws[2 * axis])
-        start = (1.0 - scale) * float(draws[2 * axis + 1])
-        h = scale / (nodes + 1)
-        axes.append(start + h * torch.arange(nodes + 2, dtype=torch.float64))
-        spacing.append(h)
-    return axes, spacing
+    return grid_from_draws(torch.rand(2 * dim, generator=generator, dtype=torch.float64), nodes, min_scale)
+
+
+def grid_from_draws(draws: torch.Tensor, nodes: int, min_scale: float = 1.0):
+    """:func:`training_grid` from its 2 dim uniform draws (float64, on any device; per axis the
+    scale's and the offset's), in tensor arithmetic alone, so that a CUDA graph can replay it
+    with new draws."""
+    scale = min_scale + (1.0 - min_scale) * draws[0::2]
+    start = (1.0 - scale) * draws[1::2]
+    h = scale / (nodes + 1)
+    axes = start[:, None] + h[:, None] * torch.arange(nodes + 2, dtype=torch.float64, device=draws.device)
+    return list(axes.unbind(0)), list(h.unbind(0))
 
 
 def grid_points(axes) -> torch.Tensor:

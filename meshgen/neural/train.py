@@ -37,6 +37,7 @@ from meshgen.neural.config import TrainConfig, to_dict, to_yaml
 from meshgen.neural.derivatives import (
     autograd_derivatives,
     grid_derivatives,
+    grid_from_draws,
     grid_points,
     stencil_derivatives,
     training_grid,
@@ -51,6 +52,9 @@ HISTORY_COLUMNS = ("stage", "step", "L1", "L2", "total", "a1", "a2", "conflict",
 TEST_SEED = 271828  # the held-out points are the same for every run, whatever its seed
 TEST_STENCIL_H = 1e-3  # test-set residual: per-point stencils in float64, truncation error ~ h^2
 SUMMARY_CELLS = 30  # the final quality summary meshes 30^dim cells
+# Adam steps on a GPU between two reads of their history rows: the device runs a block behind the
+# host instead of idling at each step's read (about 0.2 s of steps for the paper's network on an H100)
+DEVICE_BLOCK = 100
 CONFIG_HEADER = "# meshgen train: the resolved configuration of this run (repeat it with --config FILE)\n"
 
 
@@ -86,12 +90,14 @@ class TrainResult:
 # the map and the losses
 
 
-def transfinite_tensor(problem: Problem, coords) -> torch.Tensor:
-    """Normalised TFI at the broadcast of ``coords`` (float64 tensors), as float32 on the device."""
+def grid_tfi(problem: Problem, axes) -> torch.Tensor:
+    """Normalised TFI at the nodes of the grid ``axes`` (1D float64 tensors), flattened in
+    :func:`grid_points`' order: (n, d) float32 on the CPU."""
     from meshgen.tfi import transfinite
 
-    values = transfinite(problem.boundary, [c.cpu().numpy() for c in coords])
-    return torch.from_numpy(values).float().to(problem.device)
+    dim = problem.dim
+    broadcast = [a.cpu().reshape([-1 if d == i else 1 for d in range(dim)]).numpy() for i, a in enumerate(axes)]
+    return torch.from_numpy(transfinite(problem.boundary, broadcast)).float().reshape(-1, dim)
 
 
 def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=None) -> torch.Tensor:
@@ -102,16 +108,14 @@ def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=N
     return tfi_values + bubble(points)[:, None] * output
 
 
-def grid_residual(network: MLP, problem: Problem, axes, spacing) -> torch.Tensor:
+def grid_residual(network: MLP, problem: Problem, axes, spacing, tfi_values=None) -> torch.Tensor:
     """Winslow residual at the interior nodes of the grid ``axes`` (1D float64 tensors, halo
-    included) by finite differences: (m1, ..., md, d)."""
+    included) by finite differences: (m1, ..., md, d). The exact-boundary form needs TFI at the
+    nodes: ``tfi_values`` ((n, d) on the device, :func:`grid_tfi`), computed here when not given."""
     nodes = grid_points(axes)
     flat = nodes.reshape(-1, problem.dim).float().to(problem.device)
-    tfi_values = None
-    if problem.exact:
-        dim = problem.dim
-        broadcast = [a.reshape([-1 if d == i else 1 for d in range(dim)]) for i, a in enumerate(axes)]
-        tfi_values = transfinite_tensor(problem, broadcast).reshape(-1, dim)
+    if problem.exact and tfi_values is None:
+        tfi_values = grid_tfi(problem, axes).to(problem.device)
     values = apply_map(network, problem, flat, tfi_values).reshape(*nodes.shape)
     _, first, second = grid_derivatives(values, spacing)
     return winslow_residual(first, second)
@@ -128,12 +132,61 @@ def grid_nodes_per_axis(config: TrainConfig, dim: int) -> int:
     return max(1, round(config.points.interior ** (1.0 / dim)))
 
 
+def grid_min_scale(config: TrainConfig, random: bool = True) -> float:
+    """The smallest fraction of the cube a training grid spans: ``points.grid_min_scale`` for the
+    randomly shifted grids of the Adam stage, 1 (the fixed grid) otherwise."""
+    return config.points.grid_min_scale if (random and config.points.random_grid) else 1.0
+
+
 def sample_pde_points(config: TrainConfig, dim: int, generator: torch.Generator, random: bool = True):
     """One step's interior points: a training grid (axes, spacing) for fd, random points for autograd."""
     if config.method.derivatives == "fd":
-        min_scale = config.points.grid_min_scale if (random and config.points.random_grid) else 1.0
-        return training_grid(dim, grid_nodes_per_axis(config, dim), generator, min_scale)
+        return training_grid(dim, grid_nodes_per_axis(config, dim), generator, grid_min_scale(config, random))
     return sample_interior(config.points.interior, dim, generator)
+
+
+def sample_step(config: TrainConfig, problem: Problem, generator: torch.Generator, pool=None) -> dict:
+    """What the host gives one Adam step, as CPU tensors drawn from ``generator`` in a fixed order:
+    ``grid`` (2 d,) float64, the draws of the training grid (fd; the exact-boundary form adds
+    ``tfi`` (n, d) float32, TFI at its nodes: the geometry is NumPy code) or ``points`` (N, d)
+    random interior points (autograd); then ``index`` (N,) int64 into ``pool`` (see
+    :func:`boundary_pool`) or, without a pool, ``boundary_points`` and ``boundary_targets`` (N, d)
+    float32; no boundary points for the exact-boundary form, which has no boundary loss."""
+    inputs = {}
+    if config.method.derivatives == "fd":
+        inputs["grid"] = torch.rand(2 * problem.dim, generator=generator, dtype=torch.float64)
+        if problem.exact:
+            axes, _ = grid_from_draws(inputs["grid"], grid_nodes_per_axis(config, problem.dim), grid_min_scale(config))
+            inputs["tfi"] = grid_tfi(problem, axes)
+    else:
+        inputs["points"] = sample_interior(config.points.interior, problem.dim, generator)
+    if problem.exact:
+        return inputs
+    if pool is not None:
+        inputs["index"] = torch.randint(0, len(pool), (config.points.boundary,), generator=generator)
+    else:
+        points = sample_boundary(config.points.boundary, problem.dim, generator)
+        inputs["boundary_points"] = points
+        inputs["boundary_targets"] = torch.from_numpy(problem.boundary(points.double().numpy())).float()
+    return inputs
+
+
+def step_samples(training: Training, inputs: dict, pool=None):
+    """The PDE sample (as :func:`pde_term` takes it) and the boundary sample ((points, images), or
+    None) of one step from its :func:`sample_step` inputs, moved to the device."""
+    config, problem = training.config, training.problem
+    dim = problem.dim
+    if "grid" in inputs:
+        axes, spacing = grid_from_draws(inputs["grid"], grid_nodes_per_axis(config, dim), grid_min_scale(config))
+        pde = (axes, spacing, inputs.get("tfi"))
+    else:
+        pde = inputs["points"]
+    if "index" in inputs:
+        drawn = pool.index_select(0, inputs["index"])  # several times faster than pool[index]
+        return pde, (drawn[:, :dim], drawn[:, dim:])
+    if "boundary_points" in inputs:
+        return pde, (inputs["boundary_points"], inputs["boundary_targets"])
+    return pde, None
 
 
 def pde_term(network, problem, config, sample) -> torch.Tensor:
@@ -299,31 +352,79 @@ def term_gradients(training: Training, pde_sample, boundary_sample_, factors):
     return pde, boundary, g1, g2
 
 
-def adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool=None, terms=None) -> dict:
-    """One step of the method: losses, g1 and g2, (PCGrad), the a-gradients of L, Adam, decay.
-    Non-finite losses return the row without a step (the loop's divergence guard takes over)."""
-    training = Training(network, weights, problem, config, generator, terms or TermRunner(False))
-    parameters = list(network.parameters())
-    pde_sample = sample_pde_points(config, problem.dim, generator)
-    boundary_points = boundary_sample(config, problem, generator, pool)
+def adam_gradients(training: Training, inputs: dict, pool=None) -> dict:
+    """The device part of one step of the method, from the step's :func:`sample_step` inputs (on
+    the device): L1, L2, their gradients g1, g2 combined into the update of the network's weights
+    (PCGrad or the sum; zero when a loss is not finite, and the loop restores the last good state),
+    L and its gradient on the reweighting parameters (``a_gradient``, learned weights only), and
+    whether g1 and g2 conflict. Reads nothing back to the host and changes nothing, so that it can
+    be captured into a CUDA graph (:mod:`meshgen.neural.cudagraph`)."""
+    weights, config = training.weights, training.config
+    pde_sample, boundary_points = step_samples(training, inputs, pool)
     factors = weights.factors().detach()
     pde, boundary, g1, g2 = term_gradients(training, pde_sample, boundary_points, factors)
-    lr = optimizer.param_groups[0]["lr"]  # the rate of this step, before the decay
     finite = torch.isfinite(pde) & torch.isfinite(boundary)
     if config.method.pcgrad:
         update, conflict = project_conflicting(g1, g2)
     else:
         update, conflict = g1 + g2, (g1 @ g2) < 0
-    # A non-finite loss gives a zero update, and the loop restores the last good state.
-    assign(parameters, torch.where(finite, update, torch.zeros_like(update)))
     total = weights.objective(pde.detach(), boundary.detach())
+    gradients = {"update": torch.where(finite, update, torch.zeros_like(update)), "L1": pde.detach(),
+                 "L2": boundary.detach(), "total": torch.where(finite, total.detach(), torch.nan),
+                 "conflict": conflict.int()}
     if weights.learned:  # the a take their gradient from L itself, outside the projection
-        (weights.log_a.grad,) = torch.autograd.grad(total, weights.log_a)
+        (gradients["a_gradient"],) = torch.autograd.grad(total, weights.log_a)
+    return gradients
+
+
+def apply_adam(training: Training, optimizer, scheduler, gradients: dict) -> dict:
+    """Give the network and the reweighting parameters their gradients from :func:`adam_gradients`
+    and take the Adam step with its decay; returns the history row's numbers (0-d tensors, copied
+    out of ``gradients``, which a CUDA graph overwrites at its next replay)."""
+    weights = training.weights
+    lr = optimizer.param_groups[0]["lr"]  # the rate of this step, before the decay
+    assign(list(training.network.parameters()), gradients["update"])
+    if weights.learned:
+        weights.log_a.grad = gradients["a_gradient"].clone()
+    losses = torch.stack([gradients["L1"], gradients["L2"], gradients["total"]])  # one copy
+    conflict = gradients["conflict"].clone()
     optimizer.step()
     scheduler.step()
     a = weights.a().detach()
-    return {"L1": pde.detach(), "L2": boundary.detach(), "total": torch.where(finite, total.detach(), torch.nan),
-            "a1": a[0], "a2": a[1], "conflict": conflict.int(), "lr": lr}
+    return {"L1": losses[0], "L2": losses[1], "total": losses[2], "a1": a[0], "a2": a[1], "conflict": conflict, "lr": lr}
+
+
+def adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool=None, terms=None) -> dict:
+    """One step of the method, eagerly: draw its inputs, :func:`adam_gradients`, :func:`apply_adam`.
+    Non-finite losses return the row without a step (the loop's divergence guard takes over)."""
+    training = Training(network, weights, problem, config, generator, terms or TermRunner(False))
+    inputs = {name: value.to(problem.device) for name, value in sample_step(config, problem, generator, pool).items()}
+    return apply_adam(training, optimizer, scheduler, adam_gradients(training, inputs, pool))
+
+
+class AdamSteps:
+    """The Adam stage's steps for one run: each draws its inputs on the host (:func:`sample_step`)
+    and runs :func:`adam_gradients` on the device, eagerly on a CPU, as one replayed CUDA graph on
+    a GPU (:mod:`meshgen.neural.cudagraph`), then :func:`apply_adam`."""
+
+    def __init__(self, training: Training, pool=None):
+        self.training, self.pool = training, pool
+        device = training.problem.device
+
+        def gradients(inputs):
+            return adam_gradients(training, inputs, pool)
+
+        if device.type == "cuda":
+            from meshgen.neural.cudagraph import CapturedFunction
+
+            self.gradients = CapturedFunction(gradients, device)
+        else:
+            self.gradients = lambda inputs: gradients({k: v.to(device) for k, v in inputs.items()})
+
+    def __call__(self, optimizer, scheduler) -> dict:
+        t = self.training
+        inputs = sample_step(t.config, t.problem, t.generator, self.pool)
+        return apply_adam(t, optimizer, scheduler, self.gradients(inputs))
 
 
 def lbfgs_step(network, weights, problem, config, optimizer, fixed, terms=None) -> dict:
@@ -426,6 +527,8 @@ class Stage:
     points: Callable  # (Training) -> the stage's fixed points (or None)
     step: Callable  # (Training, optimizer, scheduler, points) -> the history row's numbers
     start: Callable = lambda training, say: None  # (Training, say) before the stage's first step
+    # (Training) -> steps taken between two reads of their rows (one wait for the device)
+    block: Callable = lambda training: 1
 
 
 STAGE_TABLE = (
@@ -435,10 +538,10 @@ STAGE_TABLE = (
           step=lambda t, optimizer, scheduler, points: pretrain_step(t.network, t.problem, optimizer, points)),
     Stage("adam",
           optimizer=lambda t: make_optimizer("adam", t.network, t.weights, t.config),
-          points=lambda t: boundary_pool(t.problem, t.config),
-          step=lambda t, optimizer, scheduler, pool: adam_step(t.network, t.weights, t.problem, t.config, optimizer,
-                                                               scheduler, t.generator, pool, t.terms),
-          start=balance_start),
+          points=lambda t: AdamSteps(t, boundary_pool(t.problem, t.config)),
+          step=lambda t, optimizer, scheduler, steps: steps(optimizer, scheduler),
+          start=balance_start,
+          block=lambda t: DEVICE_BLOCK if t.problem.device.type == "cuda" else 1),
     Stage("lbfgs",
           optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
           points=lambda t: lbfgs_points(t.problem, t.config),
@@ -501,15 +604,20 @@ def _format_row(row: dict) -> dict:
     return {k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()}
 
 
-def read_row(numbers: dict, network) -> tuple[dict, bool]:
-    """A step's numbers (0-d tensors on the device, or Python numbers) as Python numbers, and
-    whether the step is good (finite loss, finite weights): one transfer from the device per step,
-    the only wait for it in the loop outside L-BFGS (whose line search reads its losses itself)."""
-    keys = [k for k, v in numbers.items() if isinstance(v, torch.Tensor)]
+def read_rows(steps: list[dict], network) -> tuple[list[dict], bool]:
+    """The numbers of consecutive steps (0-d tensors on the device, or Python numbers) as Python
+    numbers, and whether all of them are good (finite losses, finite weights after the last): one
+    transfer from the device, the only wait for it in the loop outside L-BFGS (whose line search
+    reads its losses itself)."""
+    keys = [k for k, v in steps[0].items() if isinstance(v, torch.Tensor)]
     finite_weights = torch.isfinite(torch.stack([p.detach().sum() for p in network.parameters()]).sum())
-    values = torch.stack([numbers[k].detach().double().reshape(()) for k in keys] + [finite_weights.double()]).tolist()
-    row = {**numbers, **{k: (int(v) if k == "conflict" else v) for k, v in zip(keys, values)}}
-    return row, bool(values[-1]) and math.isfinite(row["total"])
+    values = torch.stack([numbers[k].detach().double().reshape(()) for numbers in steps for k in keys]
+                         + [finite_weights.double()]).tolist()
+    rows = []
+    for index, numbers in enumerate(steps):
+        read = values[index * len(keys):(index + 1) * len(keys)]
+        rows.append({**numbers, **{k: (int(v) if k == "conflict" else v) for k, v in zip(keys, read)}})
+    return rows, bool(values[-1]) and all(math.isfinite(row["total"]) for row in rows)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -518,7 +626,9 @@ def read_row(numbers: dict, network) -> tuple[dict, bool]:
 
 class DivergenceGuard:
     """Keeps the last good state of a stage; after a non-finite step, restores it with a lower
-    learning rate (``guard.lr_factor``), at most ``guard.max_retries`` times in a row."""
+    learning rate (``guard.lr_factor``), at most ``guard.max_retries`` times in a row. The loop
+    checks steps a block at a time (one step on a CPU, ``DEVICE_BLOCK`` Adam steps on a GPU): a
+    non-finite step anywhere in a block sends the run back to the state before the block."""
 
     def __init__(self, training: Training, optimizer, scheduler, state: TrainState):
         self.training, self.optimizer, self.scheduler, self.state = training, optimizer, scheduler, state
@@ -619,9 +729,15 @@ def train(
             if reporter is not None:
                 reporter.stage(stage.name, state.stage_step, total)
             guard = DivergenceGuard(training, optimizer, scheduler, state)
+            block = stage.block(training)
+            every = config.checkpoint.every
             while state.stage_step < total and not (interrupted := stop()):
-                row, good = read_row(stage.step(training, optimizer, scheduler, points), training.network)
-                if not good:
+                # a block of steps, read back at once: on a GPU the host runs ahead of the device
+                # instead of waiting for it at every step; it ends at a checkpoint and the stage's end
+                count = min(block, total - state.stage_step, every - state.step % every)
+                steps = [(stage.step(training, optimizer, scheduler, points), saver.seconds()) for _ in range(count)]
+                rows, good = read_rows([numbers for numbers, _ in steps], training.network)
+                if not good:  # the whole block is taken again from the last good state
                     if not guard.reject(stage.name, say):
                         saver.save(history_file)
                         raise TrainingDiverged(
@@ -630,15 +746,16 @@ def train(
                             f"saved in {saver.path}")
                     continue
                 guard.accept()
-                row = {"stage": stage.name, "step": state.step, **row, "seconds": saver.seconds()}
-                row.setdefault("lr", optimizer.param_groups[0]["lr"])
-                row.setdefault("a1", training.weights.a()[0].item())  # the TFI fit leaves them as they are
-                row.setdefault("a2", training.weights.a()[1].item())
-                history.writerow(_format_row(row))
-                state.last_row, state.stage_step, state.step = row, state.stage_step + 1, state.step + 1
-                if reporter is not None:
-                    reporter.update(row, state.stage_step, total)
-                if state.step % config.checkpoint.every == 0:
+                for row, (_, seconds) in zip(rows, steps):
+                    row = {"stage": stage.name, "step": state.step, **row, "seconds": seconds}
+                    row.setdefault("lr", optimizer.param_groups[0]["lr"])
+                    row.setdefault("a1", training.weights.a()[0].item())  # the TFI fit leaves them as they are
+                    row.setdefault("a2", training.weights.a()[1].item())
+                    history.writerow(_format_row(row))
+                    state.last_row, state.stage_step, state.step = row, state.stage_step + 1, state.step + 1
+                    if reporter is not None:
+                        reporter.update(row, state.stage_step, total)
+                if state.step % every == 0:
                     saver.save(history_file)
             if interrupted:
                 break
