@@ -32,7 +32,7 @@ from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.neural.config import resolve_config  # noqa: E402
 from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, normalised_boundary  # noqa: E402
 from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
-from meshgen.neural.train import Problem, adam_step, boundary_pool, corrected, make_optimizer, train  # noqa: E402
+from meshgen.neural.train import DEVICE_BLOCK, Problem, adam_step, boundary_pool, corrected, make_optimizer, train  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import parametric_grid  # noqa: E402
 
@@ -193,15 +193,19 @@ QUALITY_BOUNDS = {
 }
 
 
-def reference_figures(geometry, cells: int = 30) -> dict:
-    """The ``figures`` of TFI's and the elliptic solver's ``cells``^d meshes of ``geometry``: the
-    yardsticks of the angle bounds."""
+def reference_figures(geometry, cells: int = 30, layout: str = "smoothed") -> dict:
+    """The ``figures`` of TFI's and the elliptic solver's ``cells``^d meshes of ``geometry`` on the
+    boundary ``layout`` a network is trained on ("smoothed": the faces' own Winslow grids, what
+    ``meshgen mesh --method elliptic`` makes; "fixed": the Coons faces): the yardsticks of the
+    angle bounds."""
     from meshgen.elliptic import elliptic
+    from meshgen.layout import with_layout
     from meshgen.tfi import tfi
 
     dims = [cells] * geometry.dim
-    return {"tfi": figures(quality_report(tfi(geometry, dims), geometry)),
-            "elliptic": figures(quality_report(elliptic(geometry, dims)[0], geometry))}
+    return {"layout": layout,
+            "tfi": figures(quality_report(tfi(with_layout(geometry, layout), dims), geometry)),
+            "elliptic": figures(quality_report(elliptic(geometry, dims, boundary_layout=layout)[0], geometry))}
 
 
 def milestones(point: dict, references: dict, bounds: dict = QUALITY_BOUNDS) -> dict:
@@ -232,12 +236,16 @@ class QualityProbe:
             print("   ", text, flush=True)
 
     def measure(self, checkpoint, seconds) -> dict:
+        from meshgen.layout import trained_layout, with_layout
         from meshgen.neural.inference import boundary_errors, error_figures
 
-        X = mesh_from_checkpoint(checkpoint, self.coords, self.geometry)
-        raw_error = error_figures(boundary_errors(X, self.geometry, self.coords), self.geometry)
+        # the boundary the network was trained on (the smoothed layout for today's presets): its
+        # error and the correction are measured against it, as ``meshgen mesh`` does
+        geometry = with_layout(self.geometry, trained_layout(checkpoint))
+        X = mesh_from_checkpoint(checkpoint, self.coords, geometry)
+        raw_error = error_figures(boundary_errors(X, geometry, self.coords), geometry)
         point = {"step": checkpoint["step"], "stage": checkpoint["stage"], "seconds": seconds,
-                 **figures(quality_report(corrected(X, self.geometry, self.coords), self.geometry)),
+                 **figures(quality_report(corrected(X, geometry, self.coords), geometry)),
                  "raw_boundary_error_max_rel": raw_error["max_rel"]}
         point.update(milestones(point, self.references))
         return point
@@ -260,22 +268,23 @@ class QualityProbe:
 
 
 def time_to_quality(preset, geometry, overrides, bounds=QUALITY_BOUNDS, references=None, verbose=True,
-                    threads=None, stop_when_converged=False):
+                    threads=None, stop_when_converged=False, device="cpu"):
     """Train ``preset`` (with ``overrides``, ``key=value`` strings) on ``geometry`` with ``threads``
     torch threads (default: as set), measuring the corrected 30^3 mesh at every checkpoint
     (``checkpoint.every`` steps) and at the end: the first state that is valid and better than TFI
     (``first_valid``) and the first within the converged bound (``first_converged``; None if
     never), the final state, and the trajectory. ``stop_when_converged``: end training there.
-    Seconds are training seconds, the probes' own time excluded; CPU seconds are the process's."""
-    references = references or reference_figures(geometry)
+    Seconds are training seconds, the probes' own time excluded; CPU seconds are the process's.
+    ``references``: :func:`reference_figures` on the layout the run trains on (default: computed)."""
     config = resolve_config(preset, None, overrides)
+    references = references or reference_figures(geometry, layout=config.boundary_layout)
     previous = torch.get_num_threads()
     torch.set_num_threads(threads or previous)
     try:
         with tempfile.TemporaryDirectory() as folder:
             probe = QualityProbe(folder, geometry, config.checkpoint.every, references, verbose)
             start, cpu = time.perf_counter(), time.process_time()
-            result = train(config, geometry, folder, reporter=probe, summary=False,
+            result = train(config, geometry, folder, reporter=probe, summary=False, device=device,
                            stop=(lambda: probe.done) if stop_when_converged else None)
             wall = time.perf_counter() - start - probe.probe_seconds
             cpu = time.process_time() - cpu
@@ -288,6 +297,8 @@ def time_to_quality(preset, geometry, overrides, bounds=QUALITY_BOUNDS, referenc
     return {
         "preset": preset,
         "overrides": list(overrides),
+        "device": device,
+        "layout": config.boundary_layout,
         "threads": threads or previous,
         "adam_steps": config.adam.steps,
         "lbfgs_steps": config.lbfgs.steps,
@@ -309,9 +320,10 @@ def time_to_quality(preset, geometry, overrides, bounds=QUALITY_BOUNDS, referenc
     }
 
 
-def loop_step_seconds(preset, geometry, stage, steps, threads) -> float:
+def loop_step_seconds(preset, geometry, stage, steps, threads, device="cpu") -> float:
     """Seconds per step of ``stage`` (adam or lbfgs) of ``preset`` inside ``train`` with ``threads``
-    torch threads, from the history rows' clocks (the first rows, warm-up, left out)."""
+    torch threads on ``device``, from the history rows' clocks (the first fifth, warm-up, left out;
+    on a GPU the rows of a block are read together, so the clock spans whole blocks)."""
     others = {"adam": "lbfgs.steps=0", "lbfgs": "adam.steps=0"}[stage]
     config = resolve_config(preset, None, ["pretrain.steps=0", f"{stage}.steps={steps}", others, "checkpoint.every=100000"])
     keeper = RowKeeper()
@@ -319,46 +331,67 @@ def loop_step_seconds(preset, geometry, stage, steps, threads) -> float:
     torch.set_num_threads(threads)
     try:
         with tempfile.TemporaryDirectory() as folder:
-            train(config, geometry, folder, reporter=keeper, summary=False)
+            train(config, geometry, folder, reporter=keeper, summary=False, device=device)
     finally:
         torch.set_num_threads(previous)
     rows = [row for row in keeper.rows if row["stage"] == stage]
     skip = max(1, len(rows) // 5)
+    if device == "cuda" and stage == "adam":  # from a block's end to the last block's end
+        skip = max(skip, DEVICE_BLOCK - 1)
     return (rows[-1]["seconds"] - rows[skip]["seconds"]) / (len(rows) - 1 - skip)
 
 
 SPEED_PRESETS = ("exact", "default", "paper")
-# The runs of the speed table: the presets as they are, paper capped (12000 Adam steps are the GPU
-# target's; on a CPU the table reports how far a capped run gets)
+# The runs of the speed table: the presets as they are, paper capped on a CPU (12000 Adam steps
+# are the GPU target's; on a CPU the table reports how far a capped run gets)
 SPEED_OVERRIDES = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"],
                    "paper": ["checkpoint.every=100", "adam.steps=500", "lbfgs.steps=0"]}
+CUDA_OVERRIDES = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"],
+                  "paper": ["checkpoint.every=1000", "lbfgs.steps=0"]}
 QUICK_SPEED_OVERRIDES = {"exact": ["checkpoint.every=25", "adam.steps=100", "lbfgs.steps=0"],
                          "default": ["checkpoint.every=25", "pretrain.steps=5", "adam.steps=50", "lbfgs.steps=5"],
                          "paper": ["checkpoint.every=25", "adam.steps=50", "lbfgs.steps=0"]}
+# the boundary layouts of the time-to-quality runs: on the smoothed layout (the presets' default)
+# the semicylinder's TFI is already within 0.01 degrees of the elliptic mesh, so the network has
+# little to learn there; on the fixed (Coons) layout it must move the interior 2 degrees
+LAYOUTS = ("smoothed", "fixed")
 
 
-def speed_table(geometry, threads=(1, 2), quick=False, verbose=True) -> dict:
-    """Issue 13 part 2: per preset and CPU thread count, seconds per Adam and L-BFGS step inside the
-    loop and the time to a valid corrected mesh better than TFI and to converged quality (runs
-    stopped there); CUDA rows only where torch sees a GPU (else skipped, with the reason)."""
-    references = reference_figures(geometry)
-    overrides = QUICK_SPEED_OVERRIDES if quick else SPEED_OVERRIDES
+def speed_table(geometry, threads=(1, 2), quick=False, verbose=True, cuda=None) -> dict:
+    """Issue 13 part 2: per preset, device (CPU with each of ``threads``, and CUDA where torch sees
+    a GPU) and boundary layout (both on 2 threads and CUDA, the smoothed one alone on 1 thread),
+    seconds per Adam and L-BFGS step inside the loop and the time to a valid corrected mesh better
+    than TFI and to converged quality (runs stopped there, but for ``paper`` on CUDA, whose 12000
+    Adam steps are timed whole). ``cuda``: force the CUDA rows on or off (default: when available;
+    else skipped, with the reason)."""
+    layouts = (LAYOUTS[0],) if quick else LAYOUTS
+    references = {layout: reference_figures(geometry, layout=layout) for layout in layouts}
+    cuda = torch.cuda.is_available() if cuda is None else cuda
+    runs = [("cpu", count) for count in threads] + ([("cuda", 1)] if cuda else [])
     rows = []
     for preset in SPEED_PRESETS:
-        for count in threads:
-            adam = loop_step_seconds(preset, geometry, "adam", 20 if quick else 60, count)
-            lbfgs = loop_step_seconds(preset, geometry, "lbfgs", 4 if quick else 8, count)
-            run = time_to_quality(preset, geometry, overrides[preset], references=references, verbose=False,
-                                  threads=count, stop_when_converged=True)
-            row = {"preset": preset, "device": "cpu", "threads": count, "adam_seconds_per_step": adam,
-                   "lbfgs_seconds_per_step": lbfgs, "capped": quick or preset == "paper", **run}
-            rows.append(row)
-            if verbose:
-                valid, converged = run["first_valid"], run["first_converged"]
-                print(f"  {preset:8s} cpu x{count}: Adam {adam * 1e3:6.1f} ms/step, L-BFGS {lbfgs:6.3f} s/step; "
-                      f"valid, better than TFI: {_when(valid)}; converged: {_when(converged)}; "
-                      f"{run['steps']} steps, {run['training_seconds']:.1f} s", flush=True)
-    skipped = None if torch.cuda.is_available() else "no CUDA device is available to torch on this machine"
+        for device, count in runs:
+            steps = {"adam": 20 if quick else 60, "lbfgs": 4 if quick else 8}
+            if device == "cuda":
+                steps["adam"] = 3 * DEVICE_BLOCK
+            adam = loop_step_seconds(preset, geometry, "adam", steps["adam"], count, device)
+            lbfgs = loop_step_seconds(preset, geometry, "lbfgs", steps["lbfgs"], count, device)
+            for layout in layouts if (device == "cuda" or count >= 2) else layouts[:1]:
+                overrides = (CUDA_OVERRIDES if device == "cuda" and not quick else
+                             QUICK_SPEED_OVERRIDES if quick else SPEED_OVERRIDES)[preset] + [f"boundary_layout={layout}"]
+                whole = device == "cuda" and preset == "paper"
+                run = time_to_quality(preset, geometry, overrides, references=references[layout], verbose=False,
+                                      threads=count, stop_when_converged=not whole, device=device)
+                row = {"preset": preset, "device": device, "threads": count, "adam_seconds_per_step": adam,
+                       "lbfgs_seconds_per_step": lbfgs, "capped": quick or (preset == "paper" and device == "cpu"), **run}
+                rows.append(row)
+                if verbose:
+                    valid, converged = run["first_valid"], run["first_converged"]
+                    where = "cuda" if device == "cuda" else f"cpu x{count}"
+                    print(f"  {preset:8s} {where:6s} {layout:8s}: Adam {adam * 1e3:6.1f} ms/step, L-BFGS {lbfgs:6.3f} s/step; "
+                          f"valid, better than TFI: {_when(valid)}; converged: {_when(converged)}; "
+                          f"{run['steps']} steps, {run['training_seconds']:.1f} s", flush=True)
+    skipped = None if cuda else "no CUDA device is available to torch on this machine"
     if skipped and verbose:
         print(f"  CUDA rows skipped: {skipped}")
     return {"geometry": geometry.name, "references": references, "rows": rows, "cuda_skipped": skipped}
