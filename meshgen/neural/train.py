@@ -496,10 +496,11 @@ def lbfgs_points(problem: Problem, config: TrainConfig) -> dict:
     """Fixed points of the L-BFGS stage: the unshifted training grid (fd) or random points, and
     boundary points, drawn from their own seed so that a resumed run gets the same ones."""
     generator = torch.Generator().manual_seed(config.seed + 2)
-    return {
-        "pde": sample_pde_points(config, problem.dim, generator, random=False),
-        "boundary": boundary_sample(config, problem, generator),
-    }
+    pde = sample_pde_points(config, problem.dim, generator, random=False)
+    if problem.exact and config.method.derivatives == "fd":  # TFI at the fixed grid once, not per iteration
+        axes, spacing = pde
+        pde = (axes, spacing, grid_tfi(problem, axes).to(problem.device))
+    return {"pde": pde, "boundary": boundary_sample(config, problem, generator)}
 
 
 # ---------------------------------------------------------------------------------------------
