@@ -1,11 +1,11 @@
 """Train the model that meshgen ships for a geometry and record how it was made and how it meshes.
 
-    python scripts/bundle_model.py [--geometry semicylinder] [--preset exact] [--seed 0] [--measure-only]
+    python scripts/bundle_model.py [--geometry semicylinder] [--preset exact] [--set KEY=VALUE ...] [--seed 0] [--measure-only]
 
 ``--measure-only``: keep the bundled checkpoint and its training record, measure step 3 again
 (after a change to how meshes are made from a model, e.g. the boundary correction).
 
-1. ``meshgen train -g GEOMETRY --preset PRESET --seed SEED --out <temporary run folder>``;
+1. ``meshgen train -g GEOMETRY --preset PRESET [--set KEY=VALUE ...] --seed SEED --out <temporary run folder>``;
 2. the checkpoint, less its optimiser and scheduler state (only a resumed run needs them, and the
    L-BFGS history is most of the file), saved with meshgen's own ``save_checkpoint`` to
    ``meshgen/_models/GEOMETRY/checkpoint.pt``;
@@ -75,6 +75,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--geometry", default="semicylinder")
     parser.add_argument("--preset", default="exact")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                        help="a preset setting changed for this model, as meshgen train --set (repeatable)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--measure-only", action="store_true", help="keep the bundled checkpoint; measure its quality again")
     args = parser.parse_args()
@@ -91,7 +93,9 @@ def main():
     folder = MODELS_DIR / args.geometry
     folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as run_dir:
-        command = ["meshgen", "train", "-g", args.geometry, "--preset", args.preset, "--seed", str(args.seed), "--out", "RUN", "-q"]
+        settings = [word for setting in args.overrides for word in ("--set", setting)]
+        command = ["meshgen", "train", "-g", args.geometry, "--preset", args.preset, *settings, "--seed", str(args.seed),
+                   "--out", "RUN", "-q"]
         started = time.perf_counter()
         subprocess.run([sys.executable, "-m", *[run_dir if c == "RUN" else c for c in command]], check=True,
                        env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
@@ -106,6 +110,7 @@ def main():
         "geometry": args.geometry,
         "params": dict(geometry.values),
         "preset": args.preset,
+        "settings": list(args.overrides),
         "command": " ".join(command).replace("RUN", "<run folder>"),
         "seed": args.seed,
         "post_processing": "optimizer and scheduler state removed (needed only to resume training); saved with meshgen.neural.checkpoint.save_checkpoint",
