@@ -25,6 +25,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 BENCHMARKS = Path(__file__).resolve().parent
@@ -68,17 +69,35 @@ def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) ->
     return row
 
 
-def gpu_row() -> dict:
-    try:
-        import torch
+GPU_NODES = 501  # per axis: 1.26e8 nodes, 3 GB of float64 coordinates on the host
+GPU_WIDTHS = [85, 85, 85, 85]
 
-        available = torch.cuda.is_available()
-    except ImportError:
-        available = False
-    if not available:
-        return {"skipped": "no CUDA device on this machine (torch.cuda.is_available() is False); "
-                           "GPU inference of 501^3 nodes needs one, and `meshgen mesh --device` is issue 13's"}
-    return {"skipped": "a CUDA device is present but meshgen's inference runs on the CPU until `--device` lands (issue 13)"}
+
+def gpu_row(repeats: int = 3) -> dict:
+    """The [85]*4 network (random weights) over 501^3 nodes on the GPU, the nodes copied back into
+    one float64 host array (``evaluate_on_grid(device="cuda")``, what ``meshgen mesh --device cuda``
+    runs): median of ``repeats`` after a warm-up. Skipped where torch sees no CUDA device."""
+    import numpy as np
+    import torch
+
+    if not torch.cuda.is_available():
+        return {"skipped": "no CUDA device on this machine (torch.cuda.is_available() is False)"}
+    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.model import MLP, describe
+
+    torch.manual_seed(0)
+    model = describe(MLP(3, GPU_WIDTHS), GPU_WIDTHS, False, [0.0, 0.0, 0.0], 1.0)
+    coords = [np.linspace(0.0, 1.0, GPU_NODES)] * 3
+    out = np.empty((GPU_NODES**3, 3))
+    evaluate_on_grid(model, [c[:101] for c in coords], device="cuda")  # warm-up: context, kernels
+    seconds = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        evaluate_on_grid(model, coords, out=out, device="cuda")
+        torch.cuda.synchronize()
+        seconds.append(time.perf_counter() - start)
+    return {"nodes_per_axis": GPU_NODES, "widths": GPU_WIDTHS, "device": torch.cuda.get_device_name(0),
+            "seconds": sorted(seconds)[len(seconds) // 2], "all_seconds": seconds}
 
 
 def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None) -> dict:

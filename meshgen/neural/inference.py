@@ -166,6 +166,7 @@ def _evaluate_on_gpu(layers, axes, count: int, out: np.ndarray) -> np.ndarray:
     device = torch.device("cuda")
     layers = [(weight.to(device), bias.to(device)) for weight, bias in layers]
     axes = [axis.to(device) for axis in axes]
+    target = torch.from_numpy(out)  # the copies land in ``out`` itself, with no host array between
     with torch.inference_mode():
         for start in range(0, count, GPU_CHUNK_NODES):
             stop = min(count, start + GPU_CHUNK_NODES)
@@ -174,7 +175,7 @@ def _evaluate_on_gpu(layers, axes, count: int, out: np.ndarray) -> np.ndarray:
                 hidden = torch.addmm(bias, hidden, weight)
                 if index < len(layers) - 1:
                     hidden = torch.tanh(hidden)
-            out[start:stop] = hidden.double().cpu().numpy()
+            target[start:stop].copy_(hidden.double())
     return out
 
 
