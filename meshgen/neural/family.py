@@ -14,7 +14,8 @@ the interior correction, and it is trained on the Winslow residual alone. Each s
 ``MEMBERS_PER_STEP`` members uniformly in the ranges and one shifted training grid shared by them;
 the TFI of each member comes from the plugin (NumPy), the network and the residual run for all
 members in one batch. An L-BFGS stage follows on the unshifted grid, with members that cover the
-range: its corners, its middle and stratified samples drawn again every few steps (``lbfgs_batch``). A member's residual is weighted by (S / s_p)^2, s_p its own size, so that a
+range: its corners, its middle and stratified samples drawn again every few steps
+(``lbfgs_batch``). A member's residual is weighted by (S / s_p)^2, s_p its own size, so that a
 small member counts as much as a large one (the residual is of degree one in length).
 
 Meshing one member is one forward pass: the varied inputs are constant over the grid, so they fold
@@ -369,10 +370,9 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
                  reporter=None, stop=None, summary: bool = True):
     """Train one network for ``family`` (exact-boundary form, PDE loss alone): Adam on
     ``MEMBERS_PER_STEP`` members sampled per step, then L-BFGS on members covering the range
-(``lbfgs_batch``). Writes
-    ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and ``summary.json`` in ``run_dir``, as
-    ``meshgen.neural.train.train`` does, and returns its TrainResult; ``resume`` continues a
-    saved family checkpoint."""
+    (``lbfgs_batch``). Writes ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and
+    ``summary.json`` in ``run_dir``, as ``meshgen.neural.train.train`` does, and returns its
+    TrainResult; ``resume`` continues a saved family checkpoint."""
     from meshgen import __version__
     from meshgen.neural.config import to_dict, to_yaml
     from meshgen.neural.train import CONFIG_HEADER, TrainResult, open_history
