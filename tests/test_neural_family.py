@@ -2,6 +2,7 @@
 refused before training, members meshed with an exact boundary in one forward pass, and the mesh's
 derivative in the parameters by autograd against a finite difference of the plugin-based mesh."""
 
+import itertools
 import re
 import shutil
 from pathlib import Path
@@ -17,7 +18,9 @@ from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import resolve_config
 from meshgen.neural.family import (
+    LBFGS_RESAMPLE,
     FamilyMesher,
+    covering_members,
     family_from_checkpoint,
     make_family,
     mesh_member,
@@ -207,25 +210,66 @@ def test_family_from_checkpoint_rebuilds_the_ranges(semicylinder_family):
     assert family.check_values({"radius": 0.5}) == {"radius": 0.5, "length": 2.5}  # unset: the middle
 
 
-def test_an_interrupted_family_run_resumes_to_the_weights_of_an_uninterrupted_one(tmp_path):
+@pytest.mark.parametrize("parameters, interior", [(1, 8), (2, 8), (3, 5)])
+def test_the_lbfgs_members_cover_the_corners_the_middle_and_every_slice_of_each_range(parameters, interior):
+    q = covering_members(parameters, interior, torch.Generator().manual_seed(parameters)).numpy()
+    corners = 2**parameters
+    assert q.shape == (corners + 1 + interior, parameters)
+    assert {tuple(row) for row in q[:corners]} == set(itertools.product((-1.0, 1.0), repeat=parameters))
+    assert np.array_equal(q[corners], np.zeros(parameters))
+    stratified = q[corners + 1:]
+    assert np.all((stratified > -1) & (stratified < 1))
+    for axis in range(parameters):  # a Latin hypercube: one sample in each of the axis's equal slices
+        slices = np.floor((stratified[:, axis] + 1) / 2 * interior).astype(int)
+        assert sorted(slices) == list(range(interior)), axis
+    again = covering_members(parameters, interior, torch.Generator().manual_seed(parameters + 1)).numpy()
+    assert not np.array_equal(again[corners + 1:], stratified)  # drawn again, not a fixed set
+
+
+@pytest.mark.parametrize("stop_at, stage", [(4, "adam"), (6 + LBFGS_RESAMPLE + 1, "lbfgs")])
+def test_an_interrupted_family_run_resumes_to_the_weights_of_an_uninterrupted_one(tmp_path, stop_at, stage):
+    """Interrupted in Adam, or in L-BFGS after its members were drawn again: the same weights."""
     family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
-    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=6", "lbfgs.steps=2", "lbfgs.max_iter=3",
-                                             "points.interior=64", "checkpoint.every=100"])
+    lbfgs_steps = LBFGS_RESAMPLE + 3
+    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=6", f"lbfgs.steps={lbfgs_steps}",
+                                             "lbfgs.max_iter=3", "points.interior=64", "checkpoint.every=100"])
     (tmp_path / "whole").mkdir()
     whole = train_family(config, family, tmp_path / "whole", summary=False)
     calls = []
 
-    def stop_after_four():
+    def stop_after():
         calls.append(1)
-        return len(calls) > 4
+        return len(calls) > stop_at
 
     (tmp_path / "part").mkdir()
-    part = train_family(config, family, tmp_path / "part", stop=stop_after_four, summary=False)
-    assert part.interrupted and part.step == 4 and part.checkpoint["stage"] == "adam"
+    part = train_family(config, family, tmp_path / "part", stop=stop_after, summary=False)
+    assert part.interrupted and part.step == stop_at and part.checkpoint["stage"] == stage
     resumed = train_family(config, family, tmp_path / "part", resume=load_checkpoint(tmp_path / "part" / "checkpoint.pt"),
                            summary=False)
-    assert resumed.step == whole.step == 8
+    assert resumed.step == whole.step == 6 + lbfgs_steps
     for key, value in whole.checkpoint["model"]["state_dict"].items():
         assert torch.equal(value, resumed.checkpoint["model"]["state_dict"][key]), key
     rows = (tmp_path / "part" / "history.csv").read_text().splitlines()
-    assert [row.split(",")[1] for row in rows[1:]] == [str(i) for i in range(8)]
+    assert [row.split(",")[1] for row in rows[1:]] == [str(i) for i in range(6 + lbfgs_steps)]
+
+
+def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_the_trained_layout():
+    """A family network meets each member's own boundary map (``boundary_layout: fixed``), so its
+    reference is the elliptic mesh on that layout, not on the smoothed one (the elliptic default)."""
+    import sys
+
+    from meshgen.elliptic import elliptic
+    from meshgen.quality import quality_report
+
+    sys.path.insert(0, str(README.parent / "benchmarks"))
+    import bench_family
+
+    tiny = ["model.widths=[8,8]", "adam.steps=2", "lbfgs.steps=0", "points.interior=64"]
+    data = bench_family.measure_case("semicylinder", {"radius": (0.5, 2.0)}, 1, 6, tiny)
+    assert data["elliptic_boundary_layout"] == "fixed"
+    row = data["members"][0]
+    geometry = load_geometry("semicylinder").with_params(**row["params"])
+    angles = {layout: quality_report(elliptic(geometry, (6, 6, 6), boundary_layout=layout)[0], geometry)
+              ["metrics"]["min_angle"]["mean"] for layout in ("fixed", "smoothed")}
+    assert row["elliptic_min_angle_mean"] == pytest.approx(angles["fixed"], abs=1e-9)
+    assert abs(angles["smoothed"] - angles["fixed"]) > 0.1  # the two references differ: the test tells them apart
