@@ -251,6 +251,25 @@ def test_correction_keeps_the_cells_that_snapping_folds(semicylinder):
     np.testing.assert_allclose(X, expected, rtol=0, atol=1e-14)
 
 
+def test_correction_of_an_error_inside_one_face_fades_as_the_closed_form(semicylinder):
+    """A bump on the cap zeta = 0, zero on its edges: the correction's corner part and every other
+    face's term vanish, so it is the bump times (1 - zeta)^p at every node (closed form), where
+    linear TFI would carry (1 - zeta) of it through the whole volume."""
+    from meshgen.neural.inference import CORRECTION_POWER
+
+    dims = (12, 10, 16)
+    coords = parametric_grid(dims)
+    X = tfi(semicylinder, dims)
+    bump = 0.05 * np.outer(np.sin(np.pi * coords[0]), np.sin(np.pi * coords[1]))
+    moved = X.copy()
+    moved[:, :, 0, 2] += bump
+    expected = moved[..., 2] - bump[:, :, None] * (1.0 - coords[2]) ** CORRECTION_POWER  # X on zeta = 0
+    correct_boundary(moved, semicylinder, coords)
+    np.testing.assert_allclose(moved[..., 2], expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(moved[..., :2], X[..., :2], rtol=0, atol=1e-15)
+    assert np.abs(moved - X)[:, :, 8:].max() < 0.05 * 0.5**CORRECTION_POWER + 1e-15  # the inner half kept
+
+
 def test_correction_block_by_block_from_the_model_equals_the_whole_mesh(soft_3d, semicylinder):
     """What a block-wise mesher does: the boundary errors from the faces alone, then each block's
     nodes from the network plus the correction on that block."""

@@ -41,7 +41,7 @@ def pde_loss(residual: torch.Tensor) -> torch.Tensor:
     return residual.square().sum(-1).mean()
 
 
-def boundary_local_size(boundary, points: np.ndarray) -> np.ndarray:
+def boundary_local_size(boundary, points: np.ndarray, images: np.ndarray | None = None) -> np.ndarray:
     """The boundary map's local size at cube-boundary ``points`` (N, d) float64: the shortest of its
     tangent vectors |dB/dxi_t| over the axes t along which the point can move and stay on the
     boundary (the axes of its face; on an edge, of both faces), by one-sided differences of step
@@ -49,7 +49,8 @@ def boundary_local_size(boundary, points: np.ndarray) -> np.ndarray:
     unit parametric length: the local cell size times the cells per side. Floored at
     ``SIZE_FLOOR`` times the median. Returns (N,) float64.
 
-    ``boundary``: (N, d) -> (N, d), vectorised (a Problem's normalised boundary map)."""
+    ``boundary``: (N, d) -> (N, d), vectorised (a Problem's normalised boundary map); ``images``:
+    its values at ``points`` when the caller has them (saves one call)."""
     points = np.asarray(points, dtype=float)
     count, dim = points.shape
     on_face = (points == 0.0) | (points == 1.0)  # (N, d)
@@ -61,10 +62,11 @@ def boundary_local_size(boundary, points: np.ndarray) -> np.ndarray:
         step = np.where(moved[:, axis] < 0.5, TANGENT_STEP, -TANGENT_STEP)
         moved[:, axis] += step
         steps.append((moved, step))
-    images = boundary(np.concatenate([points] + [moved for moved, _ in steps]))
-    size, start = np.full(count, np.inf), count
+    moved_images = boundary(np.concatenate([moved for moved, _ in steps]))
+    images = boundary(points) if images is None else np.asarray(images, dtype=float)
+    size, start = np.full(count, np.inf), 0
     for rows, (moved, step) in zip(movable, steps):
-        tangent = (images[start : start + len(rows)] - images[rows]) / step[:, None]
+        tangent = (moved_images[start : start + len(rows)] - images[rows]) / step[:, None]
         size[rows] = np.minimum(size[rows], np.linalg.norm(tangent, axis=1))
         start += len(rows)
     return np.maximum(size, SIZE_FLOOR * np.median(size))

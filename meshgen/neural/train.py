@@ -161,7 +161,7 @@ def boundary_targets(problem: Problem, config: TrainConfig, points: torch.Tensor
     images = problem.boundary(points.double().numpy())
     size = None
     if config.method.boundary_error == "relative":
-        size = torch.from_numpy(boundary_local_size(problem.boundary, points.double().numpy())).float()
+        size = torch.from_numpy(boundary_local_size(problem.boundary, points.double().numpy(), images)).float()
     return points, torch.from_numpy(images).float(), size
 
 
