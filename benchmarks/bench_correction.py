@@ -2,6 +2,9 @@
 preset trained on each 3D built-in geometry, its corrected mesh at 30^3, 100^3 and 200^3 cells
 against the converged elliptic mesh of the same dims (inverted cells, boundary deviation, mean
 minimum angle), and the raw network's figures (boundary error, inverted cells) beside them.
+The network is corrected against the boundary it was trained on (its checkpoint's
+``boundary_layout``, ``smoothed`` for ``default``); the elliptic reference uses its own default
+layout (``smoothed``), so both meshes put their boundary nodes on the same kind of surface grid.
 
     python benchmarks/bench_correction.py [--quick] [--json FILE] [--checkpoints DIR]
 
@@ -29,22 +32,28 @@ ANGLE_TOLERANCE_DEGREES = 0.3  # issue 13: mean min angle within 0.3 degrees of 
 QUICK_OVERRIDES = ["pretrain.steps=10", "adam.steps=100", "lbfgs.steps=10"]
 
 
-def trained_checkpoint(geometry, folder: Path | None, overrides) -> tuple[dict, float | None]:
+def trained_checkpoint(geometry, folder: Path | None, overrides) -> tuple[dict, float | None, float | None]:
     """``default`` trained on ``geometry`` (or the checkpoint kept in ``folder``): (checkpoint,
-    training seconds, None when reused)."""
+    training wall seconds, training CPU seconds of this process; both None when reused)."""
     from meshgen.neural.checkpoint import load_checkpoint
     from meshgen.neural.config import resolve_config
     from meshgen.neural.train import train
 
     if folder is not None and (folder / "checkpoint.pt").is_file():
-        return load_checkpoint(folder / "checkpoint.pt"), None
+        return load_checkpoint(folder / "checkpoint.pt"), None, None
     config = resolve_config("default", None, overrides)
     with tempfile.TemporaryDirectory() as temporary:
         run_dir = folder or Path(temporary)
         run_dir.mkdir(parents=True, exist_ok=True)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         result = train(config, geometry, run_dir, summary=False)
-        return result.checkpoint, time.perf_counter() - start
+        return result.checkpoint, time.perf_counter() - start, time.process_time() - cpu
+
+
+def torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
 
 
 def figures(report: dict) -> dict:
@@ -59,24 +68,27 @@ def figures(report: dict) -> dict:
 
 
 def measure(geometry, checkpoint: dict, n: int) -> dict:
-    """The corrected network mesh and the converged elliptic mesh of ``n``^3 cells, measured alike."""
+    """The corrected network mesh and the converged elliptic mesh of ``n``^3 cells, measured alike:
+    the network on the boundary layout it was trained on, elliptic on its default layout."""
     from meshgen.elliptic import elliptic
+    from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.inference import correct_boundary, mesh_from_model
     from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid
 
+    trained = with_layout(geometry, trained_layout(checkpoint))  # the boundary map the network learnt
     coords = parametric_grid([n] * 3)
     start = time.perf_counter()
-    X = mesh_from_model(checkpoint["model"], coords, geometry)
+    X = mesh_from_model(checkpoint["model"], coords, trained)
     network_seconds = time.perf_counter() - start
     raw_inverted = quality_report(X)["inverted"]["count"]
     start = time.perf_counter()
-    info = correct_boundary(X, geometry, coords)
+    info = correct_boundary(X, trained, coords)
     correction_seconds = time.perf_counter() - start
     corrected = figures(quality_report(X, geometry))
     del X
     start = time.perf_counter()
-    Y, solver = elliptic(geometry, [n] * 3)
+    Y, solver = elliptic(geometry, [n] * 3)  # default layout: smoothed
     elliptic_seconds = time.perf_counter() - start
     reference = figures(quality_report(Y, geometry))
     del Y
@@ -116,9 +128,10 @@ def run(quick: bool = False, checkpoints: Path | None = None, verbose: bool = Tr
     for name in names:
         geometry = load_geometry(name)
         folder = checkpoints / name if checkpoints is not None else None
-        checkpoint, seconds = trained_checkpoint(geometry, folder, overrides)
+        checkpoint, seconds, cpu_seconds = trained_checkpoint(geometry, folder, overrides)
         for n in dims:
-            row = {"geometry": name, "training_seconds": seconds, "steps": checkpoint["step"], **measure(geometry, checkpoint, n)}
+            row = {"geometry": name, "training_seconds": seconds, "training_cpu_seconds": cpu_seconds,
+                   "torch_threads": torch_threads(), "steps": checkpoint["step"], **measure(geometry, checkpoint, n)}
             rows.append(row)
             if partial is not None:
                 partial.write_text(json.dumps(rows, indent=2) + "\n")
@@ -139,7 +152,12 @@ def main():
     parser.add_argument("--checkpoints", type=Path, help="keep (and reuse) the trained checkpoints here")
     parser.add_argument("--geometries", nargs="+", choices=GEOMETRIES, help="these geometries only")
     parser.add_argument("--dims", nargs="+", type=int, help="these cells per axis only")
+    parser.add_argument("--threads", type=int, help="torch threads (as meshgen train --threads; default: torch's)")
     args = parser.parse_args()
+    if args.threads is not None:
+        import torch
+
+        torch.set_num_threads(args.threads)
     results = run(args.quick, args.checkpoints, partial=args.json.with_suffix(".partial.json") if args.json else None,
                   geometries=args.geometries, dims=args.dims)
     print(f"all met: {results['all_met']}")

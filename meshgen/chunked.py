@@ -143,6 +143,7 @@ def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
 
 def _neural_block(shared, block):
     from meshgen import cube
+    from meshgen.neural.inference import add_correction_terms
     from meshgen.tfi import add_face_terms
 
     model, coords, tfi_terms, error_terms, boundary_values = shared
@@ -150,7 +151,7 @@ def _neural_block(shared, block):
     tfi_block = add_face_terms(tfi_terms, coords, block=block) if tfi_terms else None
     X = network_map_block(model, sub_coords, tfi_block)
     if error_terms:
-        add_face_terms(error_terms, coords, X, block)  # X + TFI[g - M] on the block
+        add_correction_terms(error_terms, coords, X, block)  # X + TFI[g - M] on the block
         # The network's float32 values on a face differ from those of a block in the last bits (other
         # batch sizes): the boundary nodes take the boundary map's values exactly.
         for face, values in zip(cube.faces(len(coords)), boundary_values):
@@ -168,7 +169,7 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     ``correct_boundary``: X = M + TFI[g - M] (``meshgen.neural.inference.add_boundary_correction``
     block by block, the face errors computed once on the faces alone); else the network's map M.
     """
-    from meshgen.neural.inference import error_figures, model_boundary_errors
+    from meshgen.neural.inference import correction_terms, error_figures, model_boundary_errors
     from meshgen.tfi import face_terms, face_values
 
     coords = [np.asarray(c, dtype=float) for c in coords]
@@ -179,7 +180,7 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     if correct_boundary:
         errors = model_boundary_errors(model, geometry, coords)
         info = {"corrected": True, "error_before": error_figures(errors, geometry)}
-        error_terms = face_terms(errors, coords)
+        error_terms = correction_terms(errors, coords)
     shape = tuple(len(c) for c in coords)
     shared = (model, coords, tfi_terms, error_terms, boundary_values)
     return _node_array(_neural_block, shared, shape, len(coords), block_nodes), info

@@ -24,8 +24,9 @@ def parametric_grid(dims) -> list[np.ndarray]:
     return [np.linspace(0.0, 1.0, int(n) + 1) for n in dims]
 
 
-def transfinite(boundary, coords) -> np.ndarray:
-    """Gordon-Hall interpolant of ``boundary`` at parametric coordinates ``coords``.
+def transfinite(boundary, coords, power: int = 1) -> np.ndarray:
+    """Gordon-Hall interpolant of ``boundary`` at parametric coordinates ``coords`` (``power``: of
+    the blending functions, :func:`blending`; 1, linear, for TFI).
 
     ``boundary``: ``(N, dim) -> (N, dim)`` map of the unit cube's boundary.
     ``coords``: ``dim`` mutually broadcastable arrays (t_1, ..., t_dim) in [0, 1]; e.g. three
@@ -44,7 +45,7 @@ def transfinite(boundary, coords) -> np.ndarray:
                 weight = np.ones(())
                 fixed = list(coords)
                 for axis, side in zip(axes, sides):
-                    weight = weight * (coords[axis] if side else 1.0 - coords[axis])
+                    weight = weight * blending(coords[axis], int(side), power)
                     fixed[axis] = np.asarray(side)
                 terms.append((sign, weight, np.broadcast_arrays(*fixed)))
     # One call of the boundary map for the points of all terms: a plugin's cost is mostly per call
@@ -92,9 +93,20 @@ def face_values(boundary, coords) -> list[np.ndarray]:
     return values
 
 
-def face_terms(face_values, coords) -> list:
+def blending(t, side: int, power: int = 1):
+    """The blending function of a side: L_0(t) = (1 - t)^power, L_1(t) = t^power. Power 1 is
+    Gordon-Hall's linear blending (TFI); any power keeps L_s(s) = 1 and L_s(1 - s) = 0, so the
+    Boolean sum still reproduces the data on every face, while a higher power confines the
+    interpolant of data on a face to a layer next to it (about 1 / power of the axis deep)."""
+    t = np.asarray(t, dtype=float)
+    weight = t if side else 1.0 - t
+    return weight if power == 1 else weight**power
+
+
+def face_terms(face_values, coords, power: int = 1) -> list:
     """The blended face terms of the TFI of data given at the face nodes of the tensor grid of
-    ``coords`` (first and last values 0 and 1 on every axis).
+    ``coords`` (first and last values 0 and 1 on every axis); ``power``: the blending functions'
+    (:func:`blending`; 1 for TFI), the same as given to :func:`add_face_terms` with the terms.
 
     ``face_values``: per face, in :func:`boundary_faces` order (axis-major, side-minor), the data
     at its nodes, shape (face nodes..., d) or (face nodes, d) in C order. Returns [(axis, side, D)],
@@ -121,14 +133,15 @@ def face_terms(face_values, coords) -> list:
             # D lacks its own (earlier) axis, so this axis is D's axis - 1; on the face, the earlier
             # axis keeps its number, this one being later.
             restricted = np.expand_dims(np.take(D, end, axis=axis - 1), earlier)
-            weight = coords[earlier] if earlier_side else 1.0 - coords[earlier]
+            weight = blending(coords[earlier], earlier_side, power)
             values -= _along(weight, earlier, dim - 1) * restricted
         terms.append((axis, side, values))
     return terms
 
 
-def add_face_terms(terms, coords, out: np.ndarray | None = None, block=None) -> np.ndarray:
-    """Add the TFI of :func:`face_terms` ``terms`` (made on the grid of ``coords``) to ``out``, or
+def add_face_terms(terms, coords, out: np.ndarray | None = None, block=None, power: int = 1) -> np.ndarray:
+    """Add the TFI of :func:`face_terms` ``terms`` (made on the grid of ``coords`` with the same
+    blending ``power``) to ``out``, or
     return it: on the whole grid, or with ``block`` (one slice per axis, steps of 1) on that block
     of its nodes only, ``out`` then of the block's shape (m1, .., d). A block-wise caller makes
     the terms once (face-sized) and evaluates any block of the grid from them; each node sees the
@@ -140,8 +153,7 @@ def add_face_terms(terms, coords, out: np.ndarray | None = None, block=None) -> 
     shape = tuple(len(np.arange(len(c))[b]) for c, b in zip(coords, block))
     result = np.zeros(shape + (terms[0][2].shape[-1],)) if out is None else out
     for axis, side, D in terms:
-        weight = coords[axis][block[axis]]
-        weight = weight if side else 1.0 - weight
+        weight = blending(coords[axis][block[axis]], side, power)
         on_block = D[tuple(b for d, b in enumerate(block) if d != axis)]
         result += _along(weight, axis, dim) * np.expand_dims(on_block, axis)
     return result

@@ -26,7 +26,7 @@ from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
 from meshgen.tfi import transfinite, parametric_grid, tfi
-from neural_helpers import tiny_config
+from neural_helpers import direct_correction, tiny_config
 
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
 
@@ -211,11 +211,10 @@ def test_correction_is_the_tfi_of_the_boundary_error_and_exact_on_the_boundary(r
     # the default configuration trains on the smoothed boundary layout: the correction goes there
     exact = smoothed(semicylinder).boundary(grid[on_boundary])
     np.testing.assert_allclose(X[on_boundary], exact, rtol=0, atol=1e-14)  # on the boundary to round-off
-    # Inside: the raw network plus the 26-term Gordon-Hall sum of the error at the face nodes.
+    # Inside: the raw network plus the correction's direct form of the error at the face nodes.
     error = np.zeros_like(X_raw)
     error[on_boundary] = exact - X_raw[on_boundary]
-    axes = [c.reshape([-1 if d == a else 1 for d in range(3)]) for a, c in enumerate(coords)]
-    np.testing.assert_allclose(X - X_raw, transfinite(grid_lookup(error, coords), axes), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(X - X_raw, direct_correction(grid_lookup(error, coords), coords), rtol=0, atol=1e-13)
     assert np.abs(error).max() > 1e-3  # a tiny run is visibly off: the check means something
     # The network's boundary error, said the same way with and without the correction.
     distance = np.linalg.norm(error[on_boundary], axis=1)
@@ -244,8 +243,31 @@ def test_correction_keeps_the_cells_that_snapping_folds(semicylinder):
     assert info["inverted_before"] == info["inverted_after"] == 0
     report = quality_report(X, semicylinder)
     assert report["inverted"]["count"] == 0 and report["boundary_deviation"]["max"] < 1e-14
-    # The error is 1.5 h along z on the cap zeta = 0 and zero on zeta = 1: TFI blends it linearly in zeta.
-    np.testing.assert_allclose(X, tfi(semicylinder, dims), rtol=0, atol=1e-14)
+    # The error is 1.5 h along z on the cap zeta = 0 and on the side faces' first two node rings,
+    # zero elsewhere: the corrected mesh is the moved one plus the correction's direct form of it.
+    error = np.zeros(X.shape)
+    error[:, :, :2, 2] = 1.5 * height
+    expected = tfi(semicylinder, dims) - error + direct_correction(grid_lookup(error, coords), coords)
+    np.testing.assert_allclose(X, expected, rtol=0, atol=1e-14)
+
+
+def test_correction_of_an_error_inside_one_face_fades_as_the_closed_form(semicylinder):
+    """A bump on the cap zeta = 0, zero on its edges: the correction's corner part and every other
+    face's term vanish, so it is the bump times (1 - zeta)^p at every node (closed form), where
+    linear TFI would carry (1 - zeta) of it through the whole volume."""
+    from meshgen.neural.inference import CORRECTION_POWER
+
+    dims = (12, 10, 16)
+    coords = parametric_grid(dims)
+    X = tfi(semicylinder, dims)
+    bump = 0.05 * np.outer(np.sin(np.pi * coords[0]), np.sin(np.pi * coords[1]))
+    moved = X.copy()
+    moved[:, :, 0, 2] += bump
+    expected = moved[..., 2] - bump[:, :, None] * (1.0 - coords[2]) ** CORRECTION_POWER  # X on zeta = 0
+    correct_boundary(moved, semicylinder, coords)
+    np.testing.assert_allclose(moved[..., 2], expected, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(moved[..., :2], X[..., :2], rtol=0, atol=1e-15)
+    assert np.abs(moved - X)[:, :, 8:].max() < 0.05 * 0.5**CORRECTION_POWER + 1e-15  # the inner half kept
 
 
 def test_correction_block_by_block_from_the_model_equals_the_whole_mesh(soft_3d, semicylinder):

@@ -142,3 +142,37 @@ def test_the_same_seed_repeats_a_cpu_run_and_another_seed_does_not(tmp_path, sem
     assert all(torch.equal(same[0][k], same[1][k]) for k in same[0])
     other = runs["c"]["model"]["state_dict"]
     assert not torch.equal(same[0]["layers.0.weight"], other["layers.0.weight"])
+
+
+def test_boundary_local_size_is_the_shortest_tangent_along_the_face(semidisk):
+    """Closed forms: the semidisk's edges are its diameter (x = 2 xi - 1: tangent 2 R) and arcs of
+    pi/4, pi/2, pi/4 (tangent pi/4 R, pi/2 R, pi/4 R); a corner may move along both of its edges.
+    A box [0, a] x [0, b] x [0, c]: on a face the shorter of its two sides, on an edge all three."""
+    from meshgen.neural.losses import boundary_local_size
+
+    radius = 1.0
+    points = np.array([[0.3, 0.0], [0.0, 0.6], [1.0, 0.2], [0.5, 1.0], [0.0, 0.0], [0.0, 1.0]])
+    expected = np.array([2.0, np.pi / 4, np.pi / 4, np.pi / 2, np.pi / 4, np.pi / 4]) * radius
+    np.testing.assert_allclose(boundary_local_size(semidisk.boundary, points), expected, rtol=1e-6)
+
+    sides = np.array([3.0, 0.5, 2.0])
+    box = np.array([[0.2, 0.7, 0.0], [1.0, 0.4, 0.9], [0.3, 0.0, 0.8], [0.0, 0.0, 0.4]])
+    np.testing.assert_allclose(boundary_local_size(lambda p: p * sides, box), [0.5, 0.5, 2.0, 0.5], rtol=1e-12)
+
+
+def test_the_relative_boundary_error_is_scale_free():
+    """L2 with the error divided by the local size: the same for a geometry scaled by k (error and
+    size scale alike), where the absolute L2 scales by k^2."""
+    from meshgen.neural.losses import boundary_loss
+
+    generator = torch.Generator().manual_seed(0)
+    target, size = torch.rand((50, 3), generator=generator), 0.1 + torch.rand(50, generator=generator)
+    predicted = target + 0.01 * torch.randn((50, 3), generator=generator)
+    relative, distance = boundary_loss(predicted, target, 1.0, size)
+    scaled, _ = boundary_loss(7.0 * predicted, 7.0 * target, 1.0, 7.0 * size)
+    absolute, _ = boundary_loss(7.0 * predicted, 7.0 * target, 0.0)
+    torch.testing.assert_close(scaled, relative)
+    expected = ((predicted - target).norm(dim=1) / size).square().mean()
+    assert relative > expected  # the point weights 1 + |e| only add
+    assert math.isclose(float(absolute), 49.0 * float((predicted - target).square().sum(1).mean()), rel_tol=1e-5)
+    torch.testing.assert_close(distance, (predicted - target).norm(dim=1) / size)

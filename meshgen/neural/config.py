@@ -34,6 +34,9 @@ class MethodConfig:
     balance_start: bool = True  # reweighting: start a1, a2 at the stationary point of L for the first losses
     pcgrad: bool = True  # project conflicting PDE / boundary gradients
     point_weights: float = 1.0  # c of the surface-point weights w = 1 + c |error|; 0 switches them off
+    # L2's error: "relative" to the boundary's local size (scale-free, like L1), or "absolute" in
+    # normalised units (the paper's)
+    boundary_error: str = "relative"
     pde_weight: float = 1.0  # fixed weight of L1 (the starting weight when reweighting)
     boundary_weight: float = 1.0  # fixed weight of L2 (the starting weight when reweighting)
 
@@ -107,7 +110,7 @@ class TrainConfig:
     test: TestConfig = field(default_factory=TestConfig)
 
 
-CHOICES = {"method.derivatives": ("fd", "autograd")}
+CHOICES = {"method.derivatives": ("fd", "autograd"), "method.boundary_error": ("relative", "absolute")}
 
 
 # ---------------------------------------------------------------------------------------------

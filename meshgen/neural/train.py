@@ -42,7 +42,7 @@ from meshgen.neural.derivatives import (
     stencil_derivatives,
     training_grid,
 )
-from meshgen.neural.losses import boundary_loss, pde_loss, sample_boundary, sample_interior
+from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
 from meshgen.neural.model import MLP, bubble, describe, normalisation, normalised_boundary
 from meshgen.neural.pcgrad import assign, flatten, project_conflicting
 from meshgen.neural.reweighting import UncertaintyWeights
@@ -151,7 +151,8 @@ def sample_step(config: TrainConfig, problem: Problem, generator: torch.Generato
     ``tfi`` (n, d) float32, TFI at its nodes: the geometry is NumPy code) or ``points`` (N, d)
     random interior points (autograd); then ``index`` (N,) int64 into ``pool`` (see
     :func:`boundary_pool`) or, without a pool, ``boundary_points`` and ``boundary_targets`` (N, d)
-    float32; no boundary points for the exact-boundary form, which has no boundary loss."""
+    float32 (and ``boundary_size`` (N,), the boundary's local size, with the relative boundary
+    error); no boundary points for the exact-boundary form, which has no boundary loss."""
     inputs = {}
     if config.method.derivatives == "fd":
         inputs["grid"] = torch.rand(2 * problem.dim, generator=generator, dtype=torch.float64)
@@ -166,14 +167,16 @@ def sample_step(config: TrainConfig, problem: Problem, generator: torch.Generato
         inputs["index"] = torch.randint(0, len(pool), (config.points.boundary,), generator=generator)
     else:
         points = sample_boundary(config.points.boundary, problem.dim, generator)
-        inputs["boundary_points"] = points
-        inputs["boundary_targets"] = torch.from_numpy(problem.boundary(points.double().numpy())).float()
+        points, images, size = boundary_targets(problem, config, points)
+        inputs["boundary_points"], inputs["boundary_targets"] = points, images
+        if size is not None:
+            inputs["boundary_size"] = size
     return inputs
 
 
 def step_samples(training: Training, inputs: dict, pool=None):
-    """The PDE sample (as :func:`pde_term` takes it) and the boundary sample ((points, images), or
-    None) of one step from its :func:`sample_step` inputs, moved to the device."""
+    """The PDE sample (as :func:`pde_term` takes it) and the boundary sample ((points, images, local
+    size or None), or None) of one step from its :func:`sample_step` inputs, moved to the device."""
     config, problem = training.config, training.problem
     dim = problem.dim
     if "grid" in inputs:
@@ -183,9 +186,9 @@ def step_samples(training: Training, inputs: dict, pool=None):
         pde = inputs["points"]
     if "index" in inputs:
         drawn = pool.index_select(0, inputs["index"])  # several times faster than pool[index]
-        return pde, (drawn[:, :dim], drawn[:, dim:])
+        return pde, (drawn[:, :dim], drawn[:, dim : 2 * dim], drawn[:, 2 * dim] if drawn.shape[1] > 2 * dim else None)
     if "boundary_points" in inputs:
-        return pde, (inputs["boundary_points"], inputs["boundary_targets"])
+        return pde, (inputs["boundary_points"], inputs["boundary_targets"], inputs.get("boundary_size"))
     return pde, None
 
 
@@ -197,39 +200,48 @@ def pde_term(network, problem, config, sample) -> torch.Tensor:
 
 
 def boundary_sample(config: TrainConfig, problem: Problem, generator: torch.Generator, pool=None):
-    """One step's boundary points (N, d) and their normalised images, float32 on the device: drawn
-    from ``pool`` (see :func:`boundary_pool`) when given, else fresh."""
+    """One step's boundary points (N, d), their normalised images (N, d) and, with
+    ``method.boundary_error: relative``, the boundary's local size there (N,) (else None), float32
+    on the device: drawn from ``pool`` (see :func:`boundary_pool`) when given, else fresh."""
     dim = problem.dim
     if pool is not None:
         index = torch.randint(0, len(pool), (config.points.boundary,), generator=generator)
         drawn = pool.index_select(0, index.to(pool.device))  # several times faster than pool[index]
-        return drawn[:, :dim], drawn[:, dim:]
+        return drawn[:, :dim], drawn[:, dim : 2 * dim], (drawn[:, 2 * dim] if drawn.shape[1] > 2 * dim else None)
     points = sample_boundary(config.points.boundary, dim, generator)
-    targets = torch.from_numpy(problem.boundary(points.double().numpy())).float()
-    return points.to(problem.device), targets.to(problem.device)
+    return tuple(None if t is None else t.to(problem.device) for t in boundary_targets(problem, config, points))
+
+
+def boundary_targets(problem: Problem, config: TrainConfig, points: torch.Tensor):
+    """(points, images, local size or None) of cube-boundary ``points`` (N, d), float32 on the CPU."""
+    images = problem.boundary(points.double().numpy())
+    size = None
+    if config.method.boundary_error == "relative":
+        size = torch.from_numpy(boundary_local_size(problem.boundary, points.double().numpy(), images)).float()
+    return points, torch.from_numpy(images).float(), size
 
 
 def boundary_pool(problem: Problem, config: TrainConfig):
-    """``points.boundary_pool`` steps' worth of boundary points with their images, computed once,
-    as one (P, 2d) tensor [points | images]: the geometry's boundary map is NumPy code that costs
-    as much as a forward pass per step if called every step. Drawn from its own seed, so a resumed
-    run gets the same pool; None when switched off (or unused: the exact-boundary form has no
-    boundary loss)."""
+    """``points.boundary_pool`` steps' worth of boundary points with their images (and local sizes),
+    computed once, as one (P, 2d [+ 1]) tensor [points | images | size]: the geometry's boundary
+    map is NumPy code that costs as much as a forward pass per step if called every step. Drawn
+    from its own seed, so a resumed run gets the same pool; None when switched off (or unused: the
+    exact-boundary form has no boundary loss)."""
     if config.points.boundary_pool == 0 or problem.exact:
         return None
     generator = torch.Generator().manual_seed(config.seed + 3)
     count = config.points.boundary * config.points.boundary_pool
-    points = sample_boundary(count, problem.dim, generator)
-    targets = torch.from_numpy(problem.boundary(points.double().numpy())).float()
-    return torch.cat([points, targets], dim=1).to(problem.device)
+    points, images, size = boundary_targets(problem, config, sample_boundary(count, problem.dim, generator))
+    columns = [points, images] + ([size[:, None]] if size is not None else [])
+    return torch.cat(columns, dim=1).to(problem.device)
 
 
 def boundary_term(network, problem, config, sample) -> torch.Tensor:
     """L2 on one boundary sample (zero for the exact-boundary form, which meets it by construction)."""
     if problem.exact:
         return torch.zeros((), device=problem.device)
-    points, targets = sample
-    return boundary_loss(network(points), targets, config.method.point_weights)[0]
+    points, targets, size = sample
+    return boundary_loss(network(points), targets, config.method.point_weights, size)[0]
 
 
 # ---------------------------------------------------------------------------------------------
