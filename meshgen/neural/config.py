@@ -68,7 +68,7 @@ class AdamConfig:
 
 @dataclass
 class LbfgsConfig:
-    steps: int = 200  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
+    steps: int = 300  # L-BFGS steps (strong Wolfe line search) on fixed points after Adam
     max_iter: int = 20  # iterations per step
     history_size: int = 50
     lr: float = 1.0
