@@ -185,8 +185,7 @@ def step_samples(training: Training, inputs: dict, pool=None):
     else:
         pde = inputs["points"]
     if "index" in inputs:
-        drawn = pool.index_select(0, inputs["index"])  # several times faster than pool[index]
-        return pde, (drawn[:, :dim], drawn[:, dim : 2 * dim], drawn[:, 2 * dim] if drawn.shape[1] > 2 * dim else None)
+        return pde, pool_rows(pool, inputs["index"], dim)
     if "boundary_points" in inputs:
         return pde, (inputs["boundary_points"], inputs["boundary_targets"], inputs.get("boundary_size"))
     return pde, None
@@ -206,10 +205,15 @@ def boundary_sample(config: TrainConfig, problem: Problem, generator: torch.Gene
     dim = problem.dim
     if pool is not None:
         index = torch.randint(0, len(pool), (config.points.boundary,), generator=generator)
-        drawn = pool.index_select(0, index.to(pool.device))  # several times faster than pool[index]
-        return drawn[:, :dim], drawn[:, dim : 2 * dim], (drawn[:, 2 * dim] if drawn.shape[1] > 2 * dim else None)
+        return pool_rows(pool, index.to(pool.device), dim)
     points = sample_boundary(config.points.boundary, dim, generator)
     return tuple(None if t is None else t.to(problem.device) for t in boundary_targets(problem, config, points))
+
+
+def pool_rows(pool: torch.Tensor, index: torch.Tensor, dim: int):
+    """(points, images, local size or None) of the rows ``index`` of a :func:`boundary_pool`."""
+    drawn = pool.index_select(0, index)  # several times faster than pool[index]
+    return drawn[:, :dim], drawn[:, dim : 2 * dim], (drawn[:, 2 * dim] if drawn.shape[1] > 2 * dim else None)
 
 
 def boundary_targets(problem: Problem, config: TrainConfig, points: torch.Tensor):
