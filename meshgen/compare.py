@@ -150,8 +150,7 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
     """
     try:
         from meshgen.neural.config import resolve_config
-        from meshgen.neural.inference import load_model
-        from meshgen.neural.session import resolve_device
+        from meshgen.neural.inference import inference_device, load_model
         from meshgen.neural.train import train
     except ImportError as exc:
         raise MeshgenError(
@@ -185,7 +184,7 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
         return run
 
     config = resolve_config(get_method(name).preset, overrides=budget.overrides, steps=budget.steps, seed=budget.seed)
-    device = resolve_device(budget.device)
+    device = inference_device(budget.device)
 
     def run(run_dir):
         run_dir = Path(run_dir)

@@ -312,6 +312,14 @@ def test_device_cuda_without_a_gpu_is_one_line_exit_2(run_cli, tmp_path):
     assert not (tmp_path / "m.vtu").exists()
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="a GPU is present: --device cuda is valid here")
+def test_train_device_cuda_without_a_gpu_names_the_flag_and_makes_no_run_folder(run_cli, tmp_path):
+    """train, mesh and compare share one device check (``inference_device``), worded for the CLI."""
+    result = run_cli("train", "-g", "semicylinder", "--device", "cuda", "--out", "run", "-q")
+    assert one_line_error(result) and "--device cuda: no CUDA device is available" in result.stderr, result.stderr
+    assert not (tmp_path / "run").exists()
+
+
 def test_device_cpu_and_auto_give_the_same_mesh_on_a_cpu_machine(run_cli, tmp_path):
     dims = (5, 4, 6)
     for device in ("cpu", "auto"):

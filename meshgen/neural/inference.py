@@ -97,11 +97,11 @@ def inference_device(device: str = "auto") -> str:
     import torch
 
     if device not in ("auto", "cpu", "cuda"):
-        raise MeshgenError(f"unknown device {device!r}: pick auto, cpu or cuda")
+        raise ParameterError("device", f"unknown {{name}} {device!r}: pick auto, cpu or cuda")
     if device == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
     if device == "cuda" and not torch.cuda.is_available():
-        raise MeshgenError("device cuda: no CUDA device is available to torch here; use cpu")
+        raise ParameterError("device", "{name} cuda: no CUDA device is available to torch here; use cpu")
     return device
 
 

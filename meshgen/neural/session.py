@@ -67,16 +67,6 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     return path
 
 
-def resolve_device(device: str) -> str:
-    import torch
-
-    if device == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if device == "cuda" and not torch.cuda.is_available():
-        raise MeshgenError("--device cuda: no CUDA device is available to torch here; use --device cpu")
-    return device
-
-
 def _geometry_spec(spec: str) -> str:
     from meshgen.geometry import _looks_like_path
 
@@ -149,7 +139,9 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
             f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
             f"'{geometry_object.name}' is {geometry_object.dim}D"
         )
-    device = resolve_device(device)
+    from meshgen.neural.inference import inference_device
+
+    device = inference_device(device)
     if threads is not None:
         import torch
 
