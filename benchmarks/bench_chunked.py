@@ -48,13 +48,18 @@ def run_command(arguments: list[str], folder: Path) -> dict:
     environment = dict(os.environ)
     environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
     command = [sys.executable, "-m", "meshgen", *arguments]
-    result = subprocess.run([sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True,
-                            capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True, capture_output=True, text=True
+    )
     figures = json.loads(result.stdout.strip().splitlines()[-1])
     if figures["returncode"] != 0:
         raise RuntimeError(f"meshgen {' '.join(arguments)} failed: {figures['stderr']}")
-    return {"command": "meshgen " + " ".join(arguments), "seconds": figures["seconds"], "cpu_seconds": figures["cpu_seconds"],
-            "peak_megabytes": figures["peak_kib"] * 1024 / 1e6}
+    return {
+        "command": "meshgen " + " ".join(arguments),
+        "seconds": figures["seconds"],
+        "cpu_seconds": figures["cpu_seconds"],
+        "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,
+    }
 
 
 def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) -> dict:
@@ -64,8 +69,15 @@ def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) ->
         arguments.append("--no-quality")
     row = run_command(arguments, folder)
     nodes = (cells + 1) ** 3
-    row.update(method=method, cells_per_axis=cells, nodes=nodes, path=mode.lstrip("-"), quality=quality,
-               nodes_per_second=nodes / row["seconds"], megabytes_written=output.stat().st_size / 1e6)
+    row.update(
+        method=method,
+        cells_per_axis=cells,
+        nodes=nodes,
+        path=mode.lstrip("-"),
+        quality=quality,
+        nodes_per_second=nodes / row["seconds"],
+        megabytes_written=output.stat().st_size / 1e6,
+    )
     return row
 
 
@@ -96,8 +108,13 @@ def gpu_row(repeats: int = 3) -> dict:
         evaluate_on_grid(model, coords, out=out, device="cuda")
         torch.cuda.synchronize()
         seconds.append(time.perf_counter() - start)
-    return {"nodes_per_axis": GPU_NODES, "widths": GPU_WIDTHS, "device": torch.cuda.get_device_name(0),
-            "seconds": sorted(seconds)[len(seconds) // 2], "all_seconds": seconds}
+    return {
+        "nodes_per_axis": GPU_NODES,
+        "widths": GPU_WIDTHS,
+        "device": torch.cuda.get_device_name(0),
+        "seconds": sorted(seconds)[len(seconds) // 2],
+        "all_seconds": seconds,
+    }
 
 
 def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None) -> dict:
@@ -109,31 +126,53 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
         for quality in (True, False):
             for mode in ("--in-memory", "--chunked"):
                 rows.append(mesh_row("tfi", same, mode, quality, temporary))
-                print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
-                      f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+                print(
+                    f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+                    f"peak {rows[-1]['peak_megabytes']:.0f} MB",
+                    flush=True,
+                )
                 (temporary / f"tfi-{same}{mode}.cgns").unlink()
         for mode in ("--in-memory", "--chunked"):
             rows.append(mesh_row("neural", same, mode, False, temporary))
-            print(f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
-                  f"peak {rows[-1]['peak_megabytes']:.0f} MB", flush=True)
+            print(
+                f"  {rows[-1]['command']}: {rows[-1]['seconds']:.1f} s, {rows[-1]['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+                f"peak {rows[-1]['peak_megabytes']:.0f} MB",
+                flush=True,
+            )
             (temporary / f"neural-{same}{mode}.cgns").unlink()
         big_row = mesh_row("tfi", big, "--chunked", False, temporary)
-        print(f"  {big_row['command']}: {big_row['seconds']:.1f} s, {big_row['nodes_per_second'] / 1e6:.2f} M nodes/s, "
-              f"peak {big_row['peak_megabytes']:.0f} MB", flush=True)
+        print(
+            f"  {big_row['command']}: {big_row['seconds']:.1f} s, {big_row['nodes_per_second'] / 1e6:.2f} M nodes/s, "
+            f"peak {big_row['peak_megabytes']:.0f} MB",
+            flush=True,
+        )
         evaluate_row = run_command(["evaluate", str(temporary / f"tfi-{big}--chunked.cgns"), "--chunked", "-q"], temporary)
         evaluate_row.update(cells=big**3, cells_per_second=big**3 / evaluate_row["seconds"])
-        print(f"  {evaluate_row['command']}: {evaluate_row['seconds']:.1f} s, peak {evaluate_row['peak_megabytes']:.0f} MB", flush=True)
+        print(
+            f"  {evaluate_row['command']}: {evaluate_row['seconds']:.1f} s, peak {evaluate_row['peak_megabytes']:.0f} MB",
+            flush=True,
+        )
 
     def throughput(path, quality, method="tfi"):
-        return next(r["nodes_per_second"] for r in rows if r["method"] == method and r["path"] == path and r["quality"] == quality)
+        return next(
+            r["nodes_per_second"] for r in rows if r["method"] == method and r["path"] == path and r["quality"] == quality
+        )
 
-    ratios = {("with_quality" if quality else "without_quality"): throughput("in-memory", quality) / throughput("chunked", quality)
-              for quality in (True, False)}
+    ratios = {
+        ("with_quality" if quality else "without_quality"): throughput("in-memory", quality) / throughput("chunked", quality)
+        for quality in (True, False)
+    }
     ratios["neural_without_quality"] = throughput("in-memory", False, "neural") / throughput("chunked", False, "neural")
-    return {"same_size_cells_per_axis": same, "big_cells_per_axis": big, "rows": rows, "big": big_row,
-            "evaluate_big": evaluate_row, "throughput_ratio_in_memory_over_chunked": ratios,
-            "big_over_same_size_in_memory_ratio": throughput("in-memory", False) / big_row["nodes_per_second"],
-            "gpu_inference": gpu_row()}
+    return {
+        "same_size_cells_per_axis": same,
+        "big_cells_per_axis": big,
+        "rows": rows,
+        "big": big_row,
+        "evaluate_big": evaluate_row,
+        "throughput_ratio_in_memory_over_chunked": ratios,
+        "big_over_same_size_in_memory_ratio": throughput("in-memory", False) / big_row["nodes_per_second"],
+        "gpu_inference": gpu_row(),
+    }
 
 
 def main():

@@ -103,17 +103,30 @@ def measure(geometry, checkpoint: dict, n: int) -> dict:
         "raw_inverted": raw_inverted,
         "raw_boundary_error": info["error_before"],
         "corrected": corrected,
-        "elliptic": {**reference, "seconds": elliptic_seconds, "iterations": solver["iterations"],
-                     "converged": bool(solver["converged"])},
+        "elliptic": {
+            **reference,
+            "seconds": elliptic_seconds,
+            "iterations": solver["iterations"],
+            "converged": bool(solver["converged"]),
+        },
         "min_angle_mean_difference_degrees": difference,
         "within": bool(abs(difference) <= ANGLE_TOLERANCE_DEGREES),
-        "met": bool(corrected["inverted"] == 0 and corrected["boundary_deviation_max_rel"] < 1e-12
-                    and difference >= -ANGLE_TOLERANCE_DEGREES),
+        "met": bool(
+            corrected["inverted"] == 0
+            and corrected["boundary_deviation_max_rel"] < 1e-12
+            and difference >= -ANGLE_TOLERANCE_DEGREES
+        ),
     }
 
 
-def run(quick: bool = False, checkpoints: Path | None = None, verbose: bool = True, partial: Path | None = None,
-        geometries=None, dims=None) -> dict:
+def run(
+    quick: bool = False,
+    checkpoints: Path | None = None,
+    verbose: bool = True,
+    partial: Path | None = None,
+    geometries=None,
+    dims=None,
+) -> dict:
     """The whole table: {"rows": [...], "all_met": bool, ...}; see the module docstring.
     ``partial``: a JSON file rewritten after each row (what a long run has measured so far);
     ``geometries``, ``dims``: a part of the table only (default: all of it)."""
@@ -124,29 +137,51 @@ def run(quick: bool = False, checkpoints: Path | None = None, verbose: bool = Tr
     overrides = QUICK_OVERRIDES if quick else []
     rows = []
     if verbose:
-        print(f"default preset{' ' + ' '.join(overrides) if overrides else ''}; corrected mesh vs converged elliptic "
-              f"(met: 0 inverted, boundary deviation < 1e-12 of the length, min angle difference >= "
-              f"-{ANGLE_TOLERANCE_DEGREES} deg; within: |difference| <= {ANGLE_TOLERANCE_DEGREES})")
-        print(f"{'geometry':<13}{'cells':>6} {'train s':>8} {'raw err':>9} {'raw inv':>8} {'inverted':>9} "
-              f"{'bdev rel':>9} {'min ang':>8} {'elliptic':>9} {'diff':>7}  met within", flush=True)
+        print(
+            f"default preset{' ' + ' '.join(overrides) if overrides else ''}; corrected mesh vs converged elliptic "
+            f"(met: 0 inverted, boundary deviation < 1e-12 of the length, min angle difference >= "
+            f"-{ANGLE_TOLERANCE_DEGREES} deg; within: |difference| <= {ANGLE_TOLERANCE_DEGREES})"
+        )
+        print(
+            f"{'geometry':<13}{'cells':>6} {'train s':>8} {'raw err':>9} {'raw inv':>8} {'inverted':>9} "
+            f"{'bdev rel':>9} {'min ang':>8} {'elliptic':>9} {'diff':>7}  met within",
+            flush=True,
+        )
     for name in names:
         geometry = load_geometry(name)
         folder = checkpoints / name if checkpoints is not None else None
         checkpoint, seconds, cpu_seconds = trained_checkpoint(geometry, folder, overrides)
         for n in dims:
-            row = {"geometry": name, "training_seconds": seconds, "training_cpu_seconds": cpu_seconds,
-                   "torch_threads": torch_threads(), "steps": checkpoint["step"], **measure(geometry, checkpoint, n)}
+            row = {
+                "geometry": name,
+                "training_seconds": seconds,
+                "training_cpu_seconds": cpu_seconds,
+                "torch_threads": torch_threads(),
+                "steps": checkpoint["step"],
+                **measure(geometry, checkpoint, n),
+            }
             rows.append(row)
             if partial is not None:
                 partial.write_text(json.dumps(rows, indent=2) + "\n")
             if verbose:
                 c, e = row["corrected"], row["elliptic"]
-                print(f"{name:<13}{n:>5}^3 {seconds or 0:>8.1f} {row['raw_boundary_error']['max_rel']:>9.2e} "
-                      f"{row['raw_inverted']:>8d} {c['inverted']:>9d} {c['boundary_deviation_max_rel']:>9.1e} "
-                      f"{c['min_angle_mean']:>8.2f} {e['min_angle_mean']:>9.2f} {row['min_angle_mean_difference_degrees']:>+7.2f}  "
-                      f"{'yes' if row['met'] else 'NO':>3} {'yes' if row['within'] else 'no':>6}", flush=True)
-    return {"preset": "default", "overrides": overrides, "dims": dims, "geometries": names, "capped": quick,
-            "angle_tolerance_degrees": ANGLE_TOLERANCE_DEGREES, "rows": rows, "all_met": all(r["met"] for r in rows)}
+                print(
+                    f"{name:<13}{n:>5}^3 {seconds or 0:>8.1f} {row['raw_boundary_error']['max_rel']:>9.2e} "
+                    f"{row['raw_inverted']:>8d} {c['inverted']:>9d} {c['boundary_deviation_max_rel']:>9.1e} "
+                    f"{c['min_angle_mean']:>8.2f} {e['min_angle_mean']:>9.2f} {row['min_angle_mean_difference_degrees']:>+7.2f}  "
+                    f"{'yes' if row['met'] else 'NO':>3} {'yes' if row['within'] else 'no':>6}",
+                    flush=True,
+                )
+    return {
+        "preset": "default",
+        "overrides": overrides,
+        "dims": dims,
+        "geometries": names,
+        "capped": quick,
+        "angle_tolerance_degrees": ANGLE_TOLERANCE_DEGREES,
+        "rows": rows,
+        "all_met": all(r["met"] for r in rows),
+    }
 
 
 def main():
@@ -162,8 +197,13 @@ def main():
         import torch
 
         torch.set_num_threads(args.threads)
-    results = run(args.quick, args.checkpoints, partial=args.json.with_suffix(".partial.json") if args.json else None,
-                  geometries=args.geometries, dims=args.dims)
+    results = run(
+        args.quick,
+        args.checkpoints,
+        partial=args.json.with_suffix(".partial.json") if args.json else None,
+        geometries=args.geometries,
+        dims=args.dims,
+    )
     print(f"all met: {results['all_met']}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=2) + "\n")

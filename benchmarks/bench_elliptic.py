@@ -60,8 +60,10 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # kB on Linux
 
 
-HEADER = (f"{'cells':>8}{'cycles':>8}{'wall [s]':>10}{'cpu [s]':>9}{'update':>10}{'residual':>10}{'inverted':>10}"
-          f"{'TFI inv.':>9}{'peak MB':>9}{'target':>14}")
+HEADER = (
+    f"{'cells':>8}{'cycles':>8}{'wall [s]':>10}{'cpu [s]':>9}{'update':>10}{'residual':>10}{'inverted':>10}"
+    f"{'TFI inv.':>9}{'peak MB':>9}{'target':>14}"
+)
 
 
 def measure_size(geometry, n: int, jacobi: bool = False) -> dict:
@@ -96,9 +98,11 @@ def measure_size(geometry, n: int, jacobi: bool = False) -> dict:
 def format_row(row: dict) -> str:
     n = row["cells"]
     target = f"<= {TARGETS[n]:.0f} s {'met' if row['target_met'] else 'NOT met'}" if n in TARGETS else ""
-    return (f"{n:>5}^3{row['iterations']:>8}{row['seconds']:>10.2f}{row['cpu_seconds']:>9.2f}{row['final_update']:>10.1e}"
-            f"{row['final_residual']:>10.1e}{row['inverted_cells']:>10}{row['tfi_inverted_cells']:>9}"
-            f"{row['peak_memory_mb']:>9.0f}{target:>14}")
+    return (
+        f"{n:>5}^3{row['iterations']:>8}{row['seconds']:>10.2f}{row['cpu_seconds']:>9.2f}{row['final_update']:>10.1e}"
+        f"{row['final_residual']:>10.1e}{row['inverted_cells']:>10}{row['tfi_inverted_cells']:>9}"
+        f"{row['peak_memory_mb']:>9.0f}{target:>14}"
+    )
 
 
 def main() -> None:
@@ -120,7 +124,9 @@ def main() -> None:
         print(format_row(row))
     for row in rows:
         if "jacobi_sweeps" in row:
-            print(f"point Jacobi at {row['cells']}^3: {row['jacobi_sweeps']} sweeps to the same tolerance (multigrid: {row['iterations']} cycles)")
+            print(
+                f"point Jacobi at {row['cells']}^3: {row['jacobi_sweeps']} sweeps to the same tolerance (multigrid: {row['iterations']} cycles)"
+            )
     args.json.write_text(json.dumps({"geometry": "semicylinder", "load_average": load, "results": rows}, indent=2) + "\n")
     print(f"wrote {args.json}")
 

@@ -53,8 +53,12 @@ def measure_case(name: str, ranges: dict, members: int, cells: int, overrides=()
     with tempfile.TemporaryDirectory() as folder:
         start, start_cpu = time.perf_counter(), time.process_time()
         result = train_family(config, family, folder, summary=False)
-        training = {"seconds": time.perf_counter() - start, "cpu_seconds": time.process_time() - start_cpu,
-                    "steps": result.step, "test_loss": result.test_loss["pde"]}
+        training = {
+            "seconds": time.perf_counter() - start,
+            "cpu_seconds": time.process_time() - start_cpu,
+            "steps": result.step,
+            "test_loss": result.test_loss["pde"],
+        }
     checkpoint = result.checkpoint
     dims = (cells,) * 3
     coords = parametric_grid(dims)
@@ -69,18 +73,20 @@ def measure_case(name: str, ranges: dict, members: int, cells: int, overrides=()
         reference, info = elliptic(geometry, dims, boundary_layout=config.boundary_layout)
         network, ell = quality_report(X, geometry), quality_report(reference, geometry)
         angle, ell_angle = network["metrics"]["min_angle"]["mean"], ell["metrics"]["min_angle"]["mean"]
-        rows.append({
-            "params": values,
-            "meshing_seconds": meshing,
-            "inverted": network["inverted"]["count"],
-            "boundary_deviation_max_rel": network["boundary_deviation"]["max_rel"],
-            "min_angle_mean": angle,
-            "elliptic_min_angle_mean": ell_angle,
-            "elliptic_inverted": ell["inverted"]["count"],
-            "elliptic_iterations": info.get("iterations"),
-            "difference_degrees": angle - ell_angle,
-            "within_tolerance": bool(network["inverted"]["count"] == 0 and abs(angle - ell_angle) <= TOLERANCE_DEGREES),
-        })
+        rows.append(
+            {
+                "params": values,
+                "meshing_seconds": meshing,
+                "inverted": network["inverted"]["count"],
+                "boundary_deviation_max_rel": network["boundary_deviation"]["max_rel"],
+                "min_angle_mean": angle,
+                "elliptic_min_angle_mean": ell_angle,
+                "elliptic_inverted": ell["inverted"]["count"],
+                "elliptic_iterations": info.get("iterations"),
+                "difference_degrees": angle - ell_angle,
+                "within_tolerance": bool(network["inverted"]["count"] == 0 and abs(angle - ell_angle) <= TOLERANCE_DEGREES),
+            }
+        )
     worst = max(range(len(rows)), key=lambda i: (rows[i]["inverted"] > 0, abs(rows[i]["difference_degrees"])))
     return {
         "geometry": name,
@@ -107,25 +113,38 @@ def run(quick: bool = False, seed: int = 0) -> dict:
         cases[name] = data
     import torch
 
-    return {"preset": "family", "quick": quick, "members": members, "cells_per_axis": cells,
-            "torch_threads": torch.get_num_threads(), "cases": cases}
+    return {
+        "preset": "family",
+        "quick": quick,
+        "members": members,
+        "cells_per_axis": cells,
+        "torch_threads": torch.get_num_threads(),
+        "cases": cases,
+    }
 
 
 def print_case(data: dict) -> None:
     ranges = " ".join(f"{k}={lo:g}:{hi:g}" for k, (lo, hi) in data["ranges"].items())
     training = data["training"]
-    print(f"{data['geometry']} {ranges}: trained {training['steps']} steps in {training['seconds']:.1f} s "
-          f"(CPU {training['cpu_seconds']:.1f} s); {data['cells_per_axis']}^3 members against the elliptic mesh "
-          f"on the {data['elliptic_boundary_layout']} boundary layout:")
+    print(
+        f"{data['geometry']} {ranges}: trained {training['steps']} steps in {training['seconds']:.1f} s "
+        f"(CPU {training['cpu_seconds']:.1f} s); {data['cells_per_axis']}^3 members against the elliptic mesh "
+        f"on the {data['elliptic_boundary_layout']} boundary layout:"
+    )
     print(f"  {'member':<32} {'mesh s':>7} {'inv':>4} {'bdev':>8} {'min ang':>8} {'elliptic':>8} {'diff':>6}")
     for row in data["members"]:
         at = ", ".join(f"{k}={v:.3g}" for k, v in row["params"].items())
-        print(f"  {at:<32} {row['meshing_seconds']:7.3f} {row['inverted']:4d} {row['boundary_deviation_max_rel']:8.1e} "
-              f"{row['min_angle_mean']:8.2f} {row['elliptic_min_angle_mean']:8.2f} {row['difference_degrees']:+6.2f}")
+        print(
+            f"  {at:<32} {row['meshing_seconds']:7.3f} {row['inverted']:4d} {row['boundary_deviation_max_rel']:8.1e} "
+            f"{row['min_angle_mean']:8.2f} {row['elliptic_min_angle_mean']:8.2f} {row['difference_degrees']:+6.2f}"
+        )
     worst = data["worst"]
-    print(f"  worst: {', '.join(f'{k}={v:.3g}' for k, v in worst['params'].items())}, {worst['inverted']} inverted, "
-          f"{worst['difference_degrees']:+.2f} deg from elliptic; all within {data['tolerance_degrees']} deg and "
-          f"valid: {data['all_within_tolerance']}", flush=True)
+    print(
+        f"  worst: {', '.join(f'{k}={v:.3g}' for k, v in worst['params'].items())}, {worst['inverted']} inverted, "
+        f"{worst['difference_degrees']:+.2f} deg from elliptic; all within {data['tolerance_degrees']} deg and "
+        f"valid: {data['all_within_tolerance']}",
+        flush=True,
+    )
 
 
 def main(argv=None) -> int:

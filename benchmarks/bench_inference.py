@@ -55,8 +55,14 @@ def matmul_rates(size: int = 4096, repeats: int = 5) -> dict:
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         if wall < best_wall:
             best_wall, cpu_of_best = wall, cpu
-    return {"size": size, "repeats": repeats, "threads": torch.get_num_threads(), "gflops": flop / best_wall / 1e9,
-            "gflops_per_cpu_second": flop / max(cpu_of_best, 1e-9) / 1e9, "best_seconds": best_wall}
+    return {
+        "size": size,
+        "repeats": repeats,
+        "threads": torch.get_num_threads(),
+        "gflops": flop / best_wall / 1e9,
+        "gflops_per_cpu_second": flop / max(cpu_of_best, 1e-9) / 1e9,
+        "best_seconds": best_wall,
+    }
 
 
 def matmul_roof(size: int = 4096, repeats: int = 5) -> float:
@@ -106,12 +112,16 @@ def mesh_command(cells: int, folder: Path, environment: dict | None = None) -> d
     environment = dict(os.environ if environment is None else environment)
     environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
     command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q"]
-    result = subprocess.run([sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True,
-                            capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True, capture_output=True, text=True
+    )
     figures = json.loads(result.stdout.strip().splitlines()[-1])
-    return {"seconds": figures["seconds"], "cpu_seconds": figures["cpu_seconds"],
-            "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,  # ru_maxrss is in KiB on Linux
-            "megabytes_written": (Path(folder) / "out.vtu").stat().st_size / 1e6}
+    return {
+        "seconds": figures["seconds"],
+        "cpu_seconds": figures["cpu_seconds"],
+        "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,  # ru_maxrss is in KiB on Linux
+        "megabytes_written": (Path(folder) / "out.vtu").stat().st_size / 1e6,
+    }
 
 
 def run_mesh(cells: int, folder: Path) -> float:
@@ -144,8 +154,13 @@ def main():
         memory_cells = 100 if args.quick else 200
         memory = peak_memory_gb(memory_cells, folder)
     figures = {
-        "machine": {"cpus": os.cpu_count(), "torch_threads": torch.get_num_threads(), "python": platform.python_version(),
-                    "torch": torch.__version__, "processor": platform.processor() or platform.machine()},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "torch_threads": torch.get_num_threads(),
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+            "processor": platform.processor() or platform.machine(),
+        },
         "matmul_gflops": gflops,
         "network": {"widths": WIDTHS, "nodes": NODES**3, "gflop": flops / 1e9},
         "inference_seconds": inference,
@@ -159,13 +174,30 @@ def main():
         "quick": args.quick,
     }
     rows = [
-        ("inference, 101^3 nodes, [85]*4", f"{inference:.3f} s", f"<= {TARGETS['inference_seconds']} s",
-         inference <= TARGETS["inference_seconds"]),
-        ("  matmul roof", f"{roof_seconds:.3f} s", f"{gflops:.0f} GFLOP/s; inference at {100 * roof_seconds / inference:.0f}% of it", None),
-        ("meshgen mesh --dims 100 100 100", f"{figures['end_to_end_seconds']:.2f} s", f"<= {TARGETS['end_to_end_seconds']} s",
-         figures["end_to_end_seconds"] <= TARGETS["end_to_end_seconds"]),
-        (f"peak memory, {memory_cells}^3 mesh", f"{memory:.2f} GB", f"< {TARGETS['peak_memory_gb']} GB (200^3)",
-         memory < TARGETS["peak_memory_gb"] if memory_cells == 200 else None),
+        (
+            "inference, 101^3 nodes, [85]*4",
+            f"{inference:.3f} s",
+            f"<= {TARGETS['inference_seconds']} s",
+            inference <= TARGETS["inference_seconds"],
+        ),
+        (
+            "  matmul roof",
+            f"{roof_seconds:.3f} s",
+            f"{gflops:.0f} GFLOP/s; inference at {100 * roof_seconds / inference:.0f}% of it",
+            None,
+        ),
+        (
+            "meshgen mesh --dims 100 100 100",
+            f"{figures['end_to_end_seconds']:.2f} s",
+            f"<= {TARGETS['end_to_end_seconds']} s",
+            figures["end_to_end_seconds"] <= TARGETS["end_to_end_seconds"],
+        ),
+        (
+            f"peak memory, {memory_cells}^3 mesh",
+            f"{memory:.2f} GB",
+            f"< {TARGETS['peak_memory_gb']} GB (200^3)",
+            memory < TARGETS["peak_memory_gb"] if memory_cells == 200 else None,
+        ),
     ]
     width = max(len(r[0]) for r in rows)
     print(f"{'figure':<{width}}  {'measured':>10}  target")

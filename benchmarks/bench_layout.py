@@ -28,7 +28,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from meshgen.elliptic import elliptic  # noqa: E402
-from meshgen.geometry import load_geometry, list_geometries  # noqa: E402
+from meshgen.geometry import list_geometries, load_geometry  # noqa: E402
 from meshgen.layout import layout_of, smoothed  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import tfi  # noqa: E402
@@ -113,8 +113,11 @@ def run(quick: bool = False) -> list[dict]:
                     flush=True,
                 )
             if result.get("gmsh_smoothed_min_angle_mean") is not None:
-                print(f"{name:13s} {cells:4d}^3 {'gmsh smoothed':18s} min angle "
-                      f"{result['gmsh_smoothed_min_angle_mean']:7.3f}  (the section, smoother converged)", flush=True)
+                print(
+                    f"{name:13s} {cells:4d}^3 {'gmsh smoothed':18s} min angle "
+                    f"{result['gmsh_smoothed_min_angle_mean']:7.3f}  (the section, smoother converged)",
+                    flush=True,
+                )
     return results
 
 

@@ -33,8 +33,12 @@ TARGET_SECONDS = 3.0
 REPORT = "quality_report + boundary deviation"
 # (path, what): the per-cell metrics alone, then the whole report (``meshgen evaluate`` of a file
 # takes the unstructured one)
-CASES = [("structured", "cell_metrics"), ("unstructured", "cell_metrics_unstructured"),
-         ("structured", REPORT), ("unstructured", REPORT)]
+CASES = [
+    ("structured", "cell_metrics"),
+    ("unstructured", "cell_metrics_unstructured"),
+    ("structured", REPORT),
+    ("unstructured", REPORT),
+]
 
 
 def timed(function, repeat):
@@ -86,8 +90,10 @@ def measure(dims=(100, 100, 100), repeat: int = 5, cases=None) -> dict:
 
 def print_table(data: dict) -> None:
     n_cells = data["cells"]
-    print(f"quality benchmark: {n_cells} hexahedra ({' x '.join(map(str, data['dims']))} semicylinder TFI), "
-          f"median of {data['repeat']} runs, target {TARGET_SECONDS:g} s")
+    print(
+        f"quality benchmark: {n_cells} hexahedra ({' x '.join(map(str, data['dims']))} semicylinder TFI), "
+        f"median of {data['repeat']} runs, target {TARGET_SECONDS:g} s"
+    )
     header = f"{'path':<13} {'what':<38} {'median s':>9} {'min s':>7} {'max s':>7} {'cpu s':>7} {'Mcells/s':>9}  target"
     print(header)
     print("-" * len(header))
@@ -111,8 +117,12 @@ def main(argv=None):
         data = {
             "benchmark": "quality",
             **data,
-            "machine": {"cpus": os.cpu_count(), "processor": platform.processor(), "python": platform.python_version(),
-                        "numpy": np.__version__},
+            "machine": {
+                "cpus": os.cpu_count(),
+                "processor": platform.processor(),
+                "python": platform.python_version(),
+                "numpy": np.__version__,
+            },
         }
         Path(args.json_path).write_text(json.dumps(data, indent=2) + "\n")
         print(f"wrote {args.json_path}")

@@ -74,19 +74,24 @@ def measure(X, geometry, repeat: int, label: str = "neural") -> dict:
                 cpus.append(time.process_time() - cpu)
             start = time.perf_counter()
             read_mesh(path)
-            rows.append({
-                "format": name,
-                "write_seconds": statistics.median(walls),
-                "write_cpu_seconds": statistics.median(cpus),
-                "runs_seconds": walls,
-                "megabytes": size_mb(path),
-                "read_seconds": time.perf_counter() - start,
-            })
+            rows.append(
+                {
+                    "format": name,
+                    "write_seconds": statistics.median(walls),
+                    "write_cpu_seconds": statistics.median(cpus),
+                    "runs_seconds": walls,
+                    "megabytes": size_mb(path),
+                    "read_seconds": time.perf_counter() - start,
+                }
+            )
     by_name = {row["format"]: row for row in rows}
     vts, vtu = by_name[".vts"], by_name[".vtu"]
     return {
-        "mesh": f"semicylinder, {label}", "cells_per_axis": dims[0], "cells": dims[0] * dims[1] * dims[2],
-        "repeat": repeat, "results": rows,
+        "mesh": f"semicylinder, {label}",
+        "cells_per_axis": dims[0],
+        "cells": dims[0] * dims[1] * dims[2],
+        "repeat": repeat,
+        "results": rows,
         "vts_vs_vtu": {
             "size_ratio": vts["megabytes"] / vtu["megabytes"],
             "write_time_ratio": vts["write_seconds"] / vtu["write_seconds"],
@@ -100,10 +105,14 @@ def print_table(data: dict) -> None:
     print(f"{data['mesh']}, {data['cells_per_axis']}^3 cells, 7 quality arrays + patches; write median of {data['repeat']}")
     print(f"{'format':<18}{'write [s]':>10}{'cpu [s]':>9}{'size [MB]':>11}{'read [s]':>10}")
     for row in data["results"]:
-        print(f"{row['format']:<18}{row['write_seconds']:>10.2f}{row['write_cpu_seconds']:>9.2f}{row['megabytes']:>11.1f}{row['read_seconds']:>10.2f}")
+        print(
+            f"{row['format']:<18}{row['write_seconds']:>10.2f}{row['write_cpu_seconds']:>9.2f}{row['megabytes']:>11.1f}{row['read_seconds']:>10.2f}"
+        )
     ratio = data["vts_vs_vtu"]
-    print(f".vts / .vtu: size {ratio['size_ratio']:.2f} (target <= 0.5: {'met' if ratio['size_met'] else 'NOT met'}), "
-          f"write time {ratio['write_time_ratio']:.2f} (target <= 1: {'met' if ratio['speed_met'] else 'NOT met'})")
+    print(
+        f".vts / .vtu: size {ratio['size_ratio']:.2f} (target <= 0.5: {'met' if ratio['size_met'] else 'NOT met'}), "
+        f"write time {ratio['write_time_ratio']:.2f} (target <= 1: {'met' if ratio['speed_met'] else 'NOT met'})"
+    )
 
 
 def main() -> None:

@@ -13,6 +13,7 @@ the figures to report).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -43,11 +44,18 @@ SIZES = {"default": [48, 48, 48], "paper": [85, 85, 85, 85]}
 def setup(preset, widths, geometry, interior=4096, boundary=6000):
     """A network, weights, optimiser and the problem of ``preset`` at the given sizes (16^3 grid
     nodes for fd, as many random points for autograd)."""
-    config = resolve_config(preset, None, [f"model.widths={widths}", f"points.interior={interior}",
-                                           f"points.boundary={boundary}"])
+    config = resolve_config(
+        preset, None, [f"model.widths={widths}", f"points.interior={interior}", f"points.boundary={boundary}"]
+    )
     center, scale = normalisation(geometry)
-    problem = Problem(geometry.dim, normalised_boundary(geometry, center, scale), center, scale,
-                      config.model.exact_boundary, torch.device("cpu"))
+    problem = Problem(
+        geometry.dim,
+        normalised_boundary(geometry, center, scale),
+        center,
+        scale,
+        config.model.exact_boundary,
+        torch.device("cpu"),
+    )
     torch.manual_seed(0)
     network = MLP(geometry.dim, config.model.widths)
     weights = UncertaintyWeights(learned=config.method.reweighting)
@@ -63,9 +71,7 @@ def step_times(presets, widths, geometry, repeats):
     for preset in presets:
         config, problem, network, weights, optimizer, scheduler, pool = setup(preset, widths, geometry)
         generator = torch.Generator().manual_seed(0)
-        step = (lambda network=network, weights=weights, problem=problem, config=config, optimizer=optimizer,
-                scheduler=scheduler, generator=generator, pool=pool:
-                adam_step(network, weights, problem, config, optimizer, scheduler, generator, pool))
+        step = functools.partial(adam_step, network, weights, problem, config, optimizer, scheduler, generator, pool)
         for _ in range(3):
             step()
         states[preset] = (step, [], [])
@@ -104,21 +110,45 @@ def step_table(geometry, sizes, repeats, extras=True):
         for preset in VARIANTS:
             seconds, cpu = times[preset]
             derivatives = resolve_config(preset).method.derivatives
-            rows.append({"sizes": size_name, "widths": widths, "variant": preset, "derivatives": derivatives,
-                         "seconds_per_step": seconds, "cpu_seconds_per_step": cpu})
-            print(f"  {size_name:8s} {preset:10s} {derivatives:9s} {seconds * 1e3:8.2f} ms/step ({cpu * 1e3:.2f} ms CPU)",
-                  flush=True)
+            rows.append(
+                {
+                    "sizes": size_name,
+                    "widths": widths,
+                    "variant": preset,
+                    "derivatives": derivatives,
+                    "seconds_per_step": seconds,
+                    "cpu_seconds_per_step": cpu,
+                }
+            )
+            print(
+                f"  {size_name:8s} {preset:10s} {derivatives:9s} {seconds * 1e3:8.2f} ms/step ({cpu * 1e3:.2f} ms CPU)",
+                flush=True,
+            )
         if not extras:
             continue
         loop = loop_seconds_per_step(geometry, widths, 60 + 2 * repeats)
-        rows.append({"sizes": size_name, "widths": widths, "variant": "default inside the training loop",
-                     "derivatives": "fd", "seconds_per_step": loop})
+        rows.append(
+            {
+                "sizes": size_name,
+                "widths": widths,
+                "variant": "default inside the training loop",
+                "derivatives": "fd",
+                "seconds_per_step": loop,
+            }
+        )
         print(f"  {size_name:8s} default inside the training loop: {loop * 1e3:.2f} ms/step", flush=True)
         # the floor: one forward and backward pass over the points an fd step evaluates
         grid_nodes = (16 + 2) ** geometry.dim + 6000
         floor = forward_backward_seconds(widths, geometry.dim, grid_nodes, repeats)
-        rows.append({"sizes": size_name, "widths": widths, "variant": "forward+backward only",
-                     "derivatives": "-", "seconds_per_step": floor})
+        rows.append(
+            {
+                "sizes": size_name,
+                "widths": widths,
+                "variant": "forward+backward only",
+                "derivatives": "-",
+                "seconds_per_step": floor,
+            }
+        )
         print(f"  {size_name:8s} forward+backward of {grid_nodes} points: {floor * 1e3:.2f} ms", flush=True)
     return rows
 
@@ -138,7 +168,9 @@ def ratios(rows, key="seconds_per_step"):
             continue
         if (size, "forward+backward only") in by:
             out[size]["default overhead over forward+backward"] = by[(size, "default")] / by[(size, "forward+backward only")] - 1
-            out[size]["training-loop overhead over the step"] = by[(size, "default inside the training loop")] / by[(size, "default")] - 1
+            out[size]["training-loop overhead over the step"] = (
+                by[(size, "default inside the training loop")] / by[(size, "default")] - 1
+            )
     return out
 
 
@@ -161,8 +193,18 @@ class RowKeeper:
 def loop_seconds_per_step(geometry, widths, steps):
     """Seconds per Adam step inside ``train``: the step plus what the loop adds (divergence-guard
     snapshot, history row, finiteness check), from the rows' clocks between steps 50 and ``steps``."""
-    config = resolve_config("default", None, [f"model.widths={widths}", "points.interior=4096", "pretrain.steps=0",
-                                              f"adam.steps={steps}", "lbfgs.steps=0", "checkpoint.every=100000"])
+    config = resolve_config(
+        "default",
+        None,
+        [
+            f"model.widths={widths}",
+            "points.interior=4096",
+            "pretrain.steps=0",
+            f"adam.steps={steps}",
+            "lbfgs.steps=0",
+            "checkpoint.every=100000",
+        ],
+    )
     keeper = RowKeeper()
     with tempfile.TemporaryDirectory() as folder:
         train(config, geometry, folder, reporter=keeper, summary=False)
@@ -203,9 +245,11 @@ def reference_figures(geometry, cells: int = 30, layout: str = "smoothed") -> di
     from meshgen.tfi import tfi
 
     dims = [cells] * geometry.dim
-    return {"layout": layout,
-            "tfi": figures(quality_report(tfi(with_layout(geometry, layout), dims), geometry)),
-            "elliptic": figures(quality_report(elliptic(geometry, dims, boundary_layout=layout)[0], geometry))}
+    return {
+        "layout": layout,
+        "tfi": figures(quality_report(tfi(with_layout(geometry, layout), dims), geometry)),
+        "elliptic": figures(quality_report(elliptic(geometry, dims, boundary_layout=layout)[0], geometry)),
+    }
 
 
 def milestones(point: dict, references: dict, bounds: dict = QUALITY_BOUNDS) -> dict:
@@ -213,9 +257,12 @@ def milestones(point: dict, references: dict, bounds: dict = QUALITY_BOUNDS) -> 
     {"valid_better_than_tfi": bool, "converged": bool}."""
     valid = point["inverted"] <= bounds["inverted_at_most"]
     angle = point["min_angle_mean"]
-    return {"valid_better_than_tfi": bool(valid and angle > references["tfi"]["min_angle_mean"]),
-            "converged": bool(valid and abs(angle - references["elliptic"]["min_angle_mean"])
-                              <= bounds["converged_within_degrees_of_elliptic"])}
+    return {
+        "valid_better_than_tfi": bool(valid and angle > references["tfi"]["min_angle_mean"]),
+        "converged": bool(
+            valid and abs(angle - references["elliptic"]["min_angle_mean"]) <= bounds["converged_within_degrees_of_elliptic"]
+        ),
+    }
 
 
 class QualityProbe:
@@ -244,9 +291,13 @@ class QualityProbe:
         geometry = with_layout(self.geometry, trained_layout(checkpoint))
         X = mesh_from_checkpoint(checkpoint, self.coords, geometry)
         raw_error = error_figures(boundary_errors(X, geometry, self.coords), geometry)
-        point = {"step": checkpoint["step"], "stage": checkpoint["stage"], "seconds": seconds,
-                 **figures(quality_report(corrected(X, geometry, self.coords), geometry)),
-                 "raw_boundary_error_max_rel": raw_error["max_rel"]}
+        point = {
+            "step": checkpoint["step"],
+            "stage": checkpoint["stage"],
+            "seconds": seconds,
+            **figures(quality_report(corrected(X, geometry, self.coords), geometry)),
+            "raw_boundary_error_max_rel": raw_error["max_rel"],
+        }
         point.update(milestones(point, self.references))
         return point
 
@@ -262,13 +313,24 @@ class QualityProbe:
         self.done = point["valid_better_than_tfi"] and point["converged"]
         self.probe_seconds += time.perf_counter() - start
         if self.verbose:
-            print(f"    step {point['step']:5d} {point['seconds']:7.1f} s  corrected: inverted {point['inverted']} "
-                  f"min angle {point['min_angle_mean']:.2f}; raw boundary error {point['raw_boundary_error_max_rel']:.2e}",
-                  flush=True)
+            print(
+                f"    step {point['step']:5d} {point['seconds']:7.1f} s  corrected: inverted {point['inverted']} "
+                f"min angle {point['min_angle_mean']:.2f}; raw boundary error {point['raw_boundary_error_max_rel']:.2e}",
+                flush=True,
+            )
 
 
-def time_to_quality(preset, geometry, overrides, bounds=QUALITY_BOUNDS, references=None, verbose=True,
-                    threads=None, stop_when_converged=False, device="cpu"):
+def time_to_quality(
+    preset,
+    geometry,
+    overrides,
+    bounds=QUALITY_BOUNDS,
+    references=None,
+    verbose=True,
+    threads=None,
+    stop_when_converged=False,
+    device="cpu",
+):
     """Train ``preset`` (with ``overrides``, ``key=value`` strings) on ``geometry`` with ``threads``
     torch threads (default: as set), measuring the corrected 30^3 mesh at every checkpoint
     (``checkpoint.every`` steps) and at the end: the first state that is valid and better than TFI
@@ -284,8 +346,15 @@ def time_to_quality(preset, geometry, overrides, bounds=QUALITY_BOUNDS, referenc
         with tempfile.TemporaryDirectory() as folder:
             probe = QualityProbe(folder, geometry, config.checkpoint.every, references, verbose)
             start, cpu = time.perf_counter(), time.process_time()
-            result = train(config, geometry, folder, reporter=probe, summary=False, device=device,
-                           stop=(lambda: probe.done) if stop_when_converged else None)
+            result = train(
+                config,
+                geometry,
+                folder,
+                reporter=probe,
+                summary=False,
+                device=device,
+                stop=(lambda: probe.done) if stop_when_converged else None,
+            )
             wall = time.perf_counter() - start - probe.probe_seconds
             cpu = time.process_time() - cpu
             training_seconds = result.checkpoint["elapsed_seconds"] - probe.probe_seconds
@@ -344,13 +413,21 @@ def loop_step_seconds(preset, geometry, stage, steps, threads, device="cpu") -> 
 SPEED_PRESETS = ("exact", "default", "paper")
 # The runs of the speed table: the presets as they are, paper capped on a CPU (12000 Adam steps
 # are the GPU target's; on a CPU the table reports how far a capped run gets)
-SPEED_OVERRIDES = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"],
-                   "paper": ["checkpoint.every=100", "adam.steps=500", "lbfgs.steps=0"]}
-CUDA_OVERRIDES = {"exact": ["checkpoint.every=25"], "default": ["checkpoint.every=50"],
-                  "paper": ["checkpoint.every=1000", "lbfgs.steps=0"]}
-QUICK_SPEED_OVERRIDES = {"exact": ["checkpoint.every=25", "adam.steps=100", "lbfgs.steps=0"],
-                         "default": ["checkpoint.every=25", "pretrain.steps=5", "adam.steps=50", "lbfgs.steps=5"],
-                         "paper": ["checkpoint.every=25", "adam.steps=50", "lbfgs.steps=0"]}
+SPEED_OVERRIDES = {
+    "exact": ["checkpoint.every=25"],
+    "default": ["checkpoint.every=50"],
+    "paper": ["checkpoint.every=100", "adam.steps=500", "lbfgs.steps=0"],
+}
+CUDA_OVERRIDES = {
+    "exact": ["checkpoint.every=25"],
+    "default": ["checkpoint.every=50"],
+    "paper": ["checkpoint.every=1000", "lbfgs.steps=0"],
+}
+QUICK_SPEED_OVERRIDES = {
+    "exact": ["checkpoint.every=25", "adam.steps=100", "lbfgs.steps=0"],
+    "default": ["checkpoint.every=25", "pretrain.steps=5", "adam.steps=50", "lbfgs.steps=5"],
+    "paper": ["checkpoint.every=25", "adam.steps=50", "lbfgs.steps=0"],
+}
 # the boundary layouts of the time-to-quality runs: on the smoothed layout (the presets' default)
 # the semicylinder's TFI is already within 0.01 degrees of the elliptic mesh, so the network has
 # little to learn there; on the fixed (Coons) layout it must move the interior 2 degrees
@@ -377,20 +454,39 @@ def speed_table(geometry, threads=(1, 2), quick=False, verbose=True, cuda=None) 
             adam = loop_step_seconds(preset, geometry, "adam", steps["adam"], count, device)
             lbfgs = loop_step_seconds(preset, geometry, "lbfgs", steps["lbfgs"], count, device)
             for layout in layouts if (device == "cuda" or count >= 2) else layouts[:1]:
-                overrides = (CUDA_OVERRIDES if device == "cuda" and not quick else
-                             QUICK_SPEED_OVERRIDES if quick else SPEED_OVERRIDES)[preset] + [f"boundary_layout={layout}"]
+                overrides = (
+                    CUDA_OVERRIDES if device == "cuda" and not quick else QUICK_SPEED_OVERRIDES if quick else SPEED_OVERRIDES
+                )[preset] + [f"boundary_layout={layout}"]
                 whole = device == "cuda" and preset == "paper"
-                run = time_to_quality(preset, geometry, overrides, references=references[layout], verbose=False,
-                                      threads=count, stop_when_converged=not whole, device=device)
-                row = {"preset": preset, "device": device, "threads": count, "adam_seconds_per_step": adam,
-                       "lbfgs_seconds_per_step": lbfgs, "capped": quick or (preset == "paper" and device == "cpu"), **run}
+                run = time_to_quality(
+                    preset,
+                    geometry,
+                    overrides,
+                    references=references[layout],
+                    verbose=False,
+                    threads=count,
+                    stop_when_converged=not whole,
+                    device=device,
+                )
+                row = {
+                    "preset": preset,
+                    "device": device,
+                    "threads": count,
+                    "adam_seconds_per_step": adam,
+                    "lbfgs_seconds_per_step": lbfgs,
+                    "capped": quick or (preset == "paper" and device == "cpu"),
+                    **run,
+                }
                 rows.append(row)
                 if verbose:
                     valid, converged = run["first_valid"], run["first_converged"]
                     where = "cuda" if device == "cuda" else f"cpu x{count}"
-                    print(f"  {preset:8s} {where:6s} {layout:8s}: Adam {adam * 1e3:6.1f} ms/step, L-BFGS {lbfgs:6.3f} s/step; "
-                          f"valid, better than TFI: {_when(valid)}; converged: {_when(converged)}; "
-                          f"{run['steps']} steps, {run['training_seconds']:.1f} s", flush=True)
+                    print(
+                        f"  {preset:8s} {where:6s} {layout:8s}: Adam {adam * 1e3:6.1f} ms/step, L-BFGS {lbfgs:6.3f} s/step; "
+                        f"valid, better than TFI: {_when(valid)}; converged: {_when(converged)}; "
+                        f"{run['steps']} steps, {run['training_seconds']:.1f} s",
+                        flush=True,
+                    )
     skipped = None if cuda else "no CUDA device is available to torch on this machine"
     if skipped and verbose:
         print(f"  CUDA rows skipped: {skipped}")
@@ -412,8 +508,10 @@ def main():
     geometry = load_geometry("semicylinder")
     repeats = 5 if args.quick else 20
     sizes = {"default": SIZES["default"]} if args.quick else SIZES
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads (OMP_WAIT_POLICY={os.environ['OMP_WAIT_POLICY']}), "
-          f"load average {os.getloadavg()[0]:.2f}")
+    print(
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads (OMP_WAIT_POLICY={os.environ['OMP_WAIT_POLICY']}), "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     print("Seconds per Adam step, semicylinder, 4096 interior (16^3 grid nodes or random points) + 6000 boundary points:")
     rows = step_table(geometry, sizes, repeats)
     step_ratios = ratios(rows)
@@ -423,10 +521,15 @@ def main():
     print("Speed: seconds per step and time to quality of the corrected 30^3 mesh, CPU threads 1 and 2:")
     speed = speed_table(geometry, quick=args.quick)
     results = {
-        "machine": {"platform": platform.platform(), "processor": platform.processor(), "cpus": os.cpu_count(),
-                    "threads": torch.get_num_threads(), "torch": torch.__version__,
-                    "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
-                    "load_average_at_end": os.getloadavg()[0]},
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor(),
+            "cpus": os.cpu_count(),
+            "threads": torch.get_num_threads(),
+            "torch": torch.__version__,
+            "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),
+            "load_average_at_end": os.getloadavg()[0],
+        },
         "quick": args.quick,
         "step_seconds": rows,
         "ratios": step_ratios,

@@ -97,7 +97,9 @@ def formats_table(X, repeat: int) -> dict:
         import meshio
 
         path = Path(folder) / "meshio.vtu"
-        mesh = meshio.Mesh(flat_points(X), [("hexahedron", cell_connectivity(X.shape[:-1]))], cell_data={"quality": [cell_data["quality"]]})
+        mesh = meshio.Mesh(
+            flat_points(X), [("hexahedron", cell_connectivity(X.shape[:-1]))], cell_data={"quality": [cell_data["quality"]]}
+        )
         write = best_time(lambda: meshio.write(path, mesh, compression="zlib"), repeat)
         read = best_time(lambda: meshio.read(path), repeat)
         rows.append({"format": "meshio vtu", "write_s": write, "read_s": read, "size_mb": os.path.getsize(path) / 1e6})
@@ -142,7 +144,10 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
     meshio_mesh = meshio.Mesh(flat_points(X), cells, cell_data={name: [values] for name, values in cell_data.items()})
     writers = [("meshio, level 6 (old)", lambda path: meshio.vtu.write(path, meshio_mesh, binary=True, compression="zlib"))]
     writers += [
-        (f"meshgen, level {level}", lambda path, level=level: _vtu.write(path, X, cell_data, metadata, level=level, rle_above=None))
+        (
+            f"meshgen, level {level}",
+            lambda path, level=level: _vtu.write(path, X, cell_data, metadata, level=level, rle_above=None),
+        )
         for level in (1, 3, 6)
     ]
     writers += [(f"meshgen, level {_vtu.LEVEL} + RLE*", lambda path: _vtu.write(path, X, cell_data, metadata))]
@@ -154,16 +159,29 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
             meshio_read, _ = median_times(lambda: meshio.read(path), 3)
             vtk_read, _ = median_times(lambda: read_with_vtk(path), 3)
             size = os.path.getsize(path) / 1e6
-            rows.append({"writer": label, "write_s": wall, "write_cpu_s": cpu, "size_mb": size, "meshio_read_s": meshio_read, "vtk_read_s": vtk_read})
+            rows.append(
+                {
+                    "writer": label,
+                    "write_s": wall,
+                    "write_cpu_s": cpu,
+                    "size_mb": size,
+                    "meshio_read_s": meshio_read,
+                    "vtk_read_s": vtk_read,
+                }
+            )
 
-    print(f".vtu of {mesh_label}, {' x '.join(map(str, dims))} cells with {len(cell_data)} quality arrays: write median of {repeat}, reads median of 3")
+    print(
+        f".vtu of {mesh_label}, {' x '.join(map(str, dims))} cells with {len(cell_data)} quality arrays: write median of {repeat}, reads median of 3"
+    )
     print(f"{'writer':<24}{'write [s]':>10}{'cpu [s]':>9}{'size [MB]':>11}{'meshio read [s]':>17}{'VTK read [s]':>14}")
     for row in rows:
         print(
             f"{row['writer']:<24}{row['write_s']:>10.2f}{row['write_cpu_s']:>9.2f}{row['size_mb']:>11.1f}"
             f"{row['meshio_read_s']:>17.2f}{row['vtk_read_s']:>14.2f}"
         )
-    print(f"  * the default: level {_vtu.LEVEL}, Z_RLE for blocks whose first {_vtu.PROBE_BYTES // 1024} KiB keep more than {_vtu.RLE_ABOVE} of their size at level {_vtu.LEVEL}")
+    print(
+        f"  * the default: level {_vtu.LEVEL}, Z_RLE for blocks whose first {_vtu.PROBE_BYTES // 1024} KiB keep more than {_vtu.RLE_ABOVE} of their size at level {_vtu.LEVEL}"
+    )
 
     # The codecs alone: the same arrays, the writer's blocks and thread pool.
     arrays = [flat_points(X), cell_connectivity(X.shape[:-1]), *cell_data.values()]
@@ -179,7 +197,9 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
     print(f"compression alone of its points, cells and quality arrays ({raw_mb:.1f} MB), median of {repeat}")
     print(f"{'codec':<24}{'time [s]':>10}{'cpu [s]':>9}{'size [MB]':>11}{'ratio':>7}")
     for row in codec_rows:
-        print(f"{row['codec']:<24}{row['seconds']:>10.2f}{row['cpu_s']:>9.2f}{row['size_mb']:>11.1f}{row['size_mb'] / raw_mb:>7.2f}")
+        print(
+            f"{row['codec']:<24}{row['seconds']:>10.2f}{row['cpu_s']:>9.2f}{row['size_mb']:>11.1f}{row['size_mb'] / raw_mb:>7.2f}"
+        )
     print()
     return {"cells": int(np.prod(dims)), "writers": rows, "codecs": codec_rows, "uncompressed_mb": raw_mb}
 

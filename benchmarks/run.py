@@ -88,8 +88,21 @@ sys.path.insert(1, str(BENCHMARKS))
 
 GEOMETRY = "semicylinder"
 PAPER_WIDTHS = [85, 85, 85, 85]  # the network the inference target is set for
-SECTIONS = ["machine", "meshing", "boundary_layout", "mesh_command", "training", "time_to_quality", "correction", "family",
-            "evaluate", "formats", "solver_formats", "memory", "chunked"]
+SECTIONS = [
+    "machine",
+    "meshing",
+    "boundary_layout",
+    "mesh_command",
+    "training",
+    "time_to_quality",
+    "correction",
+    "family",
+    "evaluate",
+    "formats",
+    "solver_formats",
+    "memory",
+    "chunked",
+]
 
 # figure key -> (comparison, target, unit, where the target comes from)
 TARGETS = {
@@ -112,8 +125,13 @@ TARGETS = {
     "default_converged_seconds": ("<=", 90.0, "s", "issue 13: default to converged quality on 2 cores"),
     "gpu_inference_501_seconds": ("<=", 1.0, "s", "issue 14: [85]*4 network on 501^3 nodes on a GPU"),
     "paper_cuda_adam_seconds": ("<=", 60.0, "s", "issue 13: paper's 12000 Adam steps, [85]*4, on a GPU"),
-    "correction_angle_degrees": (">=", -0.3, "deg", "issue 13: corrected mesh within 0.3 degrees of the elliptic mesh, "
-                                 "judged as at most 0.3 below it (a higher angle is a better mesh)"),
+    "correction_angle_degrees": (
+        ">=",
+        -0.3,
+        "deg",
+        "issue 13: corrected mesh within 0.3 degrees of the elliptic mesh, "
+        "judged as at most 0.3 below it (a higher angle is a better mesh)",
+    ),
 }
 
 
@@ -179,19 +197,21 @@ def processor_name() -> str:
 
 def git_commit() -> str | None:
     try:
-        result = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                text=True, timeout=10)
-        dirty = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
+        result = subprocess.run(
+            ["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10
+        )
+        dirty = subprocess.run(
+            ["git", "-C", str(REPO), "status", "--porcelain", "--untracked-files=no"], capture_output=True, text=True, timeout=10
+        ).stdout.strip()
         return result.stdout.strip() + ("+modified" if dirty else "") if result.returncode == 0 else None
     except (OSError, subprocess.SubprocessError):
         return None
 
 
 def machine(quick: bool) -> dict:
+    import bench_inference
     import torch
 
-    import bench_inference
     import meshgen
 
     try:
@@ -214,11 +234,15 @@ def machine(quick: bool) -> dict:
         "matmul": bench_inference.matmul_rates(4096, 3 if quick else 5),
     }
     roof = data["matmul"]
-    print(f"{data['processor']}, {data['usable_cpus']} of {data['cpus']} cores, {memory or 0:.0f} GB; python {data['python']}, "
-          f"numpy {data['numpy']}, torch {data['torch']} ({data['torch_threads']} threads), meshgen {data['meshgen']} "
-          f"({data['git_commit']})")
-    print(f"float32 matrix product {roof['size']}^2: {roof['gflops']:.0f} GFLOP/s (best of {roof['repeats']}), "
-          f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second")
+    print(
+        f"{data['processor']}, {data['usable_cpus']} of {data['cpus']} cores, {memory or 0:.0f} GB; python {data['python']}, "
+        f"numpy {data['numpy']}, torch {data['torch']} ({data['torch_threads']} threads), meshgen {data['meshgen']} "
+        f"({data['git_commit']})"
+    )
+    print(
+        f"float32 matrix product {roof['size']}^2: {roof['gflops']:.0f} GFLOP/s (best of {roof['repeats']}), "
+        f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second"
+    )
     return data
 
 
@@ -238,9 +262,9 @@ def bundled_model():
 def meshing(quick: bool, roof: dict | None) -> dict:
     """Each method through ``make_mesh`` (as ``meshgen mesh`` calls it) at 30^3 (and 100^3), then
     the network's forward pass alone against the matrix-product roof."""
+    import bench_inference
     import torch
 
-    import bench_inference
     from meshgen.geometry import load_geometry
     from meshgen.methods import make_mesh
     from meshgen.neural.inference import evaluate_on_grid
@@ -264,12 +288,17 @@ def meshing(quick: bool, roof: dict | None) -> dict:
             if method == "elliptic":
                 notes = {"iterations": info["iterations"], "converged": bool(info["converged"])}
             elif method == "neural":
-                notes = {"model": f"bundled {model.preset()} {list(model.checkpoint['model']['widths'])}",
-                         "raw_boundary_error_max": info["correction"]["error_before"]["max"]}
+                notes = {
+                    "model": f"bundled {model.preset()} {list(model.checkpoint['model']['widths'])}",
+                    "raw_boundary_error_max": info["correction"]["error_before"]["max"],
+                }
             row = {"method": method, "cells_per_axis": n, "cells": n**3, "repeat": repeat, **timing, **notes}
             rows.append(row)
-            print(f"{method:<10}{n:>5}^3{row['seconds']:>10.3f}{row['min_seconds']:>8.3f}{row['max_seconds']:>8.3f}"
-                  f"{row['cpu_seconds']:>8.3f}{repeat:>6}  " + ", ".join(f"{k} {v}" for k, v in notes.items()), flush=True)
+            print(
+                f"{method:<10}{n:>5}^3{row['seconds']:>10.3f}{row['min_seconds']:>8.3f}{row['max_seconds']:>8.3f}"
+                f"{row['cpu_seconds']:>8.3f}{repeat:>6}  " + ", ".join(f"{k} {v}" for k, v in notes.items()),
+                flush=True,
+            )
 
     # The forward pass alone: the bundled model at each size, and the [85]*4 network of the target.
     networks = [(f"bundled {model.preset()}", model.checkpoint["model"], n + 1) for n in sizes]
@@ -285,20 +314,31 @@ def meshing(quick: bool, roof: dict | None) -> dict:
         timing.pop("result")
         gflop = bench_inference.network_flops(description["widths"], 3, nodes**3) / 1e9
         roof_seconds = gflop / roof["gflops"] if roof else None
-        row = {"network": label, "widths": list(description["widths"]), "nodes_per_axis": nodes, "nodes": nodes**3,
-               "gflop": gflop, **timing, "roof_seconds": roof_seconds,
-               "fraction_of_roof": roof_seconds / timing["seconds"] if roof else None,
-               # the same per CPU second: what a busy machine changes less
-               "fraction_of_roof_per_cpu_second": gflop / timing["cpu_seconds"] / roof["gflops_per_cpu_second"] if roof else None}
+        row = {
+            "network": label,
+            "widths": list(description["widths"]),
+            "nodes_per_axis": nodes,
+            "nodes": nodes**3,
+            "gflop": gflop,
+            **timing,
+            "roof_seconds": roof_seconds,
+            "fraction_of_roof": roof_seconds / timing["seconds"] if roof else None,
+            # the same per CPU second: what a busy machine changes less
+            "fraction_of_roof_per_cpu_second": gflop / timing["cpu_seconds"] / roof["gflops_per_cpu_second"] if roof else None,
+        }
         forward.append(row)
         fraction = f"{row['fraction_of_roof']:.0%} (per CPU second {row['fraction_of_roof_per_cpu_second']:.0%})" if roof else "-"
-        print(f"{label + ' ' + str(row['widths']):<38}{nodes:>6}^3{gflop:>7.1f}{row['seconds']:>10.3f}"
-              f"{row['cpu_seconds']:>8.3f}  {fraction}", flush=True)
+        print(
+            f"{label + ' ' + str(row['widths']):<38}{nodes:>6}^3{gflop:>7.1f}{row['seconds']:>10.3f}"
+            f"{row['cpu_seconds']:>8.3f}  {fraction}",
+            flush=True,
+        )
     return {"geometry": GEOMETRY, "methods": rows, "forward_pass": forward}
 
 
 # ---------------------------------------------------------------------------------------------
 # the mesh command, end to end, and its memory
+
 
 def mesh_command(cells: int, folder: Path) -> dict:
     """``bench_inference.mesh_command`` in the environment this process started with (so without
@@ -315,13 +355,22 @@ def mesh_command_section(quick: bool) -> dict:
         mesh_command(10, folder)  # warm the file cache (torch's libraries) for the timed runs
         runs = [mesh_command(100, folder) for _ in range(repeat)]
     seconds = [run["seconds"] for run in runs]
-    data = {"command": "meshgen mesh --dims 100 100 100 -o out.vtu -q (bundled model)", "cells": 100**3,
-            "repeat": repeat, "seconds": statistics.median(seconds), "min_seconds": min(seconds),
-            "max_seconds": max(seconds), "cpu_seconds": statistics.median(run["cpu_seconds"] for run in runs),
-            "peak_megabytes": max(run["peak_megabytes"] for run in runs),
-            "megabytes_written": runs[-1]["megabytes_written"], "runs": runs}
-    print(f"{data['command']}: median {data['seconds']:.2f} s of {repeat} (CPU {data['cpu_seconds']:.2f} s), "
-          f"peak memory {data['peak_megabytes']:.0f} MB, {data['megabytes_written']:.0f} MB written")
+    data = {
+        "command": "meshgen mesh --dims 100 100 100 -o out.vtu -q (bundled model)",
+        "cells": 100**3,
+        "repeat": repeat,
+        "seconds": statistics.median(seconds),
+        "min_seconds": min(seconds),
+        "max_seconds": max(seconds),
+        "cpu_seconds": statistics.median(run["cpu_seconds"] for run in runs),
+        "peak_megabytes": max(run["peak_megabytes"] for run in runs),
+        "megabytes_written": runs[-1]["megabytes_written"],
+        "runs": runs,
+    }
+    print(
+        f"{data['command']}: median {data['seconds']:.2f} s of {repeat} (CPU {data['cpu_seconds']:.2f} s), "
+        f"peak memory {data['peak_megabytes']:.0f} MB, {data['megabytes_written']:.0f} MB written"
+    )
     return data
 
 
@@ -329,10 +378,16 @@ def memory_section(quick: bool) -> dict:
     cells = 100 if quick else 200
     with tempfile.TemporaryDirectory() as folder:
         run = mesh_command(cells, Path(folder))
-    data = {"command": f"meshgen mesh --dims {cells} {cells} {cells} -o out.vtu -q (bundled model)",
-            "cells_per_axis": cells, "cells": cells**3, **run}
-    print(f"{data['command']}: peak memory {run['peak_megabytes']:.0f} MB, {run['seconds']:.1f} s "
-          f"(CPU {run['cpu_seconds']:.1f} s), {run['megabytes_written']:.0f} MB written")
+    data = {
+        "command": f"meshgen mesh --dims {cells} {cells} {cells} -o out.vtu -q (bundled model)",
+        "cells_per_axis": cells,
+        "cells": cells**3,
+        **run,
+    }
+    print(
+        f"{data['command']}: peak memory {run['peak_megabytes']:.0f} MB, {run['seconds']:.1f} s "
+        f"(CPU {run['cpu_seconds']:.1f} s), {run['megabytes_written']:.0f} MB written"
+    )
     return data
 
 
@@ -347,30 +402,40 @@ def chunked_section(quick: bool) -> dict:
 
 
 def training(quick: bool) -> dict:
+    import bench_train
     import torch
 
-    import bench_train
     from meshgen.geometry import load_geometry
 
     geometry = load_geometry(GEOMETRY)
     sizes = {"default": bench_train.SIZES["default"]} if quick else bench_train.SIZES
     repeats = 5 if quick else 20
-    print(f"seconds per Adam step, median of {repeats}; 4096 interior (16^3 grid nodes or random points) + "
-          f"6000 boundary points; torch {torch.get_num_threads()} threads")
+    print(
+        f"seconds per Adam step, median of {repeats}; 4096 interior (16^3 grid nodes or random points) + "
+        f"6000 boundary points; torch {torch.get_num_threads()} threads"
+    )
     rows = bench_train.step_table(geometry, sizes, repeats, extras=not quick)
     ratios, cpu_ratios = bench_train.ratios(rows), bench_train.ratios(rows, "cpu_seconds_per_step")
     for size, values in ratios.items():
         for name, value in values.items():
             cpu = f" (of CPU seconds {cpu_ratios[size][name]:.2f}x)" if name in cpu_ratios[size] else ""
             print(f"  {size:8s} {name}: {value:.2f}{'' if 'overhead' in name else 'x'}{cpu}")
-    return {"geometry": GEOMETRY, "interior_points": 4096, "boundary_points": 6000, "repeat": repeats,
-            "sizes": {name: list(widths) for name, widths in sizes.items()}, "steps": rows, "ratios": ratios,
-            "ratios_of_cpu_seconds": cpu_ratios,
-            "fd_ad_pairs": {name: list(pair) for name, pair in bench_train.AD_FD_PAIRS.items()}}
+    return {
+        "geometry": GEOMETRY,
+        "interior_points": 4096,
+        "boundary_points": 6000,
+        "repeat": repeats,
+        "sizes": {name: list(widths) for name, widths in sizes.items()},
+        "steps": rows,
+        "ratios": ratios,
+        "ratios_of_cpu_seconds": cpu_ratios,
+        "fd_ad_pairs": {name: list(pair) for name, pair in bench_train.AD_FD_PAIRS.items()},
+    }
 
 
 def time_to_quality(quick: bool) -> dict:
     import bench_train
+
     from meshgen.geometry import load_geometry
 
     return bench_train.speed_table(load_geometry(GEOMETRY), quick=quick)
@@ -387,7 +452,11 @@ def boundary_layout(quick: bool) -> dict:
 
     results = bench_layout.run(quick)
     measured = {r["cells"]: r.get("gmsh_smoothed_min_angle_mean") for r in results if r["geometry"] == "semicylinder"}
-    return {"results": results, "gmsh_smoothed_semicylinder": measured, "gmsh_smoothed_semicylinder_quoted": bench_layout.GMSH_SMOOTHED}
+    return {
+        "results": results,
+        "gmsh_smoothed_semicylinder": measured,
+        "gmsh_smoothed_semicylinder_quoted": bench_layout.GMSH_SMOOTHED,
+    }
 
 
 def family(quick: bool) -> dict:
@@ -406,25 +475,57 @@ def evaluate(quick: bool) -> dict:
     cases = [("unstructured", bench_quality.REPORT)] if quick else bench_quality.CASES
     data = bench_quality.measure((100, 100, 100), 2 if quick else 5, cases)
     bench_quality.print_table(data)
-    rows = [{"path": r["path"], "what": r["what"], "cells": r["cells"], "seconds": r["median_s"],
-             "min_seconds": r["min_s"], "max_seconds": r["max_s"], "cpu_seconds": r["median_cpu_s"],
-             "runs_seconds": r["runs_s"], "cells_per_second": r["cells"] / r["median_s"]} for r in data["results"]]
-    return {"geometry": GEOMETRY, "mesh": "TFI", "dims": data["dims"], "cells": data["cells"], "repeat": data["repeat"],
-            "results": rows}
+    rows = [
+        {
+            "path": r["path"],
+            "what": r["what"],
+            "cells": r["cells"],
+            "seconds": r["median_s"],
+            "min_seconds": r["min_s"],
+            "max_seconds": r["max_s"],
+            "cpu_seconds": r["median_cpu_s"],
+            "runs_seconds": r["runs_s"],
+            "cells_per_second": r["cells"] / r["median_s"],
+        }
+        for r in data["results"]
+    ]
+    return {
+        "geometry": GEOMETRY,
+        "mesh": "TFI",
+        "dims": data["dims"],
+        "cells": data["cells"],
+        "repeat": data["repeat"],
+        "results": rows,
+    }
 
 
 def formats(quick: bool) -> dict:
     import formats as formats_benchmark
+
     from meshgen.geometry import load_geometry
     from meshgen.tfi import tfi
 
     cells = 50 if quick else 100
     repeat = 1 if quick else 3
     data = formats_benchmark.formats_table(tfi(load_geometry(GEOMETRY), (cells,) * 3), repeat)
-    rows = [{"format": r["format"] + (" (baseline: meshio's own writer)" if r["format"] == "meshio vtu" else ""), "write_seconds": r["write_s"], "read_seconds": r["read_s"], "megabytes": r["size_mb"]}
-            for r in data["results"]]
-    return {"geometry": GEOMETRY, "mesh": "TFI, one cell-data array and the metadata", "cells_per_axis": cells,
-            "cells": cells**3, "repeat": repeat, "timing": f"best of {repeat}", "results": rows}
+    rows = [
+        {
+            "format": r["format"] + (" (baseline: meshio's own writer)" if r["format"] == "meshio vtu" else ""),
+            "write_seconds": r["write_s"],
+            "read_seconds": r["read_s"],
+            "megabytes": r["size_mb"],
+        }
+        for r in data["results"]
+    ]
+    return {
+        "geometry": GEOMETRY,
+        "mesh": "TFI, one cell-data array and the metadata",
+        "cells_per_axis": cells,
+        "cells": cells**3,
+        "repeat": repeat,
+        "timing": f"best of {repeat}",
+        "results": rows,
+    }
 
 
 def solver_formats(quick: bool) -> dict:
@@ -441,7 +542,7 @@ def solver_formats(quick: bool) -> dict:
 # the summary
 
 
-def summary(sections: dict) -> list[dict]:
+def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows, one block per benchmark
     """The headline figures, each with its target (where one is set) and met / not met. ``cpu``:
     the process CPU seconds beside a wall time (all threads; on a loaded machine the wall time
     grows more), None where not measured."""
@@ -455,47 +556,92 @@ def summary(sections: dict) -> list[dict]:
 
     if "machine" in sections:
         roof = sections["machine"]["matmul"]
-        add(f"float32 matrix product {roof['size']}^2, {roof['threads']} threads (the roof)", roof["gflops"], "GFLOP/s",
-            note=f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second")
+        add(
+            f"float32 matrix product {roof['size']}^2, {roof['threads']} threads (the roof)",
+            roof["gflops"],
+            "GFLOP/s",
+            note=f"{roof['gflops_per_cpu_second']:.0f} GFLOP per CPU second",
+        )
     if "meshing" in sections:
         for row in sections["meshing"]["methods"]:
             n = row["cells_per_axis"]
             key = {("elliptic", 100): "elliptic_100_seconds", ("elliptic", 30): "elliptic_30_seconds"}.get((row["method"], n))
-            note = {"elliptic": f"{row.get('iterations')} cycles", "neural": f"{row.get('model')}, corrected"}.get(row["method"], "")
-            add(f"mesh {n}^3 cells, {row['method']} (median of {row['repeat']})", row["seconds"], "s", key, note=note,
-                cpu=row["cpu_seconds"])
+            note = {"elliptic": f"{row.get('iterations')} cycles", "neural": f"{row.get('model')}, corrected"}.get(
+                row["method"], ""
+            )
+            add(
+                f"mesh {n}^3 cells, {row['method']} (median of {row['repeat']})",
+                row["seconds"],
+                "s",
+                key,
+                note=note,
+                cpu=row["cpu_seconds"],
+            )
         for row in sections["meshing"]["forward_pass"]:
             n = row["nodes_per_axis"]
-            fraction = (f"{row['fraction_of_roof']:.0%} of the roof ({row['fraction_of_roof_per_cpu_second']:.0%} "
-                        f"per CPU second)" if row["fraction_of_roof"] else "")
-            add(f"network forward pass, {row['network']}, {n}^3 nodes", row["seconds"], "s",
-                "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None, note=fraction,
-                cpu=row["cpu_seconds"])
+            fraction = (
+                f"{row['fraction_of_roof']:.0%} of the roof ({row['fraction_of_roof_per_cpu_second']:.0%} per CPU second)"
+                if row["fraction_of_roof"]
+                else ""
+            )
+            add(
+                f"network forward pass, {row['network']}, {n}^3 nodes",
+                row["seconds"],
+                "s",
+                "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None,
+                note=fraction,
+                cpu=row["cpu_seconds"],
+            )
     if "boundary_layout" in sections:
         for result in sections["boundary_layout"]["results"]:
             n = result["cells"]
             for method, row in result["methods"].items():
                 key = f"elliptic_min_angle_{n}" if (result["geometry"], method) == (GEOMETRY, "elliptic smoothed") else None
-                add(f"mean min angle, {result['geometry']} {n}^3, {method} layout", row["min_angle_mean"], "deg", key,
+                add(
+                    f"mean min angle, {result['geometry']} {n}^3, {method} layout",
+                    row["min_angle_mean"],
+                    "deg",
+                    key,
                     note=f"{row['inverted']} inverted, deviation {row['deviation_max_rel']:.1e}, "
-                         f"{format_value(row['seconds'], 's')}")
+                    f"{format_value(row['seconds'], 's')}",
+                )
             if result.get("gmsh_smoothed_min_angle_mean") is not None:
-                add(f"mean min angle, {result['geometry']} {n}^3, gmsh's smoothed transfinite mesh (section, converged)",
-                    result["gmsh_smoothed_min_angle_mean"], "deg", None, note="the reference of issue 16")
+                add(
+                    f"mean min angle, {result['geometry']} {n}^3, gmsh's smoothed transfinite mesh (section, converged)",
+                    result["gmsh_smoothed_min_angle_mean"],
+                    "deg",
+                    None,
+                    note="the reference of issue 16",
+                )
     if "mesh_command" in sections:
         data = sections["mesh_command"]
-        add(f"`meshgen mesh --dims 100 100 100 -o out.vtu`, end to end (median of {data['repeat']})", data["seconds"],
-            "s", "mesh_command_100_seconds", cpu=data["cpu_seconds"], note=f"peak memory {data['peak_megabytes']:.0f} MB")
+        add(
+            f"`meshgen mesh --dims 100 100 100 -o out.vtu`, end to end (median of {data['repeat']})",
+            data["seconds"],
+            "s",
+            "mesh_command_100_seconds",
+            cpu=data["cpu_seconds"],
+            note=f"peak memory {data['peak_megabytes']:.0f} MB",
+        )
     if "training" in sections:
         data = sections["training"]
         for row in data["steps"]:
             if row["variant"] in bench_variants():
-                add(f"training step, {row['variant']} {row['widths']}", row["seconds_per_step"], "s",
-                    cpu=row["cpu_seconds_per_step"])
+                add(
+                    f"training step, {row['variant']} {row['widths']}",
+                    row["seconds_per_step"],
+                    "s",
+                    cpu=row["cpu_seconds_per_step"],
+                )
         for size, values in data["ratios"].items():
             for name in data["fd_ad_pairs"]:
-                add(f"FD/AD step ratio, {name}, {data['sizes'][size]}", values[name], "x", "fd_ad_step_ratio",
-                    note=f"{data['ratios_of_cpu_seconds'][size][name]:.2f}x of CPU seconds")
+                add(
+                    f"FD/AD step ratio, {name}, {data['sizes'][size]}",
+                    values[name],
+                    "x",
+                    "fd_ad_step_ratio",
+                    note=f"{data['ratios_of_cpu_seconds'][size][name]:.2f}x of CPU seconds",
+                )
     if "time_to_quality" in sections:
         data = sections["time_to_quality"]
         stepped = set()
@@ -508,91 +654,163 @@ def summary(sections: dict) -> list[dict]:
                 add(f"training step, {name}, L-BFGS", row["lbfgs_seconds_per_step"], "s")
             name += f", {row.get('layout', 'smoothed')} layout"
             if row["device"] == "cuda" and row["preset"] == "paper":
-                add(f"whole run, {name}, {row['adam_steps']} Adam steps", row["training_seconds"], "s",
-                    "paper_cuda_adam_seconds" if row["adam_steps"] >= 12000 else None)
+                add(
+                    f"whole run, {name}, {row['adam_steps']} Adam steps",
+                    row["training_seconds"],
+                    "s",
+                    "paper_cuda_adam_seconds" if row["adam_steps"] >= 12000 else None,
+                )
             for milestone, label in (("first_valid", "valid, better than TFI"), ("first_converged", "converged")):
                 point = row[milestone]
-                key = {("exact", "first_converged", "cpu", 2): "exact_converged_seconds",
-                       ("default", "first_converged", "cpu", 2): "default_converged_seconds"}.get(
-                    (row["preset"], milestone, row["device"], row["threads"]))
-                note = (f"step {point['step']} of {row['steps']}" if point else f"not reached in {row['steps']} steps")
+                key = {
+                    ("exact", "first_converged", "cpu", 2): "exact_converged_seconds",
+                    ("default", "first_converged", "cpu", 2): "default_converged_seconds",
+                }.get((row["preset"], milestone, row["device"], row["threads"]))
+                note = f"step {point['step']} of {row['steps']}" if point else f"not reached in {row['steps']} steps"
                 note += ", capped budget" if row["capped"] else ""
-                add(f"time to {label}, {name}, 30^3 corrected mesh", point["seconds"] if point else None, "s", key,
-                    judged=not (row["capped"] and row["preset"] != "paper"), note=note)
+                add(
+                    f"time to {label}, {name}, 30^3 corrected mesh",
+                    point["seconds"] if point else None,
+                    "s",
+                    key,
+                    judged=not (row["capped"] and row["preset"] != "paper"),
+                    note=note,
+                )
         if data["cuda_skipped"]:
             add("CUDA rows", None, "s", note=f"skipped: {data['cuda_skipped']}")
     if "correction" in sections:
         data = sections["correction"]
         for row in data["rows"]:
             c = row["corrected"]
-            add(f"default on {row['geometry']}, corrected {row['cells_per_axis']}^3: min angle minus elliptic's",
-                row["min_angle_mean_difference_degrees"], "deg", "correction_angle_degrees",
+            add(
+                f"default on {row['geometry']}, corrected {row['cells_per_axis']}^3: min angle minus elliptic's",
+                row["min_angle_mean_difference_degrees"],
+                "deg",
+                "correction_angle_degrees",
                 judged=not data["capped"],
                 note=f"{c['inverted']} inverted, boundary deviation {c['boundary_deviation_max_rel']:.1e} of the length; "
-                     f"raw network {row['raw_inverted']} inverted, boundary error {row['raw_boundary_error']['max_rel']:.1e}")
+                f"raw network {row['raw_inverted']} inverted, boundary error {row['raw_boundary_error']['max_rel']:.1e}",
+            )
     if "family" in sections:
         data = sections["family"]
         for name, case in data["cases"].items():
             ranges = " ".join(f"{k}={lo:g}:{hi:g}" for k, (lo, hi) in case["ranges"].items())
             capped = ", capped budget" if data["quick"] else ""
-            add(f"family training, {name} {ranges}", case["training"]["seconds"], "s", cpu=case["training"]["cpu_seconds"],
-                note=f"{case['training']['steps']} steps{capped}")
-            add(f"family member mesh {case['cells_per_axis']}^3, {name} (median of {len(case['members'])})",
-                case["meshing_seconds_median"], "s")
+            add(
+                f"family training, {name} {ranges}",
+                case["training"]["seconds"],
+                "s",
+                cpu=case["training"]["cpu_seconds"],
+                note=f"{case['training']['steps']} steps{capped}",
+            )
+            add(
+                f"family member mesh {case['cells_per_axis']}^3, {name} (median of {len(case['members'])})",
+                case["meshing_seconds_median"],
+                "s",
+            )
             worst = case["worst"]
             at = ", ".join(f"{k}={v:.3g}" for k, v in worst["params"].items())
-            add(f"family worst member, {name}: |min angle - elliptic's|", abs(worst["difference_degrees"]), "deg",
-                "family_worst_degrees", judged=not data["quick"],
+            add(
+                f"family worst member, {name}: |min angle - elliptic's|",
+                abs(worst["difference_degrees"]),
+                "deg",
+                "family_worst_degrees",
+                judged=not data["quick"],
                 note=f"{at}: {worst['inverted']} inverted, boundary deviation {worst['boundary_deviation_max_rel']:.1e} "
-                     f"of the length, {worst['min_angle_mean']:.2f} vs {worst['elliptic_min_angle_mean']:.2f}")
+                f"of the length, {worst['min_angle_mean']:.2f} vs {worst['elliptic_min_angle_mean']:.2f}",
+            )
             if worst["inverted"] and not data["quick"]:
                 rows[-1]["met"] = False  # an inverted cell fails the target whatever the angles
     if "evaluate" in sections:
         data = sections["evaluate"]
         for row in data["results"]:
             headline = row["path"] == "unstructured" and "report" in row["what"]
-            add(f"evaluate {row['cells']:,} cells, {row['path']} {row['what']}", row["seconds"], "s",
-                "evaluate_1e6_seconds" if headline else None, judged=row["cells"] >= 1e6, cpu=row["cpu_seconds"])
+            add(
+                f"evaluate {row['cells']:,} cells, {row['path']} {row['what']}",
+                row["seconds"],
+                "s",
+                "evaluate_1e6_seconds" if headline else None,
+                judged=row["cells"] >= 1e6,
+                cpu=row["cpu_seconds"],
+            )
     if "formats" in sections:
         data = sections["formats"]
         for row in data["results"]:
-            add(f"write {data['cells_per_axis']}^3 cells, {row['format']}", row["write_seconds"], "s",
-                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
+            add(
+                f"write {data['cells_per_axis']}^3 cells, {row['format']}",
+                row["write_seconds"],
+                "s",
+                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}",
+            )
     if "solver_formats" in sections:
         data = sections["solver_formats"]
         n = data["cells_per_axis"]
         for row in data["results"]:
-            add(f"write {n}^3 cells with patches, {row['format']} ({data['mesh']}, median of {data['repeat']})",
-                row["write_seconds"], "s", cpu=row["write_cpu_seconds"],
-                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}")
+            add(
+                f"write {n}^3 cells with patches, {row['format']} ({data['mesh']}, median of {data['repeat']})",
+                row["write_seconds"],
+                "s",
+                cpu=row["write_cpu_seconds"],
+                note=f"{row['megabytes']:.1f} MB; read {format_value(row['read_seconds'], 's')}",
+            )
         ratios = data["vts_vs_vtu"]
         add(f".vts size / .vtu size, {n}^3", ratios["size_ratio"], "x", "vts_vtu_size_ratio", judged=n == 100)
-        add(f".vts write time / .vtu write time, {n}^3", ratios["write_time_ratio"], "x", "vts_vtu_write_time_ratio",
-            judged=n == 100)
+        add(
+            f".vts write time / .vtu write time, {n}^3",
+            ratios["write_time_ratio"],
+            "x",
+            "vts_vtu_write_time_ratio",
+            judged=n == 100,
+        )
     if "memory" in sections:
         data = sections["memory"]
-        add(f"peak memory, `meshgen mesh --dims {data['cells_per_axis']} {data['cells_per_axis']} "
-            f"{data['cells_per_axis']} -o out.vtu`", data["peak_megabytes"], "MB",
-            "peak_memory_200_megabytes", judged=data["cells_per_axis"] == 200,
-            note=f"{format_value(data['seconds'], 's')} end to end")
+        add(
+            f"peak memory, `meshgen mesh --dims {data['cells_per_axis']} {data['cells_per_axis']} "
+            f"{data['cells_per_axis']} -o out.vtu`",
+            data["peak_megabytes"],
+            "MB",
+            "peak_memory_200_megabytes",
+            judged=data["cells_per_axis"] == 200,
+            note=f"{format_value(data['seconds'], 's')} end to end",
+        )
     if "chunked" in sections:
         data = sections["chunked"]
         same, big = data["same_size_cells_per_axis"], data["big_cells_per_axis"]
         for name, ratio in data["throughput_ratio_in_memory_over_chunked"].items():
             method = "neural" if name.startswith("neural") else "TFI"
-            add(f"in-memory / chunked node throughput, {method} {same}^3 to .cgns, {name.replace('neural_', '').replace('_', ' ')}",
-                ratio, "x", "chunked_throughput_ratio", judged=same == 200)
+            add(
+                f"in-memory / chunked node throughput, {method} {same}^3 to .cgns, {name.replace('neural_', '').replace('_', ' ')}",
+                ratio,
+                "x",
+                "chunked_throughput_ratio",
+                judged=same == 200,
+            )
         row = data["big"]
-        add(f"peak memory, `meshgen mesh -m tfi --dims {big}^3 --chunked --no-quality -o big.cgns`", row["peak_megabytes"], "MB",
-            "chunked_1000_peak_megabytes", judged=big == 1000,
-            note=f"{row['seconds']:.0f} s, {row['nodes_per_second'] / 1e6:.2f} M nodes/s")
+        add(
+            f"peak memory, `meshgen mesh -m tfi --dims {big}^3 --chunked --no-quality -o big.cgns`",
+            row["peak_megabytes"],
+            "MB",
+            "chunked_1000_peak_megabytes",
+            judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['nodes_per_second'] / 1e6:.2f} M nodes/s",
+        )
         row = data["evaluate_big"]
-        add(f"peak memory, `meshgen evaluate --chunked` of the {big}^3 file", row["peak_megabytes"], "MB",
-            "evaluate_chunked_1000_peak_megabytes", judged=big == 1000,
-            note=f"{row['seconds']:.0f} s, {row['cells_per_second'] / 1e6:.2f} M cells/s")
+        add(
+            f"peak memory, `meshgen evaluate --chunked` of the {big}^3 file",
+            row["peak_megabytes"],
+            "MB",
+            "evaluate_chunked_1000_peak_megabytes",
+            judged=big == 1000,
+            note=f"{row['seconds']:.0f} s, {row['cells_per_second'] / 1e6:.2f} M cells/s",
+        )
         gpu = data["gpu_inference"]
-        add("GPU inference, 501^3 nodes, [85]*4", gpu.get("seconds"), "s", "gpu_inference_501_seconds",
-            note=gpu.get("skipped") or f"{gpu['device']}, into one float64 host array")
+        add(
+            "GPU inference, 501^3 nodes, [85]*4",
+            gpu.get("seconds"),
+            "s",
+            "gpu_inference_501_seconds",
+            note=gpu.get("skipped") or f"{gpu['device']}, into one float64 host array",
+        )
     return rows
 
 
@@ -631,9 +849,11 @@ def print_summary(rows: list[dict]) -> None:
     print("-" * (width + 60))
     for row in rows:
         verdict = mark(row["met"]) if "target" in row else ""
-        print(f"{row['figure']:<{width}}  {format_value(row['value'], row['unit']):>11}  "
-              f"{format_value(row['cpu_seconds'], 's') if row['cpu_seconds'] is not None else '':>9}  "
-              f"{target_text(row):>11}  {verdict:<10}  {row['note']}")
+        print(
+            f"{row['figure']:<{width}}  {format_value(row['value'], row['unit']):>11}  "
+            f"{format_value(row['cpu_seconds'], 's') if row['cpu_seconds'] is not None else '':>9}  "
+            f"{target_text(row):>11}  {verdict:<10}  {row['note']}"
+        )
 
 
 def markdown(results: dict) -> str:
@@ -655,19 +875,31 @@ def markdown(results: dict) -> str:
     for row in results["summary"]:
         verdict = mark(row["met"]) if "target" in row else ""
         cpu = format_value(row["cpu_seconds"], "s") if row["cpu_seconds"] is not None else ""
-        lines.append(f"| {row['figure']} | {format_value(row['value'], row['unit'])} | {cpu} | "
-                     f"{target_text(row).replace('<=', '≤').replace('>=', '≥')} | {verdict} | {row['note']} |")
-    lines += ["", "Times are wall seconds (medians); CPU is the process's CPU time over all threads: on a busy "
-                  "machine the wall time grows with the load, the CPU time much less. All meshes are of the "
-                  "semicylinder; the neural rows use the bundled model."]
+        lines.append(
+            f"| {row['figure']} | {format_value(row['value'], row['unit'])} | {cpu} | "
+            f"{target_text(row).replace('<=', '≤').replace('>=', '≥')} | {verdict} | {row['note']} |"
+        )
+    lines += [
+        "",
+        "Times are wall seconds (medians); CPU is the process's CPU time over all threads: on a busy "
+        "machine the wall time grows with the load, the CPU time much less. All meshes are of the "
+        "semicylinder; the neural rows use the bundled model.",
+    ]
     if results["sections"].get("time_to_quality"):
-        lines += ["", "Time to quality: training seconds (the measurements' own time left out) until the 30^3 mesh of "
-                      "the network, corrected to N + TFI[g - N] as `meshgen mesh` writes it, has no inverted cell and a "
-                      "mean minimum angle above TFI's (valid, better than TFI), and until that angle is within 0.3° of "
-                      "the elliptic mesh's (converged; the run stops there)."]
-    lines += ["", "Reproduce (10 to 15 minutes on 2 cores; `--quick`, for CI, under 2 minutes with smaller "
-                  "sizes and capped training):", "",
-              "    python benchmarks/run.py --json benchmarks.json --markdown benchmarks.md", ""]
+        lines += [
+            "",
+            "Time to quality: training seconds (the measurements' own time left out) until the 30^3 mesh of "
+            "the network, corrected to N + TFI[g - N] as `meshgen mesh` writes it, has no inverted cell and a "
+            "mean minimum angle above TFI's (valid, better than TFI), and until that angle is within 0.3° of "
+            "the elliptic mesh's (converged; the run stops there).",
+        ]
+    lines += [
+        "",
+        "Reproduce (10 to 15 minutes on 2 cores; `--quick`, for CI, under 2 minutes with smaller sizes and capped training):",
+        "",
+        "    python benchmarks/run.py --json benchmarks.json --markdown benchmarks.md",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -680,8 +912,13 @@ def main(argv=None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="write every figure to this JSON file")
     parser.add_argument("--markdown", type=Path, default=None, help="write the summary table as Markdown")
     parser.add_argument("--only", choices=SECTIONS, action="append", help="run only this section (repeatable)")
-    parser.add_argument("--from-json", type=Path, default=None, metavar="FILE",
-                        help="measure nothing: print (and with --markdown write) the summary of an earlier run's JSON")
+    parser.add_argument(
+        "--from-json",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="measure nothing: print (and with --markdown write) the summary of an earlier run's JSON",
+    )
     args = parser.parse_args(argv)
     if args.from_json:
         results = json.loads(args.from_json.read_text())
@@ -724,16 +961,25 @@ def main(argv=None) -> int:
         section_header(name)
         before, wall, cpu = load_average(), time.perf_counter(), time.process_time()
         data = runners[name]()
-        data["section"] = {"wall_seconds": time.perf_counter() - wall, "cpu_seconds": time.process_time() - cpu,
-                           "load_average_before": before, "load_average_after": load_average()}
+        data["section"] = {
+            "wall_seconds": time.perf_counter() - wall,
+            "cpu_seconds": time.process_time() - cpu,
+            "load_average_before": before,
+            "load_average_after": load_average(),
+        }
         results["sections"][name] = data
     results["load_average"]["end"] = load_average()
-    results["run"] = {"wall_seconds": time.perf_counter() - started, "cpu_seconds": time.process_time() - started_cpu,
-                      "note": "cpu_seconds: this process only (subprocess commands are in their sections)"}
+    results["run"] = {
+        "wall_seconds": time.perf_counter() - started,
+        "cpu_seconds": time.process_time() - started_cpu,
+        "note": "cpu_seconds: this process only (subprocess commands are in their sections)",
+    }
     results["summary"] = summary(results["sections"])
     print_summary(results["summary"])
-    print(f"\nwhole run: {results['run']['wall_seconds']:.0f} s wall, {results['run']['cpu_seconds']:.0f} s CPU; "
-          f"load average {results['load_average']['start'][0]:.2f} -> {results['load_average']['end'][0]:.2f}")
+    print(
+        f"\nwhole run: {results['run']['wall_seconds']:.0f} s wall, {results['run']['cpu_seconds']:.0f} s CPU; "
+        f"load average {results['load_average']['start'][0]:.2f} -> {results['load_average']['end'][0]:.2f}"
+    )
     if args.json:
         args.json.write_text(json.dumps(results, indent=2, default=float) + "\n")
         print(f"wrote {args.json}")

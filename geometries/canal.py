@@ -54,8 +54,7 @@ def boundary(points, tube_radius, bend_radius):
     """(N, 3) points on the unit cube's boundary -> (N, 3) points on the canal's surface."""
     if not 0 < tube_radius < bend_radius:
         raise GeometryError(
-            f"geometry 'canal': need 0 < tube_radius < bend_radius "
-            f"(got tube_radius={tube_radius:g}, bend_radius={bend_radius:g})"
+            f"geometry 'canal': need 0 < tube_radius < bend_radius (got tube_radius={tube_radius:g}, bend_radius={bend_radius:g})"
         )
 
     def circle(square_points):

@@ -202,8 +202,9 @@ def single_threaded_torch(enabled: bool = True):
         torch.set_num_threads(threads)
 
 
-def write_chunked_mesh(path, X, geometry=None, metadata: dict | None = None, client=None, progress=None,
-                       evaluate: bool = True, patches=None) -> tuple[dict | None, dict]:
+def write_chunked_mesh(
+    path, X, geometry=None, metadata: dict | None = None, client=None, progress=None, evaluate: bool = True, patches=None
+) -> tuple[dict | None, dict]:
     """Compute the dask node array ``X`` block by block and stream it into ``path`` (a format that
     can be written in blocks: CGNS), atomically; then, unless ``evaluate`` is False, its quality
     report computed block-wise from the written file (``meshgen.quality.chunked``) before the

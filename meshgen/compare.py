@@ -108,7 +108,9 @@ def parse_checkpoints(specs) -> dict[str, Path]:
         name, sep, path = spec.partition("=")
         name = name.strip().lower()
         if not sep or not name or not path.strip():
-            raise ParameterError("checkpoint", f"malformed {{name}} {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt")
+            raise ParameterError(
+                "checkpoint", f"malformed {{name}} {spec!r}: expected METHOD=PATH, e.g. pinn=runs/pinn/checkpoint.pt"
+            )
         if name not in TRAINED:
             raise ParameterError(
                 "checkpoint", f"{{name}} {spec!r}: '{name}' is not a neural method (neural methods: {', '.join(TRAINED)})"
@@ -449,11 +451,15 @@ def compare_methods(
 
     # Everything that can be checked is checked before anything runs.
     if len(coords) != geometry.dim:
-        raise MeshgenError(f"geometry '{geometry.name}' is {geometry.dim}D: it needs {geometry.dim} coordinate axes, got {len(coords)}")
+        raise MeshgenError(
+            f"geometry '{geometry.name}' is {geometry.dim}D: it needs {geometry.dim} coordinate axes, got {len(coords)}"
+        )
     neural = [name for name in methods if name in TRAINED]
     for name in checkpoints:
         if name not in methods:
-            raise ParameterError("checkpoint", f"{{name}} for '{name}', which is not among the compared methods ({', '.join(methods)})")
+            raise ParameterError(
+                "checkpoint", f"{{name}} for '{name}', which is not among the compared methods ({', '.join(methods)})"
+            )
     if not neural and (budget.given() or checkpoints):
         given = (budget.given() or ["checkpoint"])[0]
         raise ParameterError(given, f"{{name}} applies to neural methods only ({', '.join(TRAINED)})")
@@ -488,7 +494,11 @@ def compare_methods(
                 say(f"{name}: failed: {exc}")
                 continue
             seconds = statistics.median(timings)
-            figures = {"meshing_seconds": seconds, "training_seconds": record.get("training_seconds"), "test_loss": record.get("test_loss")}
+            figures = {
+                "meshing_seconds": seconds,
+                "training_seconds": record.get("training_seconds"),
+                "test_loss": record.get("test_loss"),
+            }
             if out_dir is not None:
                 metadata = {
                     "meshgen_version": __version__,

@@ -94,9 +94,7 @@ def face_named(name: str, dim: int) -> Face:
 def edges() -> tuple[Edge, ...]:
     """The 12 edges of the 3D cube: for each pair of axes (a < b), the four side combinations."""
     return tuple(
-        Edge((a, b), sides)
-        for a, b in itertools.combinations(range(3), 2)
-        for sides in itertools.product((0, 1), repeat=2)
+        Edge((a, b), sides) for a, b in itertools.combinations(range(3), 2) for sides in itertools.product((0, 1), repeat=2)
     )
 
 

@@ -249,7 +249,9 @@ class AndersonMixing:
         return mixed
 
 
-def solve_winslow(X0: np.ndarray, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, length: float = 1.0, progress=None):
+def solve_winslow(
+    X0: np.ndarray, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, length: float = 1.0, progress=None
+):
     """Solve the discrete Winslow equations for the interior nodes of ``X0``.
 
     ``X0``: initial node array (n1+1, n2+1[, n3+1], dim), float64; its boundary nodes are kept.
@@ -326,8 +328,15 @@ def _check_options(tol, max_iter):
         raise ParameterError("max_iter", f"{{name}} must be a positive integer, got {max_iter}")
 
 
-def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | None = None, progress=None,
-                   boundary_layout: str | None = None, orthogonal=()):
+def build_elliptic(
+    geometry,
+    coords,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    progress=None,
+    boundary_layout: str | None = None,
+    orthogonal=(),
+):
     """Method ``elliptic`` (meshgen.methods): Winslow mesh of ``geometry`` at parametric node
     coordinates ``coords`` (1D arrays per axis), starting from TFI, whose boundary nodes are the
     geometry's boundary map at the parametric boundary points and stay there.
@@ -356,9 +365,16 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     if boundary_layout == "smoothed":
         relax_faces(geometry, coords, X0)  # the faces' own discrete Winslow grids (see there)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
-        return X0, {"iterations": 0, "final_update": 0.0, "final_residual": 0.0, "tol": float(tol),
-                    "converged": True, "seconds": 0.0, "boundary_layout": boundary_layout,
-                    "note": "no interior nodes: the TFI mesh is the mesh"}
+        return X0, {
+            "iterations": 0,
+            "final_update": 0.0,
+            "final_residual": 0.0,
+            "tol": float(tol),
+            "converged": True,
+            "seconds": 0.0,
+            "boundary_layout": boundary_layout,
+            "note": "no interior nodes: the TFI mesh is the mesh",
+        }
     X, info = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
     info["boundary_layout"] = boundary_layout
     if walls:
@@ -368,8 +384,7 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
             raise ParameterError("orthogonal", "{name} needs at least 3 cells across each orthogonal wall's axis")
         for face in walls:
             straighten_first_layer(X, face)
-        X[block], second = solve_winslow(X[block], sub_coords, tol=tol, max_iter=max_iter,
-                                         length=geometry.characteristic_length)
+        X[block], second = solve_winslow(X[block], sub_coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length)
         info["orthogonal"] = [face.name for face in walls]
         info["iterations"] += second["iterations"]
         for key in ("final_update", "final_residual", "converged"):
@@ -384,8 +399,17 @@ def build_elliptic(geometry, coords, tol: float | None = None, max_iter: int | N
     return X, info
 
 
-def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, progress=None,
-             boundary_layout: str | None = None, orthogonal=()):
+def elliptic(
+    geometry,
+    dims=None,
+    coords=None,
+    *,
+    tol: float = DEFAULT_TOL,
+    max_iter: int = DEFAULT_MAX_ITER,
+    progress=None,
+    boundary_layout: str | None = None,
+    orthogonal=(),
+):
     """Elliptic (Winslow) mesh of ``geometry``: the Python entry point.
 
     ``dims``: cells per axis (n1, n2[, n3]); ``coords``: optional 1D parametric node positions per
@@ -400,8 +424,9 @@ def elliptic(geometry, dims=None, coords=None, *, tol: float = DEFAULT_TOL, max_
     if coords is None:
         coords = parametric_grid(dims)
     check_axes(geometry, coords)
-    X, info = build_elliptic(geometry, coords, tol=tol, max_iter=max_iter, progress=progress,
-                             boundary_layout=boundary_layout, orthogonal=orthogonal)
+    X, info = build_elliptic(
+        geometry, coords, tol=tol, max_iter=max_iter, progress=progress, boundary_layout=boundary_layout, orthogonal=orthogonal
+    )
     for line in info.get("warnings", []):
         warnings.warn(line, ConvergenceWarning, stacklevel=2)
     return X, info

@@ -30,10 +30,10 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Callable
 
 import numpy as np
 
@@ -72,9 +72,7 @@ class Geometry:
     def boundary(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != self.dim:
-            raise GeometryError(
-                f"geometry '{self.name}': boundary points must have shape (N, {self.dim}), got {points.shape}"
-            )
+            raise GeometryError(f"geometry '{self.name}': boundary points must have shape (N, {self.dim}), got {points.shape}")
         try:
             mapped = self.boundary_map(points, **self.values)
         except GeometryError:
@@ -82,9 +80,7 @@ class Geometry:
         # A plugin is foreign code: report it with its name and file. SystemExit too: sys.exit() in
         # a plugin must not end meshgen with the plugin's status (0 would read as success).
         except (Exception, SystemExit) as exc:
-            raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}"
-            ) from exc
+            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}") from exc
         try:
             mapped = np.asarray(mapped, dtype=float)
         except (TypeError, ValueError) as exc:
@@ -94,8 +90,7 @@ class Geometry:
             ) from exc
         if mapped.shape != points.shape:
             raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} "
-                f"for input shape {points.shape}"
+                f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} for input shape {points.shape}"
             )
         if not np.all(np.isfinite(mapped)):
             raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() returned non-finite values")
@@ -109,20 +104,18 @@ class Geometry:
                 length = float(self.length_map(**self.values))
             except (Exception, SystemExit) as exc:  # foreign code, as in boundary()
                 raise GeometryError(
-                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised "
-                    f"{type(exc).__name__}: {exc}"
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised {type(exc).__name__}: {exc}"
                 ) from exc
             if not (np.isfinite(length) and length > 0):
                 raise GeometryError(
-                    f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive "
-                    f"number, got {length!r}"
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive number, got {length!r}"
                 )
             return length
         samples = np.concatenate([cube.corners(self.dim), cube.face_samples(self.dim, 9)])
         mapped = self.boundary(samples)
         return float(np.linalg.norm(mapped.max(axis=0) - mapped.min(axis=0)))
 
-    def with_params(self, **values: float) -> "Geometry":
+    def with_params(self, **values: float) -> Geometry:
         """The same plugin with some parameter values replaced (names checked)."""
         return bind(self, values)
 
@@ -242,9 +235,7 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
     if unknown:
         valid = ", ".join(geometry.defaults) or "none"
         hint = did_you_mean(unknown[0], geometry.defaults)
-        raise GeometryError(
-            f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}"
-        )
+        raise GeometryError(f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}")
     merged = {**geometry.values, **{k: float(v) for k, v in values.items()}}
     bad = [k for k, v in merged.items() if not np.isfinite(v)]
     if bad:

@@ -5,9 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 # Corner offsets (di, dj[, dk]) in VTK order: hexahedron (VTK_HEXAHEDRON) and quad (VTK_QUAD).
-HEX_CORNERS = np.array(
-    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
-)
+HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
 QUAD_CORNERS = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
 
 
@@ -19,9 +17,7 @@ def cell_connectivity(node_shape) -> np.ndarray:
     corners = HEX_CORNERS if len(node_shape) == 3 else QUAD_CORNERS
     flat_index = np.arange(np.prod(node_shape)).reshape(node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
-    columns = [
-        flat_index[tuple(slice(o, o + c) for o, c in zip(offset, cell_shape))].reshape(-1) for offset in corners
-    ]
+    columns = [flat_index[tuple(slice(o, o + c) for o, c in zip(offset, cell_shape))].reshape(-1) for offset in corners]
     return np.stack(columns, axis=1)
 
 

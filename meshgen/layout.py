@@ -200,9 +200,7 @@ def _scalar_operator(c11, c22, c12, grid):
             keep = target >= 0
             rows.append(index[keep]), cols.append(target[keep])
             vals.append(np.broadcast_to(coefficient, (m_p, m_q))[keep])
-    return sparse.csc_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m_p * m_q, m_p * m_q)
-    )
+    return sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m_p * m_q, m_p * m_q))
 
 
 def coons_start(edge_u: tuple, coords) -> np.ndarray:
@@ -220,7 +218,10 @@ def coons_start(edge_u: tuple, coords) -> np.ndarray:
     for c in range(2):
         F = U[..., c]
         F[1:-1, 1:-1] = (
-            (1 - s) * F[0:1, :] + s * F[-1:, :] + (1 - r) * F[:, 0:1] + r * F[:, -1:]
+            (1 - s) * F[0:1, :]
+            + s * F[-1:, :]
+            + (1 - r) * F[:, 0:1]
+            + r * F[:, -1:]
             - ((1 - s) * (1 - r) * F[0, 0] + s * (1 - r) * F[-1, 0] + (1 - s) * r * F[0, -1] + s * r * F[-1, -1])
         )[1:-1, 1:-1]
     return U
@@ -304,8 +305,7 @@ def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
     dim = geometry.dim
     if dim == 2:
         edge_values = {
-            ((face.axis,), (face.side,)): _edge_values(boundary, 2, (face.axis,), (face.side,), cells)
-            for face in faces(2)
+            ((face.axis,), (face.side,)): _edge_values(boundary, 2, (face.axis,), (face.side,), cells) for face in faces(2)
         }
         return Layout(2, edge_values, {}, {})
     from meshgen.cube import edges
@@ -394,9 +394,7 @@ def cache_path(geometry, cells: int = RESOLUTION):
         return None
     identity = json.dumps([__version__, geometry.name, sorted(geometry.values.items()), cells]).encode()
     digest = hashlib.sha256(identity + b"\0" + source).hexdigest()[:32]
-    folder = os.environ.get("MESHGEN_CACHE_DIR") or Path(
-        os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    ) / "meshgen"
+    folder = os.environ.get("MESHGEN_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "meshgen"
     return Path(folder) / "layouts" / f"{geometry.name}-{digest}.npz"
 
 
@@ -431,8 +429,14 @@ def _write_layout(path, layout: Layout) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as temporary:
             with open(temporary, "wb") as file:
-                np.savez(file, dim=layout.dim, edge_keys=json.dumps(list(layout.edge_values)),
-                         face_keys=json.dumps(list(layout.face_values)), face_info=json.dumps(layout.face_info), **arrays)
+                np.savez(
+                    file,
+                    dim=layout.dim,
+                    edge_keys=json.dumps(list(layout.edge_values)),
+                    face_keys=json.dumps(list(layout.face_values)),
+                    face_info=json.dumps(layout.face_info),
+                    **arrays,
+                )
     except OSError:
         pass
 

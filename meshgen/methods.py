@@ -44,11 +44,29 @@ def register_method(method: Method) -> None:
 
 NEURAL = "meshgen.neural.inference:build_neural"
 NEURAL_OPTIONS = ("model", "correct", "device")
-register_method(Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",)))
-register_method(Method("elliptic", "meshgen.elliptic:build_elliptic", "Winslow elliptic equations, nonlinear multigrid", options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal")))
-register_method(Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS))
+register_method(
+    Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",))
+)
+register_method(
+    Method(
+        "elliptic",
+        "meshgen.elliptic:build_elliptic",
+        "Winslow elliptic equations, nonlinear multigrid",
+        options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal"),
+    )
+)
+register_method(
+    Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS)
+)
 # The trained methods of DESIGN section 6: name -> training preset (presets/<preset>.yaml).
-TRAINED = {"3dmeshnet": "default", "exact": "exact", "pinn": "pinn", "fd-pinn": "fd-pinn", "rwgp-pinn": "rwgp-pinn", "mgnet": "mgnet"}
+TRAINED = {
+    "3dmeshnet": "default",
+    "exact": "exact",
+    "pinn": "pinn",
+    "fd-pinn": "fd-pinn",
+    "rwgp-pinn": "rwgp-pinn",
+    "mgnet": "mgnet",
+}
 for _name, _preset in TRAINED.items():
     register_method(Method(_name, NEURAL, f"a network trained with preset '{_preset}'", options=NEURAL_OPTIONS, preset=_preset))
 

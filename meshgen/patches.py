@@ -41,7 +41,7 @@ INFLOW_WORDS, OUTFLOW_WORDS = ("inlet", "inflow"), ("outlet", "outflow")
 
 
 def flow_role(patch) -> str | None:
-    """"inflow" or "outflow" for a ``patch``-type patch whose name says so (inlet, inflow /
+    """ "inflow" or "outflow" for a ``patch``-type patch whose name says so (inlet, inflow /
     outlet, outflow, any case), else None: how CGNS BC types and OpenFOAM's starting fields tell
     an inlet from an outlet."""
     if patch.type != "patch":
@@ -117,7 +117,9 @@ def parse_patch_options(items, dim: int) -> dict[str, tuple[str, str | None]]:
         if not sep or not face or not name:
             raise MeshgenError(f"malformed --patch {item!r}: expected FACE=NAME[:TYPE], e.g. zeta0=inlet:patch")
         if face not in cube.face_names(dim):
-            raise MeshgenError(f"--patch {item!r}: unknown face '{face}' of a {dim}D mesh (faces: {', '.join(cube.face_names(dim))})")
+            raise MeshgenError(
+                f"--patch {item!r}: unknown face '{face}' of a {dim}D mesh (faces: {', '.join(cube.face_names(dim))})"
+            )
         if kind and kind not in PATCH_TYPES:
             raise MeshgenError(f"--patch {item!r}: unknown type '{kind}' (types: {', '.join(PATCH_TYPES)})")
         check_patch_name(name)

@@ -133,9 +133,7 @@ def _axes(figure, size, column: int, row: int, left=58, right=14, bottom=44, top
     width, height = size
     x0 = column * PANEL_PX[0] + left
     y0 = height - TITLE_PX - (row + 1) * PANEL_PX[1] + bottom
-    return figure.add_axes(
-        [x0 / width, y0 / height, (PANEL_PX[0] - left - right) / width, (PANEL_PX[1] - bottom - top) / height]
-    )
+    return figure.add_axes([x0 / width, y0 / height, (PANEL_PX[0] - left - right) / width, (PANEL_PX[1] - bottom - top) / height])
 
 
 def _save(figure, path) -> Path:
@@ -176,7 +174,12 @@ def sections_figure(pictures, metric: str, path, heading: str = "") -> Path | No
             faces, values = panel["faces"], panel["values"]
             # Cell edges thin out as cells get smaller, so fine meshes show colour, not black lines.
             collection = PolyCollection(
-                faces, array=values, cmap=colormap, norm=norm, edgecolors="black", linewidths=min(0.5, 15.0 / math.sqrt(len(faces)))
+                faces,
+                array=values,
+                cmap=colormap,
+                norm=norm,
+                edgecolors="black",
+                linewidths=min(0.5, 15.0 / math.sqrt(len(faces))),
             )
             axes.add_collection(collection)
             axes.autoscale_view()
@@ -238,7 +241,14 @@ def loss_curves_figure(pictures, path) -> Path | None:
             if key in history:
                 axes.plot(step, positive(history[key], ~pretrain), label=name, linewidth=1.0)
         if pretrain.any() and "total" in history:
-            axes.plot(step, positive(history["total"], pretrain), color="grey", linestyle="--", linewidth=1.0, label="fit to TFI (pretraining)")
+            axes.plot(
+                step,
+                positive(history["total"], pretrain),
+                color="grey",
+                linestyle="--",
+                linewidth=1.0,
+                label="fit to TFI (pretraining)",
+            )
         if "stage" in history:
             changes = np.flatnonzero(history["stage"][1:] != history["stage"][:-1]) + 1
             for index in changes:

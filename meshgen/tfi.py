@@ -86,7 +86,7 @@ def face_values(boundary, coords) -> list[np.ndarray]:
     images = boundary(np.concatenate([points for _, points in faces]))
     values, start = [], 0
     shape = tuple(len(c) for c in coords)
-    for face, (index, points) in zip(cube.faces(len(coords)), faces):
+    for face, (_index, points) in zip(cube.faces(len(coords)), faces):
         face_shape = tuple(n for d, n in enumerate(shape) if d != face.axis)
         values.append(images[start : start + len(points)].reshape(*face_shape, -1))
         start += len(points)

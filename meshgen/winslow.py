@@ -82,8 +82,7 @@ def stencils(coords) -> Stencils:
         )
         second.append(
             tuple(
-                w.reshape(shape)
-                for w in (2.0 / (minus * (minus + plus)), -2.0 / (minus * plus), 2.0 / (plus * (minus + plus)))
+                w.reshape(shape) for w in (2.0 / (minus * (minus + plus)), -2.0 / (minus * plus), 2.0 / (plus * (minus + plus)))
             )
         )
     return Stencils(coords, tuple(first), tuple(second))
@@ -162,11 +161,7 @@ def winslow_operator(R: np.ndarray, grid: Stencils) -> tuple[np.ndarray, list[np
     # and the mixed derivative r_ab is the first-derivative stencil of axis a applied to them.
     along = [_stencil(R, a, grid.first[a]) for a in axes]
     r = [_interior(along[a][0], tuple(b for b in axes if b != a)) for a in axes]
-    g = {
-        (a, b): np.einsum("c...,c...->...", r[a], r[b]) * (along[a][1] * along[b][1])
-        for a in axes
-        for b in range(a, dim)
-    }
+    g = {(a, b): np.einsum("c...,c...->...", r[a], r[b]) * (along[a][1] * along[b][1]) for a in axes for b in range(a, dim)}
     A = cofactors(g)
     inverse_trace = 1.0 / sum(A[a, a] for a in axes)
 

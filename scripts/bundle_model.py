@@ -75,8 +75,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--geometry", default="semicylinder")
     parser.add_argument("--preset", default="exact")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="a preset setting changed for this model, as meshgen train --set (repeatable)")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a preset setting changed for this model, as meshgen train --set (repeatable)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--measure-only", action="store_true", help="keep the bundled checkpoint; measure its quality again")
     args = parser.parse_args()
@@ -94,11 +100,26 @@ def main():
     folder.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as run_dir:
         settings = [word for setting in args.overrides for word in ("--set", setting)]
-        command = ["meshgen", "train", "-g", args.geometry, "--preset", args.preset, *settings, "--seed", str(args.seed),
-                   "--out", "RUN", "-q"]
+        command = [
+            "meshgen",
+            "train",
+            "-g",
+            args.geometry,
+            "--preset",
+            args.preset,
+            *settings,
+            "--seed",
+            str(args.seed),
+            "--out",
+            "RUN",
+            "-q",
+        ]
         started = time.perf_counter()
-        subprocess.run([sys.executable, "-m", *[run_dir if c == "RUN" else c for c in command]], check=True,
-                       env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+        subprocess.run(
+            [sys.executable, "-m", *[run_dir if c == "RUN" else c for c in command]],
+            check=True,
+            env={**__import__("os").environ, "PYTHONPATH": str(REPO)},
+        )
         wall = time.perf_counter() - started
         checkpoint = load_checkpoint(Path(run_dir) / "checkpoint.pt")
     checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}

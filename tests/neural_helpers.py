@@ -61,8 +61,10 @@ def direct_correction(error_at, coords):
     values = [error_at(corner[None, :])[0] for corner in corners]
 
     def corner_part(t):  # t: dim broadcastable arrays
-        return sum(np.prod([ti if c else 1.0 - ti for ti, c in zip(t, corner)], axis=0)[..., None] * value
-                   for corner, value in zip(corners, values))
+        return sum(
+            np.prod([ti if c else 1.0 - ti for ti, c in zip(t, corner)], axis=0)[..., None] * value
+            for corner, value in zip(corners, values)
+        )
 
     def rest_at(points):
         return error_at(points) - corner_part([points[:, d] for d in range(dim)])

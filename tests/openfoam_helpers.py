@@ -42,9 +42,7 @@ def foam_environment() -> dict | None:
     bashrc = next((path for path in BASHRC_CANDIDATES if Path(path).is_file()), None)
     if bashrc is None:
         return dict(os.environ)  # a tool on PATH with its environment already set
-    result = subprocess.run(
-        ["bash", "-c", f"source {bashrc} >/dev/null 2>&1; env -0"], capture_output=True, timeout=60
-    )
+    result = subprocess.run(["bash", "-c", f"source {bashrc} >/dev/null 2>&1; env -0"], capture_output=True, timeout=60)
     if result.returncode != 0:
         return None
     pairs = (item.split(b"=", 1) for item in result.stdout.split(b"\0") if b"=" in item)

@@ -28,8 +28,13 @@ def run_in_terminal(args, columns: int, cwd, timeout: float = 300, env=None):
     for name in ("COLUMNS", "LINES", "MESHGEN_DEBUG"):
         environment.pop(name, None)
     process = subprocess.Popen(
-        [sys.executable, "-m", "meshgen", *map(str, args)], cwd=cwd, env=environment,
-        stdin=subprocess.DEVNULL, stdout=follower, stderr=follower, close_fds=True,
+        [sys.executable, "-m", "meshgen", *map(str, args)],
+        cwd=cwd,
+        env=environment,
+        stdin=subprocess.DEVNULL,
+        stdout=follower,
+        stderr=follower,
+        close_fds=True,
     )
     os.close(follower)
     chunks, deadline = [], time.time() + timeout

@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from neural_helpers import direct_correction
 
 from meshgen.chunked import neural_array, tfi_array, write_chunked_mesh
 from meshgen.cli import cli
@@ -19,7 +20,6 @@ from meshgen.quality import METRICS, quality_report
 from meshgen.quality import sketch as sketches
 from meshgen.quality.chunked import chunked_report
 from meshgen.tfi import tfi
-from neural_helpers import direct_correction
 
 pytest.importorskip("dask")
 
@@ -104,8 +104,16 @@ def soft_model(rng):
     for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
         state[f"layers.{index}.weight"] = torch.tensor(rng.normal(0, 0.5, (fan_out, fan_in)), dtype=torch.float32)
         state[f"layers.{index}.bias"] = torch.tensor(rng.normal(0, 0.1, fan_out), dtype=torch.float32)
-    return {"dim": 3, "widths": sizes[1:-1], "state_dict": state, "scale": 1.5, "center": [0.0, 0.5, 1.0],
-            "exact_boundary": False, "activation": "tanh", "input": "2*xi-1"}
+    return {
+        "dim": 3,
+        "widths": sizes[1:-1],
+        "state_dict": state,
+        "scale": 1.5,
+        "center": [0.0, 0.5, 1.0],
+        "exact_boundary": False,
+        "activation": "tanh",
+        "input": "2*xi-1",
+    }
 
 
 def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_the_error(semicylinder):
@@ -196,7 +204,10 @@ def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
         (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "formats that can: .cgns"),
         (["-m", "elliptic", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.cgns"], "methods that can: tfi, neural"),
         (["-m", "tfi", "--dims", "100000", "100000", "100000", "-o", "{dir}/x.cgns"], "GB free"),
-        (["-m", "tfi", "--dims", "4", "4", "4", "--scheduler", "tcp://127.0.0.1:9", "-o", "{dir}/x.cgns"], "cannot reach the Dask scheduler"),
+        (
+            ["-m", "tfi", "--dims", "4", "4", "4", "--scheduler", "tcp://127.0.0.1:9", "-o", "{dir}/x.cgns"],
+            "cannot reach the Dask scheduler",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, args, expected):
@@ -240,7 +251,9 @@ def test_no_quality_writes_the_mesh_alone(tmp_path):
 
     runner = CliRunner()
     for name, extra in (("a.vtu", []), ("b.cgns", ["--chunked"])):
-        result = runner.invoke(cli, ["mesh", "-m", "tfi", "--dims", "4", "3", "5", "--no-quality", "-q", *extra, "-o", str(tmp_path / name)])
+        result = runner.invoke(
+            cli, ["mesh", "-m", "tfi", "--dims", "4", "3", "5", "--no-quality", "-q", *extra, "-o", str(tmp_path / name)]
+        )
         assert result.exit_code == 0, result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.vtu", "b.cgns"]  # no .quality.json
     assert meshio.read(tmp_path / "a.vtu").cell_data == {}

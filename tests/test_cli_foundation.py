@@ -95,12 +95,21 @@ BAD_INPUTS = {
         ["mesh", "-g", "semicylindr", "--dims", "4", "4", "4", "-o", "m.vtu"],
         ["unknown geometry 'semicylindr'", "available: ", "semidisk", "did you mean 'semicylinder'"],
     ),
-    "unknown-geometry-show": (["geometries", "show", "flowr", "-o", "s.stl"], ["unknown geometry 'flowr'", "did you mean 'flower'"]),
+    "unknown-geometry-show": (
+        ["geometries", "show", "flowr", "-o", "s.stl"],
+        ["unknown geometry 'flowr'", "did you mean 'flower'"],
+    ),
     "dims-one-number": (["mesh", "--dims", "4", "-o", "m.vtu"], ["2 (2D) or 3 (3D) cell counts, got 1"]),
     "dims-four-numbers": (["mesh", "--dims", "4", "4", "4", "4", "-o", "m.vtu"], ["2 (2D) or 3 (3D) cell counts, got 4"]),
     "dims-none": (["mesh", "--dims", "-o", "m.vtu"], ["cell counts, got 0"]),
-    "dims-2-for-3d": (["mesh", "-g", "semicylinder", "--dims", "4", "4", "-o", "m.vtu"], ["is 3D: --dims needs 3 numbers, got 2"]),
-    "dims-3-for-2d": (["mesh", "-g", "semidisk", "--dims", "4", "4", "4", "-o", "m.vtu"], ["is 2D: --dims needs 2 numbers, got 3"]),
+    "dims-2-for-3d": (
+        ["mesh", "-g", "semicylinder", "--dims", "4", "4", "-o", "m.vtu"],
+        ["is 3D: --dims needs 3 numbers, got 2"],
+    ),
+    "dims-3-for-2d": (
+        ["mesh", "-g", "semidisk", "--dims", "4", "4", "4", "-o", "m.vtu"],
+        ["is 2D: --dims needs 2 numbers, got 3"],
+    ),
     "dims-zero": (["mesh", "--dims", "0", "4", "4", "-o", "m.vtu"], ["positive integers, got 0"]),
     "dims-negative": (["mesh", "--dims", "4", "-3", "4", "-o", "m.vtu"], ["positive integers, got -3"]),
     "dims-fraction": (["mesh", "--dims", "4", "4.5", "4", "-o", "m.vtu"], ["positive integers, got '4.5'"]),
@@ -132,7 +141,10 @@ BAD_INPUTS = {
     "plugin-non-finite": (None, ["geometry 'brokenplugin'", "plugin.py", "non-finite values"]),
     "plugin-raises": (None, ["geometry 'brokenplugin'", "plugin.py", "boundary() raised ZeroDivisionError"]),
     "plugin-not-numbers": (None, ["geometry 'brokenplugin'", "not an array of numbers"]),
-    "plugin-discontinuous": (["geometries", "show", "plugin.py", "-o", "s.stl"], ["geometry 'brokenplugin'", "plugin.py", "not continuous"]),
+    "plugin-discontinuous": (
+        ["geometries", "show", "plugin.py", "-o", "s.stl"],
+        ["geometry 'brokenplugin'", "plugin.py", "not continuous"],
+    ),
     "unknown-method": (["mesh", "-m", "nosuch", "--dims", "4", "4", "4", "-o", "m.vtu"], ["unknown method 'nosuch'"]),
     "unknown-command": (["mesg"], ["no command 'mesg'", "did you mean 'mesh'"]),
 }

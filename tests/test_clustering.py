@@ -55,7 +55,9 @@ def test_axis_missing_in_2d_and_duplicate_axis_are_rejected():
 def test_cli_writes_a_clustered_mesh(run_cli, tmp_path):
     import meshio
 
-    result = run_cli("mesh", "-m", "tfi", "-g", "semicylinder", "--dims", "3", "3", "8", "--cluster", "zeta:both:1.3", "-o", "c.vtu")
+    result = run_cli(
+        "mesh", "-m", "tfi", "-g", "semicylinder", "--dims", "3", "3", "8", "--cluster", "zeta:both:1.3", "-o", "c.vtu"
+    )
     assert result.returncode == 0, result.stderr
     points = meshio.read(tmp_path / "c.vtu").points.reshape(4, 4, 9, 3)
     expected = 2.0 * clustered_coordinates(8, parse_cluster("zeta:both:1.3"))

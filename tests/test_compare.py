@@ -54,9 +54,13 @@ def methods_run(tmp_path_factory):
     environment = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
 
     def cli(*args):
-        return subprocess.run([sys.executable, "-m", "meshgen", *args], cwd=folder, env=environment, capture_output=True, text=True, timeout=300)
+        return subprocess.run(
+            [sys.executable, "-m", "meshgen", *args], cwd=folder, env=environment, capture_output=True, text=True, timeout=300
+        )
 
-    result = cli("compare", "-g", "semidisk", "--dims", "12", "7", "--methods", "tfi,elliptic", "--timing-repeats", "3", "--out", "out")
+    result = cli(
+        "compare", "-g", "semidisk", "--dims", "12", "7", "--methods", "tfi,elliptic", "--timing-repeats", "3", "--out", "out"
+    )
     assert result.returncode == 0, result.stderr
     evaluated = cli("evaluate", "out/tfi.vtu", "out/elliptic.vtu", "--json", "-")
     assert evaluated.returncode == 0, evaluated.stderr
@@ -77,7 +81,9 @@ def test_figures_equal_evaluate_on_the_written_meshes(methods_run):
         assert headline["inverted_percent"] == pytest.approx(100 * report["inverted"]["fraction"])
         assert headline["valid"] is report["valid"]
         for stat in ("max", "max_rel", "mean", "mean_rel"):
-            assert headline[f"boundary_deviation_{stat}"] == pytest.approx(report["boundary_deviation"][stat], rel=1e-9, abs=1e-15)
+            assert headline[f"boundary_deviation_{stat}"] == pytest.approx(
+                report["boundary_deviation"][stat], rel=1e-9, abs=1e-15
+            )
         # The figures as the terminal prints them: 4 significant digits, on the method's line.
         line = next(line for line in result.stdout.splitlines() if line.split()[:1] == [row["name"]])
         for metric in comparing.HEADLINE_METRICS:
@@ -213,7 +219,10 @@ def test_a_failing_method_gets_a_failed_row_and_exit_1_while_the_others_are_comp
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--methods", "tfi,foo"], "unknown method 'foo' (methods: tfi, elliptic, neural, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet)"),
+        (
+            ["--methods", "tfi,foo"],
+            "unknown method 'foo' (methods: tfi, elliptic, neural, 3dmeshnet, exact, pinn, fd-pinn, rwgp-pinn, mgnet)",
+        ),
         (["--checkpoint", "tfi=x.pt"], "'tfi' is not a neural method"),
         (["--checkpoint", "pinn"], "malformed --checkpoint"),
         (["--steps", "5"], "--steps applies to neural methods only"),
@@ -260,7 +269,9 @@ def row(name, **values):
 def test_best_rows_rules():
     rows = [
         row("a", min_angle=80.0, max_angle=95.0, aspect_ratio=1.5, boundary_deviation_max_rel=1e-16, test_loss=None),
-        row("b", min_angle=85.0, max_angle=100.0, aspect_ratio=1.5 * (1 + 1e-12), boundary_deviation_max_rel=3e-16, test_loss=2e-3),
+        row(
+            "b", min_angle=85.0, max_angle=100.0, aspect_ratio=1.5 * (1 + 1e-12), boundary_deviation_max_rel=3e-16, test_loss=2e-3
+        ),
         row("c", min_angle=60.0, max_angle=120.0, aspect_ratio=2.0, boundary_deviation_max_rel=1e-3, test_loss=float("nan")),
     ]
     best = comparing.best_rows(rows)
@@ -273,8 +284,8 @@ def test_best_rows_rules():
 
 
 def test_headline_and_cells_of_a_report():
-    from meshgen.quality import quality_report
     from meshgen.geometry import load_geometry
+    from meshgen.quality import quality_report
     from meshgen.tfi import tfi
 
     geometry = load_geometry("semidisk")
@@ -384,7 +395,20 @@ def test_neural_method_trains_meshes_and_reuses_its_checkpoint(run_cli, tmp_path
         assert float(png_pixels(tmp_path / "out" / "loss_curves.png")[..., :3].var()) > 0
 
     # Reusing the checkpoint: no training, the same network, so the same mesh and test-set loss.
-    again = run_cli("compare", "-g", "semidisk", "--dims", "10", "6", "--methods", "3dmeshnet", "--checkpoint", f"3dmeshnet={checkpoint_path}", "--out", "again")
+    again = run_cli(
+        "compare",
+        "-g",
+        "semidisk",
+        "--dims",
+        "10",
+        "6",
+        "--methods",
+        "3dmeshnet",
+        "--checkpoint",
+        f"3dmeshnet={checkpoint_path}",
+        "--out",
+        "again",
+    )
     assert again.returncode == 0, again.stderr
     reused = json.loads((tmp_path / "again" / "compare.json").read_text())["rows"][0]
     assert reused["headline"]["test_loss"] == neural["headline"]["test_loss"]

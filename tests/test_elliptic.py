@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from mesh_checks import corner_jacobians
 
 from meshgen.clustering import node_coordinates
 from meshgen.elliptic import (
@@ -27,7 +28,6 @@ from meshgen.formats import metadata_of, read_mesh
 from meshgen.geometry import load_geometry
 from meshgen.tfi import parametric_grid, tfi
 from meshgen.winslow import winslow_residual
-from mesh_checks import corner_jacobians
 
 # ---------------------------------------------------------------------------------------------
 # independent reference: the discrete Winslow equations on a uniform grid, and point Jacobi
@@ -104,8 +104,6 @@ def affine_geometry(tmp_path, dim):
         f"def boundary(points):\n    return points @ np.array({matrix}).T + 1.5\n"
     )
     return load_geometry(str(path))
-
-
 
 
 # ---------------------------------------------------------------------------------------------
@@ -202,8 +200,13 @@ def test_stretched_nodes_sample_the_same_map(tmp_path):
         i, j = (np.clip(np.searchsorted(t, s, side="right") - 1, 0, 255) for s in (s1, s2))
         u, v = ((s - t[k]) * 256 for s, k in ((s1, i), (s2, j)))
         u, v = u[:, None, None], v[None, :, None]
-        I, J = np.meshgrid(i, j, indexing="ij")
-        return (1 - u) * (1 - v) * fine[I, J] + u * (1 - v) * fine[I + 1, J] + (1 - u) * v * fine[I, J + 1] + u * v * fine[I + 1, J + 1]
+        rows, cols = np.meshgrid(i, j, indexing="ij")
+        return (
+            (1 - u) * (1 - v) * fine[rows, cols]
+            + u * (1 - v) * fine[rows + 1, cols]
+            + (1 - u) * v * fine[rows, cols + 1]
+            + u * v * fine[rows + 1, cols + 1]
+        )
 
     errors = []
     for n in (16, 32):

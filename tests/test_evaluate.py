@@ -31,7 +31,6 @@ def write_gmsh(path, X, extra=True):
     return path
 
 
-
 def evaluate_json(run_cli, tmp_path, *args):
     out = tmp_path / "report.json"
     result = run_cli("evaluate", *args, "--json", out)
@@ -116,7 +115,11 @@ def test_markdown_has_the_values(run_cli, tmp_path):
     text = (tmp_path / "summary.md").read_text()
     rows = {cells[0]: cells[1:] for cells in (line.strip("|").split("|") for line in text.splitlines() if line.startswith("|"))}
     rows = {key.strip(): [v.strip() for v in values] for key, values in rows.items()}
-    for label, name in (("min angle (deg)", "min_angle"), ("aspect ratio", "aspect_ratio"), ("scaled Jacobian", "scaled_jacobian")):
+    for label, name in (
+        ("min angle (deg)", "min_angle"),
+        ("aspect ratio", "aspect_ratio"),
+        ("scaled Jacobian", "scaled_jacobian"),
+    ):
         values = [float(v) for v in rows[label]]
         expected = [report["metrics"][name][stat] for stat in STATS]
         np.testing.assert_allclose(values, expected, rtol=1e-3)
@@ -170,7 +173,9 @@ def test_quad_meshes_from_the_mesh_command(run_cli, tmp_path):
         (lambda d: (d / "m.vtu").write_bytes(b""), "empty"),
         (lambda d: (d / "m.vtu").write_text("<VTKFile nonsense"), "could not read"),
         (
-            lambda d: meshio.write(d / "m.vtu", meshio.Mesh(np.random.rand(4, 3), [("triangle", np.array([[0, 1, 2], [1, 2, 3]]))])),
+            lambda d: meshio.write(
+                d / "m.vtu", meshio.Mesh(np.random.rand(4, 3), [("triangle", np.array([[0, 1, 2], [1, 2, 3]]))])
+            ),
             "no hexahedra or quadrilaterals to evaluate (found: 2 triangle)",
         ),
         (

@@ -11,12 +11,12 @@ import textwrap
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from mesh_checks import corner_jacobians
 
 from meshgen.cli import cli
 from meshgen.errors import GeometryError
 from meshgen.geometry import ENTRY_POINT_GROUP, _builtin_files, available_names, load_geometry
 from meshgen.tfi import parametric_grid, tfi
-from mesh_checks import corner_jacobians
 
 NAMES = available_names()
 BUILTINS = ["bump", "canal", "flower", "semicylinder", "semidisk", "topcurve"]
@@ -295,7 +295,9 @@ def test_plugin_loads_from_an_entry_point(tmp_path, monkeypatch):
     dist_info = tmp_path / "meshgen_test_plugin-1.0.dist-info"
     dist_info.mkdir()
     (dist_info / "METADATA").write_text("Metadata-Version: 2.1\nName: meshgen-test-plugin\nVersion: 1.0\n")
-    (dist_info / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\nskewedentry = {module}\nbrokenentry = {module}_missing\n")
+    (dist_info / "entry_points.txt").write_text(
+        f"[{ENTRY_POINT_GROUP}]\nskewedentry = {module}\nbrokenentry = {module}_missing\n"
+    )
     monkeypatch.syspath_prepend(str(tmp_path))
     try:
         names = available_names()
@@ -319,7 +321,7 @@ def test_discontinuous_plugin_is_rejected_with_its_name(tmp_path):
     path = tmp_path / "torn.py"
     path.write_text(
         textwrap.dedent(
-            '''
+            """
             import numpy as np
             name = "tornbox"
             dim = 3
@@ -327,7 +329,7 @@ def test_discontinuous_plugin_is_rejected_with_its_name(tmp_path):
             def boundary(points):
                 lifted = np.isclose(points[:, 0], 1.0) & (points[:, 1] > 0) & (points[:, 1] < 1) & (points[:, 2] > 0) & (points[:, 2] < 1)
                 return points + 0.05 * lifted[:, None]
-            '''
+            """
         )
     )
     with pytest.raises(GeometryError, match=r"geometry 'tornbox' \(.*torn\.py\): boundary is not continuous"):

@@ -197,8 +197,12 @@ def test_every_section_of_the_semicylinder_is_gmshs_smoothed_transfinite_mesh(tm
 
     geo = tmp_path / "section.geo"
     geo.write_text(SEMIDISK_GEO.format(nodes=cells + 1, steps=2 * cells**2))
-    result = subprocess.run([GMSH, str(geo), "-2", "-o", str(tmp_path / "section.msh"), "-format", "msh22"],
-                            capture_output=True, text=True, timeout=300)
+    result = subprocess.run(
+        [GMSH, str(geo), "-2", "-o", str(tmp_path / "section.msh"), "-format", "msh22"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
     mesh = meshio.read(tmp_path / "section.msh")
     quads = mesh.cells_dict["quad"]

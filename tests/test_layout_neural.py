@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from neural_helpers import tiny_config
 
 from meshgen.layout import smoothed, trained_layout
 from meshgen.neural.config import ConfigError
 from meshgen.neural.model import mesh_from_checkpoint
 from meshgen.neural.train import train
 from meshgen.tfi import parametric_grid, tfi
-from neural_helpers import tiny_config
 
 
 @pytest.mark.parametrize("layout", ["smoothed", "fixed"])

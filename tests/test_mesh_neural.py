@@ -9,28 +9,26 @@ import time
 import numpy as np
 import pytest
 import torch
+from neural_helpers import direct_correction, tiny_config
 
 from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.inference import (
     MODELS_DIR,
-    evaluate_on_grid,
-    mesh_from_model,
     add_boundary_correction,
     boundary_errors,
     correct_boundary,
+    evaluate_on_grid,
+    mesh_from_model,
     transfinite_on_grid,
 )
 from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
-from meshgen.tfi import transfinite, parametric_grid, tfi
-from neural_helpers import direct_correction, tiny_config
+from meshgen.tfi import parametric_grid, tfi, transfinite
 
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
-
-
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +114,9 @@ def test_bundled_model_loads_with_weights_only_and_is_the_recorded_run(semicylin
     record = json.loads((BUNDLED.parent / "model.json").read_text())
     assert checkpoint["stage"] == "done" and checkpoint["step"] == record["steps"]
     assert checkpoint["geometry"]["params"] == dict(semicylinder.defaults)
-    assert checkpoint["config"]["model"]["exact_boundary"] and record["command"].startswith("meshgen train -g semicylinder --preset exact")
+    assert checkpoint["config"]["model"]["exact_boundary"] and record["command"].startswith(
+        "meshgen train -g semicylinder --preset exact"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,7 +222,10 @@ def test_correction_is_the_tfi_of_the_boundary_error_and_exact_on_the_boundary(r
         info = json.loads((tmp_path / f"{name}.vtu.quality.json").read_text())["method_info"]["correction"]
         assert info["error_before"]["max"] == pytest.approx(distance.max(), rel=1e-9)
         assert info["error_before"]["mean"] == pytest.approx(distance.mean(), rel=1e-9)  # each node once
-        assert f"network's boundary error (|g(xi) - N(xi)| at the boundary nodes' parametric points): max {distance.max():.3g}" in result.stdout
+        assert (
+            f"network's boundary error (|g(xi) - N(xi)| at the boundary nodes' parametric points): max {distance.max():.3g}"
+            in result.stdout
+        )
 
 
 def test_correction_keeps_the_cells_that_snapping_folds(semicylinder):
@@ -336,8 +339,18 @@ def test_default_preset_corrected_is_valid_and_near_elliptic_at_every_resolution
     from meshgen.elliptic import elliptic
     from meshgen.neural.config import resolve_config
 
-    config = resolve_config("default", None, ["pretrain.steps=5", "adam.steps=100", "lbfgs.steps=20",
-                                              "model.widths=[24,24]", "points.interior=1000", "points.boundary=1000"])
+    config = resolve_config(
+        "default",
+        None,
+        [
+            "pretrain.steps=5",
+            "adam.steps=100",
+            "lbfgs.steps=20",
+            "model.widths=[24,24]",
+            "points.interior=1000",
+            "points.boundary=1000",
+        ],
+    )
     model = train(config, semidisk, tmp_path, summary=False).checkpoint["model"]
     for cells in (8, 30, 60):
         coords = parametric_grid((cells, cells))

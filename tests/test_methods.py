@@ -24,21 +24,39 @@ def test_trained_methods_are_registered_neural_methods_with_existing_presets():
 
 
 def test_compare_neural_row_is_the_mesh_that_meshgen_mesh_makes(tmp_path, run_cli, semidisk):
+    from neural_helpers import tiny_config
+
     from meshgen.formats import read_mesh
     from meshgen.neural.train import train
-    from neural_helpers import tiny_config
 
     run = tmp_path / "run"
     run.mkdir()
     train(tiny_config("adam.steps=3"), semidisk, run, summary=False)
     coords = meshgen.node_coordinates((9, 5), ["eta:1:1.2"])
     outcome = comparing.compare_methods(
-        semidisk, coords, ["3dmeshnet"], checkpoints={"3dmeshnet": run / "checkpoint.pt"}, out_dir=tmp_path / "cmp",
+        semidisk,
+        coords,
+        ["3dmeshnet"],
+        checkpoints={"3dmeshnet": run / "checkpoint.pt"},
+        out_dir=tmp_path / "cmp",
     )
     rows = {row["name"]: row for row in outcome.comparison["rows"]}
     assert "error" not in rows["3dmeshnet"] and rows["3dmeshnet"]["kind"] == "neural"
-    made = run_cli("mesh", "--method", "neural", "--checkpoint", run / "checkpoint.pt", "--dims", 9, 5,
-                   "--cluster", "eta:1:1.2", "-o", "m.vtu", "-q")
+    made = run_cli(
+        "mesh",
+        "--method",
+        "neural",
+        "--checkpoint",
+        run / "checkpoint.pt",
+        "--dims",
+        9,
+        5,
+        "--cluster",
+        "eta:1:1.2",
+        "-o",
+        "m.vtu",
+        "-q",
+    )
     assert made.returncode == 0, made.stderr
     by_mesh, by_compare = read_mesh(tmp_path / "m.vtu"), read_mesh(tmp_path / "cmp" / "3dmeshnet.vtu")
     np.testing.assert_array_equal(by_mesh.points, by_compare.points)  # the same mesh, bit for bit
@@ -62,22 +80,56 @@ def test_mesh_command_names_its_methods_and_refuses_trained_ones(tmp_path):
 @pytest.mark.parametrize(
     ("call", "parameter", "library", "command_line"),
     [
-        (lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), tol=-1.0), "tol",
-         "tol must be a positive number, got -1.0", "--tol must be a positive number"),
-        (lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), max_iter=0), "max_iter",
-         "max_iter must be a positive integer, got 0", "--max-iter must be a positive integer"),
-        (lambda g: make_mesh("tfi", g, meshgen.node_coordinates((4, 4)), tol=1e-3), "tol",
-         "tol does not apply to method 'tfi'", "--tol does not apply to method 'tfi'"),
-        (lambda g: meshgen.node_coordinates((4, 4), ["zeta:both:1.1"]), "cluster",
-         "cluster axis zeta does not exist in a 2D mesh", "--cluster axis zeta does not exist"),
-        (lambda g: meshgen.node_coordinates((4, 4), ["eta:both"]), "cluster",
-         "malformed cluster 'eta:both'", "malformed --cluster 'eta:both'"),
-        (lambda g: comparing.parse_checkpoints(["pinn"]), "checkpoint",
-         "malformed checkpoint 'pinn'", "malformed --checkpoint 'pinn'"),
-        (lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], budget=comparing.Budget(overrides=("adam.lr=1",))),
-         "overrides", "overrides applies to neural methods only", "--set applies to neural methods only"),
-        (lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], method_options={"max_iter": 3}),
-         "max_iter", "max_iter applies to none of the compared methods", "--max-iter applies to none"),
+        (
+            lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), tol=-1.0),
+            "tol",
+            "tol must be a positive number, got -1.0",
+            "--tol must be a positive number",
+        ),
+        (
+            lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), max_iter=0),
+            "max_iter",
+            "max_iter must be a positive integer, got 0",
+            "--max-iter must be a positive integer",
+        ),
+        (
+            lambda g: make_mesh("tfi", g, meshgen.node_coordinates((4, 4)), tol=1e-3),
+            "tol",
+            "tol does not apply to method 'tfi'",
+            "--tol does not apply to method 'tfi'",
+        ),
+        (
+            lambda g: meshgen.node_coordinates((4, 4), ["zeta:both:1.1"]),
+            "cluster",
+            "cluster axis zeta does not exist in a 2D mesh",
+            "--cluster axis zeta does not exist",
+        ),
+        (
+            lambda g: meshgen.node_coordinates((4, 4), ["eta:both"]),
+            "cluster",
+            "malformed cluster 'eta:both'",
+            "malformed --cluster 'eta:both'",
+        ),
+        (
+            lambda g: comparing.parse_checkpoints(["pinn"]),
+            "checkpoint",
+            "malformed checkpoint 'pinn'",
+            "malformed --checkpoint 'pinn'",
+        ),
+        (
+            lambda g: comparing.compare_methods(
+                g, meshgen.node_coordinates((4, 4)), ["tfi"], budget=comparing.Budget(overrides=("adam.lr=1",))
+            ),
+            "overrides",
+            "overrides applies to neural methods only",
+            "--set applies to neural methods only",
+        ),
+        (
+            lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], method_options={"max_iter": 3}),
+            "max_iter",
+            "max_iter applies to none of the compared methods",
+            "--max-iter applies to none",
+        ),
     ],
 )
 def test_library_errors_name_parameters_and_the_command_line_names_flags(call, parameter, library, command_line, semidisk):

@@ -9,12 +9,12 @@ import time
 
 import pytest
 import torch
+from neural_helpers import TINY, tiny_config
 
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import from_dict, preset_paths
 from meshgen.neural.train import HISTORY_COLUMNS, train
-from neural_helpers import TINY, tiny_config
 
 TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
 
@@ -48,7 +48,10 @@ def test_train_writes_a_run_folder_and_says_how_to_mesh(run_cli, tmp_path):
     assert checkpoint["config"]["adam"]["steps"] == 6 and checkpoint["config"]["dim"] == 2
     lines = result.stdout.strip().splitlines()
     assert "Network, 30 x 30 mesh:" in result.stdout and "TFI, 30 x 30 mesh:" in result.stdout
-    assert "boundary deviation from 'semidisk': max" in result.stdout and "Network corrected to N + TFI[g - N] (what meshgen mesh writes), 30 x 30 mesh:" in result.stdout
+    assert (
+        "boundary deviation from 'semidisk': max" in result.stdout
+        and "Network corrected to N + TFI[g - N] (what meshgen mesh writes), 30 x 30 mesh:" in result.stdout
+    )
     assert lines[-2] == f"Checkpoint: {run.relative_to(tmp_path) / 'checkpoint.pt'}"
     assert lines[-1].startswith("Mesh with: meshgen mesh") and "checkpoint.pt" in lines[-1]
     assert "Adam: 6 steps" in result.stderr  # --quiet: log lines, no progress bar
@@ -65,8 +68,24 @@ def test_list_presets_shows_one_line_each(run_cli):
 def test_ctrl_c_saves_a_checkpoint_and_resume_finishes_the_run(tmp_path):
     from conftest import REPO
 
-    command = [sys.executable, "-m", "meshgen", "train", "-g", "semidisk", "--preset", "2d", *TINY_ARGS,
-               "--set", "pretrain.steps=0", "--steps", "100000", "--out", "run", "--quiet"]
+    command = [
+        sys.executable,
+        "-m",
+        "meshgen",
+        "train",
+        "-g",
+        "semidisk",
+        "--preset",
+        "2d",
+        *TINY_ARGS,
+        "--set",
+        "pretrain.steps=0",
+        "--steps",
+        "100000",
+        "--out",
+        "run",
+        "--quiet",
+    ]
     env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
     process = subprocess.Popen(command, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     history = tmp_path / "run" / "history.csv"
@@ -85,7 +104,11 @@ def test_ctrl_c_saves_a_checkpoint_and_resume_finishes_the_run(tmp_path):
 
     resumed = subprocess.run(
         [sys.executable, "-m", "meshgen", "train", "--resume", "run/checkpoint.pt", "--steps", str(stopped_at + 3), "-q"],
-        cwd=tmp_path, env={"PYTHONPATH": str(repo), "PATH": "/usr/bin:/bin"}, capture_output=True, text=True, timeout=120,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(repo), "PATH": "/usr/bin:/bin"},
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert resumed.returncode == 0, resumed.stderr
     final = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
@@ -106,11 +129,17 @@ BAD_INPUTS = [
     (["--resume", "truncated.pt"], "checkpoint truncated.pt is truncated or not a meshgen checkpoint"),
     (["--resume", "notes.pt"], "is truncated or not a meshgen checkpoint"),
     (["--resume", "semidisk.pt", "-g", "semicylinder"], "was trained on semidisk {'radius': 1.0}, not on semicylinder"),
-    (["--resume", "semidisk.pt", "--param", "radius=2"], "was trained on semidisk {'radius': 1.0}, not on semidisk {'radius': 2.0}"),
+    (
+        ["--resume", "semidisk.pt", "--param", "radius=2"],
+        "was trained on semidisk {'radius': 1.0}, not on semidisk {'radius': 2.0}",
+    ),
     (["--resume", "semidisk.pt", "--set", "model.widths=[4]"], "--set model.widths cannot change when resuming"),
     (["--resume", "semidisk.pt", "--preset", "paper"], "--preset does not apply with --resume"),
     (["--out", "occupied"], "output folder occupied exists and is not a run folder"),
-    (["--device", "cuda"] if not torch.cuda.is_available() else ["--device", "tpu"], "cuda" if not torch.cuda.is_available() else "tpu"),
+    (
+        ["--device", "cuda"] if not torch.cuda.is_available() else ["--device", "tpu"],
+        "cuda" if not torch.cuda.is_available() else "tpu",
+    ),
 ]
 
 

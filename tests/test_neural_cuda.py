@@ -6,6 +6,7 @@ an H100, see the README's training-speed table)."""
 import numpy as np
 import pytest
 import torch
+from neural_helpers import Recorder, tiny_config
 
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.cudagraph import CapturedFunction
@@ -21,15 +22,20 @@ from meshgen.neural.train import (
     sample_step,
     train,
 )
-from neural_helpers import Recorder, tiny_config
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device is available to torch here")
 
 
 def training_on(device, geometry, config):
     center, scale = normalisation(geometry)
-    problem = Problem(geometry.dim, normalised_boundary(geometry, center, scale), center, scale,
-                      config.model.exact_boundary, torch.device(device))
+    problem = Problem(
+        geometry.dim,
+        normalised_boundary(geometry, center, scale),
+        center,
+        scale,
+        config.model.exact_boundary,
+        torch.device(device),
+    )
     torch.manual_seed(0)
     network = MLP(geometry.dim, config.model.widths).to(device)
     weights = UncertaintyWeights(learned=config.method.reweighting).to(device)
@@ -56,11 +62,11 @@ def test_the_captured_step_equals_the_eager_step_at_every_replay(semicylinder, p
 
 def test_a_run_on_cuda_trains_checkpoints_and_resumes_on_the_cpu(tmp_path, semicylinder):
     steps = 2 * DEVICE_BLOCK + 30  # whole blocks and a part block
-    config = tiny_config("model.widths=[24,24]", f"adam.steps={steps}", "adam.lr=3e-3", "lbfgs.steps=2",
-                         f"checkpoint.every={DEVICE_BLOCK}")
+    config = tiny_config(
+        "model.widths=[24,24]", f"adam.steps={steps}", "adam.lr=3e-3", "lbfgs.steps=2", f"checkpoint.every={DEVICE_BLOCK}"
+    )
     recorder = Recorder(stop_after=DEVICE_BLOCK + 50)  # polled between blocks: stops after the second
-    first = train(config, semicylinder, tmp_path, device="cuda", reporter=recorder, stop=recorder.should_stop,
-                  summary=False)
+    first = train(config, semicylinder, tmp_path, device="cuda", reporter=recorder, stop=recorder.should_stop, summary=False)
     assert first.interrupted and first.step == 2 * DEVICE_BLOCK  # 2 pretrain steps, then blocks to a checkpoint
     adam = [row for row in recorder.rows if row["stage"] == "adam"]
     assert [row["step"] for row in recorder.rows] == list(range(first.step))

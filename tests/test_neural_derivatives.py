@@ -22,9 +22,7 @@ def smooth_map(points):
         u, v = x
         return torch.stack([u + 0.2 * torch.sin(2 * v) * u, v + 0.3 * u * u + 0.1 * torch.cos(3 * u * v)], -1)
     u, v, w = x
-    return torch.stack(
-        [u + 0.1 * torch.sin(2 * v) * w, v * v + 0.3 * u + 0.5 * v, w + 0.2 * torch.cos(u * v) + 0.1 * u * w], -1
-    )
+    return torch.stack([u + 0.1 * torch.sin(2 * v) * w, v * v + 0.3 * u + 0.5 * v, w + 0.2 * torch.cos(u * v) + 0.1 * u * w], -1)
 
 
 def affine_map(points):

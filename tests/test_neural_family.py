@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from neural_helpers import TINY
 
 from meshgen.cli import cli
 from meshgen.cube import faces
@@ -31,7 +32,6 @@ from meshgen.neural.family import (
 from meshgen.neural.inference import load_model
 from meshgen.neural.model import bubble
 from meshgen.tfi import parametric_grid, tfi
-from neural_helpers import TINY
 
 TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
 README = Path(__file__).resolve().parents[1] / "README.md"
@@ -50,8 +50,23 @@ def flower_run(tmp_path_factory):
     """A tiny flower family (twist 0..180, 6 Adam steps) trained through the command line."""
     folder = tmp_path_factory.mktemp("family") / "run"
     with pytest.raises(SystemExit) as stopped:
-        cli.main(["train", "-g", "flower", "--vary", "twist=0:180", "--param", "amplitude=0.25", *TINY_ARGS,
-                  "--steps", "6", "--out", str(folder), "--quiet"])
+        cli.main(
+            [
+                "train",
+                "-g",
+                "flower",
+                "--vary",
+                "twist=0:180",
+                "--param",
+                "amplitude=0.25",
+                *TINY_ARGS,
+                "--steps",
+                "6",
+                "--out",
+                str(folder),
+                "--quiet",
+            ]
+        )
     assert stopped.value.code == 0
     return folder
 
@@ -82,8 +97,20 @@ def test_the_checkpoint_records_the_ranges_and_the_fixed_parameters(flower_run, 
 
 
 def test_a_member_meshes_with_an_exact_boundary_and_the_network_evaluated_directly(flower_run, tmp_path, capsys):
-    code, out, err = run_meshgen(capsys, "mesh", "--checkpoint", flower_run / "checkpoint.pt", "--param", "twist=73",
-                                 "--dims", 6, 5, 4, "-o", tmp_path / "m.vtu")
+    code, out, err = run_meshgen(
+        capsys,
+        "mesh",
+        "--checkpoint",
+        flower_run / "checkpoint.pt",
+        "--param",
+        "twist=73",
+        "--dims",
+        6,
+        5,
+        4,
+        "-o",
+        tmp_path / "m.vtu",
+    )
     assert code == 0, err
     assert metadata_of(tmp_path / "m.vtu")["params"]["twist"] == 73.0
     checkpoint = with_random_correction(load_checkpoint(flower_run / "checkpoint.pt"))
@@ -106,25 +133,44 @@ def test_a_member_meshes_with_an_exact_boundary_and_the_network_evaluated_direct
 
 
 def test_a_parameter_outside_the_trained_range_is_a_one_line_error(flower_run, tmp_path, capsys):
-    for item, message in [("twist=181", "outside the trained range 0..180"),
-                          ("amplitude=0.2", "trained with amplitude=0.25 fixed"),
-                          ("radius=1.5", "trained with radius=1 fixed"),
-                          ("twirl=3", "has no parameter 'twirl'")]:
-        code, out, err = run_meshgen(capsys, "mesh", "--checkpoint", flower_run / "checkpoint.pt", "--param", item,
-                                     "--dims", 4, 4, 4, "-o", tmp_path / "m.vtu")
+    for item, message in [
+        ("twist=181", "outside the trained range 0..180"),
+        ("amplitude=0.2", "trained with amplitude=0.25 fixed"),
+        ("radius=1.5", "trained with radius=1 fixed"),
+        ("twirl=3", "has no parameter 'twirl'"),
+    ]:
+        code, out, err = run_meshgen(
+            capsys,
+            "mesh",
+            "--checkpoint",
+            flower_run / "checkpoint.pt",
+            "--param",
+            item,
+            "--dims",
+            4,
+            4,
+            4,
+            "-o",
+            tmp_path / "m.vtu",
+        )
         assert code == 2 and message in err and len(err.strip().splitlines()) == 1, (item, err)
     assert not (tmp_path / "m.vtu").exists()
 
 
 def test_the_range_parser_refuses_malformed_empty_and_reversed_ranges():
     assert parse_vary(["twist=0:180", "amplitude=.1:3e-1"]) == {"twist": (0.0, 180.0), "amplitude": (0.1, 0.3)}
-    for item, message in [("twist=0-180", "malformed"), ("twist=5:5", "empty"), ("twist=180:0", "reversed"),
-                          ("twist", "malformed"), ("twist=a:b", "malformed")]:
+    for item, message in [
+        ("twist=0-180", "malformed"),
+        ("twist=5:5", "empty"),
+        ("twist=180:0", "reversed"),
+        ("twist", "malformed"),
+        ("twist=a:b", "malformed"),
+    ]:
         with pytest.raises(Exception, match=message):
             parse_vary([item])
 
 
-MIDDLE_HOLE_PLUGIN = '''
+MIDDLE_HOLE_PLUGIN = """
 import numpy as np
 from meshgen.errors import GeometryError
 
@@ -138,19 +184,25 @@ def boundary(points, s):
     if 0.4 < s < 0.6:
         raise GeometryError(f"s={s:g} is not allowed between 0.4 and 0.6")
     return s * points
-'''
+"""
 
 
-@pytest.mark.parametrize("args, message", [
-    (["-g", "flower", "--vary", "twst=0:180"], "has no parameter 'twst' (parameters: radius, amplitude, length, twist); did you mean 'twist'"),
-    (["-g", "flower", "--vary", "twist=90:90"], "range is empty"),
-    (["-g", "flower", "--vary", "twist=180:0"], "range is reversed"),
-    (["-g", "flower", "--vary", "amplitude=0.1:0.4"], "rejects the member amplitude=0.4"),
-    (["-g", "flower", "--vary", "amplitude=-0.1:0.2"], "rejects the member amplitude=-0.1"),
-    (["-g", "HOLED", "--vary", "s=0.1:1"], "rejects the member s=0.55"),
-    (["-g", "flower", "--vary", "twist=0:90", "--param", "twist=10"], "either fixed or varied"),
-    (["-g", "flower", "--vary", "twist=0:90", "--preset", "default"], "exact-boundary form"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["-g", "flower", "--vary", "twst=0:180"],
+            "has no parameter 'twst' (parameters: radius, amplitude, length, twist); did you mean 'twist'",
+        ),
+        (["-g", "flower", "--vary", "twist=90:90"], "range is empty"),
+        (["-g", "flower", "--vary", "twist=180:0"], "range is reversed"),
+        (["-g", "flower", "--vary", "amplitude=0.1:0.4"], "rejects the member amplitude=0.4"),
+        (["-g", "flower", "--vary", "amplitude=-0.1:0.2"], "rejects the member amplitude=-0.1"),
+        (["-g", "HOLED", "--vary", "s=0.1:1"], "rejects the member s=0.55"),
+        (["-g", "flower", "--vary", "twist=0:90", "--param", "twist=10"], "either fixed or varied"),
+        (["-g", "flower", "--vary", "twist=0:90", "--preset", "default"], "exact-boundary form"),
+    ],
+)
 def test_bad_vary_is_a_one_line_error_before_training(args, message, tmp_path, capsys):
     plugin = tmp_path / "holed.py"
     plugin.write_text(MIDDLE_HOLE_PLUGIN)
@@ -217,13 +269,13 @@ def test_the_lbfgs_members_cover_the_corners_the_middle_and_every_slice_of_each_
     assert q.shape == (corners + 1 + interior, parameters)
     assert {tuple(row) for row in q[:corners]} == set(itertools.product((-1.0, 1.0), repeat=parameters))
     assert np.array_equal(q[corners], np.zeros(parameters))
-    stratified = q[corners + 1:]
+    stratified = q[corners + 1 :]
     assert np.all((stratified > -1) & (stratified < 1))
     for axis in range(parameters):  # a Latin hypercube: one sample in each of the axis's equal slices
         slices = np.floor((stratified[:, axis] + 1) / 2 * interior).astype(int)
         assert sorted(slices) == list(range(interior)), axis
     again = covering_members(parameters, interior, torch.Generator().manual_seed(parameters + 1)).numpy()
-    assert not np.array_equal(again[corners + 1:], stratified)  # drawn again, not a fixed set
+    assert not np.array_equal(again[corners + 1 :], stratified)  # drawn again, not a fixed set
 
 
 @pytest.mark.parametrize("stop_at, stage", [(4, "adam"), (6 + LBFGS_RESAMPLE + 1, "lbfgs")])
@@ -231,8 +283,18 @@ def test_an_interrupted_family_run_resumes_to_the_weights_of_an_uninterrupted_on
     """Interrupted in Adam, or in L-BFGS after its members were drawn again: the same weights."""
     family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
     lbfgs_steps = LBFGS_RESAMPLE + 3
-    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=6", f"lbfgs.steps={lbfgs_steps}",
-                                             "lbfgs.max_iter=3", "points.interior=64", "checkpoint.every=100"])
+    config = resolve_config(
+        "family",
+        None,
+        [
+            "model.widths=[8,8]",
+            "adam.steps=6",
+            f"lbfgs.steps={lbfgs_steps}",
+            "lbfgs.max_iter=3",
+            "points.interior=64",
+            "checkpoint.every=100",
+        ],
+    )
     (tmp_path / "whole").mkdir()
     whole = train_family(config, family, tmp_path / "whole", summary=False)
     calls = []
@@ -244,8 +306,9 @@ def test_an_interrupted_family_run_resumes_to_the_weights_of_an_uninterrupted_on
     (tmp_path / "part").mkdir()
     part = train_family(config, family, tmp_path / "part", stop=stop_after, summary=False)
     assert part.interrupted and part.step == stop_at and part.checkpoint["stage"] == stage
-    resumed = train_family(config, family, tmp_path / "part", resume=load_checkpoint(tmp_path / "part" / "checkpoint.pt"),
-                           summary=False)
+    resumed = train_family(
+        config, family, tmp_path / "part", resume=load_checkpoint(tmp_path / "part" / "checkpoint.pt"), summary=False
+    )
     assert resumed.step == whole.step == 6 + lbfgs_steps
     for key, value in whole.checkpoint["model"]["state_dict"].items():
         assert torch.equal(value, resumed.checkpoint["model"]["state_dict"][key]), key
@@ -269,7 +332,9 @@ def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_
     assert data["elliptic_boundary_layout"] == "fixed"
     row = data["members"][0]
     geometry = load_geometry("semicylinder").with_params(**row["params"])
-    angles = {layout: quality_report(elliptic(geometry, (6, 6, 6), boundary_layout=layout)[0], geometry)
-              ["metrics"]["min_angle"]["mean"] for layout in ("fixed", "smoothed")}
+    angles = {
+        layout: quality_report(elliptic(geometry, (6, 6, 6), boundary_layout=layout)[0], geometry)["metrics"]["min_angle"]["mean"]
+        for layout in ("fixed", "smoothed")
+    }
     assert row["elliptic_min_angle_mean"] == pytest.approx(angles["fixed"], abs=1e-9)
     assert abs(angles["smoothed"] - angles["fixed"]) > 0.1  # the two references differ: the test tells them apart

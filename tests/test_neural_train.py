@@ -6,19 +6,24 @@ import math
 import numpy as np
 import pytest
 import torch
+from neural_helpers import Recorder, tiny_config
 
 import meshgen.neural.train as training
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.train import TrainingDiverged, evaluate_losses, lbfgs_points, train
-from neural_helpers import Recorder, tiny_config
-
 
 
 @pytest.mark.parametrize("derivatives", ["fd", "autograd"])
 def test_a_short_2d_run_from_random_weights_lowers_both_losses(tmp_path, semidisk, derivatives):
     config = tiny_config(
-        "model.widths=[16,16]", "points.interior=400", "points.boundary=200", "pretrain.steps=0",
-        "adam.steps=150", "adam.lr=1e-2", "lbfgs.steps=0", "method.balance_start=false",
+        "model.widths=[16,16]",
+        "points.interior=400",
+        "points.boundary=200",
+        "pretrain.steps=0",
+        "adam.steps=150",
+        "adam.lr=1e-2",
+        "lbfgs.steps=0",
+        "method.balance_start=false",
         f"method.derivatives={derivatives}",
     )
     recorder = Recorder()
@@ -42,8 +47,7 @@ def test_lbfgs_lowers_the_weighted_loss_on_its_fixed_points(tmp_path, semidisk):
 
 def test_pretraining_fits_tfi(tmp_path, semidisk):
     recorder = Recorder()
-    train(tiny_config("pretrain.steps=8", "adam.steps=0", "lbfgs.steps=0"), semidisk, tmp_path,
-          reporter=recorder, summary=False)
+    train(tiny_config("pretrain.steps=8", "adam.steps=0", "lbfgs.steps=0"), semidisk, tmp_path, reporter=recorder, summary=False)
     fits = [r["total"] for r in recorder.rows]
     assert fits[-1] < fits[0] / 10
 

@@ -41,7 +41,9 @@ def test_first_layer_meets_flat_and_curved_walls_at_right_angles(semicylinder):
     assert flat(X).max() < 1e-9 and flat(plain).max() > 5.0
     assert curved(X).max() < 1e-3 and curved(plain).max() > 5.0
     # the first layer keeps its distance from the wall (the clustering)
-    np.testing.assert_allclose(X[1:-1, 1, 1:-1, 1], np.linalg.norm(plain[1:-1, 1, 1:-1] - plain[1:-1, 0, 1:-1], axis=-1), rtol=1e-12)
+    np.testing.assert_allclose(
+        X[1:-1, 1, 1:-1, 1], np.linalg.norm(plain[1:-1, 1, 1:-1] - plain[1:-1, 0, 1:-1], axis=-1), rtol=1e-12
+    )
     assert quality_report(X)["inverted"]["count"] == 0
     # beyond the fixed first layers the nodes solve the Winslow equations
     block = inner_block(parse_walls(["eta0", "eta1"], 3), 3)

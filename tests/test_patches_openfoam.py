@@ -7,6 +7,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
 from meshgen import cube
 from meshgen.errors import MeshgenError
@@ -15,7 +16,6 @@ from meshgen.geometry import load_geometry
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import cell_metrics, quality_report
 from meshgen.tfi import tfi
-from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
 cgnscheck = shutil.which("cgnscheck")
 needs_cgnscheck = pytest.mark.skipif(cgnscheck is None, reason="cgnscheck not installed (Debian package cgns-convert)")
@@ -55,10 +55,7 @@ def test_builtins_name_their_faces_and_defaults_are_the_face_names(tmp_path):
         "symmetry": ("symmetry", ("eta0",)),
     }
     plugin = tmp_path / "plain.py"
-    plugin.write_text(
-        "name = 'plain'\ndim = 2\ndescription = 'unit square'\n"
-        "def boundary(points):\n    return points\n"
-    )
+    plugin.write_text("name = 'plain'\ndim = 2\ndescription = 'unit square'\ndef boundary(points):\n    return points\n")
     assert [(p.name, p.faces) for p in geometry_patches(load_geometry(str(plugin)))] == [
         (face, (face,)) for face in ("xi0", "xi1", "eta0", "eta1")
     ]
@@ -78,7 +75,12 @@ def test_patch_options_rename_retype_and_merge_faces():
 
 @pytest.mark.parametrize(
     "item, message",
-    [("zeta0=in", "unknown face 'zeta0' of a 2D"), ("xi0=in:inflow", "unknown type 'inflow'"), ("xi0", "malformed"), ("xi0=a b", "not valid")],
+    [
+        ("zeta0=in", "unknown face 'zeta0' of a 2D"),
+        ("xi0=in:inflow", "unknown type 'inflow'"),
+        ("xi0", "malformed"),
+        ("xi0=a b", "not valid"),
+    ],
 )
 def test_bad_patch_options_are_refused(item, message):
     with pytest.raises(MeshgenError, match=message):
@@ -112,7 +114,9 @@ CHECKMESH_CASES = [
 
 
 @needs_openfoam
-@pytest.mark.parametrize("method, name, dims, binary", CHECKMESH_CASES, ids=[f"{m}-{n}-{'bin' if b else 'ascii'}" for m, n, _, b in CHECKMESH_CASES])
+@pytest.mark.parametrize(
+    "method, name, dims, binary", CHECKMESH_CASES, ids=[f"{m}-{n}-{'bin' if b else 'ascii'}" for m, n, _, b in CHECKMESH_CASES]
+)
 def test_checkmesh_says_mesh_ok_with_the_patches_and_face_counts(tmp_path, method, name, dims, binary):
     geometry, X = make(method, name, dims)
     patches = geometry_patches(geometry)
@@ -211,8 +215,25 @@ def test_left_handed_map_still_gives_outward_normals(tmp_path):
 
 @needs_openfoam
 def test_cli_openfoam_route_then_evaluate_reads_the_case(run_cli, tmp_path):
-    result = run_cli("mesh", "--method", "tfi", "-g", "canal", "--dims", "3", "3", "6", "--format", "openfoam", "-o", "canal",
-                     "--patch", "zeta0=in", "--patch", "zeta1=out:patch")
+    result = run_cli(
+        "mesh",
+        "--method",
+        "tfi",
+        "-g",
+        "canal",
+        "--dims",
+        "3",
+        "3",
+        "6",
+        "--format",
+        "openfoam",
+        "-o",
+        "canal",
+        "--patch",
+        "zeta0=in",
+        "--patch",
+        "zeta1=out:patch",
+    )
     assert result.returncode == 0, result.stderr
     report = check_mesh(tmp_path / "canal")
     assert report["ok"] and report["patches"] == {"wall": 4 * 3 * 6, "in": 9, "out": 9}
@@ -304,8 +325,21 @@ def test_potential_foam_is_exact_on_the_elliptic_mesh_as_meshgen_mesh_writes_it(
     errors = {}
     for layout in ("smoothed", "fixed"):
         case = tmp_path / layout
-        result = run_cli("mesh", "--method", "elliptic", "--boundary-layout", layout, "--dims", "6", "6", "8",
-                         "--format", "openfoam", "-o", case.name)
+        result = run_cli(
+            "mesh",
+            "--method",
+            "elliptic",
+            "--boundary-layout",
+            layout,
+            "--dims",
+            "6",
+            "6",
+            "8",
+            "--format",
+            "openfoam",
+            "-o",
+            case.name,
+        )
         assert result.returncode == 0, result.stderr
         solved = run_tool("potentialFoam", case)
         assert solved.returncode == 0 and "\nEnd" in solved.stdout, solved.stdout[-3000:]

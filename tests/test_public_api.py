@@ -4,7 +4,6 @@ with quality arrays that agree with VTK's quality filter."""
 import re
 
 import numpy as np
-
 from conftest import REPO
 
 
@@ -14,8 +13,9 @@ def readme_python_example() -> str:
 
 
 def test_readme_python_example(tmp_path, run_cli, capsys):
-    from meshgen.formats import read_mesh
     from test_quality import vtk_quality
+
+    from meshgen.formats import read_mesh
 
     namespace = {}
     exec(compile(readme_python_example(), "README.md", "exec"), namespace)  # in tmp_path (conftest)
@@ -31,7 +31,9 @@ def test_readme_python_example(tmp_path, run_cli, capsys):
     np.testing.assert_allclose(result.quality["scaled_jacobian"], vtk_sj, atol=1e-10)
 
     # The same request on the command line: the same nodes.
-    made = run_cli("mesh", "-m", "elliptic", "-g", "semicylinder", "--dims", 20, 20, 20, "--cluster", "zeta:both:1.1", "-o", "cli.vtu", "-q")
+    made = run_cli(
+        "mesh", "-m", "elliptic", "-g", "semicylinder", "--dims", 20, 20, 20, "--cluster", "zeta:both:1.1", "-o", "cli.vtu", "-q"
+    )
     assert made.returncode == 0, made.stderr
     np.testing.assert_array_equal(read_mesh(tmp_path / "cli.vtu").points, written.points)
     assert (tmp_path / "semicylinder-elliptic.vtu.quality.json").is_file()  # beside it, as the README says

@@ -250,8 +250,6 @@ def test_face_matching_survives_hash_collisions_and_finds_non_manifold_faces():
 # boundary deviation
 
 
-
-
 def test_tfi_meshes_lie_on_the_true_boundary(semicylinder, semidisk):
     for geometry, dims in ((semicylinder, (12, 10, 8)), (semidisk, (30, 20))):
         X = tfi(geometry, dims)

@@ -22,7 +22,11 @@ gmsh = shutil.which("gmsh")
 def expected_corners(X):
     """(cells, corners, dim): corner coordinates of each cell in C order, VTK corner order."""
     dim = X.shape[-1]
-    offsets = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)] if dim == 3 else [(0, 0), (1, 0), (1, 1), (0, 1)]
+    offsets = (
+        [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+        if dim == 3
+        else [(0, 0), (1, 0), (1, 1), (0, 1)]
+    )
     cells = tuple(n - 1 for n in X.shape[:-1])
     return np.stack([X[tuple(slice(o, o + c) for o, c in zip(offset, cells))].reshape(-1, dim) for offset in offsets], axis=1)
 
@@ -163,8 +167,9 @@ def test_gmsh_opens_the_msh_and_sees_the_physical_groups(tmp_path, case):
     elements it puts in each group are what it understood."""
     geometry, dims, X, patches = case
     path = write_mesh(tmp_path / "m.msh", X, patches=patches)
-    result = subprocess.run([gmsh, str(path), "-0", "-o", str(tmp_path / "out.msh"), "-format", "msh22"],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [gmsh, str(path), "-0", "-o", str(tmp_path / "out.msh"), "-format", "msh22"], capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 0 and "Error" not in result.stdout + result.stderr, result.stdout + result.stderr
     text = (tmp_path / "out.msh").read_text()
     names = {int(tag): (int(d), name) for d, tag, name in re.findall(r'^(\d) (\d+) "([^"]+)"$', text, re.M)}
@@ -200,7 +205,11 @@ def test_evaluate_reads_every_patch_format_meshgen_mesh_writes(run_cli, tmp_path
 
 @pytest.mark.parametrize(
     "target, patch, message",
-    [("m.su2", "zeta0=in(1)", "SU2 marker"), ("m.msh", "zeta0=domain", "physical group of the cells"), ("m.cgns", "zeta0=" + "p" * 30, "too long for CGNS")],
+    [
+        ("m.su2", "zeta0=in(1)", "SU2 marker"),
+        ("m.msh", "zeta0=domain", "physical group of the cells"),
+        ("m.cgns", "zeta0=" + "p" * 30, "too long for CGNS"),
+    ],
 )
 def test_patch_name_invalid_for_the_format_is_one_line_exit_2(run_cli, tmp_path, target, patch, message):
     result = run_cli("mesh", "--method", "tfi", "--dims", "3", "3", "3", "--patch", patch, "-o", target)

@@ -6,17 +6,27 @@ import re
 
 import pytest
 from click.testing import CliRunner
+from neural_helpers import TINY
 from rich.console import Console
+from terminal_helpers import run_in_terminal
 
 from meshgen.cli import cli
 from meshgen.commands._text import wrapped
 from meshgen.neural.config import resolve_config
 from meshgen.neural.progress import FIELD_HELP, LogReporter, RichReporter, describe_row, shown_fields
-from neural_helpers import TINY
-from terminal_helpers import run_in_terminal
 
-ROW = {"stage": "adam", "step": 414, "L1": 1.58e-2, "L2": 1.16e-4, "total": 0.02, "a1": 0.586, "a2": 0.0232,
-       "conflict": 1, "lr": 1e-4, "seconds": 3.0}
+ROW = {
+    "stage": "adam",
+    "step": 414,
+    "L1": 1.58e-2,
+    "L2": 1.16e-4,
+    "total": 0.02,
+    "a1": 0.586,
+    "a2": 0.0232,
+    "conflict": 1,
+    "lr": 1e-4,
+    "seconds": 3.0,
+}
 PROGRESS = re.compile(r"^\s*(TFI fit|Adam|L-BFGS) \S* *(\d+)/(\d+) +ETA (\d+:\d\d:\d\d|-:--:--)")
 
 
@@ -38,7 +48,7 @@ def test_progress_line_keeps_bar_step_and_eta_and_fits(width):
     match = PROGRESS.match(line)
     assert match and match.group(2, 3) == ("415", "12000")  # the total is never cut
     assert "━" in line or "╸" in line  # the bar is drawn
-    losses = line[match.end():].strip()
+    losses = line[match.end() :].strip()
     full = describe_row(ROW, 1.0)
     # The loss figures fill what is left: whole where they fit, else a prefix with an ellipsis.
     assert losses == full or (losses.endswith("…") and full.startswith(losses[:-1]))
@@ -114,8 +124,22 @@ def test_help_texts_show_defaults_and_choices():
     assert not show.rstrip().endswith("...")
 
 
-TRAIN = ["train", "-g", "semidisk", "--preset", "2d", *(a for item in TINY for a in ("--set", item)),
-         "--set", "pretrain.steps=3", "--steps", "15", "--set", "lbfgs.steps=3", "--out", "run"]
+TRAIN = [
+    "train",
+    "-g",
+    "semidisk",
+    "--preset",
+    "2d",
+    *(a for item in TINY for a in ("--set", item)),
+    "--set",
+    "pretrain.steps=3",
+    "--steps",
+    "15",
+    "--set",
+    "lbfgs.steps=3",
+    "--out",
+    "run",
+]
 
 
 @pytest.mark.parametrize("columns", [80, 100])

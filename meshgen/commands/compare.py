@@ -45,28 +45,99 @@ def _methods_help() -> str:
 @click.option("--methods", default=None, metavar="LIST", help=_methods_help())
 @geometry_options(default=None)
 @dims_option(required=False, help_text="Cells per axis when meshing a geometry: two numbers (2D) or three (3D).")
-@click.option("--out", "out_dir", type=click.Path(), default=None, metavar="DIR", help="Write tables, meshes and pictures into DIR (created if missing).")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(),
+    default=None,
+    metavar="DIR",
+    help="Write tables, meshes and pictures into DIR (created if missing).",
+)
 @click.option(
     "--metric",
-    type=click.Choice(["min_angle", "max_angle", "equiangle_skewness", "aspect_ratio", "centroid_skewness", "non_orthogonality", "scaled_jacobian"]),
+    type=click.Choice(
+        [
+            "min_angle",
+            "max_angle",
+            "equiangle_skewness",
+            "aspect_ratio",
+            "centroid_skewness",
+            "non_orthogonality",
+            "scaled_jacobian",
+        ]
+    ),
     default="non_orthogonality",
     show_default=True,
     metavar="METRIC",
     help="Per-cell metric that colours the pictures: min_angle, max_angle, equiangle_skewness, aspect_ratio, "
     "centroid_skewness, non_orthogonality or scaled_jacobian.",
 )
-@click.option("--timing-repeats", type=click.IntRange(1), default=1, show_default=True, help="Time meshing as the median of N runs.")
-@click.option("--steps", type=click.IntRange(1), default=None, help="Neural methods: Adam steps of every training run [default: each preset's adam.steps].")
-@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Neural methods: override a training setting of every preset (repeatable), e.g. --set model.widths=[20,20].")
-@click.option("--seed", type=int, default=None, help="Neural methods: random seed of every training run [default: each preset's seed, 0].")
-@click.option("--checkpoint", "checkpoints", multiple=True, metavar="METHOD=PATH", help="Reuse a trained network instead of training (repeatable), e.g. pinn=runs/pinn/checkpoint.pt.")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Neural methods: where to train; auto picks cuda when available.")
-@click.option("--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help') [default: 1e-6].")
+@click.option(
+    "--timing-repeats", type=click.IntRange(1), default=1, show_default=True, help="Time meshing as the median of N runs."
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(1),
+    default=None,
+    help="Neural methods: Adam steps of every training run [default: each preset's adam.steps].",
+)
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Neural methods: override a training setting of every preset (repeatable), e.g. --set model.widths=[20,20].",
+)
+@click.option(
+    "--seed", type=int, default=None, help="Neural methods: random seed of every training run [default: each preset's seed, 0]."
+)
+@click.option(
+    "--checkpoint",
+    "checkpoints",
+    multiple=True,
+    metavar="METHOD=PATH",
+    help="Reuse a trained network instead of training (repeatable), e.g. pinn=runs/pinn/checkpoint.pt.",
+)
+@click.option(
+    "--device",
+    type=click.Choice(["auto", "cpu", "cuda"]),
+    default="auto",
+    show_default=True,
+    help="Neural methods: where to train; auto picks cuda when available.",
+)
+@click.option(
+    "--tol", type=float, default=None, help="elliptic: convergence tolerance (see 'meshgen mesh --help') [default: 1e-6]."
+)
 @click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations [default: 100].")
-@click.option("--cluster", "clusters", multiple=True, metavar="AXIS:SIDE:RATIO", help="Cluster nodes towards a wall, for every method (as in 'meshgen mesh').")
+@click.option(
+    "--cluster",
+    "clusters",
+    multiple=True,
+    metavar="AXIS:SIDE:RATIO",
+    help="Cluster nodes towards a wall, for every method (as in 'meshgen mesh').",
+)
 @click.option("--mesh-format", default=".vtu", show_default=True, metavar="EXT", help="Format of the meshes written with --out.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the table and errors.")
-def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_repeats, steps, overrides, seed, checkpoints, device, tol, max_iter, clusters, mesh_format, quiet):
+def compare(
+    meshes,
+    methods,
+    geometry,
+    params,
+    dims,
+    out_dir,
+    metric,
+    timing_repeats,
+    steps,
+    overrides,
+    seed,
+    checkpoints,
+    device,
+    tol,
+    max_iter,
+    clusters,
+    mesh_format,
+    quiet,
+):
     """Compare meshing methods on a geometry, or existing mesh files, in one table.
 
     With --dims: mesh the geometry (--geometry, default semicylinder) with each of --methods,
@@ -84,9 +155,21 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
 
     mesh_format = mesh_format if mesh_format.startswith(".") else "." + mesh_format
     if meshes:
-        given = [flag for flag, value in (("--methods", methods), ("--dims", dims), ("--steps", steps), ("--set", overrides),
-                                          ("--seed", seed), ("--checkpoint", checkpoints), ("--tol", tol), ("--max-iter", max_iter),
-                                          ("--cluster", clusters)) if value]
+        given = [
+            flag
+            for flag, value in (
+                ("--methods", methods),
+                ("--dims", dims),
+                ("--steps", steps),
+                ("--set", overrides),
+                ("--seed", seed),
+                ("--checkpoint", checkpoints),
+                ("--tol", tol),
+                ("--max-iter", max_iter),
+                ("--cluster", clusters),
+            )
+            if value
+        ]
         if given:
             raise click.UsageError(f"{given[0]} applies when meshing a geometry (--dims), not to mesh files")
         if timing_repeats > 1:
@@ -142,7 +225,9 @@ def compare(meshes, methods, geometry, params, dims, out_dir, metric, timing_rep
     from meshgen.tables import print_table
 
     header, rows, highlight = comparing.table(comparison, short=True)
-    print_table(header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION, fit_terminal=True)
+    print_table(
+        header, rows, title=comparing.title(comparison), highlight=highlight, caption=comparing.CAPTION, fit_terminal=True
+    )
     for row in comparison["rows"]:
         if "error" in row:
             click.echo(f"{row['name']} failed: {row['error']}", err=True)

@@ -44,11 +44,7 @@ def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
         rows = [[METRIC_LABELS[m], *(_number(report["metrics"][m][s]) for s in STATS)] for m in METRICS]
         return [(header, rows), (["verdict", ""], [list(row) for row in _verdict_rows(report)])]
     header = ["quantity", *(r["file"] for r in reports)]
-    rows = [
-        [f"{METRIC_LABELS[m]} {s}", *(_number(r["metrics"][m][s]) for r in reports)]
-        for m in METRICS
-        for s in STATS
-    ]
+    rows = [[f"{METRIC_LABELS[m]} {s}", *(_number(r["metrics"][m][s]) for r in reports)] for m in METRICS for s in STATS]
     verdicts = [dict(_verdict_rows(r)) for r in reports]
     labels = list(dict.fromkeys(label for v in verdicts for label in v))
     rows += [[label, *(v.get(label, "") for v in verdicts)] for label in labels]
@@ -102,7 +98,9 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
 @click.command("evaluate", epilog=EPILOG)
 @click.argument("meshes", nargs=-1, required=True, metavar="MESH...")
 @geometry_options(default=None)
-@click.option("--json", "json_path", metavar="FILE", help="Write the report as JSON ('-' for stdout): one mesh an object, several a list.")
+@click.option(
+    "--json", "json_path", metavar="FILE", help="Write the report as JSON ('-' for stdout): one mesh an object, several a list."
+)
 @click.option("--markdown", "markdown_path", metavar="FILE", help="Write the table as Markdown (e.g. for a CI job summary).")
 @click.option(
     "--fail-if",

@@ -19,8 +19,20 @@ METHOD_HELP = (
 @click.option("--method", "-m", default="auto", show_default=True, help=METHOD_HELP)
 @geometry_options()
 @dims_option()
-@click.option("-o", "--output", required=True, type=click.Path(), help="Output file; the extension picks the format (.vtu .vts .vtk .xdmf .cgns .su2 .msh .xyz .fmt), or a case folder with --format openfoam.")
-@click.option("--format", "format_name", default=None, metavar="NAME", help="Output format instead of the extension's: openfoam writes the case folder -o CASE (or CASE/constant/polyMesh).")
+@click.option(
+    "-o",
+    "--output",
+    required=True,
+    type=click.Path(),
+    help="Output file; the extension picks the format (.vtu .vts .vtk .xdmf .cgns .su2 .msh .xyz .fmt), or a case folder with --format openfoam.",
+)
+@click.option(
+    "--format",
+    "format_name",
+    default=None,
+    metavar="NAME",
+    help="Output format instead of the extension's: openfoam writes the case folder -o CASE (or CASE/constant/polyMesh).",
+)
 @click.option(
     "--patch",
     "patch_items",
@@ -30,7 +42,12 @@ METHOD_HELP = (
     "faces may share a name). Default: the geometry's patches (meshgen geometries).",
 )
 @click.option("--ascii", "ascii_files", is_flag=True, help="openfoam: write the polyMesh as ASCII [default: binary].")
-@click.option("--checkpoint", type=click.Path(dir_okay=False), default=None, help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).")
+@click.option(
+    "--checkpoint",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).",
+)
 @click.option(
     "--correct/--no-correct",
     "--snap/--no-snap",
@@ -39,9 +56,21 @@ METHOD_HELP = (
     help="neural: add TFI of the network's boundary error, X = N + TFI[g - N], so the boundary is exact and the "
     "interior moves smoothly (also block by block with --chunked); --no-correct keeps the raw network [default: --correct; --snap/--no-snap: old names].",
 )
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default=None, help="neural: where the network is evaluated; auto picks cuda when available [default: auto].")
-@click.option("--tol", type=float, default=None, help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].")
-@click.option("--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100].")
+@click.option(
+    "--device",
+    type=click.Choice(["auto", "cpu", "cuda"]),
+    default=None,
+    help="neural: where the network is evaluated; auto picks cuda when available [default: auto].",
+)
+@click.option(
+    "--tol",
+    type=float,
+    default=None,
+    help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].",
+)
+@click.option(
+    "--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100]."
+)
 @click.option(
     "--cluster",
     "clusters",
@@ -86,8 +115,28 @@ METHOD_HELP = (
     "--no-quality writes the mesh alone (meshgen evaluate can measure it later).",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
-def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii_files, checkpoint, correct, device, tol, max_iter,
-         clusters, boundary_layout, orthogonal, chunked, scheduler, quality, quiet):
+def mesh(
+    method,
+    geometry,
+    params,
+    dims,
+    output,
+    format_name,
+    patch_items,
+    ascii_files,
+    checkpoint,
+    correct,
+    device,
+    tol,
+    max_iter,
+    clusters,
+    boundary_layout,
+    orthogonal,
+    chunked,
+    scheduler,
+    quality,
+    quiet,
+):
     """Make a structured mesh of a geometry and write it.
 
     With no --method and no --checkpoint, a trained model of the --geometry (default: semicylinder)
@@ -146,8 +195,14 @@ def mesh(method, geometry, params, dims, output, format_name, patch_items, ascii
     elif address is not None:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     check_free_space(output, node_count * len(dims) * 8)
-    options = {"tol": tol, "max_iter": max_iter, "correct": correct, "device": device, "boundary_layout": boundary_layout,
-               "orthogonal": orthogonal or None}
+    options = {
+        "tol": tol,
+        "max_iter": max_iter,
+        "correct": correct,
+        "device": device,
+        "boundary_layout": boundary_layout,
+        "orthogonal": orthogonal or None,
+    }
     model = None
     if method == "neural":
         model, geometry = _neural_model(checkpoint, geometry, params, geometry_given, dims)
@@ -223,7 +278,9 @@ def _print_result(method, geometry, dims, info, seconds, output, output_format, 
         echo(line)
 
 
-def _mesh_in_blocks(method, geometry, coords, model, correct, boundary_layout, output, dims, clusters, patches, client, quality, quiet):
+def _mesh_in_blocks(
+    method, geometry, coords, model, correct, boundary_layout, output, dims, clusters, patches, client, quality, quiet
+):
     """The chunked path of ``meshgen mesh``: (report, info, meshing seconds)."""
     import sys
     import time
@@ -308,8 +365,10 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
     )
     entry = model.geometry_entry
-    same_source = chosen is not None and chosen.name == entry["name"] and (
-        Path(spec).resolve() == Path(entry["spec"]).resolve() if _looks_like_path(spec) else spec == entry["spec"]
+    same_source = (
+        chosen is not None
+        and chosen.name == entry["name"]
+        and (Path(spec).resolve() == Path(entry["spec"]).resolve() if _looks_like_path(spec) else spec == entry["spec"])
     )
     if same_source:
         geometry = bind(chosen, dict(entry["params"]))

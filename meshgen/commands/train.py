@@ -12,9 +12,9 @@ MESH_HINT = "meshgen mesh --method neural --checkpoint {checkpoint} --dims {dims
 
 def _epilog() -> str:
     """What the figures of the progress line mean (only those the preset uses are shown)."""
-    from meshgen.neural.progress import FIELD_HELP  # plain Python: no torch
-
     import textwrap
+
+    from meshgen.neural.progress import FIELD_HELP  # plain Python: no torch
 
     lines = ["\b", "Progress line: stage, bar, step/total, ETA, then the figures the preset uses:"]
     for name, text in FIELD_HELP.items():
@@ -25,16 +25,55 @@ def _epilog() -> str:
 @click.command("train", epilog=_epilog())
 @geometry_options(default=None)
 @click.option("--preset", "-p", default=None, metavar="NAME", help="Configuration preset [default: default]; see --list-presets.")
-@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None, help="YAML configuration file applied over the preset (a run's config.yaml repeats that run).")
-@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="Override a configuration key (repeatable), e.g. --set adam.lr=5e-4 --set model.widths=[64,64,64].")
-@click.option("--steps", type=click.IntRange(0), default=None, help="Adam steps (shortcut for --set adam.steps=N) [default: the preset's adam.steps; default preset: 500].")
-@click.option("--out", type=click.Path(file_okay=False), default=None, help="Run folder [default: runs/<geometry>-<timestamp>/; with --resume the checkpoint's folder].")
+@click.option(
+    "--config",
+    "config_file",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="YAML configuration file applied over the preset (a run's config.yaml repeats that run).",
+)
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Override a configuration key (repeatable), e.g. --set adam.lr=5e-4 --set model.widths=[64,64,64].",
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(0),
+    default=None,
+    help="Adam steps (shortcut for --set adam.steps=N) [default: the preset's adam.steps; default preset: 500].",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Run folder [default: runs/<geometry>-<timestamp>/; with --resume the checkpoint's folder].",
+)
 @click.option("--resume", type=click.Path(dir_okay=False), default=None, help="Continue training from this checkpoint.")
-@click.option("--seed", type=int, default=None, help="Random seed (a CPU run with the same seed and threads repeats exactly) [default: the preset's seed, 0].")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True, help="Where to train; auto picks cuda when available.")
+@click.option(
+    "--seed",
+    type=int,
+    default=None,
+    help="Random seed (a CPU run with the same seed and threads repeats exactly) [default: the preset's seed, 0].",
+)
+@click.option(
+    "--device",
+    type=click.Choice(["auto", "cpu", "cuda"]),
+    default="auto",
+    show_default=True,
+    help="Where to train; auto picks cuda when available.",
+)
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads for torch [default: torch's choice].")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar: a log line every tenth of each stage.")
-@click.option("--vary", "vary", multiple=True, metavar="NAME=LOW:HIGH", help="Train one network for a family of shapes: vary this geometry parameter over [LOW, HIGH] (repeatable), e.g. --vary twist=0:180; the preset defaults to family.")
+@click.option(
+    "--vary",
+    "vary",
+    multiple=True,
+    metavar="NAME=LOW:HIGH",
+    help="Train one network for a family of shapes: vary this geometry parameter over [LOW, HIGH] (repeatable), e.g. --vary twist=0:180; the preset defaults to family.",
+)
 @click.option("--list-presets", is_flag=True, help="List the presets with one line each and exit.")
 def train(geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, vary, list_presets):
     """Train a network that maps the unit cube onto a geometry (the 3DMeshNet method).
@@ -61,8 +100,18 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     from meshgen.neural.session import prepare_run, run_training
 
     run = prepare_run(
-        geometry=geometry, params=params, preset=preset, config_file=config_file, overrides=overrides,
-        steps=steps, out=out, resume=resume, seed=seed, device=device, threads=threads, vary=vary,
+        geometry=geometry,
+        params=params,
+        preset=preset,
+        config_file=config_file,
+        overrides=overrides,
+        steps=steps,
+        out=out,
+        resume=resume,
+        seed=seed,
+        device=device,
+        threads=threads,
+        vary=vary,
     )
     result = run_training(run, quiet=quiet)
     if result.interrupted:
@@ -77,8 +126,10 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
         return
     dims = " ".join(str(n) for n in summary["dims"])
     size = " x ".join(str(n) for n in summary["dims"])
-    echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
-         f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})")
+    echo(
+        f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
+        f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})"
+    )
     echo(f"Network, {size} mesh:")
     for line in summary_lines(summary["network"]):
         echo(f"  {line}")
@@ -99,8 +150,10 @@ def _family_report(run, result) -> None:
     from meshgen.neural.family import range_text, summary_table
 
     family = run.family
-    echo(f"Trained {family.base.name} over {' '.join(range_text(family.ranges))} for {result.step} steps "
-         f"in {result.seconds:.1f} s (test-set PDE loss {result.test_loss['pde']:.3g})")
+    echo(
+        f"Trained {family.base.name} over {' '.join(range_text(family.ranges))} for {result.step} steps "
+        f"in {result.seconds:.1f} s (test-set PDE loss {result.test_loss['pde']:.3g})"
+    )
     for line in summary_table(result.summary):
         echo(line)
     echo(f"Run folder: {run.run_dir}")

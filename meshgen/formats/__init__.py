@@ -21,9 +21,9 @@ from __future__ import annotations
 import contextlib
 import importlib
 import io
-import sys
 import json
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,13 +52,30 @@ def register_format(name: str, extensions, module: str, description: str, **opti
 
 
 register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
-register_format("vts", [".vts"], "meshgen.formats._vts", "VTK XML structured grid (zlib-compressed, no connectivity), patch ids", patches=True)
+register_format(
+    "vts", [".vts"], "meshgen.formats._vts", "VTK XML structured grid (zlib-compressed, no connectivity), patch ids", patches=True
+)
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
-register_format("cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone, a BC_t per patch", patches=True, streams=True)
-register_format("openfoam", [], "meshgen.formats._openfoam", "OpenFOAM case: constant/polyMesh (2D: extruded one cell) and CASE.foam", patches=True, folder=True)
+register_format(
+    "cgns", [".cgns"], "meshgen.formats._cgns", "CGNS/HDF5, one structured zone, a BC_t per patch", patches=True, streams=True
+)
+register_format(
+    "openfoam",
+    [],
+    "meshgen.formats._openfoam",
+    "OpenFOAM case: constant/polyMesh (2D: extruded one cell) and CASE.foam",
+    patches=True,
+    folder=True,
+)
 register_format("su2", [".su2"], "meshgen.formats._su2", "SU2 native mesh (ASCII), a MARKER_TAG per patch", patches=True)
-register_format("gmsh", [".msh"], "meshgen.formats._gmsh", "Gmsh MSH 4.1 (ASCII), a physical group per patch and one for the cells", patches=True)
+register_format(
+    "gmsh",
+    [".msh"],
+    "meshgen.formats._gmsh",
+    "Gmsh MSH 4.1 (ASCII), a physical group per patch and one for the cells",
+    patches=True,
+)
 register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
 register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
 

@@ -232,7 +232,9 @@ def read(path):
     with h5py.File(path, "r") as root:
         base, zone, node_shape = _structured_zone(root, path)
         cell_shape = tuple(n - 1 for n in node_shape)
-        X = np.stack([_c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
+        X = np.stack(
+            [_c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1
+        )
 
         point_data, cell_data = {}, {}
         for solution in _children_with_label(zone, "FlowSolution_t"):

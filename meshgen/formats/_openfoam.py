@@ -129,9 +129,7 @@ def check_output(path) -> Path:
 
 def check_patch_name(name: str) -> None:
     if not WORD.fullmatch(name):
-        raise FormatError(
-            f"patch name '{name}' is not an OpenFOAM word (a letter or _ first, then letters, digits, _ . : + -)"
-        )
+        raise FormatError(f"patch name '{name}' is not an OpenFOAM word (a letter or _ first, then letters, digits, _ . : + -)")
 
 
 # --- writing ---------------------------------------------------------------------------------
@@ -197,7 +195,9 @@ def extrude(X: np.ndarray) -> np.ndarray:
     cell size sqrt(|area| / cells)."""
     x, y = X[..., 0], X[..., 1]
     # Shoelace area of each cell as two triangles, summed: the mesh's signed area.
-    area = 0.5 * np.sum((x[1:, 1:] - x[:-1, :-1]) * (y[:-1, 1:] - y[1:, :-1]) - (x[:-1, 1:] - x[1:, :-1]) * (y[1:, 1:] - y[:-1, :-1]))
+    area = 0.5 * np.sum(
+        (x[1:, 1:] - x[:-1, :-1]) * (y[:-1, 1:] - y[1:, :-1]) - (x[:-1, 1:] - x[1:, :-1]) * (y[1:, 1:] - y[:-1, :-1])
+    )
     cells = (X.shape[0] - 1) * (X.shape[1] - 1)
     thickness = float(np.sqrt(abs(area) / cells)) or 1.0
     X3 = np.empty(X.shape[:2] + (2, 3))
@@ -412,9 +412,7 @@ def read_list(path: Path, dtype: str) -> np.ndarray:
 def _record(folder: Path) -> dict:
     path = folder / RECORD_NAME
     if not path.is_file():
-        raise FormatError(
-            f"{folder}: no {RECORD_NAME}: meshgen reads the OpenFOAM cases it wrote (their structured grid)"
-        )
+        raise FormatError(f"{folder}: no {RECORD_NAME}: meshgen reads the OpenFOAM cases it wrote (their structured grid)")
     try:
         return json.loads(path.read_text())
     except ValueError as exc:

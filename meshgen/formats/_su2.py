@@ -64,7 +64,9 @@ def write(path, X, cell_data, metadata, patches):
             elements = np.concatenate([boundary_elements(node_shape, face, positive) for face in patch.faces])
             file.write(f"MARKER_TAG= {patch.name}\nMARKER_ELEMS= {len(elements)}\n".encode())
             kind = SU2_QUADRILATERAL if dim == 3 else SU2_LINE
-            write_rows(file, np.column_stack([np.full(len(elements), kind), elements]), " ".join(["{}"] * (elements.shape[1] + 1)))
+            write_rows(
+                file, np.column_stack([np.full(len(elements), kind), elements]), " ".join(["{}"] * (elements.shape[1] + 1))
+            )
 
 
 def _comment(path, key: str) -> str | None:

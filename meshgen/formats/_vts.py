@@ -53,7 +53,15 @@ from meshgen.formats._vtu import (
 PATCHES_KEY = "meshgen_patches"
 PATCH_ARRAY = "patch"
 TYPES = {**VTK_TYPES, np.dtype("<i4"): "Int32", np.dtype("<f4"): "Float32"}
-NUMPY_TYPES = {"Float64": "<f8", "Float32": "<f4", "Int64": "<i8", "Int32": "<i4", "UInt8": "u1", "UInt64": "<u8", "UInt32": "<u4"}
+NUMPY_TYPES = {
+    "Float64": "<f8",
+    "Float32": "<f4",
+    "Int64": "<i8",
+    "Int32": "<i4",
+    "UInt8": "u1",
+    "UInt64": "<u8",
+    "UInt32": "<u4",
+}
 
 
 def write(path, X, cell_data, metadata, patches):
@@ -110,7 +118,7 @@ def write(path, X, cell_data, metadata, patches):
                     '<?xml version="1.0"?>\n<VTKFile type="StructuredGrid" version="1.0" byte_order="LittleEndian" '
                     'header_type="UInt64" compressor="vtkZLibDataCompressor">\n'
                     f'<StructuredGrid WholeExtent="{extent}">\n{elements["FieldData"]}<Piece Extent="{extent}">\n'
-                    f'{elements["PointData"]}{elements["CellData"]}{elements["Points"]}</Piece>\n</StructuredGrid>\n'
+                    f"{elements['PointData']}{elements['CellData']}{elements['Points']}</Piece>\n</StructuredGrid>\n"
                     '<AppendedData encoding="raw">\n_'
                 ).encode()
             )
@@ -217,8 +225,13 @@ def read(path):
 
     points = c_order(_decode(pieces[0].find("Points/DataArray"), root, appended).astype(float), node_shape, 3)
     cell_shape = tuple(n - 1 for n in node_shape)
-    cell_data = {a.get("Name"): [c_order(_decode(a, root, appended).astype(float), cell_shape)] for a in pieces[0].findall("CellData/DataArray")}
-    point_data = {a.get("Name"): c_order(_decode(a, root, appended), node_shape) for a in pieces[0].findall("PointData/DataArray")}
+    cell_data = {
+        a.get("Name"): [c_order(_decode(a, root, appended).astype(float), cell_shape)]
+        for a in pieces[0].findall("CellData/DataArray")
+    }
+    point_data = {
+        a.get("Name"): c_order(_decode(a, root, appended), node_shape) for a in pieces[0].findall("PointData/DataArray")
+    }
     field_data = {a.get("Name"): _decode(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
     field_data = {k: v for k, v in field_data.items() if k in (METADATA_KEY, PATCHES_KEY)}
     return meshio.Mesh(

@@ -74,8 +74,7 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     version = checkpoint.get("format_version")
     if not isinstance(version, int) or version > FORMAT_VERSION:
         raise CheckpointError(
-            f"checkpoint {path} has format version {version!r}, newer than this meshgen reads "
-            f"({FORMAT_VERSION}): upgrade meshgen"
+            f"checkpoint {path} has format version {version!r}, newer than this meshgen reads ({FORMAT_VERSION}): upgrade meshgen"
         )
     missing = [key for key in ("model", "geometry", "config") if key not in checkpoint]
     if missing:

@@ -63,7 +63,7 @@ class AdamConfig:
     lr: float = 1e-4  # paper: 1e-3 from random weights; after the fit to TFI a smaller step keeps the boundary
     decay: float = 0.9  # the learning rate is multiplied by this ...
     decay_every: int = 1000  # ... every this many steps
-    weights_lr: typing.Optional[float] = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
+    weights_lr: float | None = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
 
 
 @dataclass
@@ -94,7 +94,7 @@ class TestConfig:
 @dataclass
 class TrainConfig:
     description: str = "the full 3DMeshNet method, sized for a few minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
-    dim: typing.Optional[int] = None  # 2 or 3 for presets made for one dimension; null: any
+    dim: int | None = None  # 2 or 3 for presets made for one dimension; null: any
     seed: int = 0
     # the boundary the network learns: "smoothed" (meshgen.layout: the faces' own Winslow grids) or
     # "fixed" (the geometry's map: each face the Coons layout of its edges)

@@ -14,7 +14,7 @@ the CPU, so checkpoints, resuming and the divergence guard work the same on ever
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 

@@ -122,9 +122,6 @@ def autograd_derivatives(function, points: torch.Tensor, create_graph: bool = Tr
         if not gradient.requires_grad:  # an affine function: constant first derivatives
             second.append(torch.zeros(*gradient.shape, gradient.shape[-1], dtype=points.dtype, device=points.device))
             continue
-        rows = [
-            torch.autograd.grad(gradient[:, i].sum(), points, create_graph=create_graph)[0]
-            for i in range(points.shape[1])
-        ]
+        rows = [torch.autograd.grad(gradient[:, i].sum(), points, create_graph=create_graph)[0] for i in range(points.shape[1])]
         second.append(torch.stack(rows, dim=-2))  # (N, d, d)
     return values, torch.stack(first, dim=-1), torch.stack(second, dim=-1)

@@ -366,8 +366,17 @@ def fixed_loss(network, problem, fixed) -> torch.Tensor:
     return family_residual_loss(network, problem, fixed["q"], fixed["weights"], fixed["axes"], fixed["spacing"], fixed["tfi"])
 
 
-def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume: dict | None = None,
-                 reporter=None, stop=None, summary: bool = True):
+def train_family(
+    config,
+    family: Family,
+    run_dir,
+    *,
+    device: str = "cpu",
+    resume: dict | None = None,
+    reporter=None,
+    stop=None,
+    summary: bool = True,
+):
     """Train one network for ``family`` (exact-boundary form, PDE loss alone): Adam on
     ``MEMBERS_PER_STEP`` members sampled per step, then L-BFGS on members covering the range
     (``lbfgs_batch``). Writes ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and
@@ -414,8 +423,10 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
             "format_version": checkpoints.FORMAT_VERSION,
             "meshgen_version": __version__,
             "model": describe_family_model(network, config.model.widths, family, center, scale),
-            "family": {"ranges": {k: [float(lo), float(hi)] for k, (lo, hi) in family.ranges.items()},
-                       "members_per_step": MEMBERS_PER_STEP},
+            "family": {
+                "ranges": {k: [float(lo), float(hi)] for k, (lo, hi) in family.ranges.items()},
+                "members_per_step": MEMBERS_PER_STEP,
+            },
             "geometry": {"name": family.base.name, "spec": family.spec, "dim": dim, "params": dict(family.base.values)},
             "config": to_dict(config),
             "stage": stage_name,
@@ -426,8 +437,12 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
             "scheduler": scheduler.state_dict() if scheduler is not None else {},
             "rng": {"sampler": generator.get_state(), "torch": torch.get_rng_state()},
             "history": {"rows": step},
-            "test_loss": {"pde": pde, "boundary": 0.0, "total": pde,
-                          "definition": f"weighted Winslow residual of {TEST_MEMBERS} fixed members on the unshifted training grid"},
+            "test_loss": {
+                "pde": pde,
+                "boundary": 0.0,
+                "total": pde,
+                "definition": f"weighted Winslow residual of {TEST_MEMBERS} fixed members on the unshifted training grid",
+            },
             "guard": {"lr_reductions": 0},
             "device": str(device),
         }
@@ -436,7 +451,7 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
 
     interrupted = False
     try:
-        for stage in STAGES[STAGES.index(stage):] if stage != "done" else ():
+        for stage in STAGES[STAGES.index(stage) :] if stage != "done" else ():  # noqa: B020
             total = getattr(config, stage).steps
             if stage_step >= total:
                 stage_step = 0
@@ -462,10 +477,19 @@ def train_family(config, family: Family, run_dir, *, device: str = "cpu", resume
                     loss = _lbfgs_step(network, problem, optimizer, fixed)
                 if not math.isfinite(loss):
                     save(stage)
-                    raise MeshgenError(f"family training diverged at step {step} ({stage}): non-finite loss; "
-                                       f"the last state is in {checkpoint_path}")
-                row = {"stage": stage, "step": step, "L1": loss, "L2": 0.0, "total": loss, "lr": lr,
-                       "seconds": elapsed + time.perf_counter() - started}
+                    raise MeshgenError(
+                        f"family training diverged at step {step} ({stage}): non-finite loss; "
+                        f"the last state is in {checkpoint_path}"
+                    )
+                row = {
+                    "stage": stage,
+                    "step": step,
+                    "L1": loss,
+                    "L2": 0.0,
+                    "total": loss,
+                    "lr": lr,
+                    "seconds": elapsed + time.perf_counter() - started,
+                }
                 history.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
                 stage_step += 1
                 step += 1
@@ -490,8 +514,15 @@ def _optimizer(stage: str, network, config):
         optimizer = torch.optim.Adam(network.parameters(), lr=config.adam.lr)
         return optimizer, torch.optim.lr_scheduler.StepLR(optimizer, config.adam.decay_every, gamma=config.adam.decay)
     lbfgs = config.lbfgs
-    return torch.optim.LBFGS(network.parameters(), lr=lbfgs.lr, max_iter=lbfgs.max_iter, history_size=lbfgs.history_size,
-                             line_search_fn="strong_wolfe", tolerance_grad=0.0, tolerance_change=0.0), None
+    return torch.optim.LBFGS(
+        network.parameters(),
+        lr=lbfgs.lr,
+        max_iter=lbfgs.max_iter,
+        history_size=lbfgs.history_size,
+        line_search_fn="strong_wolfe",
+        tolerance_grad=0.0,
+        tolerance_change=0.0,
+    ), None
 
 
 def _adam_step(network, problem, config, optimizer, scheduler, generator, nodes) -> float:
@@ -561,8 +592,10 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
         return None
     family = family_from_checkpoint(checkpoint)
     if geometry_name is not None and geometry_name != family.base.name:
-        raise MeshgenError(f"checkpoint {path} was trained on '{family.base.name}', not on '{geometry_name}': "
-                           f"leave out --geometry (the checkpoint sets it)")
+        raise MeshgenError(
+            f"checkpoint {path} was trained on '{family.base.name}', not on '{geometry_name}': "
+            f"leave out --geometry (the checkpoint sets it)"
+        )
     values = family.check_values(values, f" of {display_path(path)}")
     model = member_model(checkpoint["model"], family.normalised(values))
 
@@ -633,7 +666,7 @@ class FamilyMesher:
         self.scale = float(checkpoint["model"]["scale"])
 
     @classmethod
-    def load(cls, path) -> "FamilyMesher":
+    def load(cls, path) -> FamilyMesher:
         checkpoint = checkpoints.load_checkpoint(path)
         if not is_family(checkpoint):
             raise MeshgenError(f"checkpoint {path} holds one shape, not a family (train one with --vary)")
@@ -685,8 +718,14 @@ def write_family_summary(checkpoint: dict, run_dir) -> dict:
         start = time.perf_counter()
         X = mesh_member(checkpoint, values, coords)
         seconds = time.perf_counter() - start
-        members.append({"params": values, "network": quality_report(X, geometry),
-                        "tfi": quality_report(tfi(geometry, None, coords), geometry), "meshing_seconds": seconds})
+        members.append(
+            {
+                "params": values,
+                "network": quality_report(X, geometry),
+                "tfi": quality_report(tfi(geometry, None, coords), geometry),
+                "meshing_seconds": seconds,
+            }
+        )
     angles = [m["network"]["metrics"]["min_angle"]["mean"] for m in members]
     summary = {
         "dims": [SUMMARY_CELLS] * family.base.dim,

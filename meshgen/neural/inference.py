@@ -36,8 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError, ParameterError
 from meshgen import cube
+from meshgen.errors import MeshgenError, ParameterError
 from meshgen.tfi import add_face_terms, blending, boundary_faces, face_terms, transfinite_on_grid
 
 CHUNK_NODES = 8192
@@ -105,8 +105,9 @@ def inference_device(device: str = "auto") -> str:
     return device
 
 
-def evaluate_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers=None,
-                     device: str = "cpu") -> np.ndarray:
+def evaluate_on_grid(
+    model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu"
+) -> np.ndarray:
     """The network N(xi) of ``model`` (normalised units) at the tensor grid of the 1D parametric
     coordinates ``coords`` (one array per axis, values in [0, 1]).
 
@@ -191,7 +192,9 @@ def bubble_on_grid(coords) -> np.ndarray:
     return result
 
 
-def mesh_from_model(model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu") -> np.ndarray:
+def mesh_from_model(
+    model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu"
+) -> np.ndarray:
     """The physical map of ``model`` (a ``checkpoint["model"]`` description) on the tensor grid of
     ``coords``: the node array X, shape (len(coords[0]), ..., d), float64.
 
@@ -354,8 +357,11 @@ def correct_boundary(X: np.ndarray, geometry, coords, count_inverted: bool = Fal
     info = {"corrected": True, "error_before": error_figures(errors, geometry)}
     if count_inverted:
         after = _inverted(X)
-        info.update(inverted_before=int(np.count_nonzero(before)), inverted_after=int(np.count_nonzero(after)),
-                    inverted_by_correction=int(np.count_nonzero(after & ~before)))
+        info.update(
+            inverted_before=int(np.count_nonzero(before)),
+            inverted_after=int(np.count_nonzero(after)),
+            inverted_by_correction=int(np.count_nonzero(after & ~before)),
+        )
     return info
 
 
@@ -413,8 +419,10 @@ class TrainedModel:
         parts.append(steps)
         loss = checkpoint.get("test_loss") or {}
         if isinstance(loss.get("total"), (int, float)):
-            parts.append(f"test loss {loss['total']:.3g} (PDE {loss.get('pde', float('nan')):.3g}, "
-                         f"boundary {loss.get('boundary', float('nan')):.3g})")
+            parts.append(
+                f"test loss {loss['total']:.3g} (PDE {loss.get('pde', float('nan')):.3g}, "
+                f"boundary {loss.get('boundary', float('nan')):.3g})"
+            )
         return f"{display_path(self.path)} ({', '.join(parts)})"
 
     def metadata(self) -> dict:
@@ -494,7 +502,9 @@ def _disagreement(entry: dict, geometry_name: str | None, params: dict) -> str |
     for key, value in params.items():
         if not _same_params({key: value}, recorded):
             trained = recorded.get(key)
-            return f"was trained with {key}={trained:g}, not {key}={value:g}" if trained is not None else f"has no parameter '{key}'"
+            return (
+                f"was trained with {key}={trained:g}, not {key}={value:g}" if trained is not None else f"has no parameter '{key}'"
+            )
     return None
 
 
@@ -512,14 +522,21 @@ def load_model(path, source: str = "checkpoint", record: dict | None = None) -> 
     path = Path(path)
     checkpoint = load_checkpoint(path)
     if "family" in checkpoint:  # meshgen.neural.family: a member is chosen with --param
-        raise CheckpointError(f"checkpoint {path} holds a family of shapes: mesh a member with "
-                              f"--checkpoint {path} --param name=value")
+        raise CheckpointError(
+            f"checkpoint {path} holds a family of shapes: mesh a member with --checkpoint {path} --param name=value"
+        )
     network_layers(checkpoint["model"])  # a foreign model description fails here, before any work
     return TrainedModel(path, checkpoint, source, record or {})
 
 
-def find_model(checkpoint_path=None, geometry_name: str | None = None, params: dict | None = None,
-               default_geometry: str = "semicylinder", runs_dir=RUNS_DIR, warn=None) -> TrainedModel:
+def find_model(
+    checkpoint_path=None,
+    geometry_name: str | None = None,
+    params: dict | None = None,
+    default_geometry: str = "semicylinder",
+    runs_dir=RUNS_DIR,
+    warn=None,
+) -> TrainedModel:
     """The model to mesh with.
 
     ``checkpoint_path``: use it; ``geometry_name`` / ``params`` (what was given explicitly on the
@@ -598,6 +615,5 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto"):
     if correct:
         info["correction"] = correct_boundary(X, geometry, coords)
     else:
-        info["correction"] = {"corrected": False,
-                              "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
+        info["correction"] = {"corrected": False, "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
     return X, info

@@ -65,7 +65,7 @@ def boundary_local_size(boundary, points: np.ndarray, images: np.ndarray | None 
     moved_images = boundary(np.concatenate([moved for moved, _ in steps]))
     images = boundary(points) if images is None else np.asarray(images, dtype=float)
     size, start = np.full(count, np.inf), 0
-    for rows, (moved, step) in zip(movable, steps):
+    for rows, (_moved, step) in zip(movable, steps):
         tangent = (moved_images[start : start + len(rows)] - images[rows]) / step[:, None]
         size[rows] = np.minimum(size[rows], np.linalg.norm(tangent, axis=1))
         start += len(rows)

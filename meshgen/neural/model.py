@@ -98,9 +98,8 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
     Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.inference``).
     Returns the node array X, shape (len(coords[0]), ..., dim), float64.
     """
-    from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
-
     from meshgen.layout import trained_layout, with_layout
+    from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
 
     model = checkpoint["model"]
     if model["exact_boundary"] and geometry is None:
@@ -116,4 +115,3 @@ def geometry_from_checkpoint(checkpoint: dict):
 
     entry = checkpoint["geometry"]
     return load_geometry(entry["spec"], dict(entry["params"]))
-

@@ -18,8 +18,7 @@ FIELD_HELP = {
     "L1": "the PDE (Winslow) loss",
     "L2": "the boundary loss",
     "a": "the learned weights a1 (PDE), a2 (boundary) of the losses",
-    "conflict": "share of the last 100 steps whose PDE and boundary gradients "
-    "pointed apart (PCGrad then projects them)",
+    "conflict": "share of the last 100 steps whose PDE and boundary gradients pointed apart (PCGrad then projects them)",
     "lr": "the learning rate",
 }
 
@@ -155,7 +154,9 @@ class LogReporter:
     def update(self, row, done, total):
         rate = self.conflicts.add(row)
         if done % self.every == 0 or done == total:
-            self._print(f"  step {row['step'] + 1} ({done}/{total})  {describe_row(row, rate, self.fields)}  {row['seconds']:.1f} s")
+            self._print(
+                f"  step {row['step'] + 1} ({done}/{total})  {describe_row(row, rate, self.fields)}  {row['seconds']:.1f} s"
+            )
 
     def message(self, text):
         self._print(text)

@@ -57,8 +57,7 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
             raise MeshgenError(f"output folder {path} exists and is a file")
         if not is_run_folder(path):
             raise MeshgenError(
-                f"output folder {path} exists and is not a run folder (it holds other files): "
-                f"choose a new or empty folder"
+                f"output folder {path} exists and is not a run folder (it holds other files): choose a new or empty folder"
             )
     # The folder, or the one it will be created in: found out now, not when the first file fails.
     existing = next((folder for folder in (path, *path.parents) if folder.exists()), Path("."))
@@ -73,8 +72,20 @@ def _geometry_spec(spec: str) -> str:
     return str(Path(spec).resolve()) if _looks_like_path(spec) else spec
 
 
-def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrides=(), steps=None, out=None,
-                resume=None, seed=None, device="auto", threads=None, vary=()) -> Run:
+def prepare_run(
+    geometry=None,
+    params=(),
+    preset=None,
+    config_file=None,
+    overrides=(),
+    steps=None,
+    out=None,
+    resume=None,
+    seed=None,
+    device="auto",
+    threads=None,
+    vary=(),
+) -> Run:
     """Check every input of ``meshgen train`` and return what to run; writes nothing.
 
     Raises MeshgenError (one line, exit 2) for an unknown geometry or preset, malformed YAML,
@@ -93,8 +104,10 @@ def prepare_run(geometry=None, params=(), preset=None, config_file=None, overrid
 
         for flag, value in (("--preset", preset), ("--config", config_file), ("--seed", seed)):
             if value is not None:
-                raise ConfigError(f"{flag} does not apply with --resume: the run goes on with the checkpoint's "
-                                  f"configuration (change {', '.join(RESUMABLE_KEYS)} with --set)")
+                raise ConfigError(
+                    f"{flag} does not apply with --resume: the run goes on with the checkpoint's "
+                    f"configuration (change {', '.join(RESUMABLE_KEYS)} with --set)"
+                )
         resume_path = Path(resume)
         checkpoint = load_checkpoint(resume_path)
         if checkpoint.get("stage") == "done":
@@ -161,12 +174,13 @@ def _family(config, geometry, spec: str, params, vary):
     if both:
         raise ConfigError(f"--param {both[0]} and --vary {both[0]}: a parameter is either fixed or varied")
     if not config.model.exact_boundary:
-        raise ConfigError("--vary trains the exact-boundary form (TFI + b N) alone: use --preset family or exact, "
-                          "or --set model.exact_boundary=true")
+        raise ConfigError(
+            "--vary trains the exact-boundary form (TFI + b N) alone: use --preset family or exact, "
+            "or --set model.exact_boundary=true"
+        )
     if config.boundary_layout != "fixed":
         # The smoothed layout is solved per shape (seconds each): a family learns each member's own map.
-        raise ConfigError("--vary trains on each member's own boundary map: use --preset family, "
-                          "or --set boundary_layout=fixed")
+        raise ConfigError("--vary trains on each member's own boundary map: use --preset family, or --set boundary_layout=fixed")
     return make_family(geometry, spec, ranges)
 
 
@@ -196,11 +210,24 @@ def run_training(run: Run, quiet: bool = False):
             if run.family is not None:
                 from meshgen.neural.family import train_family
 
-                return train_family(run.config, run.family, run.run_dir, device=run.device, resume=run.resume,
-                                    reporter=reporter, stop=stop_requested.is_set)
+                return train_family(
+                    run.config,
+                    run.family,
+                    run.run_dir,
+                    device=run.device,
+                    resume=run.resume,
+                    reporter=reporter,
+                    stop=stop_requested.is_set,
+                )
             return train(
-                run.config, run.geometry, run.run_dir, device=run.device, resume=run.resume, reporter=reporter,
-                stop=stop_requested.is_set, geometry_spec=run.geometry_spec,
+                run.config,
+                run.geometry,
+                run.run_dir,
+                device=run.device,
+                resume=run.resume,
+                reporter=reporter,
+                stop=stop_requested.is_set,
+                geometry_spec=run.geometry_spec,
             )
     except BaseException:
         # A run that fails before writing anything (e.g. a plugin that fails on its first points)

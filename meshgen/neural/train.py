@@ -24,9 +24,9 @@ import copy
 import csv
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -385,9 +385,13 @@ def adam_gradients(training: Training, inputs: dict, pool=None) -> dict:
     else:
         update, conflict = g1 + g2, (g1 @ g2) < 0
     total = weights.objective(pde.detach(), boundary.detach())
-    gradients = {"update": torch.where(finite, update, torch.zeros_like(update)), "L1": pde.detach(),
-                 "L2": boundary.detach(), "total": torch.where(finite, total.detach(), torch.nan),
-                 "conflict": conflict.int()}
+    gradients = {
+        "update": torch.where(finite, update, torch.zeros_like(update)),
+        "L1": pde.detach(),
+        "L2": boundary.detach(),
+        "total": torch.where(finite, total.detach(), torch.nan),
+        "conflict": conflict.int(),
+    }
     if weights.learned:  # the a take their gradient from L itself, outside the projection
         (gradients["a_gradient"],) = torch.autograd.grad(total, weights.log_a)
     return gradients
@@ -501,8 +505,10 @@ def pretrain_pool(problem: Problem, config: TrainConfig) -> dict:
 
     generator = torch.Generator().manual_seed(config.seed + 1)
     points = torch.cat(
-        [sample_interior(config.pretrain.points, problem.dim, generator),
-         sample_boundary(config.pretrain.points, problem.dim, generator)]
+        [
+            sample_interior(config.pretrain.points, problem.dim, generator),
+            sample_boundary(config.pretrain.points, problem.dim, generator),
+        ]
     ).double()
     targets = torch.from_numpy(transfinite(problem.boundary, list(points.numpy().T)))
     return {"points": points.float().to(problem.device), "targets": targets.float().to(problem.device)}
@@ -530,8 +536,10 @@ def balance_start(training: Training, say) -> None:
         return
     losses = evaluate_losses(training.network, training.problem, config, lbfgs_points(training.problem, config))
     weights.balance(losses["L1"], losses["L2"])
-    say(f"reweighting started at the balance of L1 {losses['L1']:.3g}, L2 {losses['L2']:.3g}: "
-        f"a1 {weights.a()[0]:.3g}, a2 {weights.a()[1]:.3g}")
+    say(
+        f"reweighting started at the balance of L1 {losses['L1']:.3g}, L2 {losses['L2']:.3g}: "
+        f"a1 {weights.a()[0]:.3g}, a2 {weights.a()[1]:.3g}"
+    )
 
 
 @dataclass(frozen=True)
@@ -549,21 +557,28 @@ class Stage:
 
 
 STAGE_TABLE = (
-    Stage("pretrain",
-          optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config),
-          points=lambda t: pretrain_pool(t.problem, t.config),
-          step=lambda t, optimizer, scheduler, points: pretrain_step(t.network, t.problem, optimizer, points)),
-    Stage("adam",
-          optimizer=lambda t: make_optimizer("adam", t.network, t.weights, t.config),
-          points=lambda t: AdamSteps(t, boundary_pool(t.problem, t.config)),
-          step=lambda t, optimizer, scheduler, steps: steps(optimizer, scheduler),
-          start=balance_start,
-          block=lambda t: DEVICE_BLOCK if t.problem.device.type == "cuda" else 1),
-    Stage("lbfgs",
-          optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
-          points=lambda t: lbfgs_points(t.problem, t.config),
-          step=lambda t, optimizer, scheduler, fixed: lbfgs_step(t.network, t.weights, t.problem, t.config, optimizer,
-                                                                 fixed, t.terms)),
+    Stage(
+        "pretrain",
+        optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config),
+        points=lambda t: pretrain_pool(t.problem, t.config),
+        step=lambda t, optimizer, scheduler, points: pretrain_step(t.network, t.problem, optimizer, points),
+    ),
+    Stage(
+        "adam",
+        optimizer=lambda t: make_optimizer("adam", t.network, t.weights, t.config),
+        points=lambda t: AdamSteps(t, boundary_pool(t.problem, t.config)),
+        step=lambda t, optimizer, scheduler, steps: steps(optimizer, scheduler),
+        start=balance_start,
+        block=lambda t: DEVICE_BLOCK if t.problem.device.type == "cuda" else 1,
+    ),
+    Stage(
+        "lbfgs",
+        optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
+        points=lambda t: lbfgs_points(t.problem, t.config),
+        step=lambda t, optimizer, scheduler, fixed: lbfgs_step(
+            t.network, t.weights, t.problem, t.config, optimizer, fixed, t.terms
+        ),
+    ),
 )
 STAGES = tuple(stage.name for stage in STAGE_TABLE)
 
@@ -586,16 +601,26 @@ class TrainState:
 
 
 def state_from_checkpoint(checkpoint: dict) -> TrainState:
-    return TrainState(checkpoint["stage"], checkpoint["stage_step"], checkpoint["step"],
-                      checkpoint["elapsed_seconds"], checkpoint["guard"]["lr_reductions"],
-                      dict(checkpoint["history"]["last"]))
+    return TrainState(
+        checkpoint["stage"],
+        checkpoint["stage_step"],
+        checkpoint["step"],
+        checkpoint["elapsed_seconds"],
+        checkpoint["guard"]["lr_reductions"],
+        dict(checkpoint["history"]["last"]),
+    )
 
 
 def state_to_checkpoint(state: TrainState, seconds: float) -> dict:
     """The checkpoint entries of ``state``; ``seconds``: training seconds of this process so far."""
-    return {"stage": state.stage, "stage_step": state.stage_step, "step": state.step,
-            "elapsed_seconds": state.elapsed + seconds, "history": {"rows": state.step, "last": dict(state.last_row)},
-            "guard": {"lr_reductions": state.lr_reductions}}
+    return {
+        "stage": state.stage,
+        "stage_step": state.stage_step,
+        "step": state.step,
+        "elapsed_seconds": state.elapsed + seconds,
+        "history": {"rows": state.step, "last": dict(state.last_row)},
+        "guard": {"lr_reductions": state.lr_reductions},
+    }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -628,11 +653,12 @@ def read_rows(steps: list[dict], network) -> tuple[list[dict], bool]:
     reads its losses itself)."""
     keys = [k for k, v in steps[0].items() if isinstance(v, torch.Tensor)]
     finite_weights = torch.isfinite(torch.stack([p.detach().sum() for p in network.parameters()]).sum())
-    values = torch.stack([numbers[k].detach().double().reshape(()) for numbers in steps for k in keys]
-                         + [finite_weights.double()]).tolist()
+    values = torch.stack(
+        [numbers[k].detach().double().reshape(()) for numbers in steps for k in keys] + [finite_weights.double()]
+    ).tolist()
     rows = []
     for index, numbers in enumerate(steps):
-        read = values[index * len(keys):(index + 1) * len(keys)]
+        read = values[index * len(keys) : (index + 1) * len(keys)]
         rows.append({**numbers, **{k: (int(v) if k == "conflict" else v) for k, v in zip(keys, read)}})
     return rows, bool(values[-1]) and all(math.isfinite(row["total"]) for row in rows)
 
@@ -654,12 +680,14 @@ class DivergenceGuard:
 
     def _snapshot(self) -> dict:
         """Deep copies of everything a step changes (cheap next to a step: a few small tensors)."""
-        return copy.deepcopy({
-            "network": self.training.network.state_dict(),
-            "weights": self.training.weights.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
-            "scheduler": self.scheduler.state_dict() if self.scheduler is not None else None,
-        })
+        return copy.deepcopy(
+            {
+                "network": self.training.network.state_dict(),
+                "weights": self.training.weights.state_dict(),
+                "optimizer": self.optimizer.state_dict(),
+                "scheduler": self.scheduler.state_dict() if self.scheduler is not None else None,
+            }
+        )
 
     def accept(self) -> None:
         """The step was good: it becomes the state to come back to."""
@@ -682,8 +710,10 @@ class DivergenceGuard:
         for group, lr in zip(self.optimizer.param_groups, lowered):
             group["lr"] = lr
         self.state.lr_reductions += 1
-        say(f"non-finite loss at step {self.state.step} ({stage}): restored the last good state, "
-            f"learning rate lowered to {self.optimizer.param_groups[0]['lr']:.3g}")
+        say(
+            f"non-finite loss at step {self.state.step} ({stage}): restored the last good state, "
+            f"learning rate lowered to {self.optimizer.param_groups[0]['lr']:.3g}"
+        )
         return True
 
 
@@ -728,7 +758,7 @@ def train(
         torch.set_num_threads(1)
     interrupted = False
     try:
-        for stage in STAGE_TABLE[STAGES.index(state.stage):] if state.stage != "done" else ():
+        for stage in STAGE_TABLE[STAGES.index(state.stage) :] if state.stage != "done" else ():
             total = getattr(config, stage.name).steps
             state.stage = stage.name
             if state.stage_step >= total:
@@ -760,7 +790,8 @@ def train(
                         raise TrainingDiverged(
                             f"training diverged: the loss stayed non-finite at step {state.step} after "
                             f"{config.guard.max_retries} learning-rate reductions; the last good state is "
-                            f"saved in {saver.path}")
+                            f"saved in {saver.path}"
+                        )
                     continue
                 guard.accept()
                 for row, (_, seconds) in zip(rows, steps):
@@ -785,8 +816,16 @@ def train(
         training.terms.close()
         torch.set_num_threads(threads)
     quality = write_summary(checkpoint, geometry, run_dir) if summary and not interrupted else None
-    return TrainResult(saver.path, state.stage, state.step, interrupted, checkpoint["elapsed_seconds"],
-                       checkpoint["test_loss"], checkpoint, quality)
+    return TrainResult(
+        saver.path,
+        state.stage,
+        state.step,
+        interrupted,
+        checkpoint["elapsed_seconds"],
+        checkpoint["test_loss"],
+        checkpoint,
+        quality,
+    )
 
 
 def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None):
@@ -795,8 +834,7 @@ def start_training(config: TrainConfig, geometry, device: torch.device, resume: 
     center, scale = normalisation(geometry)
     if resume is not None:  # the checkpoint's normalisation, bit for bit
         center, scale = np.asarray(resume["model"]["center"]), float(resume["model"]["scale"])
-    problem = Problem(dim, normalised_boundary(geometry, center, scale), center, scale,
-                      config.model.exact_boundary, device)
+    problem = Problem(dim, normalised_boundary(geometry, center, scale), center, scale, config.model.exact_boundary, device)
     torch.manual_seed(config.seed)
     network = MLP(dim, config.model.widths)
     if problem.exact:  # N = 0: training starts from TFI itself
@@ -842,8 +880,12 @@ class CheckpointWriter:
             "format_version": checkpoints.FORMAT_VERSION,
             "meshgen_version": __version__,
             "model": describe(t.network, t.config.model.widths, problem.exact, problem.center, problem.scale),
-            "geometry": {"name": geometry.name, "spec": self.spec or geometry.name, "dim": geometry.dim,
-                         "params": dict(geometry.values)},
+            "geometry": {
+                "name": geometry.name,
+                "spec": self.spec or geometry.name,
+                "dim": geometry.dim,
+                "params": dict(geometry.values),
+            },
             "config": to_dict(t.config),
             **state_to_checkpoint(self.state, time.perf_counter() - self.started),
             "optimizer": self.optimizer.state_dict() if self.optimizer is not None else {},

@@ -48,9 +48,7 @@ def cofactors(first: torch.Tensor) -> torch.Tensor:
         a1, a2, b12 = cofactor_terms(first)
         return torch.stack([torch.stack([a1, b12], -1), torch.stack([b12, a2], -1)], -2)
     a1, a2, a3, b12, b23, b31 = cofactor_terms(first)
-    return torch.stack(
-        [torch.stack([a1, b12, b31], -1), torch.stack([b12, a2, b23], -1), torch.stack([b31, b23, a3], -1)], -2
-    )
+    return torch.stack([torch.stack([a1, b12, b31], -1), torch.stack([b12, a2, b23], -1), torch.stack([b31, b23, a3], -1)], -2)
 
 
 def winslow_residual(first: torch.Tensor, second: torch.Tensor) -> torch.Tensor:

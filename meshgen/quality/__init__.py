@@ -17,6 +17,7 @@ This module re-exports the public names, so ``from meshgen.quality import X`` ke
 
 from meshgen.quality.faces import CELL_TYPES, cell_metrics_unstructured, cells_for_quality, match_faces
 from meshgen.quality.files import (
+    _nulls,  # noqa: F401  (used by ``meshgen evaluate --json -``)
     as_node_array,
     evaluate_file,
     recorded_metadata,
@@ -24,7 +25,6 @@ from meshgen.quality.files import (
     write_json,
     write_mesh_with_quality,
 )
-from meshgen.quality.files import _nulls  # noqa: F401  (used by ``meshgen evaluate --json -``)
 from meshgen.quality.kernels import (
     BLOCK_CELLS,
     DEFINITIONS,
@@ -46,9 +46,32 @@ from meshgen.quality.structured import cell_metrics
 from meshgen.quality.text import summary_lines
 
 __all__ = [
-    "BLOCK_CELLS", "CELL_TYPES", "DEFINITIONS", "DEGENERATE_TOLERANCE", "HEX_CORNER", "HEX_FACE_CORNERS",
-    "HEX_FACES", "METRICS", "QUAD_CORNER", "QUAD_FACE_CORNERS", "QUAD_FACES", "STATS", "VALID_FRACTION",
-    "VALID_RULE", "WORST", "as_node_array", "cell_metrics", "cell_metrics_unstructured", "cells_for_quality",
-    "evaluate_file", "match_faces", "quality_report", "recorded_metadata", "sidecar_path", "summarize",
-    "summary_lines", "write_json", "write_mesh_with_quality",
+    "BLOCK_CELLS",
+    "CELL_TYPES",
+    "DEFINITIONS",
+    "DEGENERATE_TOLERANCE",
+    "HEX_CORNER",
+    "HEX_FACE_CORNERS",
+    "HEX_FACES",
+    "METRICS",
+    "QUAD_CORNER",
+    "QUAD_FACE_CORNERS",
+    "QUAD_FACES",
+    "STATS",
+    "VALID_FRACTION",
+    "VALID_RULE",
+    "WORST",
+    "as_node_array",
+    "cell_metrics",
+    "cell_metrics_unstructured",
+    "cells_for_quality",
+    "evaluate_file",
+    "match_faces",
+    "quality_report",
+    "recorded_metadata",
+    "sidecar_path",
+    "summarize",
+    "summary_lines",
+    "write_json",
+    "write_mesh_with_quality",
 ]

@@ -140,16 +140,19 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     ``progress(done, total, phase)`` hears about every block. Adds ``"percentiles"``: how p01 and
     p99 were computed.
     """
+    import itertools
+
+    import dask
+
     from meshgen.chunked import block_slices
     from meshgen.quality.report import assemble_report
     from meshgen.scheduler import compute_in_order_of_completion
 
-    import dask
-    import itertools
-
     node_shape, dim, read = _reader(source)
     if dim not in (2, 3) or len(node_shape) != dim or min(node_shape) < 2:
-        raise MeshgenError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}")
+        raise MeshgenError(
+            f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}"
+        )
     per_axis = block_slices(node_shape, block_nodes)
     blocks = [tuple(p) for p in itertools.product(*per_axis)]
     total = 2 * len(blocks)

@@ -142,9 +142,7 @@ def _check_cells(points, cells):
         xy = points[:, :2][np.isfinite(points[:, :2]).all(axis=1)]
         size = float(np.ptp(xy, axis=0).max()) if len(xy) else 0.0
         if len(z) and np.ptp(z) > 1e-9 * max(size, 1e-300):
-            raise MeshgenError(
-                "the quadrilaterals do not lie in a plane z = const; surface quad meshes in 3D are not supported"
-            )
+            raise MeshgenError("the quadrilaterals do not lie in a plane z = const; surface quad meshes in 3D are not supported")
     return points[:, :dim], cells, dim
 
 

@@ -24,7 +24,7 @@ def as_node_array(points, cells, dims) -> np.ndarray | None:
     dims = tuple(int(n) for n in dims)
     node_shape = tuple(n + 1 for n in dims)
     dim = len(dims)
-    if len(points) != int(np.prod(node_shape)) or cells.shape != (int(np.prod(dims)), 2 ** dim):
+    if len(points) != int(np.prod(node_shape)) or cells.shape != (int(np.prod(dims)), 2**dim):
         return None
     if not np.array_equal(cells, cell_connectivity(node_shape)):
         return None
@@ -32,7 +32,6 @@ def as_node_array(points, cells, dims) -> np.ndarray | None:
         if np.any(points[:, 2] != points[0, 2]):
             return None
     return np.ascontiguousarray(points[:, :dim]).reshape(*node_shape, dim)
-
 
 
 def sidecar_path(mesh_path) -> Path:
@@ -168,7 +167,9 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
         )
     info["skipped"] = skipped
     if geometry is not None and geometry.dim != info["dim"] and source != "--geometry":
-        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation")
+        notes.append(
+            f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation"
+        )
         geometry = None
     report = _report(metrics, degenerate, info, geometry)
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
@@ -186,7 +187,9 @@ def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
     cells = int(np.prod([n - 1 for n in node_shape]))
     geometry, source, notes = _geometry_for(path, geometry, params, metadata, cells)
     if geometry is not None and geometry.dim != len(node_shape) and source != "--geometry":
-        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {len(node_shape)}D; no boundary deviation")
+        notes.append(
+            f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {len(node_shape)}D; no boundary deviation"
+        )
         geometry = None
     try:
         report = chunked_report(path, geometry, client=client)
@@ -213,7 +216,9 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
         try:
             geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
         except GeometryError as exc:
-            notes.append(f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation")
+            notes.append(
+                f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation"
+            )
             geometry = None
     elif params:
         raise MeshgenError(f"--param needs --geometry: {path} records no geometry")

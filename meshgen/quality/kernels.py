@@ -234,7 +234,14 @@ def _hex_kernel(corner, centroid, neighbour_centroid, tolerance):
             face_alignment = np.minimum(face_alignment, face_cosine)
 
     return _finish(
-        largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment, scaled_jacobian
+        largest_cosine,
+        smallest_cosine,
+        reflex_cosine,
+        any_reflex,
+        aspect_ratio,
+        centroid_alignment,
+        face_alignment,
+        scaled_jacobian,
     ), degenerate
 
 
@@ -295,7 +302,9 @@ def _quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
     ), degenerate
 
 
-def _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment, scaled_jacobian):
+def _finish(
+    largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment, scaled_jacobian
+):
     """Angles from cosines (one arccos per cell and kind), then the derived metrics."""
     min_angle = _degrees_of_cosine(largest_cosine)
     max_angle = _degrees_of_cosine(smallest_cosine)
@@ -313,4 +322,3 @@ def _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_r
         "non_orthogonality": _degrees_of_cosine(face_alignment),
         "scaled_jacobian": scaled_jacobian,
     }
-

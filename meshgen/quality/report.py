@@ -126,10 +126,7 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
         deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
         report["boundary_deviation"] = deviation
         if deviation.get("nonfinite_nodes"):
-            warnings.append(
-                f"{deviation['nonfinite_nodes']} boundary nodes are not finite: boundary deviation is undefined"
-            )
+            warnings.append(f"{deviation['nonfinite_nodes']} boundary nodes are not finite: boundary deviation is undefined")
     if warnings:
         report["warnings"] = warnings
     return report
-

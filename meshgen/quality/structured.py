@@ -26,9 +26,7 @@ from meshgen.quality.kernels import (
 def _check_node_array(X) -> np.ndarray:
     X = np.asarray(X, dtype=float)
     if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
-        raise MeshgenError(
-            f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}"
-        )
+        raise MeshgenError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}")
     return X
 
 

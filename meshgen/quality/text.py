@@ -43,4 +43,3 @@ def summary_lines(report: dict) -> list[str]:
     for warning in report.get("warnings", []):
         lines.append(f"  warning: {warning}")
     return lines
-
