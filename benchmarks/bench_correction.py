@@ -75,7 +75,8 @@ def measure(geometry, checkpoint: dict, n: int) -> dict:
     the network on the boundary layout it was trained on, elliptic on its default layout."""
     from meshgen.elliptic import elliptic
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import correct_boundary, mesh_from_model
+    from meshgen.correction import correct_boundary
+    from meshgen.neural.inference import mesh_from_model
     from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid
 

@@ -29,7 +29,7 @@ from meshgen.neural.family import (
     parse_vary,
     train_family,
 )
-from meshgen.neural.inference import load_model
+from meshgen.neural.models import load_model
 from meshgen.neural.model import bubble
 from meshgen.tfi import parametric_grid, tfi
 
