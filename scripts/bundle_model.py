@@ -51,8 +51,8 @@ def figures(X, geometry) -> dict:
 
 def neural_figures(model, geometry, cells: int) -> dict:
     """Figures of the network's own mesh (--no-correct) and of the corrected one (the default)."""
-    from meshgen.layout import trained_layout, with_layout
     from meshgen.correction import correct_boundary
+    from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.inference import mesh_from_model
     from meshgen.tfi import parametric_grid
 

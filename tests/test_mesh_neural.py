@@ -12,12 +12,12 @@ import torch
 from neural_helpers import direct_correction, tiny_config
 
 from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
+from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
-from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
 from meshgen.neural.inference import evaluate_on_grid, mesh_from_model
-from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.model import bubble, network_from_description
+from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
 from meshgen.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
