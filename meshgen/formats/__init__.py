@@ -31,6 +31,7 @@ import numpy as np
 
 from meshgen.atomic import atomic_write, check_output_file
 from meshgen.errors import FormatError, MeshgenError
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.patches import check_covers
 
 __all__ = [
@@ -102,8 +103,6 @@ register_format(
 )
 register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
 register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
-
-METADATA_KEY = "meshgen"
 
 
 def extensions() -> list[str]:
@@ -264,22 +263,6 @@ def _cell_array(name, values, node_shape) -> np.ndarray:
     if values.size != cells:
         raise FormatError(f"cell data '{name}' has {values.size} values for {cells} cells")
     return values.reshape(-1)
-
-
-def metadata_json(metadata: dict) -> str:
-    """``metadata`` as ASCII JSON (NumPy scalars and arrays become plain numbers and lists)."""
-
-    def plain(value):
-        if isinstance(value, (np.generic, np.ndarray)):
-            return value.tolist()
-        if isinstance(value, os.PathLike):
-            return os.fspath(value)
-        raise TypeError(f"{type(value).__name__} value {value!r}")
-
-    try:
-        return json.dumps(metadata, default=plain)
-    except (TypeError, ValueError) as exc:
-        raise FormatError(f"metadata is not JSON-serialisable: {exc}") from exc
 
 
 def metadata_of(source) -> dict:

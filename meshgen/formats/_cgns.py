@@ -52,7 +52,7 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.patches import Patch, flow_role
 

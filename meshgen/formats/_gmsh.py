@@ -23,8 +23,8 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import Patch, as_records
 

@@ -24,7 +24,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
 
 __all__ = ["HEADER_BYTES", "read", "write"]

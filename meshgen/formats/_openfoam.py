@@ -41,8 +41,8 @@ import numpy as np
 from meshgen import cube
 from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
 from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import Patch, flow_role
 

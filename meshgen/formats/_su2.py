@@ -27,8 +27,8 @@ import re
 import numpy as np
 
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.patches import as_records, from_records
 

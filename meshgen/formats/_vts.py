@@ -42,7 +42,6 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
-from meshgen.formats import METADATA_KEY, metadata_json
 from meshgen.formats._vtu import (
     BLOCK_BYTES,
     VTK_TYPES,
@@ -51,6 +50,7 @@ from meshgen.formats._vtu import (
     compression_header,
     cpu_count,
 )
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import as_records, from_records
 

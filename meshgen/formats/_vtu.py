@@ -46,7 +46,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from meshgen.formats import METADATA_KEY, metadata_json
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
 
 __all__ = [
