@@ -73,9 +73,10 @@ def figures(report: dict) -> dict:
 def measure(geometry, checkpoint: dict, n: int) -> dict:
     """The corrected network mesh and the converged elliptic mesh of ``n``^3 cells, measured alike:
     the network on the boundary layout it was trained on, elliptic on its default layout."""
+    from meshgen.correction import correct_boundary
     from meshgen.elliptic import elliptic
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import correct_boundary, mesh_from_model
+    from meshgen.neural.inference import mesh_from_model
     from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid
 

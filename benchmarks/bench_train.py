@@ -283,8 +283,8 @@ class QualityProbe:
             print("   ", text, flush=True)
 
     def measure(self, checkpoint, seconds) -> dict:
+        from meshgen.correction import boundary_errors, error_figures
         from meshgen.layout import trained_layout, with_layout
-        from meshgen.neural.inference import boundary_errors, error_figures
 
         # the boundary the network was trained on (the smoothed layout for today's presets): its
         # error and the correction are measured against it, as ``meshgen mesh`` does

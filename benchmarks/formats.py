@@ -216,7 +216,7 @@ def compress_blocks(arrays, codec) -> list[int]:
     """Compressed size of each block of ``arrays`` (the writer's blocks, thread pool and order)."""
     from meshgen.formats import _vtu
 
-    with ThreadPoolExecutor(max_workers=_vtu._cpu_count()) as pool:
+    with ThreadPoolExecutor(max_workers=_vtu.cpu_count()) as pool:
         blocks = [_vtu.compress_blocks(pool, np.ascontiguousarray(array), codec) for array in arrays]
         return [len(block.result()) for array_blocks in blocks for block in array_blocks]
 

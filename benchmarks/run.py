@@ -252,7 +252,7 @@ def machine(quick: bool) -> dict:
 
 def bundled_model():
     """The model bundled for the semicylinder (what ``meshgen mesh`` uses where ./runs/ has none)."""
-    from meshgen.neural.inference import bundled_models, load_model
+    from meshgen.neural.models import bundled_models, load_model
 
     folder = bundled_models()[GEOMETRY]
     record = json.loads((folder / "model.json").read_text()) if (folder / "model.json").is_file() else {}

@@ -1,3 +1,5 @@
 from meshgen.cli import main
 
+__all__ = []
+
 main()

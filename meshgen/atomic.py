@@ -7,6 +7,10 @@ import contextlib
 import os
 from pathlib import Path
 
+from meshgen.errors import MeshgenError
+
+__all__ = ["atomic_path", "atomic_write", "check_output_file"]
+
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike):
@@ -30,8 +34,6 @@ def atomic_write(target: str | os.PathLike, error=None, what: str = ""):
     """``atomic_path`` for a file meshgen writes for the user: an OSError (a full disk, no
     permission) becomes ``error`` (default MeshgenError), one line ``could not write <what><target>:
     <reason>``, and the previous file is kept."""
-    from meshgen.errors import MeshgenError
-
     try:
         with atomic_path(target) as temporary:
             yield temporary
@@ -43,8 +45,6 @@ def check_output_file(path: str | os.PathLike, example_name: str) -> Path:
     """Validate an output file path before any work is done: not a folder, inside an existing,
     writable folder. ``example_name`` (e.g. "mesh.vtu") is suggested when ``path`` is a folder.
     Raises MeshgenError; returns the path."""
-    from meshgen.errors import MeshgenError
-
     path = Path(path)
     if path.is_dir():
         raise MeshgenError(f"output {path} is a folder; give a file name such as {path / example_name}")

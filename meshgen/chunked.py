@@ -13,79 +13,51 @@ A TFI or neural mesh is a map evaluated node by node, so it can be computed bloc
 
 Blocks are slabs along the last index axis (k in 3D), which are contiguous hyperslabs of a CGNS
 coordinate array (stored k slowest); a plane too large for one block is split along the first axis
-as well. ``BLOCK_NODES`` nodes per block keep a block's coordinates near 100 MB, so the peak
+as well (``meshgen.grid.block_slices``). ``BLOCK_NODES`` nodes per block keep a block's coordinates near 100 MB, so the peak
 memory is a few blocks per worker thread, whatever the mesh size.
 
-``meshgen mesh`` takes this path (``needs_chunking``) when the in-memory path's estimated peak
-(``IN_MEMORY_BYTES_PER_NODE``) exceeds half of the memory available now, with ``--chunked``, or with
+``meshgen mesh`` takes this path (``meshgen.resources.needs_chunking``) when the in-memory path's
+estimated peak (``IN_MEMORY_BYTES_PER_NODE``) exceeds half of the memory available now, with ``--chunked``, or with
 ``--scheduler``. Only formats that can be written in blocks take it (CGNS); the others refuse.
 """
 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
-import shutil
+import time
 
 import numpy as np
 
+from meshgen import cube
+from meshgen.atomic import atomic_path
+from meshgen.correction import add_correction_terms, correction_terms, error_figures
 from meshgen.errors import MeshgenError
+from meshgen.formats import check_output_path, check_patches, streaming_writer
+from meshgen.grid import BLOCK_NODES, block_slices
+from meshgen.patches import geometry_patches
+from meshgen.quality.chunked import chunked_report
+from meshgen.quality.files import sidecar_path, write_json
+from meshgen.resources import check_free_space
+from meshgen.scheduler import compute_in_order_of_completion
+from meshgen.tfi import add_face_terms, face_terms, face_values
 
-BLOCK_NODES = 1 << 22  # about 4.2e6 nodes, 100 MB of float64 coordinates per block
-IN_MEMORY_BYTES_PER_NODE = 300  # measured: 200^3 in-memory mesh command peaks at about 2.2 GB
+__all__ = [
+    "CHUNKED_METHODS",
+    "network_map_block",
+    "neural_array",
+    "single_threaded_torch",
+    "tfi_array",
+    "write_chunked_mesh",
+]
+
 CHUNKED_METHODS = ("tfi", "neural")
-
-
-def available_memory() -> int:
-    """Bytes of memory available to a new allocation now (Linux MemAvailable; psutil elsewhere)."""
-    try:
-        import psutil
-
-        return int(psutil.virtual_memory().available)
-    except ImportError:  # pragma: no cover - psutil comes with distributed
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-
-
-def needs_chunking(node_count: int, bytes_per_node: int = IN_MEMORY_BYTES_PER_NODE) -> bool:
-    """True when the in-memory path would likely need more than half of the available memory."""
-    return node_count * bytes_per_node > available_memory() // 2
-
-
-def check_free_space(path, needed_bytes: int) -> None:
-    """MeshgenError when the folder of ``path`` has less free space than ``needed_bytes``."""
-    from pathlib import Path
-
-    folder = Path(path).parent if str(Path(path).parent) else Path(".")
-    free = shutil.disk_usage(folder).free
-    if needed_bytes > free:
-        raise MeshgenError(
-            f"the mesh needs at least {needed_bytes / 1e9:.3g} GB but {folder} has {free / 1e9:.3g} GB free; "
-            "pick fewer cells or another output folder"
-        )
-
-
-def block_slices(node_shape, block_nodes: int = BLOCK_NODES) -> list[list[slice]]:
-    """Per index axis, the slices of the blocks along it: slabs of the last axis holding about
-    ``block_nodes`` nodes; the first axis is split too when one plane of the last axis is larger."""
-    node_shape = tuple(int(n) for n in node_shape)
-    plane = int(np.prod(node_shape[:-1]))
-    per_axis = [[slice(0, n)] for n in node_shape]
-    if plane <= block_nodes:
-        step = max(1, block_nodes // plane)
-    else:
-        step = 1
-        rows = max(1, block_nodes // max(1, int(np.prod(node_shape[1:-1]))))
-        per_axis[0] = [slice(s, min(s + rows, node_shape[0])) for s in range(0, node_shape[0], rows)]
-    n = node_shape[-1]
-    per_axis[-1] = [slice(s, min(s + step, n)) for s in range(0, n, step)]
-    return per_axis
 
 
 def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int):
     """A dask array of shape node_shape + (dim,) whose block at slices ``b`` is
     ``block_function(shared, b)``; ``shared`` goes into the graph once."""
-    import itertools
-
     import dask
     import dask.array as da
 
@@ -106,16 +78,12 @@ def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int):
 
 def _tfi_block(shared, block):
     coords, terms = shared
-    from meshgen.tfi import add_face_terms
-
     return add_face_terms(terms, coords, block=block)
 
 
 def tfi_array(geometry, coords, block_nodes: int = BLOCK_NODES):
     """The TFI mesh of ``geometry`` on the tensor grid of ``coords`` (1D arrays from 0 to 1) as a
     dask array (n1+1, n2+1[, n3+1], dim), blocks of about ``block_nodes`` nodes."""
-    from meshgen.tfi import face_terms, face_values
-
     coords = [np.asarray(c, dtype=float) for c in coords]
     terms = face_terms(face_values(geometry.boundary, coords), coords)
     shape = tuple(len(c) for c in coords)
@@ -142,10 +110,6 @@ def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
 
 
 def _neural_block(shared, block):
-    from meshgen import cube
-    from meshgen.neural.inference import add_correction_terms
-    from meshgen.tfi import add_face_terms
-
     model, coords, tfi_terms, error_terms, boundary_values = shared
     sub_coords = [c[s] for c, s in zip(coords, block)]
     tfi_block = add_face_terms(tfi_terms, coords, block=block) if tfi_terms else None
@@ -166,11 +130,10 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
     a dask array, and what the boundary correction did (JSON-ready).
 
-    ``correct_boundary``: X = M + TFI[g - M] (``meshgen.neural.inference.add_boundary_correction``
+    ``correct_boundary``: X = M + TFI[g - M] (``meshgen.correction.add_boundary_correction``
     block by block, the face errors computed once on the faces alone); else the network's map M.
     """
-    from meshgen.neural.inference import correction_terms, error_figures, model_boundary_errors
-    from meshgen.tfi import face_terms, face_values
+    from meshgen.neural.inference import model_boundary_errors
 
     coords = [np.asarray(c, dtype=float) for c in coords]
     boundary_values = face_values(geometry.boundary, coords)
@@ -215,19 +178,11 @@ def write_chunked_mesh(
     one per face). ``progress(done, total, phase)`` hears about every block. Returns (the report or None,
     {"write_seconds", "quality_seconds"}).
     """
-    import time
-
     from dask.array.core import slices_from_chunks
-
-    from meshgen.atomic import atomic_path
-    from meshgen.formats import check_output_path, check_patches, streaming_writer
-    from meshgen.scheduler import compute_in_order_of_completion
 
     path = check_output_path(path)
     writer = streaming_writer(path)
     if patches is None and geometry is not None:
-        from meshgen.patches import geometry_patches
-
         patches = geometry_patches(geometry)
     patches = check_patches(patches, X.shape[-1], path)
     node_shape = X.shape[:-1]
@@ -247,15 +202,11 @@ def write_chunked_mesh(
                         progress(done, len(blocks), "mesh")
             timings["write_seconds"] = time.perf_counter() - start
             if evaluate:
-                from meshgen.quality.chunked import chunked_report
-
                 start = time.perf_counter()
                 report = chunked_report(temporary, geometry, client=client, progress=progress)
                 timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
     except OSError as exc:
         raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
     if report is not None:
-        from meshgen.quality import sidecar_path, write_json
-
         write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
     return report, timings

@@ -15,6 +15,9 @@ import sys
 import click
 
 from meshgen import __version__
+from meshgen.errors import MeshgenError, ParameterError, did_you_mean
+
+__all__ = ["COMMANDS", "FLAGS", "MeshgenGroup", "cli", "flag_of", "main", "message_for_command_line", "one_line"]
 
 # name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
 COMMANDS = {
@@ -42,8 +45,6 @@ def flag_of(parameter: str) -> str:
 def message_for_command_line(exc) -> str:
     """A library error as the command line words it: a ParameterError names the flag
     (``--tol must be positive``) where the library names the parameter (``tol must be positive``)."""
-    from meshgen.errors import ParameterError
-
     return exc.message_for(flag_of(exc.parameter)) if isinstance(exc, ParameterError) else str(exc)
 
 
@@ -64,8 +65,6 @@ class MeshgenGroup(click.Group):
     def resolve_command(self, ctx, args):
         name = args[0] if args else None
         if name is not None and name not in COMMANDS and not name.startswith("-"):
-            from meshgen.errors import did_you_mean
-
             hint = did_you_mean(name, COMMANDS)
             raise click.UsageError(f"no command '{name}' (commands: {', '.join(COMMANDS)}){hint}", ctx)
         return super().resolve_command(ctx, args)
@@ -73,8 +72,6 @@ class MeshgenGroup(click.Group):
     def main(self, args=None, prog_name=None, **extra):
         """Run with our own error reporting: one line on stderr, exit 2 for usage errors. With no
         arguments at all, print the help (exit 0), not an error."""
-        from meshgen.errors import MeshgenError
-
         extra.pop("standalone_mode", None)
         if args is None:
             args = sys.argv[1:]

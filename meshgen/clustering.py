@@ -18,6 +18,8 @@ import numpy as np
 
 from meshgen.errors import ParameterError
 
+__all__ = ["AXES", "SIDES", "Cluster", "clustered_coordinates", "node_coordinates", "parse_cluster"]
+
 AXES = {"xi": 0, "eta": 1, "zeta": 2, "i": 0, "j": 1, "k": 2}
 SIDES = {"0": "min", "min": "min", "1": "max", "max": "max", "both": "both"}
 

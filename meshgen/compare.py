@@ -152,7 +152,8 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
     """
     try:
         from meshgen.neural.config import resolve_config
-        from meshgen.neural.inference import inference_device, load_model
+        from meshgen.neural.inference import inference_device
+        from meshgen.neural.models import load_model
         from meshgen.neural.train import train
     except ImportError as exc:
         raise MeshgenError(

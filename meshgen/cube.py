@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = ["AXIS_NAMES", "Edge", "Face", "corners", "edges", "face_named", "face_names", "face_samples", "faces"]
+
 AXIS_NAMES = ("xi", "eta", "zeta")
 
 

@@ -25,6 +25,19 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.cube import faces as cube_faces
+from meshgen.layout import unsmoothed
+
+__all__ = [
+    "COARSE_INTERVALS",
+    "FD_STEP",
+    "ITERATIONS",
+    "METHOD",
+    "ON_BOUNDARY",
+    "boundary_deviation",
+    "distance_to_boundary",
+    "grid_boundary_nodes",
+    "project_to_faces",
+]
 
 COARSE_INTERVALS = {3: 16, 2: 64}  # coarse samples per face parameter, minus one
 ON_BOUNDARY = 1e-10  # relative to the characteristic length: a node this close needs no search
@@ -224,8 +237,6 @@ def distance_to_boundary(points, geometry, parametric_guess=None) -> np.ndarray:
 
     ``parametric_guess`` (K, dim): optional positions on the unit cube's boundary to start from
     (for the boundary nodes of a structured block: their index positions)."""
-    from meshgen.layout import unsmoothed
-
     geometry = unsmoothed(geometry)  # the surface is the same for every boundary layout: use its own map
     points = np.asarray(points, dtype=float)
     dim = geometry.dim

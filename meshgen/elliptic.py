@@ -37,11 +37,37 @@ relative to the same length.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
+from meshgen.anderson import ANDERSON_DEPTH, AndersonMixing
 from meshgen.errors import ParameterError
+from meshgen.layout import DEFAULT_LAYOUT, relax_faces, with_layout
+from meshgen.orthogonal import inner_block, parse_walls, straighten_first_layer
+from meshgen.tfi import check_axes, parametric_grid, tfi
 from meshgen.winslow import centre_coefficient, component_array, node_array, stencils, winslow_operator
+
+__all__ = [
+    "COARSEST_CELLS",
+    "COARSEST_SWEEPS",
+    "DAMPING",
+    "DEFAULT_MAX_ITER",
+    "DEFAULT_TOL",
+    "SEMI_COARSENING",
+    "ConvergenceWarning",
+    "Level",
+    "along_axes",
+    "build_elliptic",
+    "coarser_coordinates",
+    "elliptic",
+    "hierarchy",
+    "interpolation_matrix",
+    "smooth",
+    "solve_lines",
+    "solve_winslow",
+    "v_cycle",
+]
 
 DEFAULT_TOL = 1e-6  # largest node update per cycle, relative to the characteristic length
 DEFAULT_MAX_ITER = 100  # finest-grid cycles; 5-10 are typical
@@ -50,7 +76,6 @@ SEMI_COARSENING = 0.1  # coarsen only axes at least this strongly coupled relati
 PRE_SMOOTHING, POST_SMOOTHING = 1, 1  # relaxation sweeps before and after the coarse-grid correction
 DAMPING = 1.0  # of the line-ADI step; damping (0.85) gave more cycles in every case tried
 COARSEST_SWEEPS = 40  # relaxation sweeps that solve the coarsest grid (at most 3 interior nodes per axis)
-ANDERSON_DEPTH = 3  # cycles remembered by the Anderson mixing (0: plain V-cycles)
 
 
 def coarser_coordinates(t: np.ndarray) -> np.ndarray:
@@ -208,47 +233,6 @@ def v_cycle(levels: list[Level], index: int, R: np.ndarray, f) -> float:
     return smooth(R, f, level, POST_SMOOTHING)
 
 
-class AndersonMixing:
-    """Anderson acceleration of the fixed-point iteration x <- G(x), G one V-cycle.
-
-    From the last ``depth`` differences of the cycle outputs (dG) and of the cycle updates
-    f = G(x) - x (dF), the next iterate is G(x) - dG gamma with gamma minimising
-    |f - dF gamma| (2-norm over all nodes): GMRES-like for the nearly linear late cycles, it removes
-    the few modes a V-cycle reduces slowly (cells made nearly flat where the boundary is smooth
-    across a corner of the parametric cube) at the price of 2 * depth stored arrays.
-    """
-
-    def __init__(self, depth: int):
-        self.depth = depth
-        self.output_changes: list[np.ndarray] = []
-        self.update_changes: list[np.ndarray] = []
-        self.previous = None  # (update, output) of the previous cycle
-
-    def restart(self) -> None:
-        self.output_changes.clear()
-        self.update_changes.clear()
-        self.previous = None
-
-    def next_iterate(self, x: np.ndarray, output: np.ndarray) -> np.ndarray:
-        if self.depth == 0:
-            return output
-        update = output - x
-        if self.previous is not None:
-            self.update_changes.append(update - self.previous[0])
-            self.output_changes.append(output - self.previous[1])
-            del self.update_changes[: -self.depth], self.output_changes[: -self.depth]
-        self.previous = (update, output)
-        if not self.update_changes:
-            return output
-        gram = np.array([[np.vdot(a, b) for b in self.update_changes] for a in self.update_changes])
-        target = np.array([np.vdot(a, update) for a in self.update_changes])
-        gamma = np.linalg.lstsq(gram, target, rcond=1e-12)[0]
-        mixed = output.copy()
-        for weight, change in zip(gamma, self.output_changes):
-            mixed -= weight * change
-        return mixed
-
-
 def solve_winslow(
     X0: np.ndarray, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, length: float = 1.0, progress=None
 ):
@@ -350,14 +334,9 @@ def build_elliptic(
     Returns ``(X, info)``, X of shape (n1+1, n2+1[, n3+1], dim); ``info`` as ``solve_winslow``'s,
     plus ``boundary_layout`` and ``warnings`` (a list of lines) when the solver did not converge.
     """
-    from meshgen.layout import DEFAULT_LAYOUT, relax_faces, with_layout
-    from meshgen.tfi import tfi
-
     tol = DEFAULT_TOL if tol is None else tol
     max_iter = DEFAULT_MAX_ITER if max_iter is None else max_iter
     _check_options(tol, max_iter)
-    from meshgen.orthogonal import inner_block, parse_walls, straighten_first_layer
-
     walls = parse_walls(orthogonal or (), geometry.dim)
     boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
     geometry = with_layout(geometry, boundary_layout)
@@ -417,10 +396,6 @@ def elliptic(
     ``solve_winslow``; ``boundary_layout``, ``orthogonal``: see ``build_elliptic``.
     Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
     """
-    import warnings
-
-    from meshgen.tfi import check_axes, parametric_grid
-
     if coords is None:
         coords = parametric_grid(dims)
     check_axes(geometry, coords)

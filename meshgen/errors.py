@@ -1,5 +1,9 @@
 """Errors a user can act on. The CLI prints them as one line and exits with status 2."""
 
+import difflib
+
+__all__ = ["FormatError", "GeometryError", "MeshgenError", "ParameterError", "did_you_mean", "unknown_name"]
+
 
 class MeshgenError(Exception):
     """A problem with the user's input or environment, reported without a traceback."""
@@ -29,8 +33,6 @@ class ParameterError(MeshgenError):
 
 def did_you_mean(name: str, choices) -> str:
     """``"; did you mean 'x'?"`` for the choice closest to a misspelt ``name``, or ``""``."""
-    import difflib
-
     close = difflib.get_close_matches(name, list(choices), n=1)
     return f"; did you mean '{close[0]}'?" if close else ""
 

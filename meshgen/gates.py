@@ -15,6 +15,19 @@ from dataclasses import dataclass
 from meshgen.errors import MeshgenError, did_you_mean
 from meshgen.quality import METRICS, STATS
 
+__all__ = [
+    "DEVIATION_FIELDS",
+    "OPERATORS",
+    "OTHER_NAMES",
+    "Gate",
+    "GateError",
+    "check_gates",
+    "gate_names",
+    "gate_value",
+    "parse_gate",
+    "valid_names_text",
+]
+
 OPERATORS = {"<=": operator.le, ">=": operator.ge, "==": operator.eq, "!=": operator.ne, "<": operator.lt, ">": operator.gt}
 _GATE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)?)\s*(<=|>=|==|!=|<|>)\s*([^\s<>=!]+)\s*$")
 DEVIATION_FIELDS = ("max", "mean", "max_rel", "mean_rel")

@@ -38,7 +38,22 @@ from types import ModuleType
 import numpy as np
 
 from meshgen import cube
-from meshgen.errors import GeometryError, did_you_mean
+from meshgen.errors import GeometryError, MeshgenError, did_you_mean
+from meshgen.patches import as_records, face_assignment, geometry_patches, patches_from_assignment
+from meshgen.surface import boundary_surface
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "Geometry",
+    "available_names",
+    "bind",
+    "builtin_dir",
+    "check_boundary",
+    "list_geometries",
+    "load_geometry",
+    "looks_like_path",
+    "parse_params",
+]
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
 
@@ -120,8 +135,6 @@ class Geometry:
         return bind(self, values)
 
     def describe(self) -> dict:
-        from meshgen.patches import as_records, geometry_patches
-
         return {
             "name": self.name,
             "dim": self.dim,
@@ -133,8 +146,6 @@ class Geometry:
     def surface(self, resolution: int = 64):
         """Closed boundary surface as a watertight ``trimesh.Trimesh`` (3D), or the filled
         domain triangulated in the z = 0 plane (2D)."""
-        from meshgen.surface import boundary_surface
-
         return boundary_surface(self, resolution)
 
 
@@ -213,9 +224,6 @@ def _from_module(module, source: str) -> Geometry:
 
 def _declared_patches(declared, dim: int, source: str) -> dict:
     """A plugin's ``patches`` checked (faces, names, types, shared names sharing a type)."""
-    from meshgen.errors import MeshgenError
-    from meshgen.patches import face_assignment, patches_from_assignment
-
     if not isinstance(declared, dict) or not all(
         isinstance(v, (tuple, list)) and len(v) == 2 and all(isinstance(x, str) for x in v) for v in declared.values()
     ):
@@ -253,7 +261,7 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
     )
 
 
-def _looks_like_path(spec: str) -> bool:
+def looks_like_path(spec: str) -> bool:
     return spec.endswith(".py") or "/" in spec or "\\" in spec
 
 
@@ -261,7 +269,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
     (shape, finiteness, continuity across the cube's edges)."""
-    if _looks_like_path(spec):
+    if looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")

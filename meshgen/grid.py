@@ -1,8 +1,13 @@
-"""Structured-grid topology: VTK cell connectivity of a node array, flattened points."""
+"""Structured-grid topology: VTK cell connectivity of a node array, flattened points, and the
+partition of the node index space into blocks (meshes larger than memory)."""
 
 from __future__ import annotations
 
 import numpy as np
+
+__all__ = ["BLOCK_NODES", "HEX_CORNERS", "QUAD_CORNERS", "block_slices", "cell_connectivity", "flat_points"]
+
+BLOCK_NODES = 1 << 22  # about 4.2e6 nodes, 100 MB of float64 coordinates per block
 
 # Corner offsets (di, dj[, dk]) in VTK order: hexahedron (VTK_HEXAHEDRON) and quad (VTK_QUAD).
 HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
@@ -28,3 +33,20 @@ def flat_points(X: np.ndarray, width: int = 3) -> np.ndarray:
     if dim < width:
         points = np.hstack([points, np.zeros((points.shape[0], width - dim))])
     return np.ascontiguousarray(points, dtype=float)
+
+
+def block_slices(node_shape, block_nodes: int = BLOCK_NODES) -> list[list[slice]]:
+    """Per index axis, the slices of the blocks along it: slabs of the last axis holding about
+    ``block_nodes`` nodes; the first axis is split too when one plane of the last axis is larger."""
+    node_shape = tuple(int(n) for n in node_shape)
+    plane = int(np.prod(node_shape[:-1]))
+    per_axis = [[slice(0, n)] for n in node_shape]
+    if plane <= block_nodes:
+        step = max(1, block_nodes // plane)
+    else:
+        step = 1
+        rows = max(1, block_nodes // max(1, int(np.prod(node_shape[1:-1]))))
+        per_axis[0] = [slice(s, min(s + rows, node_shape[0])) for s in range(0, node_shape[0], rows)]
+    n = node_shape[-1]
+    per_axis[-1] = [slice(s, min(s + step, n)) for s in range(0, n, step)]
+    return per_axis

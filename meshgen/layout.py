@@ -30,12 +30,44 @@ cap against the semidisk).
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
-from meshgen.cube import faces
+from meshgen import __version__
+from meshgen.anderson import ANDERSON_DEPTH, AndersonMixing
+from meshgen.atomic import atomic_path
+from meshgen.cube import edges, faces
 from meshgen.errors import GeometryError
+from meshgen.winslow import stencils, winslow_operator
+
+__all__ = [
+    "ARC_SAMPLES",
+    "DEFAULT_LAYOUT",
+    "FACE_MAX_ITER",
+    "FACE_TOL",
+    "LAYOUTS",
+    "RELAX_TOL",
+    "RESOLUTION",
+    "TANGENT_STEP",
+    "Layout",
+    "cache_path",
+    "compute_layout",
+    "coons_start",
+    "interpolate_1d",
+    "interpolate_2d",
+    "layout_of",
+    "relax_faces",
+    "smoothed",
+    "surface_grid",
+    "trained_layout",
+    "unsmoothed",
+    "with_layout",
+]
 
 LAYOUTS = ("smoothed", "fixed")
 DEFAULT_LAYOUT = "smoothed"
@@ -237,9 +269,6 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
     """
     from scipy.sparse.linalg import splu
 
-    from meshgen.elliptic import ANDERSON_DEPTH, AndersonMixing
-    from meshgen.winslow import stencils, winslow_operator
-
     U = np.array(U, dtype=float)
     shape = U.shape[:-1]
     grid = stencils(coords)
@@ -308,8 +337,6 @@ def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
             ((face.axis,), (face.side,)): _edge_values(boundary, 2, (face.axis,), (face.side,), cells) for face in faces(2)
         }
         return Layout(2, edge_values, {}, {})
-    from meshgen.cube import edges
-
     edge_values = {(e.axes, e.sides): _edge_values(boundary, 3, e.axes, e.sides, cells) for e in edges()}
     face_values, face_info = {}, {}
     for face in faces(3):
@@ -381,13 +408,6 @@ def cache_path(geometry, cells: int = RESOLUTION):
     ``$XDG_CACHE_HOME/meshgen``, else ``~/.cache/meshgen``, under ``layouts/``, named by a hash of
     meshgen's version, the plugin's name and source text, its parameter values and ``cells``.
     None for a plugin whose source file cannot be read (its layout is then computed every run)."""
-    import hashlib
-    import json
-    import os
-    from pathlib import Path
-
-    from meshgen import __version__
-
     try:
         source = Path(geometry.source).read_bytes()
     except (OSError, TypeError, ValueError):
@@ -401,8 +421,6 @@ def cache_path(geometry, cells: int = RESOLUTION):
 def _read_layout(path):
     """The Layout stored at ``path``, or None when there is none or it cannot be read (a damaged or
     foreign file is ignored and recomputed; no pickles are loaded)."""
-    import json
-
     try:
         with np.load(path, allow_pickle=False) as stored:
             dim = int(stored["dim"])
@@ -419,10 +437,6 @@ def _read_layout(path):
 
 def _write_layout(path, layout: Layout) -> None:
     """Store ``layout`` at ``path`` atomically; a cache that cannot be written is skipped."""
-    import json
-
-    from meshgen.atomic import atomic_path
-
     arrays = {f"edge{i}": values for i, values in enumerate(layout.edge_values.values())}
     arrays.update({f"face{i}": values for i, values in enumerate(layout.face_values.values())})
     try:

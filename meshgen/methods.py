@@ -3,7 +3,7 @@
 ``build(geometry, coords, **options) -> (X, info)``, with ``info`` a JSON-serialisable dict of what
 the method wants recorded (iterations, residual, ...).
 
-The neural methods are one function, ``meshgen.neural.inference.build_neural`` (a trained network
+The neural methods are one function, ``meshgen.neural.models.build_neural`` (a trained network
 evaluated at the nodes, its boundary corrected onto the geometry), registered once as ``neural``
 (any trained model) and once per training preset (``3dmeshnet``, ``exact``, ``pinn`` ...: the
 methods of DESIGN section 6, which ``meshgen compare`` trains with that preset). So a mesh of the
@@ -42,7 +42,7 @@ def register_method(method: Method) -> None:
     METHODS[method.name] = method
 
 
-NEURAL = "meshgen.neural.inference:build_neural"
+NEURAL = "meshgen.neural.models:build_neural"
 NEURAL_OPTIONS = ("model", "correct", "device")
 register_method(
     Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",))

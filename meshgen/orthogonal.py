@@ -19,6 +19,8 @@ import numpy as np
 from meshgen.cube import Face, face_named, face_names
 from meshgen.errors import ParameterError
 
+__all__ = ["inner_block", "parse_walls", "straighten_first_layer"]
+
 
 def parse_walls(names, dim: int) -> list[Face]:
     """Face names (``xi0`` .. ``zeta1``; repeats dropped) -> faces; ParameterError for unknown ones."""

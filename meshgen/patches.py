@@ -21,6 +21,23 @@ from dataclasses import dataclass
 from meshgen import cube
 from meshgen.errors import MeshgenError
 
+__all__ = [
+    "DEFAULT_TYPE",
+    "NAME_PATTERN",
+    "PATCH_TYPES",
+    "Patch",
+    "as_records",
+    "check_covers",
+    "check_patch_name",
+    "default_patches",
+    "face_assignment",
+    "flow_role",
+    "from_records",
+    "geometry_patches",
+    "parse_patch_options",
+    "patches_from_assignment",
+]
+
 PATCH_TYPES = ("wall", "patch", "symmetry", "empty")
 DEFAULT_TYPE = "patch"
 # What any patch name must be (each format may be stricter: meshgen.formats.check_patches):

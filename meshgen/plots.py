@@ -24,7 +24,31 @@ from pathlib import Path
 
 import numpy as np
 
+from meshgen.atomic import atomic_write
+from meshgen.quality import cell_metrics, cell_metrics_unstructured
 from meshgen.tables import METRIC_LABELS
+
+__all__ = [
+    "AXIS_NAMES",
+    "COLORBAR_PX",
+    "DPI",
+    "INDEX_NAMES",
+    "INSTALL_HINT",
+    "LOSS_CURVES",
+    "PANEL_PX",
+    "TITLE_PX",
+    "drawable",
+    "loss_curves_figure",
+    "loss_curves_size",
+    "mid_section",
+    "panels",
+    "plotting_available",
+    "quad_faces",
+    "read_history",
+    "sections_figure",
+    "sections_size",
+    "whole_mesh",
+]
 
 PANEL_PX = (400, 360)
 COLORBAR_PX = 120
@@ -71,8 +95,6 @@ def mid_section(X: np.ndarray, axis: int, metric: str):
     min(n//2, n-1) along ``axis``, computed on a slab of up to three cell layers around them, so
     that their face neighbours, and hence every metric, are those of the whole mesh.
     """
-    from meshgen.quality import cell_metrics
-
     n = X.shape[axis] - 1
     node = n // 2
     cell = min(node, n - 1)
@@ -88,8 +110,6 @@ def mid_section(X: np.ndarray, axis: int, metric: str):
 
 def whole_mesh(picture, metric: str):
     """Faces and values of a 2D mesh: a node array (n1+1, n2+1, 2) or points (N, 2) with quads (M, 4)."""
-    from meshgen.quality import cell_metrics, cell_metrics_unstructured
-
     if picture.X is not None:
         return quad_faces(picture.X), cell_metrics(picture.X)[metric]
     return picture.points[picture.cells][..., :2], cell_metrics_unstructured(picture.points, picture.cells)[metric]
@@ -137,8 +157,6 @@ def _axes(figure, size, column: int, row: int, left=58, right=14, bottom=44, top
 
 
 def _save(figure, path) -> Path:
-    from meshgen.atomic import atomic_write
-
     path = Path(path)
     with atomic_write(path) as temporary:
         figure.savefig(temporary, dpi=DPI, format="png")

@@ -9,9 +9,12 @@ or merge it and let it go: memory stays bounded by the window, not by the mesh.
 
 from __future__ import annotations
 
+import logging
 import os
 
 from meshgen.errors import MeshgenError
+
+__all__ = ["ADDRESS_VARIABLE", "CONNECT_TIMEOUT_SECONDS", "compute_in_order_of_completion", "connect", "scheduler_address"]
 
 CONNECT_TIMEOUT_SECONDS = 5
 ADDRESS_VARIABLE = "DASK_SCHEDULER_ADDRESS"
@@ -27,7 +30,6 @@ def connect(address: str | None):
     MeshgenError within ``CONNECT_TIMEOUT_SECONDS`` when the scheduler cannot be reached."""
     if not address:
         return None
-    import logging
 
     from distributed import Client
 

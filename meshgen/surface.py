@@ -6,9 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.atomic import check_output_file
+from meshgen.atomic import atomic_write, check_output_file
 from meshgen.cube import faces as cube_faces
 from meshgen.errors import MeshgenError
+from meshgen.tfi import tfi
+
+__all__ = ["SURFACE_EXTENSIONS", "boundary_surface", "check_surface_path", "write_surface"]
 
 SURFACE_EXTENSIONS = (".stl", ".ply", ".obj", ".off")
 
@@ -31,8 +34,6 @@ def boundary_surface(geometry, resolution: int = 64):
     t = np.arange(n + 1)
     u, v = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
     if geometry.dim == 2:
-        from meshgen.tfi import tfi
-
         X = tfi(geometry, (n, n)).reshape(-1, 2)
         vertices = np.column_stack([X, np.zeros(len(X))])
         return trimesh.Trimesh(vertices, _grid_triangles(n, flip=False), process=False)
@@ -65,8 +66,6 @@ def check_surface_path(path) -> Path:
 
 def write_surface(geometry, path, resolution: int = 64):
     """Write ``boundary_surface`` to ``path`` (STL, PLY, OBJ or OFF by extension), atomically."""
-    from meshgen.atomic import atomic_write
-
     path = check_surface_path(path)
     surface = boundary_surface(geometry, resolution)
     with atomic_write(path) as temporary:

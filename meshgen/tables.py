@@ -5,7 +5,10 @@ in Markdown)."""
 
 from __future__ import annotations
 
+import shutil
 import sys
+
+__all__ = ["METRIC_LABELS", "markdown_table", "number", "print_table", "transposed"]
 
 # How each per-cell metric of meshgen.quality is named in tables and figure labels.
 METRIC_LABELS = {
@@ -71,8 +74,6 @@ def print_table(header, rows, title=None, highlight=frozenset(), caption=None, f
 
 def _terminal_columns(stream) -> int | None:
     """The width of the terminal ``stream`` writes to; None for a file or pipe."""
-    import shutil
-
     try:
         return shutil.get_terminal_size().columns if stream.isatty() else None
     except (AttributeError, ValueError):

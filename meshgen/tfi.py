@@ -18,6 +18,19 @@ import numpy as np
 from meshgen import cube
 from meshgen.errors import MeshgenError
 
+__all__ = [
+    "add_face_terms",
+    "blending",
+    "boundary_faces",
+    "check_axes",
+    "face_terms",
+    "face_values",
+    "parametric_grid",
+    "tfi",
+    "transfinite",
+    "transfinite_on_grid",
+]
+
 
 def parametric_grid(dims) -> list[np.ndarray]:
     """Uniform parametric node coordinates: one array of ``n + 1`` values in [0, 1] per cell count."""

@@ -34,6 +34,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+__all__ = [
+    "Stencils",
+    "centre_coefficient",
+    "cofactors",
+    "component_array",
+    "node_array",
+    "stencils",
+    "winslow_operator",
+    "winslow_residual",
+]
+
 
 @dataclass(frozen=True)
 class Stencils:

@@ -51,8 +51,9 @@ def figures(X, geometry) -> dict:
 
 def neural_figures(model, geometry, cells: int) -> dict:
     """Figures of the network's own mesh (--no-correct) and of the corrected one (the default)."""
+    from meshgen.correction import correct_boundary
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import correct_boundary, mesh_from_model
+    from meshgen.neural.inference import mesh_from_model
     from meshgen.tfi import parametric_grid
 
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it learnt, as meshgen mesh does
@@ -94,7 +95,7 @@ def main():
     from meshgen import __version__
     from meshgen.geometry import load_geometry
     from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
-    from meshgen.neural.inference import MODELS_DIR, load_model
+    from meshgen.neural.models import MODELS_DIR, load_model
 
     folder = MODELS_DIR / args.geometry
     folder.mkdir(parents=True, exist_ok=True)
@@ -170,7 +171,7 @@ def quality(model, geometry) -> dict:
 
 def measure_only(name: str) -> None:
     from meshgen.geometry import load_geometry
-    from meshgen.neural.inference import MODELS_DIR, load_model
+    from meshgen.neural.models import MODELS_DIR, load_model
 
     folder = MODELS_DIR / name
     record = json.loads((folder / "model.json").read_text())

@@ -43,7 +43,7 @@ class Recorder:
 
 
 def direct_correction(error_at, coords):
-    """The boundary correction of ``meshgen.neural.inference`` by its direct form, a second
+    """The boundary correction of ``meshgen.correction`` by its direct form, a second
     algorithm: the multilinear interpolant of the errors at the cube's corners, written out as a
     sum over the corners of products of t and 1 - t, plus the 26-term (2D: 8-term) Gordon-Hall sum
     (``meshgen.tfi.transfinite``) of the rest of the error with the blending (1 - t)^p, t^p.
@@ -53,7 +53,7 @@ def direct_correction(error_at, coords):
 
     import numpy as np
 
-    from meshgen.neural.inference import CORRECTION_POWER
+    from meshgen.correction import CORRECTION_POWER
     from meshgen.tfi import transfinite
 
     dim = len(coords)

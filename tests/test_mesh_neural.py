@@ -12,21 +12,15 @@ import torch
 from neural_helpers import direct_correction, tiny_config
 
 from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
+from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
-from meshgen.neural.inference import (
-    MODELS_DIR,
-    add_boundary_correction,
-    boundary_errors,
-    correct_boundary,
-    evaluate_on_grid,
-    mesh_from_model,
-    transfinite_on_grid,
-)
+from meshgen.neural.inference import evaluate_on_grid, mesh_from_model
 from meshgen.neural.model import bubble, network_from_description
+from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
-from meshgen.tfi import parametric_grid, tfi, transfinite
+from meshgen.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
 
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
 
@@ -258,7 +252,7 @@ def test_correction_of_an_error_inside_one_face_fades_as_the_closed_form(semicyl
     """A bump on the cap zeta = 0, zero on its edges: the correction's corner part and every other
     face's term vanish, so it is the bump times (1 - zeta)^p at every node (closed form), where
     linear TFI would carry (1 - zeta) of it through the whole volume."""
-    from meshgen.neural.inference import CORRECTION_POWER
+    from meshgen.correction import CORRECTION_POWER
 
     dims = (12, 10, 16)
     coords = parametric_grid(dims)

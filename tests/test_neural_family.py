@@ -29,8 +29,8 @@ from meshgen.neural.family import (
     parse_vary,
     train_family,
 )
-from meshgen.neural.inference import load_model
 from meshgen.neural.model import bubble
+from meshgen.neural.models import load_model
 from meshgen.tfi import parametric_grid, tfi
 
 TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]

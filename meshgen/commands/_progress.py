@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 
+__all__ = ["progress_display"]
+
 
 def _format(value) -> str:
     return f"{value:.2e}" if isinstance(value, float) else str(value)

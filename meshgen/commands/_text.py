@@ -8,6 +8,8 @@ import textwrap
 
 import click
 
+__all__ = ["echo", "terminal_width", "wrapped"]
+
 
 def terminal_width(stream=None) -> int | None:
     """The terminal's width in columns when ``stream`` (default stdout) is a terminal, else None

@@ -10,9 +10,16 @@ import json
 
 import click
 
+from meshgen.atomic import atomic_write, check_output_file
 from meshgen.commands._options import geometry_options
-from meshgen.tables import METRIC_LABELS
+from meshgen.gates import GateError, check_gates, parse_gate
+from meshgen.geometry import load_geometry, parse_params
+from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_json
+from meshgen.scheduler import connect, scheduler_address
+from meshgen.tables import METRIC_LABELS, markdown_table, print_table
 from meshgen.tables import number as _number
+
+__all__ = ["EPILOG", "evaluate", "markdown", "tables"]
 
 
 def _verdict_rows(report) -> list[tuple[str, str]]:
@@ -36,8 +43,6 @@ def _verdict_rows(report) -> list[tuple[str, str]]:
 def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
     """(header, rows) of the quality tables: one mesh gives a metric x statistic grid and a
     verdict table; several give one table with a column per mesh."""
-    from meshgen.quality import METRICS, STATS
-
     if len(reports) == 1:
         report = reports[0]
         header = ["metric", *STATS]  # the statistics as --json and --fail-if name them
@@ -53,8 +58,6 @@ def tables(reports) -> list[tuple[list[str], list[list[str]]]]:
 
 def markdown(reports, gate_results) -> str:
     """The quality tables as Markdown (a CI job summary), with the gates' outcome."""
-    from meshgen.tables import markdown_table
-
     lines = ["## Mesh quality", ""]
     if len(reports) == 1:
         lines += [f"`{reports[0]['file']}`", ""]
@@ -76,8 +79,6 @@ def markdown(reports, gate_results) -> str:
 
 
 def _parse_gates(ctx, param, values):
-    from meshgen.gates import GateError, parse_gate
-
     try:
         return [parse_gate(text) for text in values]
     except GateError as exc:
@@ -133,12 +134,6 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     validity verdict (valid: inverted cells <= 0.5% of all cells), and the boundary deviation when
     the geometry is known: files written by meshgen record it; for others pass --geometry.
     """
-    from meshgen.atomic import check_output_file
-    from meshgen.gates import GateError, check_gates
-    from meshgen.geometry import load_geometry, parse_params
-    from meshgen.quality import evaluate_file, write_json
-    from meshgen.scheduler import connect, scheduler_address
-
     # Report paths first: a bad one fails before any mesh is read.
     if json_path and json_path != "-":  # '-': stdout
         check_output_file(json_path, "report.json")
@@ -175,14 +170,10 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     if json_path:
         data = reports[0] if len(reports) == 1 else reports
         if to_stdout:
-            from meshgen.quality import _nulls
-
-            click.echo(json.dumps(_nulls(data), indent=2, allow_nan=False))
+            click.echo(json.dumps(json_ready(data), indent=2, allow_nan=False))
         else:
             write_json(json_path, data)
     if markdown_path:
-        from meshgen.atomic import atomic_write
-
         with atomic_write(markdown_path) as temporary:
             temporary.write_text(markdown(reports, gate_results))
 
@@ -204,8 +195,6 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
 
 
 def _print_table(reports) -> None:
-    from meshgen.tables import print_table
-
     for number, (header, rows) in enumerate(tables(reports)):
         title = "mesh quality" + (f": {reports[0]['file']}" if len(reports) == 1 else "") if number == 0 else None
         print_table(header, rows, title=title)

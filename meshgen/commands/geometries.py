@@ -7,6 +7,11 @@ import json
 import click
 
 from meshgen.commands._options import load_selected_geometry
+from meshgen.errors import GeometryError
+from meshgen.geometry import available_names, load_geometry
+from meshgen.surface import check_surface_path, write_surface
+
+__all__ = ["geometries", "show"]
 
 
 @click.group("geometries", invoke_without_command=True)
@@ -17,9 +22,6 @@ def geometries(ctx, as_json):
     boundary patches (name, type: cube faces)."""
     if ctx.invoked_subcommand is not None:
         return
-    from meshgen.errors import GeometryError
-    from meshgen.geometry import available_names, load_geometry
-
     described = []
     for name in available_names():
         try:
@@ -49,8 +51,6 @@ def geometries(ctx, as_json):
 @click.option("--resolution", default=64, show_default=True, type=click.IntRange(2, 2048), help="Samples per face edge.")
 def show(name, params, output, resolution):
     """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0)."""
-    from meshgen.surface import check_surface_path, write_surface
-
     check_surface_path(output)  # before loading: a bad path fails fast, whatever the geometry
     geometry = load_selected_geometry(name, params)
     path, surface = write_surface(geometry, output, resolution)

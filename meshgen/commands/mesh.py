@@ -153,7 +153,7 @@ def mesh(
     import sys
     import time
 
-    from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
+    from meshgen.chunked import CHUNKED_METHODS
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
     from meshgen.errors import MeshgenError
@@ -162,6 +162,7 @@ def mesh(
     from meshgen.methods import get_method, make_mesh
     from meshgen.patches import geometry_patches, parse_patch_options
     from meshgen.quality import write_mesh_with_quality
+    from meshgen.resources import check_free_space, needs_chunking
     from meshgen.scheduler import connect, scheduler_address
 
     output_format = format_for(output, format_name)
@@ -336,11 +337,11 @@ def _check_method(name):
 
 
 def _neural_model(checkpoint, spec, params, geometry_given, dims):
-    """The model to mesh with (``meshgen.neural.inference.find_model``) and the geometry it was
+    """The model to mesh with (``meshgen.neural.models.find_model``) and the geometry it was
     trained on, with its parameters. The geometry is loaded and checked once: the one given on the
     command line when the model was trained on it, else the model's."""
-    from meshgen.geometry import _looks_like_path, bind, check_boundary, load_geometry, parse_params
-    from meshgen.neural.inference import find_model
+    from meshgen.geometry import bind, check_boundary, load_geometry, looks_like_path, parse_params
+    from meshgen.neural.models import find_model
 
     given_params = parse_params(params)
     if checkpoint is not None:
@@ -368,7 +369,7 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
     same_source = (
         chosen is not None
         and chosen.name == entry["name"]
-        and (Path(spec).resolve() == Path(entry["spec"]).resolve() if _looks_like_path(spec) else spec == entry["spec"])
+        and (Path(spec).resolve() == Path(entry["spec"]).resolve() if looks_like_path(spec) else spec == entry["spec"])
     )
     if same_source:
         geometry = bind(chosen, dict(entry["params"]))

@@ -29,7 +29,32 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import FormatError
+from meshgen.atomic import atomic_write, check_output_file
+from meshgen.errors import FormatError, MeshgenError
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.patches import check_covers
+
+__all__ = [
+    "FORMATS",
+    "METADATA_KEY",
+    "Format",
+    "block_reader",
+    "check_output_path",
+    "check_patches",
+    "extensions",
+    "format_for",
+    "format_named",
+    "format_names",
+    "metadata_json",
+    "metadata_of",
+    "read_header",
+    "read_mesh",
+    "read_node_block",
+    "read_patches",
+    "register_format",
+    "streaming_writer",
+    "write_mesh",
+]
 
 
 @dataclass(frozen=True)
@@ -79,8 +104,6 @@ register_format(
 register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
 register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
 
-METADATA_KEY = "meshgen"
-
 
 def extensions() -> list[str]:
     return [ext for fmt in FORMATS for ext in fmt.extensions]
@@ -117,8 +140,6 @@ def check_output_path(path: str | os.PathLike, format_name: str | None = None, d
     """Validate an output path before any work is done: known extension (or ``format_name``),
     existing writable folder, not a folder itself (folder formats: their own rules), a format that
     takes ``dim``-dimensional meshes. Returns the path to write (an OpenFOAM case: its folder)."""
-    from meshgen.atomic import check_output_file
-
     fmt = format_for(path, format_name)
     if dim is not None and dim not in fmt.dims:
         raise FormatError(f"{fmt.name} takes {' or '.join(f'{d}D' for d in fmt.dims)} meshes, not {dim}D")
@@ -140,12 +161,32 @@ def streaming_writer(path, format_name: str | None = None):
     return importlib.import_module(fmt.module)
 
 
+def block_reader(path, format_name: str | None = None):
+    """The reader module of ``path``'s format (or ``format_name``'s) when it can read a structured
+    mesh block by block (``zone_header``, ``read_node_block``: the formats that stream); FormatError
+    naming the formats that can, otherwise."""
+    fmt = format_for(path, format_name)
+    if not fmt.streams:
+        able = ", ".join(ext for f in FORMATS if f.streams for ext in f.extensions)
+        raise FormatError(f"{fmt.name} ({Path(path).suffix}) cannot be read block by block; formats that can: {able}")
+    return importlib.import_module(fmt.module)
+
+
+def read_header(path) -> tuple[tuple[int, ...], dict]:
+    """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of a structured mesh file that
+    can be read block by block (CGNS), without reading the nodes."""
+    return block_reader(path).zone_header(path)
+
+
+def read_node_block(path, block) -> np.ndarray:
+    """The nodes ``block`` (one slice per index axis) of a structured mesh file that can be read
+    block by block (CGNS): an array of the block's shape + (dim,), C order, float64."""
+    return block_reader(path).read_node_block(path, block)
+
+
 def check_patches(patches, dim: int, path=None, format_name: str | None = None):
     """``patches`` (None: one per face, named after it) checked to cover every face once, and their
     names against the format of ``path`` / ``format_name`` if given. Returns Patch objects."""
-    from meshgen.errors import MeshgenError
-    from meshgen.patches import check_covers
-
     try:
         checked = check_covers(patches, dim)
     except MeshgenError as exc:
@@ -173,8 +214,6 @@ def write_mesh(
     ``{"name", "type", "faces"}`` records covering every cube face once; None: one per face, named
     after it), written by the formats that carry them. ``options``: format options (OpenFOAM:
     ``binary``). Returns the path written (an OpenFOAM case: its folder)."""
-    from meshgen.atomic import atomic_write
-
     X = np.asarray(X, dtype=float)
     if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
         raise FormatError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}")
@@ -224,22 +263,6 @@ def _cell_array(name, values, node_shape) -> np.ndarray:
     if values.size != cells:
         raise FormatError(f"cell data '{name}' has {values.size} values for {cells} cells")
     return values.reshape(-1)
-
-
-def metadata_json(metadata: dict) -> str:
-    """``metadata`` as ASCII JSON (NumPy scalars and arrays become plain numbers and lists)."""
-
-    def plain(value):
-        if isinstance(value, (np.generic, np.ndarray)):
-            return value.tolist()
-        if isinstance(value, os.PathLike):
-            return os.fspath(value)
-        raise TypeError(f"{type(value).__name__} value {value!r}")
-
-    try:
-        return json.dumps(metadata, default=plain)
-    except (TypeError, ValueError) as exc:
-        raise FormatError(f"metadata is not JSON-serialisable: {exc}") from exc
 
 
 def metadata_of(source) -> dict:

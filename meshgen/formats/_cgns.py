@@ -46,11 +46,37 @@ order, since the library lists a node's children in that order.
 from __future__ import annotations
 
 import contextlib
+import json
 
 import numpy as np
 
+from meshgen import cube
 from meshgen.errors import FormatError
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
+from meshgen.patches import Patch, flow_role
+
+__all__ = [
+    "BASE_NAME",
+    "CGNS_VERSION",
+    "COORDINATE_NAMES",
+    "LENGTH_EXPONENTS",
+    "NAME_LENGTH",
+    "SOLUTION_NAME",
+    "ZONE_BC_NAME",
+    "ZONE_NAME",
+    "bc_type",
+    "check_patch_name",
+    "read",
+    "read_node_block",
+    "read_patches",
+    "stream",
+    "write",
+    "write_cell_block",
+    "write_node_block",
+    "write_zone_bc",
+    "zone_header",
+]
 
 CGNS_VERSION = 3.4  # the layout below is the one CGNS 3.x and 4.x libraries both read and write
 NAME_LENGTH = 32  # longest CGNS node name or label
@@ -83,8 +109,6 @@ def stream(path, node_shape, dim, metadata, cell_names=(), patches=()):
     ``write_node_block`` and ``write_cell_block`` (HDF5 hyperslab writes), so a mesh larger than
     memory is written block by block. One layout for both: ``write`` is this with one block."""
     import h5py
-
-    from meshgen.formats import METADATA_KEY, metadata_json
 
     for name in cell_names:
         _check_name(name, "cell data")
@@ -126,8 +150,6 @@ def stream(path, node_shape, dim, metadata, cell_names=(), patches=()):
 def bc_type(patch) -> str:
     """The CGNS BCType of a patch: walls and symmetry planes by type; a ``patch`` is BCInflow or
     BCOutflow when its name says inlet/inflow or outlet/outflow, else BCGeneral (so is ``empty``)."""
-    from meshgen.patches import flow_role
-
     if patch.type == "wall":
         return "BCWall"
     if patch.type == "symmetry":
@@ -138,8 +160,6 @@ def bc_type(patch) -> str:
 def write_zone_bc(base, zone, node_shape, patches) -> None:
     """The ZoneBC of ``zone`` (one BC_t with a PointRange per patch face) and a Family_t per patch
     under ``base``. ``node_shape``: the zone's vertex counts (ni, nj[, nk])."""
-    from meshgen import cube
-
     dim = len(node_shape)
     zone_bc = _node(zone, ZONE_BC_NAME, "ZoneBC_t")
     for patch in patches:
@@ -170,9 +190,6 @@ def read_patches(path) -> list:
     PointRange matched to the cube face it covers; the type from the Family's PatchType, else from
     the BC type."""
     import h5py
-
-    from meshgen import cube
-    from meshgen.patches import Patch
 
     types = {"BCWall": "wall", "BCSymmetryPlane": "symmetry"}
     faces_of, type_of = {}, {}
@@ -226,8 +243,6 @@ def read(path):
     cell-centred (vertex) solution arrays as cell (point) data, meshgen's metadata in field data."""
     import h5py
     import meshio
-
-    from meshgen.formats import METADATA_KEY
 
     with h5py.File(path, "r") as root:
         base, zone, node_shape = _structured_zone(root, path)
@@ -380,11 +395,7 @@ def _c_order(data: np.ndarray, shape: tuple, path) -> np.ndarray:
 def zone_header(path) -> tuple[tuple[int, ...], dict]:
     """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of the first structured zone,
     without reading the coordinates."""
-    import json
-
     import h5py
-
-    from meshgen.formats import METADATA_KEY
 
     try:
         root = h5py.File(path, "r")

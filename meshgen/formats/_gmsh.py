@@ -24,7 +24,11 @@ import numpy as np
 from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
+from meshgen.patches import Patch, as_records
+
+__all__ = ["DOMAIN_NAME", "PATCHES_SECTION", "check_patch_name", "read", "read_patches", "write"]
 
 DOMAIN_NAME = "domain"
 PATCHES_SECTION = "meshgenPatches"  # the patch types, which MSH has no place for
@@ -38,9 +42,6 @@ def check_patch_name(name: str) -> None:
 
 def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` with physical groups; ``cell_data`` is not written."""
-    from meshgen.formats import metadata_json
-    from meshgen.patches import as_records
-
     node_shape = X.shape[:-1]
     dim = len(node_shape)
     faces = cube.faces(dim)
@@ -96,8 +97,6 @@ def read(path):
     (hexahedra or quads, not the patches' boundary elements) and gives its metadata back."""
     import meshio
 
-    from meshgen.formats import METADATA_KEY
-
     mesh = meshio.read(path, file_format="gmsh")
     text = _section(path, METADATA_KEY)
     if text is None:  # a foreign file: as meshio reads it (evaluate reports other cell types as skipped)
@@ -114,8 +113,6 @@ def read_patches(path) -> list:
     """The patches of a .msh file meshgen wrote: names from $PhysicalNames, faces from the face
     entities' physical tags in $Entities (entity n is the n-th cube face), types from
     ``$meshgenPatches``."""
-    from meshgen.patches import Patch
-
     names = _section(path, "PhysicalNames")
     entities = _section(path, "Entities")
     recorded = _section(path, PATCHES_SECTION)

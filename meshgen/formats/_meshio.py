@@ -18,12 +18,16 @@ added to the file meshio wrote (still the temporary file of the atomic write):
 from __future__ import annotations
 
 import re
+import xml.etree.ElementTree as ET
 from xml.sax.saxutils import escape
 
 import numpy as np
 
 from meshgen.errors import FormatError
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
+
+__all__ = ["HEADER_BYTES", "read", "write"]
 
 # How far into a file meshio's header reaches: the insertion points lie before any array data.
 HEADER_BYTES = 1 << 16
@@ -37,8 +41,6 @@ def write(path, X, cell_data, metadata):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) with meshio, plus ``cell_data`` (arrays
     in C order of the cells) and ``metadata`` (JSON-serialisable dict)."""
     import meshio
-
-    from meshgen.formats import metadata_json
 
     cell_type = "hexahedron" if X.ndim == 4 else "quad"
     cells = [(cell_type, cell_connectivity(X.shape[:-1]))]
@@ -65,8 +67,6 @@ def read(path):
     """Read with meshio; for XDMF, also pick meshgen's metadata out of the Information element."""
     import meshio
 
-    from meshgen.formats import METADATA_KEY
-
     mesh = meshio.read(path)
     if path.suffix.lower() == ".xdmf" and METADATA_KEY not in mesh.field_data:
         text = _xdmf_metadata(path)
@@ -77,8 +77,6 @@ def read(path):
 
 def _legacy_field(text: str) -> bytes:
     """A dataset-level FIELD block with one unsigned_char array (binary legacy VTK)."""
-    from meshgen.formats import METADATA_KEY
-
     data = text.encode("ascii")
     return f"FIELD FieldData 1\n{METADATA_KEY} 1 {len(data)} unsigned_char\n".encode() + data + b"\n"
 
@@ -94,8 +92,6 @@ def _legacy_cell_data(cell_arrays: dict, cell_count: int) -> bytes:
 
 
 def _xdmf_information(text: str) -> bytes:
-    from meshgen.formats import METADATA_KEY
-
     value = escape(text, {'"': "&quot;"})
     return f'<Information Name="{METADATA_KEY}" Value="{value}">&lt;{METADATA_KEY}/&gt;</Information>'.encode("ascii")
 
@@ -118,10 +114,6 @@ def _insert_after(path, start_tag: bytes, insertion: bytes) -> None:
 def _xdmf_metadata(path) -> str | None:
     """The Value of the first Information element named "meshgen", read without parsing the
     (possibly large) data that follows it."""
-    import xml.etree.ElementTree as ET
-
-    from meshgen.formats import METADATA_KEY
-
     for _, element in ET.iterparse(path, events=("start",)):
         if element.tag == "Information" and element.get("Name") == METADATA_KEY:
             return element.get("Value")

@@ -39,8 +39,33 @@ from pathlib import Path
 import numpy as np
 
 from meshgen import cube
+from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.grid import cell_connectivity
+from meshgen.patches import Patch, flow_role
+
+__all__ = [
+    "CONTROL_DICT",
+    "EXTRUDED_PATCH",
+    "FV_SCHEMES",
+    "FV_SOLUTION",
+    "HEADER",
+    "LABEL_LIMIT",
+    "RECORD_NAME",
+    "WORD",
+    "case_folder",
+    "check_output",
+    "check_patch_name",
+    "extrude",
+    "poly_mesh_folder",
+    "read",
+    "read_boundary",
+    "read_list",
+    "read_patches",
+    "write",
+]
 
 HEADER = """/*--------------------------------*- C++ -*----------------------------------*\\
   Written by meshgen
@@ -151,8 +176,6 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     node_shape = X3.shape[:-1]
     if np.prod(node_shape) * 3 > LABEL_LIMIT:
         raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {np.prod(node_shape)} points")
-    from meshgen.formats import metadata_json
-
     shape = [int(n) for n in X.shape[:-1]]
     record = f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "metadata": {metadata_json(metadata)}}}'
 
@@ -208,8 +231,6 @@ def extrude(X: np.ndarray) -> np.ndarray:
 
 
 def _extrusion_patch():
-    from meshgen.patches import Patch
-
     return Patch(EXTRUDED_PATCH, "empty", ("zeta0", "zeta1"))
 
 
@@ -305,8 +326,6 @@ def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None
 
 
 def _has_inlet_and_outlet(patches) -> bool:
-    from meshgen.patches import flow_role
-
     roles = {flow_role(patch) for patch in patches}
     return {"inflow", "outflow"} <= roles
 
@@ -314,8 +333,6 @@ def _has_inlet_and_outlet(patches) -> bool:
 def _write_starting_fields(folder: Path, patches) -> None:
     """``0/U`` and ``0/p`` for potential flow from the patches' types and roles (module docstring),
     written to a temporary folder and renamed into place."""
-    from meshgen.patches import flow_role
-
     U, p = {}, {}
     for patch in patches:
         role = flow_role(patch)
@@ -345,8 +362,6 @@ def _write_starting_fields(folder: Path, patches) -> None:
 
 
 def _write_if_missing(path: Path, text: str) -> None:
-    from meshgen.atomic import atomic_path
-
     if path.exists():
         return
     with atomic_path(path) as temporary:
@@ -425,9 +440,6 @@ def read(path):
     front, z = 0) in C order of the cells, meshgen's metadata in field data."""
     import meshio
 
-    from meshgen.formats import METADATA_KEY, metadata_json
-    from meshgen.grid import cell_connectivity
-
     folder = poly_mesh_folder(path)
     record = _record(folder)
     node_shape = tuple(int(n) for n in record["node_shape"])
@@ -459,8 +471,6 @@ def read_boundary(folder: Path) -> list[tuple[str, str, int, int]]:
 def read_patches(path) -> list:
     """The patches of a case meshgen wrote: each boundary entry's faces located on the cube faces
     from their node labels (a 2D mesh: the extrusion's front and back left out)."""
-    from meshgen.patches import Patch
-
     folder = poly_mesh_folder(path)
     record = _record(folder)
     node_shape = tuple(int(n) for n in record["node_shape"])

@@ -33,6 +33,8 @@ import numpy as np
 from meshgen.errors import FormatError
 from meshgen.grid import cell_connectivity, flat_points
 
+__all__ = ["read", "write"]
+
 
 def write(path, X, cell_data, metadata):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a one-block whole grid; binary for

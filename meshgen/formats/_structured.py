@@ -8,6 +8,8 @@ import numpy as np
 
 from meshgen import cube
 
+__all__ = ["boundary_elements", "face_nodes", "orientation", "write_rows"]
+
 
 def orientation(X: np.ndarray) -> float:
     """+1 for a right-handed (2D: counterclockwise) map, -1 otherwise: the sign of the total

@@ -28,7 +28,11 @@ import numpy as np
 
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
+from meshgen.patches import as_records, from_records
+
+__all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write"]
 
 SU2_HEXAHEDRON, SU2_QUADRILATERAL, SU2_LINE = 12, 9, 3
 MARKER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.+-]*")
@@ -41,9 +45,6 @@ def check_patch_name(name: str) -> None:
 
 def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` with one marker per patch; ``cell_data`` has no place in .su2."""
-    from meshgen.formats import metadata_json
-    from meshgen.patches import as_records
-
     node_shape = X.shape[:-1]
     dim = len(node_shape)
     cells = cell_connectivity(node_shape)
@@ -86,8 +87,6 @@ def read(path):
     back."""
     import meshio
 
-    from meshgen.formats import METADATA_KEY
-
     # meshio warns for every marker that its tags are strings: expected here, and not the user's concern.
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         mesh = meshio.read(path, file_format="su2")
@@ -105,8 +104,6 @@ def read(path):
 
 def read_patches(path) -> list:
     """The markers of a .su2 file meshgen wrote, with the patch types of its comment line."""
-    from meshgen.patches import from_records
-
     text = _comment(path, "meshgen_patches")
     if text is None:
         raise FormatError(f"{path}: no meshgen_patches comment (not written by meshgen)")

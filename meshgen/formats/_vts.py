@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import base64
 import json
+import xml.etree.ElementTree as ET
 import zlib
 from concurrent.futures import ThreadPoolExecutor
 from xml.sax.saxutils import quoteattr
@@ -44,11 +45,16 @@ from meshgen.errors import FormatError
 from meshgen.formats._vtu import (
     BLOCK_BYTES,
     VTK_TYPES,
-    _cpu_count,
     compress_block,
     compress_blocks,
     compression_header,
+    cpu_count,
 )
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.grid import cell_connectivity
+from meshgen.patches import as_records, from_records
+
+__all__ = ["NUMPY_TYPES", "PATCHES_KEY", "PATCH_ARRAY", "TYPES", "patch_ids", "read", "read_patches", "write"]
 
 PATCHES_KEY = "meshgen_patches"
 PATCH_ARRAY = "patch"
@@ -68,15 +74,12 @@ def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vts with ``cell_data``
     (name -> (cells,) float64, C order of the cells), ``metadata`` and ``patches``
     (``meshgen.patches.Patch``)."""
-    from meshgen.formats import METADATA_KEY, metadata_json
-    from meshgen.patches import as_records
-
     node_shape = X.shape[:-1]
     dim = len(node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
     extent = " ".join(f"0 {n - 1}" for n in node_shape) + (" 0 0" if dim == 2 else "")
     order = tuple(range(dim - 1, -1, -1))  # VTK's i-fastest order
-    pool = ThreadPoolExecutor(max_workers=_cpu_count())
+    pool = ThreadPoolExecutor(max_workers=cpu_count())
     sections = {"FieldData": [], "PointData": [], "CellData": [], "Points": []}
 
     def add(section, name, values, more=None):
@@ -144,8 +147,6 @@ def patch_ids(node_shape, patches) -> np.ndarray:
 
 def _parse(path):
     """(XML root, raw appended bytes or None) of a .vts file."""
-    import xml.etree.ElementTree as ET
-
     data = open(path, "rb").read()
     appended = None
     start = data.find(b"<AppendedData")
@@ -205,9 +206,6 @@ def read(path):
     cells in meshgen's C order, cell data, point data, meshgen's metadata in field data."""
     import meshio
 
-    from meshgen.formats import METADATA_KEY
-    from meshgen.grid import cell_connectivity
-
     root, appended = _parse(path)
     grid = root.find("StructuredGrid")
     pieces = grid.findall("Piece")
@@ -244,8 +242,6 @@ def read(path):
 
 
 def read_patches(path) -> list:
-    from meshgen.patches import from_records
-
     codes = read(path).field_data.get(PATCHES_KEY)
     if codes is None:
         raise FormatError(f"{path}: no {PATCHES_KEY} field data (not written by meshgen)")

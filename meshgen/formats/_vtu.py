@@ -46,7 +46,24 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
+
+__all__ = [
+    "BLOCK_BYTES",
+    "FILE_HEAD",
+    "HEADER_TYPE",
+    "LEVEL",
+    "PROBE_BYTES",
+    "RLE_ABOVE",
+    "VTK_TYPES",
+    "compress_block",
+    "compress_blocks",
+    "compression_header",
+    "cpu_count",
+    "read",
+    "write",
+]
 
 # zlib level 1: at 1e6 hexahedra with seven quality arrays 3% larger than level 3 and 13% larger
 # than level 6 (meshio's), at 3/4 and 1/3 of their compression time (benchmarks/formats.py).
@@ -74,12 +91,10 @@ def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_
     dict; none stored when empty). ``level``, ``rle_above``: see ``compress_block``;
     ``block_bytes``: uncompressed bytes per block, a multiple of 8 (meshio decodes each block
     into whole values)."""
-    from meshgen.formats import METADATA_KEY, metadata_json
-
     node_shape = X.shape[:-1]
     cell_count = int(np.prod([n - 1 for n in node_shape]))
     compress = functools.partial(compress_block, level=level, rle_above=rle_above)
-    pool = ThreadPoolExecutor(max_workers=_cpu_count())
+    pool = ThreadPoolExecutor(max_workers=cpu_count())
     arrays = []  # (element, name, further attributes, type, bytes, compressed blocks) in file order
 
     def add(element, name, more, values):
@@ -166,7 +181,7 @@ def _write_data_array(file, name: str, more: dict, dtype, header: bytes, streams
     file.write(b"\n</DataArray>\n")
 
 
-def _cpu_count() -> int:
+def cpu_count() -> int:
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux

@@ -580,11 +580,11 @@ def mesh_member(checkpoint: dict, values: dict, coords) -> np.ndarray:
 
 def load_family_member(path, values: dict, geometry_name: str | None = None):
     """The member of the family checkpoint at ``path`` with the parameters ``values`` given on the
-    command line, as a ``meshgen.neural.inference.TrainedModel`` whose model is the member's plain
+    command line, as a ``meshgen.neural.models.TrainedModel`` whose model is the member's plain
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
     Returns None when ``path`` is no family checkpoint."""
     from meshgen.geometry import load_geometry
-    from meshgen.neural.inference import TrainedModel, display_path
+    from meshgen.neural.models import TrainedModel, display_path
 
     path = Path(path)
     checkpoint = checkpoints.load_checkpoint(path)

@@ -67,9 +67,9 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
 
 
 def _geometry_spec(spec: str) -> str:
-    from meshgen.geometry import _looks_like_path
+    from meshgen.geometry import looks_like_path
 
-    return str(Path(spec).resolve()) if _looks_like_path(spec) else spec
+    return str(Path(spec).resolve()) if looks_like_path(spec) else spec
 
 
 def prepare_run(

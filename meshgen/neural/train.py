@@ -905,8 +905,8 @@ class CheckpointWriter:
 
 def corrected(X: np.ndarray, geometry, coords) -> np.ndarray:
     """A copy of node array ``X`` corrected to X + TFI[g - X] (what ``meshgen mesh`` makes of a
-    network's mesh by default; ``meshgen.neural.inference.correct_boundary``)."""
-    from meshgen.neural.inference import correct_boundary
+    network's mesh by default; ``meshgen.correction.correct_boundary``)."""
+    from meshgen.correction import correct_boundary
 
     X = X.copy()
     correct_boundary(X, geometry, coords)

@@ -17,9 +17,9 @@ This module re-exports the public names, so ``from meshgen.quality import X`` ke
 
 from meshgen.quality.faces import CELL_TYPES, cell_metrics_unstructured, cells_for_quality, match_faces
 from meshgen.quality.files import (
-    _nulls,  # noqa: F401  (used by ``meshgen evaluate --json -``)
     as_node_array,
     evaluate_file,
+    json_ready,
     recorded_metadata,
     sidecar_path,
     write_json,
@@ -66,6 +66,7 @@ __all__ = [
     "cell_metrics_unstructured",
     "cells_for_quality",
     "evaluate_file",
+    "json_ready",
     "match_faces",
     "quality_report",
     "recorded_metadata",

@@ -1,7 +1,7 @@
 """The quality report of a mesh larger than memory, block by block on Dask.
 
 The node array (a CGNS file read by hyperslabs, or any NumPy or dask array) is cut into the blocks
-of ``meshgen.chunked.block_slices``. Two passes over the blocks:
+of ``meshgen.grid.block_slices``. Two passes over the blocks:
 
 1. the bounding box and the non-finite nodes (and in 2D the total signed area): the degenerate-edge
    tolerance and the orientation depend on the whole mesh;
@@ -18,13 +18,21 @@ is a few blocks per worker plus the boundary nodes (O(n^2) in 3D) for the bounda
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import numpy as np
 
 from meshgen.errors import MeshgenError
+from meshgen.formats import read_header, read_node_block
+from meshgen.grid import block_slices
 from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
+from meshgen.quality.report import assemble_report
+from meshgen.quality.structured import structured_metrics
+from meshgen.scheduler import compute_in_order_of_completion
+
+__all__ = ["EVALUATE_BLOCK_NODES", "chunked_report"]
 
 # Block size of evaluation in nodes: the kernels hold about 60 float64 temporaries per cell of a block.
 EVALUATE_BLOCK_NODES = 1 << 21
@@ -35,9 +43,7 @@ def _reader(source):
     import dask
 
     if isinstance(source, (str, os.PathLike)):
-        from meshgen.formats._cgns import read_node_block, zone_header
-
-        node_shape, _ = zone_header(source)
+        node_shape, _ = read_header(source)
         read = dask.delayed(read_node_block, pure=True)
         return node_shape, len(node_shape), lambda block: read(str(source), block)
     shape = tuple(source.shape)
@@ -75,14 +81,12 @@ def _extent_of_block(nodes, block, read_block, node_shape):
 def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientation):
     """Pass 2 of one block: the summaries of its owned cells (those whose first node is in
     ``block``) and its owned boundary nodes with their parametric positions."""
-    from meshgen.quality.structured import _structured
-
     dim = len(node_shape)
     owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
     summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
     if all(s.stop > s.start for s in owned_cells):
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            metrics, degenerate, _ = _structured(nodes, tolerance=tolerance, orientation=orientation)
+            metrics, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation)
         cell_shape = tuple(n - 1 for n in nodes.shape[:-1])
         mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
         degenerate = degenerate.reshape(cell_shape)[mine].reshape(-1)
@@ -140,13 +144,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     ``progress(done, total, phase)`` hears about every block. Adds ``"percentiles"``: how p01 and
     p99 were computed.
     """
-    import itertools
-
     import dask
-
-    from meshgen.chunked import block_slices
-    from meshgen.quality.report import assemble_report
-    from meshgen.scheduler import compute_in_order_of_completion
 
     node_shape, dim, read = _reader(source)
     if dim not in (2, 3) or len(node_shape) != dim or min(node_shape) < 2:

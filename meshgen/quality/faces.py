@@ -16,10 +16,12 @@ from meshgen.quality.kernels import (
     QUAD_CORNER,
     QUAD_FACE_CORNERS,
     QUAD_FACES,
-    _hex_kernel,
-    _quad_kernel,
+    hex_kernel,
+    quad_kernel,
 )
-from meshgen.quality.structured import _apply_degenerate, _orientation_2d, _tolerance
+from meshgen.quality.structured import apply_degenerate, degenerate_tolerance, orientation_2d
+
+__all__ = ["CELL_TYPES", "cell_metrics_unstructured", "cells_for_quality", "match_faces", "unstructured_metrics"]
 
 
 def _sort4(columns):
@@ -146,14 +148,14 @@ def _check_cells(points, cells):
     return points[:, :dim], cells, dim
 
 
-def _unstructured(points, cells):
+def unstructured_metrics(points, cells):
     """Per-cell metrics, degenerate mask, and info (boundary node ids, counts) of an unstructured mesh."""
     points, cells, dim = _check_cells(points, cells)
     if len(cells) == 0:
         raise MeshgenError("no cells to evaluate")
     used = _used(cells, len(points))
     components = tuple(np.ascontiguousarray(points[:, c]) for c in range(dim))
-    tolerance, nonfinite = _tolerance(tuple(c[used] for c in components))
+    tolerance, nonfinite = degenerate_tolerance(tuple(c[used] for c in components))
     offsets = HEX_CORNER if dim == 3 else QUAD_CORNER
     faces, face_corners = (HEX_FACES, HEX_FACE_CORNERS) if dim == 3 else (QUAD_FACES, QUAD_FACE_CORNERS)
     n_cells, n_faces = len(cells), len(faces)
@@ -177,7 +179,7 @@ def _unstructured(points, cells):
 
     if dim == 2:
         all_corners = {s: tuple(c[cells[:, k]] for c in components) for s, k in offsets.items()}
-        orientation = _orientation_2d(all_corners)
+        orientation = orientation_2d(all_corners)
         del all_corners
 
     metrics = {name: np.empty(n_cells) for name in METRICS}
@@ -188,13 +190,13 @@ def _unstructured(points, cells):
         block_centroid = tuple(c[block] for c in centroid)
         neighbour = {face: tuple(c[neighbour_cell[f, block]] for c in centroid_ext) for f, face in enumerate(faces)}
         if dim == 3:
-            values, short = _hex_kernel(corner, block_centroid, neighbour, tolerance)
+            values, short = hex_kernel(corner, block_centroid, neighbour, tolerance)
         else:
-            values, short = _quad_kernel(corner, block_centroid, neighbour, tolerance, orientation)
+            values, short = quad_kernel(corner, block_centroid, neighbour, tolerance, orientation)
         for name in METRICS:
             metrics[name][block] = values[name]
         degenerate[block] = short
-    _apply_degenerate(metrics, degenerate)
+    apply_degenerate(metrics, degenerate)
     info = {"dim": dim, "nonfinite_nodes": nonfinite, "nonmanifold_faces": nonmanifold, "boundary_nodes": boundary_nodes}
     return metrics, degenerate, info
 
@@ -206,7 +208,7 @@ def cell_metrics_unstructured(points, cells) -> dict[str, np.ndarray]:
     ``cells``: (M, 8) hexahedra or (M, 4) quads, VTK corner order. Face neighbours (for
     non-orthogonality) are found from shared nodes. Returns arrays of length M keyed by ``METRICS``.
     """
-    return _unstructured(points, cells)[0]
+    return unstructured_metrics(points, cells)[0]
 
 
 CELL_TYPES = {"hexahedron": 3, "quad": 2}

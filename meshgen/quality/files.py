@@ -10,17 +10,33 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import MeshgenError
+from meshgen.atomic import atomic_path
+from meshgen.errors import GeometryError, MeshgenError
+from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
+from meshgen.geometry import load_geometry
+from meshgen.grid import cell_connectivity
+from meshgen.patches import geometry_patches
+from meshgen.quality.chunked import chunked_report
 from meshgen.quality.faces import cells_for_quality
-from meshgen.quality.report import _assess, _report
-from meshgen.quality.structured import _check_node_array
+from meshgen.quality.report import assess, build_report
+from meshgen.quality.structured import check_node_array
+from meshgen.resources import needs_chunking
+
+__all__ = [
+    "EVALUATE_BYTES_PER_NODE",
+    "as_node_array",
+    "evaluate_file",
+    "json_ready",
+    "recorded_metadata",
+    "sidecar_path",
+    "write_json",
+    "write_mesh_with_quality",
+]
 
 
 def as_node_array(points, cells, dims) -> np.ndarray | None:
     """The node array of an unstructured mesh that is exactly meshgen's structured grid of ``dims``
     cells (same node order and connectivity), else None: such files take the fast path."""
-    from meshgen.grid import cell_connectivity
-
     dims = tuple(int(n) for n in dims)
     node_shape = tuple(n + 1 for n in dims)
     dim = len(dims)
@@ -42,10 +58,8 @@ def sidecar_path(mesh_path) -> Path:
 
 def write_json(path, data) -> Path:
     """Write ``data`` as indented JSON atomically (non-finite floats as null)."""
-    from meshgen.atomic import atomic_path
-
     path = Path(path)
-    text = json.dumps(_nulls(data), indent=2, allow_nan=False) + "\n"
+    text = json.dumps(json_ready(data), indent=2, allow_nan=False) + "\n"
     try:
         with atomic_path(path) as temporary:
             temporary.write_text(text)
@@ -54,11 +68,13 @@ def write_json(path, data) -> Path:
     return path
 
 
-def _nulls(data):
+def json_ready(data):
+    """``data`` with NumPy scalars as plain numbers and non-finite floats as None (JSON null), for
+    ``json.dumps(..., allow_nan=False)``."""
     if isinstance(data, dict):
-        return {k: _nulls(v) for k, v in data.items()}
+        return {k: json_ready(v) for k, v in data.items()}
     if isinstance(data, (list, tuple)):
-        return [_nulls(v) for v in data]
+        return [json_ready(v) for v in data]
     if isinstance(data, (float, np.floating)):
         return float(data) if np.isfinite(data) else None
     if isinstance(data, np.integer):
@@ -74,16 +90,12 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
     ...) to ``<path>.quality.json``. ``write_options`` go to ``meshgen.formats.write_mesh``
     (``patches``, default the ``geometry``'s; ``format``; ``binary``). Returns the report (with
     ``quality_seconds``)."""
-    from meshgen.formats import write_mesh
-
     if geometry is not None and "patches" not in write_options:
-        from meshgen.patches import geometry_patches
-
         write_options["patches"] = geometry_patches(geometry)
 
     start = time.perf_counter()
-    metrics, degenerate, info = _assess(_check_node_array(X))
-    report = _report(metrics, degenerate, info, geometry)
+    metrics, degenerate, info = assess(check_node_array(X))
+    report = build_report(metrics, degenerate, info, geometry)
     report["quality_seconds"] = time.perf_counter() - start
     written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
     write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
@@ -97,8 +109,6 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
 def recorded_metadata(path, mesh) -> dict:
     """meshgen's metadata of a mesh file: what the file records (geometry, params, method, dims),
     else its ``<mesh>.quality.json`` sidecar (marked ``"source": "sidecar"``), else {}."""
-    from meshgen.formats import metadata_of
-
     metadata = metadata_of(mesh)
     if metadata:
         return {**metadata, "source": "file"}
@@ -129,18 +139,13 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     or None for automatically when the file is CGNS and the in-memory path would need more than
     half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
     """
-    from meshgen.formats import read_mesh
-
     path = Path(path)
     if not path.exists():
         raise MeshgenError(f"mesh file {path} does not exist")
     if path.is_file() and path.stat().st_size == 0 and path.suffix.lower() != ".foam":
         raise MeshgenError(f"mesh file {path} is empty")
     if chunked is None and mesh is None and path.suffix.lower() == ".cgns":
-        from meshgen.chunked import needs_chunking
-        from meshgen.formats._cgns import zone_header
-
-        node_shape, _ = zone_header(path)
+        node_shape, _ = read_header(path)
         chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
     if chunked:
         return _evaluate_file_in_blocks(path, geometry, params, client)
@@ -157,7 +162,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
         X = as_node_array(points, cells, dims)
     try:
-        metrics, degenerate, info = _assess(X if X is not None else (points, cells))
+        metrics, degenerate, info = assess(X if X is not None else (points, cells))
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     if degenerate.all():
@@ -171,18 +176,15 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
             f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation"
         )
         geometry = None
-    report = _report(metrics, degenerate, info, geometry)
+    report = build_report(metrics, degenerate, info, geometry)
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
 def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
     """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
-    from meshgen.formats._cgns import zone_header
-    from meshgen.quality.chunked import chunked_report
-
     if path.suffix.lower() != ".cgns":
         raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
-    node_shape, recorded = zone_header(path)
+    node_shape, recorded = read_header(path)
     metadata = {**recorded, "source": "file"} if recorded else recorded_metadata(path, None)
     cells = int(np.prod([n - 1 for n in node_shape]))
     geometry, source, notes = _geometry_for(path, geometry, params, metadata, cells)
@@ -200,9 +202,6 @@ def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
 
 def _geometry_for(path, geometry, params, metadata, n_cells):
     """(geometry or None, where it came from, notes) for evaluating the file ``path``."""
-    from meshgen.errors import GeometryError
-    from meshgen.geometry import load_geometry
-
     if metadata.get("source") == "sidecar" and (metadata.get("cells") != n_cells or metadata.get("mesh") != path.name):
         metadata.clear()  # a sidecar of another mesh that once had this name
     notes = []

@@ -38,6 +38,27 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = [
+    "BLOCK_CELLS",
+    "DEFINITIONS",
+    "DEGENERATE_TOLERANCE",
+    "HEX_CORNER",
+    "HEX_FACES",
+    "HEX_FACE_CORNERS",
+    "METRICS",
+    "QUAD_CORNER",
+    "QUAD_FACES",
+    "QUAD_FACE_CORNERS",
+    "STATS",
+    "VALID_FRACTION",
+    "VALID_RULE",
+    "WORST",
+    "cross_2d",
+    "hex_kernel",
+    "quad_kernel",
+    "vector_difference",
+]
+
 METRICS = (
     "min_angle",
     "max_angle",
@@ -94,7 +115,7 @@ QUAD_FACE_CORNERS = _face_corner_table(QUAD_CORNER, QUAD_FACES)  # (4, 2)
 # vector algebra on tuples of component arrays (x, y[, z]): no stacking, no copies
 
 
-def _sub(a, b):
+def vector_difference(a, b):
     return tuple(p - q for p, q in zip(a, b))
 
 
@@ -113,7 +134,7 @@ def _cross(a, b):
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-def _cross2(a, b):
+def cross_2d(a, b):
     """z component of the cross product of two plane vectors."""
     return a[0] * b[1] - a[1] * b[0]
 
@@ -132,7 +153,7 @@ def _degrees_of_cosine(cosine):
 def _neighbour_direction(neighbour_centroid, centroid, boundary_direction):
     """Unit vector from a cell centroid to its neighbour's across a face; where there is no
     neighbour (NaN centroid: boundary, or a neighbour with non-finite nodes) the given direction."""
-    d = _sub(neighbour_centroid, centroid)
+    d = vector_difference(neighbour_centroid, centroid)
     inside = np.isfinite(sum(d))  # one test for all components: a NaN or inf anywhere shows in the sum
     d = tuple(np.where(inside, p, q) for p, q in zip(d, boundary_direction))
     return _unit(d)[0]
@@ -142,7 +163,7 @@ def _neighbour_direction(neighbour_centroid, centroid, boundary_direction):
 # the kernels: one block of cells, corners given as component tuples of equal-shaped arrays
 
 
-def _hex_kernel(corner, centroid, neighbour_centroid, tolerance):
+def hex_kernel(corner, centroid, neighbour_centroid, tolerance):
     """Metrics of a block of hexahedra.
 
     ``corner``: dict (s0, s1, s2) -> (x, y, z) arrays of one shape (the block's cells).
@@ -160,7 +181,7 @@ def _hex_kernel(corner, centroid, neighbour_centroid, tolerance):
             low[others[0]], low[others[1]] = t
             high = list(low)
             high[axis] = 1
-            edge = _sub(corner[tuple(high)], corner[tuple(low)])
+            edge = vector_difference(corner[tuple(high)], corner[tuple(low)])
             unit_edge[axis][t], length = _unit(edge)
             lengths.append(length)
             axis_sum[axis] = edge if axis_sum[axis] is None else _add(axis_sum[axis], edge)
@@ -201,7 +222,7 @@ def _hex_kernel(corner, centroid, neighbour_centroid, tolerance):
             offsets = {axis: side, a: ta, b: tb}
             return corner[(offsets[0], offsets[1], offsets[2])]
 
-        normal = _cross(_sub(node(1, 1), node(0, 0)), _sub(node(0, 1), node(1, 0)))
+        normal = _cross(vector_difference(node(1, 1), node(0, 0)), vector_difference(node(0, 1), node(1, 0)))
         # Corner (ta, tb) of the face: its edges are ua[tb] and ub[ta], both pointing away from the
         # corner when ta == tb, one reversed otherwise.
         cosines = (_dot(ua[0], ub[0]), -_dot(ua[0], ub[1]), _dot(ua[1], ub[1]), -_dot(ua[1], ub[0]))
@@ -245,8 +266,8 @@ def _hex_kernel(corner, centroid, neighbour_centroid, tolerance):
     ), degenerate
 
 
-def _quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
-    """Metrics of a block of quadrilaterals in the plane (see ``_hex_kernel``); ``orientation`` is
+def quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
+    """Metrics of a block of quadrilaterals in the plane (see ``hex_kernel``); ``orientation`` is
     +1 or -1, the sign of the mesh's total area: corners turning the other way are inverted."""
     unit_edge, axis_sum, mean_length = [{}, {}], [None, None], [None, None]
     shortest_edge = None
@@ -257,7 +278,7 @@ def _quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
             low[axis] = 0
             high = list(low)
             high[axis] = 1
-            edge = _sub(corner[tuple(high)], corner[tuple(low)])
+            edge = vector_difference(corner[tuple(high)], corner[tuple(low)])
             unit_edge[axis][t], length = _unit(edge)
             lengths.append(length)
             axis_sum[axis] = edge if axis_sum[axis] is None else _add(axis_sum[axis], edge)
@@ -272,13 +293,13 @@ def _quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
     u0, u1 = unit_edge
     # Corner (ta, tb): edges u0[tb] and u1[ta]; cosines as for a hex face, corner areas u0[tb] x u1[ta].
     cosines = (_dot(u0[0], u1[0]), -_dot(u0[0], u1[1]), _dot(u0[1], u1[1]), -_dot(u0[1], u1[0]))
-    areas = (_cross2(u0[0], u1[0]), _cross2(u0[0], u1[1]), _cross2(u0[1], u1[1]), _cross2(u0[1], u1[0]))
+    areas = (cross_2d(u0[0], u1[0]), cross_2d(u0[0], u1[1]), cross_2d(u0[1], u1[1]), cross_2d(u0[1], u1[0]))
     largest_cosine = np.maximum(np.maximum(cosines[0], cosines[1]), np.maximum(cosines[2], cosines[3]))
     smallest_cosine = np.minimum(np.minimum(cosines[0], cosines[1]), np.minimum(cosines[2], cosines[3]))
     smallest_area = np.minimum(np.minimum(areas[0], areas[1]), np.minimum(areas[2], areas[3]))
     largest_area = np.maximum(np.maximum(areas[0], areas[1]), np.maximum(areas[2], areas[3]))
     # Reflex corner: a corner area of the other sign than the quad's area at its centre (diagonals).
-    centre_area = _cross2(_sub(corner[(1, 1)], corner[(0, 0)]), _sub(corner[(0, 1)], corner[(1, 0)]))
+    centre_area = cross_2d(vector_difference(corner[(1, 1)], corner[(0, 0)]), vector_difference(corner[(0, 1)], corner[(1, 0)]))
     reflex = np.where(centre_area >= 0.0, smallest_area < 0.0, largest_area > 0.0)
     scaled_jacobian = smallest_area if orientation > 0 else -largest_area
 
@@ -287,9 +308,9 @@ def _quad_kernel(corner, centroid, neighbour_centroid, tolerance, orientation):
     for axis, side in QUAD_FACES:
         along = u1[side] if axis == 0 else u0[side]  # the face is the edge across the normal axis
         # |n . e| with n the edge's in-plane normal is |along x e|.
-        centroid_cosine = np.abs(_cross2(along, principal[axis]))
+        centroid_cosine = np.abs(cross_2d(along, principal[axis]))
         towards_neighbour = _neighbour_direction(neighbour_centroid[(axis, side)], centroid, principal[axis])
-        face_cosine = np.abs(_cross2(along, towards_neighbour))
+        face_cosine = np.abs(cross_2d(along, towards_neighbour))
         if centroid_alignment is None:
             centroid_alignment, face_alignment = centroid_cosine, face_cosine
         else:

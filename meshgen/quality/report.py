@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshgen.deviation import boundary_deviation, grid_boundary_nodes
 from meshgen.errors import MeshgenError
-from meshgen.quality.faces import _unstructured, cells_for_quality
+from meshgen.quality.faces import cells_for_quality, unstructured_metrics
 from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
-from meshgen.quality.structured import _check_node_array, _structured
+from meshgen.quality.structured import check_node_array, structured_metrics
+
+__all__ = ["assemble_report", "assess", "build_report", "quality_report", "summarize"]
 
 
 def summarize(values: np.ndarray) -> dict:
@@ -25,7 +28,7 @@ def summarize(values: np.ndarray) -> dict:
     }
 
 
-def _assess(X_or_mesh):
+def assess(X_or_mesh):
     """Per-cell metrics of any accepted input, with what the report needs besides them."""
     # Non-finite coordinates are counted, reported and make their cells degenerate; the arithmetic
     # on them (inf - inf) must not also print NumPy's RuntimeWarnings beside meshgen's messages.
@@ -34,11 +37,9 @@ def _assess(X_or_mesh):
 
 
 def _assess_quietly(X_or_mesh):
-    from meshgen.deviation import grid_boundary_nodes
-
     if isinstance(X_or_mesh, np.ndarray):
-        X = _check_node_array(X_or_mesh)
-        metrics, degenerate, info = _structured(X)
+        X = check_node_array(X_or_mesh)
+        metrics, degenerate, info = structured_metrics(X)
         info["dim"] = X.shape[-1]
         info["boundary"] = lambda: grid_boundary_nodes(X)
         return metrics, degenerate, info
@@ -47,7 +48,7 @@ def _assess_quietly(X_or_mesh):
         points, cells = X_or_mesh
     else:
         points, cells, skipped = cells_for_quality(X_or_mesh)
-    metrics, degenerate, info = _unstructured(points, cells)
+    metrics, degenerate, info = unstructured_metrics(points, cells)
     info["skipped"] = skipped
     info["boundary"] = lambda: (np.asarray(points, dtype=float)[info["boundary_nodes"], : info["dim"]], None)
     return metrics, degenerate, info
@@ -64,10 +65,10 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
     ({count, fraction, degenerate}), ``valid``, ``valid_rule``, ``units`` and, when known,
     ``boundary_deviation``, ``skipped``, ``warnings``. Summaries leave degenerate cells out.
     """
-    return _report(*_assess(X_or_mesh), geometry)
+    return build_report(*assess(X_or_mesh), geometry)
 
 
-def _report(metrics, degenerate, info, geometry) -> dict:
+def build_report(metrics, degenerate, info, geometry) -> dict:
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
     summaries = {name: summarize(metrics[name][shaped]) for name in METRICS}
@@ -84,8 +85,6 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
     (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
     ``boundary()`` -> (boundary points, parametric guesses)); shared by the whole-mesh and the
     block-wise (``meshgen.quality.chunked``) paths."""
-    from meshgen.deviation import boundary_deviation
-
     dim = int(info["dim"])
     n_cells = counts["cells"]
     inverted_count = counts["inverted"]

@@ -20,6 +20,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+__all__ = [
+    "GAMMA",
+    "LOG_GAMMA",
+    "RELATIVE_ACCURACY",
+    "SMALLEST",
+    "Buckets",
+    "QuantileSketch",
+    "merge",
+    "order_statistic",
+    "quantile",
+    "sketch_of",
+]
+
 RELATIVE_ACCURACY = 1e-4
 GAMMA = (1.0 + RELATIVE_ACCURACY) / (1.0 - RELATIVE_ACCURACY)
 LOG_GAMMA = math.log(GAMMA)

@@ -16,21 +16,23 @@ from meshgen.quality.kernels import (
     QUAD_CORNER,
     QUAD_FACES,
     WORST,
-    _cross2,
-    _hex_kernel,
-    _quad_kernel,
-    _sub,
+    cross_2d,
+    hex_kernel,
+    quad_kernel,
+    vector_difference,
 )
 
+__all__ = ["apply_degenerate", "cell_metrics", "check_node_array", "degenerate_tolerance", "orientation_2d", "structured_metrics"]
 
-def _check_node_array(X) -> np.ndarray:
+
+def check_node_array(X) -> np.ndarray:
     X = np.asarray(X, dtype=float)
     if X.ndim not in (3, 4) or X.shape[-1] != X.ndim - 1 or min(X.shape[:-1]) < 2:
         raise MeshgenError(f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {X.shape}")
     return X
 
 
-def _tolerance(points_or_components) -> tuple[float, int]:
+def degenerate_tolerance(points_or_components) -> tuple[float, int]:
     """Degenerate-edge length and the number of non-finite nodes, from the finite coordinates."""
     components = points_or_components
     finite = np.ones(components[0].shape, dtype=bool)
@@ -43,14 +45,14 @@ def _tolerance(points_or_components) -> tuple[float, int]:
     return DEGENERATE_TOLERANCE * extent, nonfinite
 
 
-def _orientation_2d(corner) -> float:
+def orientation_2d(corner) -> float:
     """+1 if the quads' total signed area (diagonal cross products) is >= 0, else -1."""
-    area = _cross2(_sub(corner[(1, 1)], corner[(0, 0)]), _sub(corner[(0, 1)], corner[(1, 0)]))
+    area = cross_2d(vector_difference(corner[(1, 1)], corner[(0, 0)]), vector_difference(corner[(0, 1)], corner[(1, 0)]))
     total = float(np.nansum(area))
     return 1.0 if total >= 0.0 else -1.0
 
 
-def _apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:
+def apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:
     if not degenerate.any():
         return
     for name, worst in WORST.items():
@@ -59,19 +61,19 @@ def _apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:
     sj[degenerate] = np.minimum(np.where(np.isfinite(sj[degenerate]), sj[degenerate], 0.0), 0.0)
 
 
-def _structured(X, tolerance=None, orientation=None):
+def structured_metrics(X, tolerance=None, orientation=None):
     """Per-cell metrics (C order of cells) and the degenerate mask of node array ``X``.
 
     ``tolerance`` (degenerate-edge length) and ``orientation`` (2D: +1 or -1) default to those of
     ``X`` itself; a block of a larger mesh passes the whole mesh's, so its cells get the values they
     get in the whole."""
-    X = _check_node_array(X)
+    X = check_node_array(X)
     dim = X.shape[-1]
     node_shape = X.shape[:-1]
     cell_shape = tuple(n - 1 for n in node_shape)
     n_cells = int(np.prod(cell_shape))
     components = tuple(np.ascontiguousarray(X[..., c]) for c in range(dim))
-    own_tolerance, nonfinite = _tolerance(components)
+    own_tolerance, nonfinite = degenerate_tolerance(components)
     tolerance = own_tolerance if tolerance is None else tolerance
     offsets = HEX_CORNER if dim == 3 else QUAD_CORNER
 
@@ -91,7 +93,7 @@ def _structured(X, tolerance=None, orientation=None):
     # NaN margin of one cell on every side: the neighbour across a boundary face is "none".
     padded = tuple(np.pad(c, 1, constant_values=np.nan) for c in centroid)
     if orientation is None:
-        orientation = _orientation_2d(all_corners) if dim == 2 else 1.0
+        orientation = orientation_2d(all_corners) if dim == 2 else 1.0
     faces = HEX_FACES if dim == 3 else QUAD_FACES
 
     metrics = {name: np.empty(cell_shape) for name in METRICS}
@@ -109,15 +111,15 @@ def _structured(X, tolerance=None, orientation=None):
             neighbour[(axis, side)] = tuple(p[index] for p in padded)
         block = corners(first, last)
         if dim == 3:
-            values, short = _hex_kernel(block, block_centroid, neighbour, tolerance)
+            values, short = hex_kernel(block, block_centroid, neighbour, tolerance)
         else:
-            values, short = _quad_kernel(block, block_centroid, neighbour, tolerance, orientation)
+            values, short = quad_kernel(block, block_centroid, neighbour, tolerance, orientation)
         for name in METRICS:
             metrics[name][first:last] = values[name]
         degenerate[first:last] = short
     metrics = {name: values.reshape(n_cells) for name, values in metrics.items()}
     degenerate = degenerate.reshape(n_cells)
-    _apply_degenerate(metrics, degenerate)
+    apply_degenerate(metrics, degenerate)
     return metrics, degenerate, {"nonfinite_nodes": nonfinite}
 
 
@@ -127,4 +129,4 @@ def cell_metrics(X) -> dict[str, np.ndarray]:
     Returns a dict keyed by ``METRICS``, each an array of length n1*n2[*n3] in C order of the
     cells (i, j[, k]), float64. Angles and non-orthogonality in degrees.
     """
-    return _structured(X)[0]
+    return structured_metrics(X)[0]

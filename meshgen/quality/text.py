@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+__all__ = ["summary_lines"]
+
 
 def _format(value, digits=4) -> str:
     if value is None:
