@@ -414,6 +414,7 @@ def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylind
 # which model
 
 
+@pytest.mark.slow
 def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_path, soft_2d, soft_3d):
     runs = tmp_path / "runs"
     for name, source, age in (("semicylinder-old", soft_3d, 200), ("semidisk-new", soft_2d, 100)):
