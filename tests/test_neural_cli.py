@@ -1,5 +1,5 @@
 """``meshgen train`` end to end: a run folder, the final lines, Ctrl-C and --resume, and every bad
-input of the issue (one-line error, exit 2, nothing written)."""
+input (one-line error, exit 2, nothing written)."""
 
 import csv
 import signal
