@@ -178,7 +178,7 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="60^3 and 80^3 instead of 200^3 and 400^3")
-    parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: the large run)")
+    parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: by hand)")
     parser.add_argument("--folder", type=Path, default=None, help="where the files go (needs (N+1)^3 * 24 bytes free)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()

@@ -220,4 +220,4 @@ def test_every_section_of_the_semicylinder_is_gmshs_smoothed_transfinite_mesh(tm
         assert distance.max() < 1e-5  # the volume solver stops at updates of 1e-6 of the length (2)
     angle = quality_report(X, semicylinder)["metrics"]["min_angle"]["mean"]
     assert angle == pytest.approx(gmsh_angle, abs=1e-4)
-    assert angle == pytest.approx({30: 74.42, 100: 74.79}[cells], abs=0.005)  # gmsh's figures, as benchmarks/bench_layout.py quotes them
+    assert angle == pytest.approx({30: 74.42, 100: 74.79}[cells], abs=0.005)  # gmsh's own figures
