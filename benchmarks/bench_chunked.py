@@ -7,12 +7,12 @@ and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN`
 
 - the in-memory path and the chunked path at the same size (``--dims 200^3``; ``--quick`` 60^3),
   TFI to ``.cgns``, each with and without the quality report (``--no-quality``); node throughput
-  is nodes per wall second, and the ratio is in-memory over chunked throughput (the issue's goal:
+  is nodes per wall second, and the ratio is in-memory over chunked throughput (target:
   at most 1.5);
 - the chunked path at ``--big-dims`` (default 400; ``--quick`` 80), TFI to ``.cgns`` with
   ``--no-quality``, then ``meshgen evaluate --chunked`` of that file; the bundled neural model in
   memory and in blocks at the same size (``--no-quality``);
-- the issue's 1000^3 rows are this with ``--big-dims 1000`` run by hand (about 24 GB on disk in
+- the 1000^3 rows are this with ``--big-dims 1000`` run by hand (about 24 GB on disk in
   ``--folder``, tens of minutes): not part of ``benchmarks/run.py``;
 - GPU inference: skipped where torch sees no CUDA device (this machine), with the reason.
 """
@@ -178,7 +178,7 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="60^3 and 80^3 instead of 200^3 and 400^3")
-    parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: the issue's)")
+    parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: by hand)")
     parser.add_argument("--folder", type=Path, default=None, help="where the files go (needs (N+1)^3 * 24 bytes free)")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()

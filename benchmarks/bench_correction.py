@@ -1,4 +1,4 @@
-"""Benchmark of the boundary correction X = N + TFI[g - N] (issue 13, part 1): the ``default``
+"""Benchmark of the boundary correction X = N + TFI[g - N]: the ``default``
 preset trained on each 3D built-in geometry, its corrected mesh at 30^3, 100^3 and 200^3 cells
 against the converged elliptic mesh of the same dims (inverted cells, boundary deviation, mean
 minimum angle), and the raw network's figures (boundary error, inverted cells) beside them.
@@ -28,7 +28,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as meshgen train does, be
 
 GEOMETRIES = ["canal", "flower", "semicylinder", "topcurve"]  # the 3D built-ins (bump and semidisk are 2D)
 DIMS = [30, 100, 200]
-# issue 13: mean min angle within 0.3 degrees of the elliptic mesh's. Judged one-sided ("met"): at
+# Target: mean min angle within 0.3 degrees of the elliptic mesh's. Judged one-sided ("met"): at
 # most 0.3 degrees below it, since a higher mean minimum angle on a valid mesh with an exact boundary
 # is a better mesh, not a miss; "within" keeps the two-sided reading beside it.
 ANGLE_TOLERANCE_DEGREES = 0.3

@@ -3,7 +3,7 @@ time, and each member's mesh against the elliptic mesh of that member.
 
     python benchmarks/bench_family.py [--quick] [--threads N] [--json FILE]
 
-Cases (issue 13, part 3): ``flower`` with twist 0..180 and ``semicylinder`` with radius 0.5..2 and
+Cases: ``flower`` with twist 0..180 and ``semicylinder`` with radius 0.5..2 and
 length 1..4. Each is trained with the ``family`` preset, then ``members`` random members (seeded)
 are meshed at ``cells``^3 and measured with ``meshgen.quality``: inverted cells, boundary deviation
 (relative to the characteristic length), mean minimum angle, and the same for the converged
@@ -32,7 +32,7 @@ CASES = {
     "flower": {"twist": (0.0, 180.0)},
     "semicylinder": {"radius": (0.5, 2.0), "length": (1.0, 4.0)},
 }
-TOLERANCE_DEGREES = 0.5  # the issue's bound on |mean min angle - elliptic's| per member
+TOLERANCE_DEGREES = 0.5  # the target's bound on |mean min angle - elliptic's| per member
 QUICK_OVERRIDES = ["adam.steps=60", "lbfgs.steps=0", "points.interior=1000"]  # a smoke test of the measurement
 
 

@@ -2,7 +2,7 @@
 
     python benchmarks/bench_inference.py [--quick] [--json FILE]
 
-Figures (targets from issue 5, for a 2-core CPU):
+Figures (targets for a 2-core CPU):
 
 - inference: ``meshgen.neural.inference.evaluate_on_grid`` on 101^3 nodes through a random
   [85]*4 tanh network, median of 5 (target 0.6 s), next to the float32 matrix-product roof: the

@@ -7,11 +7,11 @@ Per geometry and size (30^3 and 100^3 cells; --quick: 30^3 only): for TFI and el
 layout, the mean minimum angle, inverted cells, the largest boundary deviation relative to the
 characteristic length (``meshgen.quality.quality_report`` against the geometry's own surface) and
 the wall seconds of the mesh (the smoothed layout's one-off fine-grid solve is timed apart, as
-``layout_seconds``). Issue 16's marks on the semicylinder: the smoothed gmsh transfinite mesh's
+``layout_seconds``). The reference on the semicylinder: the smoothed gmsh transfinite mesh's
 mean minimum angle, measured here when gmsh is installed (``gmsh_smoothed``: gmsh's transfinite
 mesh of the section with its elliptic smoother run to convergence; the semicylinder's smoothed
-elliptic mesh is its extrusion, node for node, tests/test_layout.py), quoted as 74.42 at 30^3 and
-74.79 at 100^3 by the issue.
+elliptic mesh is its extrusion, node for node, tests/test_layout.py), 74.42 at 30^3 and 74.79 at
+100^3.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from meshgen.layout import layout_of, smoothed  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import tfi  # noqa: E402
 
-GMSH_SMOOTHED = {30: 74.42, 100: 74.79}  # semicylinder, mean min angle, as issue 16 quotes it
+GMSH_SMOOTHED = {30: 74.42, 100: 74.79}  # semicylinder, mean min angle of gmsh's smoothed transfinite mesh
 SECTION_GEO = """Point(1) = {{0, 0, 0}}; Point(2) = {{-1, 0, 0}}; Point(3) = {{Cos(3*Pi/4), Sin(3*Pi/4), 0}};
 Point(4) = {{Cos(Pi/4), Sin(Pi/4), 0}}; Point(5) = {{1, 0, 0}};
 Circle(1) = {{2, 1, 3}}; Circle(2) = {{3, 1, 4}}; Circle(3) = {{4, 1, 5}}; Line(4) = {{5, 2}};

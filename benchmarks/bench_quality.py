@@ -4,7 +4,7 @@
 
 Times, median of --repeat runs: the seven per-cell metrics (``cell_metrics`` on the node array;
 ``cell_metrics_unstructured`` on points + VTK connectivity, which also finds the face neighbours),
-and the full report with boundary deviation (``quality_report``). Target (issue 3): 1e6 hexahedra
+and the full report with boundary deviation (``quality_report``). Target: 1e6 hexahedra
 evaluated in at most 3 s on the 2-core machines. Wall and process CPU time are both given: on a
 shared machine the CPU time is the steadier figure.
 """

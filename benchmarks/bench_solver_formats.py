@@ -8,7 +8,7 @@ The default mesh is the semicylinder by the bundled network, snapped (what ``mes
 makes without options): its coordinates and quality values vary in every bit, unlike TFI's
 extrusion, whose repeated values zlib compresses several times better. Times: wall seconds,
 median of ``--repeat`` writes (CPU seconds beside them); sizes: the file, or the OpenFOAM case's
-polyMesh folder. The issue's target: the .vts at most half the .vtu's size and no slower to write.
+polyMesh folder. Target: the .vts at most half the .vtu's size and no slower to write.
 """
 
 from __future__ import annotations

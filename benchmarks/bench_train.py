@@ -435,7 +435,7 @@ LAYOUTS = ("smoothed", "fixed")
 
 
 def speed_table(geometry, threads=(1, 2), quick=False, verbose=True, cuda=None) -> dict:
-    """Issue 13 part 2: per preset, device (CPU with each of ``threads``, and CUDA where torch sees
+    """Training speed: per preset, device (CPU with each of ``threads``, and CUDA where torch sees
     a GPU) and boundary layout (both on 2 threads and CUDA, the smoothed one alone on 1 thread),
     seconds per Adam and L-BFGS step inside the loop and the time to a valid corrected mesh better
     than TFI and to converged quality (runs stopped there, but for ``paper`` on CUDA, whose 12000

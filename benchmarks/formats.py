@@ -5,12 +5,12 @@
                                  [--json benchmarks/formats.json]
 
 Formats table: times are the best of ``--repeat`` runs (a cell-data array and the metadata
-included); "meshio vtu" is meshio's own zlib .vtu of the same mesh, the baseline DESIGN section 9
+included); "meshio vtu" is meshio's own zlib .vtu of the same mesh, the baseline design notes §9
 quotes.
 
 .vtu table: the mesh as ``meshgen mesh`` writes it (the seven quality arrays of
-``meshgen.quality`` and the metadata), written by meshio at zlib's default level (the old path,
-without the metadata, which meshio's writer drops) and by ``meshgen.formats._vtu`` at
+``meshgen.quality`` and the metadata), written by meshio at zlib's default level (meshio's
+own writer, without the metadata, which meshio's writer drops) and by ``meshgen.formats._vtu`` at
 zlib levels 1, 3 and 6; wall and process CPU time (all threads) of the write, median of
 ``--vtu-repeat``, file size, and read time by meshio (what ``meshgen evaluate`` uses) and by VTK.
 Then the compression alone of the same arrays in 1 MiB blocks on the same thread pool, for the

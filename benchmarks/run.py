@@ -45,9 +45,9 @@ Sections, in order (all on the semicylinder, the reference shape):
   of that file (peak memory), a neural mesh in blocks; the 1000^3 rows are
   ``bench_chunked.py --big-dims 1000`` by hand; the GPU row is skipped without a CUDA device.
 
-The summary at the end lists the headline figures with their targets (from the issues) and met /
+The summary at the end lists the headline figures with their targets and met /
 not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
-``cpu_seconds``, ``megabytes``, ``gflops``), ``--markdown`` writes the summary as a README section.
+``cpu_seconds``, ``megabytes``, ``gflops``), ``--markdown`` writes the summary as a Markdown table.
 
 --quick (for CI, a few minutes on 2 cores): meshing at 30^3 only, 2 repeats, the default network
 sizes only with few steps, time-to-quality with capped budgets (marked ``capped``; a capped run that
@@ -104,32 +104,32 @@ SECTIONS = [
     "chunked",
 ]
 
-# figure key -> (comparison, target, unit, where the target comes from)
+# figure key -> (comparison, target, unit, what the figure measures)
 TARGETS = {
-    "inference_101_seconds": ("<=", 0.6, "s", "issue 5: [85]*4 network on 101^3 nodes"),
-    "mesh_command_100_seconds": ("<=", 5.0, "s", "issue 5: meshgen mesh --dims 100 100 100, end to end"),
-    "elliptic_100_seconds": ("<=", 60.0, "s", "issue 6"),
-    "elliptic_30_seconds": ("<=", 3.0, "s", "issue 6"),
-    "evaluate_1e6_seconds": ("<=", 3.0, "s", "issue 3: quality of 1e6 hexahedra"),
-    "fd_ad_step_ratio": (">=", 10.0, "x", "the training issue: autograd step / finite-difference step, same points"),
-    "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "issue 5: meshgen mesh --dims 200 200 200"),
-    "vts_vtu_size_ratio": ("<=", 0.5, "x", "issue 12: .vts size / .vtu size, 100^3 neural mesh with its quality arrays"),
-    "vts_vtu_write_time_ratio": ("<=", 1.0, "x", "issue 12: .vts write time / .vtu write time, same mesh"),
-    "elliptic_min_angle_30": (">=", 74.4, "deg", "issue 16: semicylinder 30^3, smoothed gmsh transfinite mesh 74.42"),
-    "elliptic_min_angle_100": (">=", 74.8, "deg", "issue 16: semicylinder 100^3, smoothed gmsh transfinite mesh 74.79"),
-    "chunked_throughput_ratio": ("<=", 1.5, "x", "issue 14: in-memory / chunked node throughput, 200^3 TFI to .cgns"),
-    "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
-    "evaluate_chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "issue 14: meshgen evaluate of the 1000^3 file"),
-    "family_worst_degrees": ("<=", 0.5, "deg", "issue 13: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
-    "exact_converged_seconds": ("<=", 15.0, "s", "issue 13: exact to converged quality on 2 cores"),
-    "default_converged_seconds": ("<=", 90.0, "s", "issue 13: default to converged quality on 2 cores"),
-    "gpu_inference_501_seconds": ("<=", 1.0, "s", "issue 14: [85]*4 network on 501^3 nodes on a GPU"),
-    "paper_cuda_adam_seconds": ("<=", 60.0, "s", "issue 13: paper's 12000 Adam steps, [85]*4, on a GPU"),
+    "inference_101_seconds": ("<=", 0.6, "s", "forward pass of a [85]*4 network on 101^3 nodes, 2 cores"),
+    "mesh_command_100_seconds": ("<=", 5.0, "s", "meshgen mesh --dims 100 100 100, end to end, bundled model"),
+    "elliptic_100_seconds": ("<=", 60.0, "s", "elliptic mesh of the semicylinder, 100^3 cells, converged"),
+    "elliptic_30_seconds": ("<=", 3.0, "s", "elliptic mesh of the semicylinder, 30^3 cells, converged"),
+    "evaluate_1e6_seconds": ("<=", 3.0, "s", "quality report of 1e6 hexahedra, with boundary deviation"),
+    "fd_ad_step_ratio": (">=", 10.0, "x", "autograd step / finite-difference step, same points"),
+    "peak_memory_200_megabytes": ("<=", 6000.0, "MB", "peak memory of meshgen mesh --dims 200 200 200"),
+    "vts_vtu_size_ratio": ("<=", 0.5, "x", ".vts size / .vtu size, 100^3 neural mesh with its quality arrays"),
+    "vts_vtu_write_time_ratio": ("<=", 1.0, "x", ".vts write time / .vtu write time, same mesh"),
+    "elliptic_min_angle_30": (">=", 74.4, "deg", "semicylinder 30^3, mean min angle; smoothed gmsh transfinite mesh 74.42"),
+    "elliptic_min_angle_100": (">=", 74.8, "deg", "semicylinder 100^3, mean min angle; smoothed gmsh transfinite mesh 74.79"),
+    "chunked_throughput_ratio": ("<=", 1.5, "x", "in-memory / chunked node throughput, 200^3 TFI to .cgns"),
+    "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "peak memory of meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
+    "evaluate_chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "peak memory of meshgen evaluate of the 1000^3 file"),
+    "family_worst_degrees": ("<=", 0.5, "deg", "family: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
+    "exact_converged_seconds": ("<=", 15.0, "s", "training time of exact to converged quality on 2 cores"),
+    "default_converged_seconds": ("<=", 90.0, "s", "training time of default to converged quality on 2 cores"),
+    "gpu_inference_501_seconds": ("<=", 1.0, "s", "forward pass of a [85]*4 network on 501^3 nodes on a GPU"),
+    "paper_cuda_adam_seconds": ("<=", 60.0, "s", "paper's 12000 Adam steps, [85]*4, on a GPU"),
     "correction_angle_degrees": (
         ">=",
         -0.3,
         "deg",
-        "issue 13: corrected mesh within 0.3 degrees of the elliptic mesh, "
+        "corrected mesh within 0.3 degrees of the elliptic mesh, "
         "judged as at most 0.3 below it (a higher angle is a better mesh)",
     ),
 }
@@ -611,7 +611,7 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                     result["gmsh_smoothed_min_angle_mean"],
                     "deg",
                     None,
-                    note="the reference of issue 16",
+                    note="the reference for the smoothed layout",
                 )
     if "mesh_command" in sections:
         data = sections["mesh_command"]

@@ -1,4 +1,4 @@
-"""Half-cylinder of radius R and length L, the reference shape of DESIGN section 3.
+"""Half-cylinder of radius R and length L, the reference shape of design notes §3.
 
 Cross-section: the half-disk x^2 + y^2 <= R^2, y >= 0, parametrised by (xi, eta) as in the
 ``semidisk`` geometry; z = L * zeta. The side faces map the square's edges; the caps

@@ -1,4 +1,4 @@
-"""Half-disk x^2 + y^2 <= R^2, y >= 0: the semicylinder's cross-section (DESIGN section 3)."""
+"""Half-disk x^2 + y^2 <= R^2, y >= 0: the semicylinder's cross-section (design notes §3)."""
 
 import numpy as np
 

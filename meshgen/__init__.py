@@ -11,7 +11,7 @@ Submodules hold the methods (``from meshgen.tfi import tfi``, ``from meshgen.ell
 elliptic``); the names below are imported lazily so that ``import meshgen`` stays cheap (no torch, no trimesh).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 _LAZY = {
     "mesh": "meshgen.meshing",

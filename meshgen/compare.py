@@ -1,5 +1,5 @@
 """Meshing methods side by side (``meshgen compare``): one row per method or mesh file, the headline
-columns of DESIGN section 7, the best value per column, and the files a comparison leaves behind.
+columns of design notes §7, the best value per column, and the files a comparison leaves behind.
 
 A comparison is plain data (what ``compare.json`` holds)::
 

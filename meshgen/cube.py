@@ -6,7 +6,7 @@ deviation, quality, training points, patches). Faces are numbered axis-major, si
     3D: xi0, xi1, eta0, eta1, zeta0, zeta1        2D: xi0, xi1, eta0, eta1
 
 ``xi0`` is the face xi = 0, ``zeta1`` the face zeta = 1. These are also the default boundary-patch
-names of a geometry (DESIGN section 3).
+names of a geometry (design notes §3).
 """
 
 from __future__ import annotations

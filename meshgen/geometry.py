@@ -1,4 +1,4 @@
-"""Geometry plugins: the boundary parametrisation of a physical domain (DESIGN section 3).
+"""Geometry plugins: the boundary parametrisation of a physical domain (design notes §3).
 
 A plugin is a Python module (a file, or a module named by an entry point) with:
 

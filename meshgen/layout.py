@@ -1,7 +1,7 @@
 """Smoothed boundary layout: a reparametrisation of the cube's boundary that moves boundary
-nodes within their face (issue 16).
+nodes within their face.
 
-Today's ("fixed") layout puts the boundary node at parametric point p on the geometry's boundary
+The "fixed" layout puts the boundary node at parametric point p on the geometry's boundary
 map g(p): on a curved face that is the transfinite (Coons) layout of its edges, and the interior
 grid lines of an elliptic mesh bend over many layers to meet it. The smoothed layout replaces g by
 g(s(p)), s a reparametrisation of the unit cube's boundary that maps every edge onto itself and

@@ -6,7 +6,7 @@ the method wants recorded (iterations, residual, ...).
 The neural methods are one function, ``meshgen.neural.models.build_neural`` (a trained network
 evaluated at the nodes, its boundary corrected onto the geometry), registered once as ``neural``
 (any trained model) and once per training preset (``3dmeshnet``, ``exact``, ``pinn`` ...: the
-methods of DESIGN section 6, which ``meshgen compare`` trains with that preset). So a mesh of the
+methods of design notes §6, which ``meshgen compare`` trains with that preset). So a mesh of the
 same checkpoint is the same mesh, whichever command makes it.
 """
 
@@ -58,7 +58,7 @@ register_method(
 register_method(
     Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS)
 )
-# The trained methods of DESIGN section 6: name -> training preset (presets/<preset>.yaml).
+# The trained methods of design notes §6: name -> training preset (presets/<preset>.yaml).
 TRAINED = {
     "3dmeshnet": "default",
     "exact": "exact",

@@ -1,4 +1,4 @@
-"""Orthogonality at chosen walls for elliptic meshes (issue 16): the first cell layer meets the
+"""Orthogonality at chosen walls for elliptic meshes: the first cell layer meets the
 wall at right angles.
 
 Method (an equivalent of the Sorenson / Thomas-Middlecoff source terms, which drive the same

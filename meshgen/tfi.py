@@ -1,4 +1,4 @@
-"""Transfinite interpolation (Gordon-Hall, linear blending; DESIGN section 4).
+"""Transfinite interpolation (Gordon-Hall, linear blending; design notes §4).
 
 The interpolant is the Boolean sum of the linear projectors along each parametric axis,
 

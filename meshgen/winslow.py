@@ -1,4 +1,4 @@
-"""The discrete Winslow operator of DESIGN section 5 on a structured tensor grid (NumPy).
+"""The discrete Winslow operator of design notes §5 on a structured tensor grid (NumPy).
 
 With r = (x, y[, z]) and the covariant metric g_ab = r_a . r_b (derivatives in the parametric
 coordinates), the Winslow system is, for every component of r,
@@ -142,7 +142,7 @@ def _stencil(F: np.ndarray, axis: int, weights, trimmed: tuple = ()):
 
 def cofactors(g: dict) -> dict:
     """Cofactor matrix A of the symmetric metric ``g`` ({(a, b): array} for a <= b), same layout.
-    3D: DESIGN section 5's a1, a2, a3 on the diagonal and b12, b23, b31 off it; 2D: g22, g11, -g12."""
+    3D: design notes §5's a1, a2, a3 on the diagonal and b12, b23, b31 off it; 2D: g22, g11, -g12."""
     if (2, 2) in g:
         g11, g22, g33 = g[0, 0], g[1, 1], g[2, 2]
         g12, g23, g13 = g[0, 1], g[1, 2], g[0, 2]

@@ -161,7 +161,7 @@ def quality(model, geometry) -> dict:
     coords = parametric_grid([30] * geometry.dim)
     classical = {method: figures(make_mesh(method, geometry, coords)[0], geometry) for method in ("tfi", "elliptic")}
     return {
-        "definitions": "meshgen.quality (DESIGN section 7); boundary deviation: closest-point distance of boundary nodes from the geometry",
+        "definitions": "meshgen.quality (design notes §7); boundary deviation: closest-point distance of boundary nodes from the geometry",
         "neural_30": neural_figures(model, geometry, 30),
         "neural_100": neural_figures(model, geometry, 100),
         "tfi_30": classical["tfi"],

@@ -59,3 +59,20 @@ def _layout_cache_in_tmp(tmp_path_factory):
         os.environ.pop("MESHGEN_CACHE_DIR", None)
     else:
         os.environ["MESHGEN_CACHE_DIR"] = previous
+
+
+TOOL_MARKERS = {  # marker -> words in a skip reason that name the tool the test runs
+    "needs_openfoam": ("openfoam", "checkmesh", "potentialfoam"),
+    "needs_gmsh": ("gmsh",),
+    "needs_cgnscheck": ("cgnscheck", "cgns-convert"),
+}
+
+
+def pytest_collection_modifyitems(items):
+    """Mark the tests that run an external tool (``-m needs_openfoam`` and so on), read from the
+    skip condition each such test carries; the skip itself stays where the test declares it."""
+    for item in items:
+        reasons = " ".join(str(mark.kwargs.get("reason", "")) for mark in item.iter_markers("skipif")).lower()
+        for marker, words in TOOL_MARKERS.items():
+            if any(word in reasons for word in words):
+                item.add_marker(marker)

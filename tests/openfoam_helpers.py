@@ -57,7 +57,7 @@ def missing_reason() -> str | None:
     return None
 
 
-needs_openfoam = pytest.mark.skipif(missing_reason() is not None, reason=missing_reason() or "")
+needs_openfoam = pytest.mark.skipif(missing_reason() is not None, reason=missing_reason() or "needs OpenFOAM")
 
 
 def run_tool(tool: str, case, *args, timeout: float = 120) -> subprocess.CompletedProcess:

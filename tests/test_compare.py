@@ -373,6 +373,7 @@ TINY_BUDGET = [
 
 
 @pytest.mark.skipif(not HAVE_NEURAL, reason="meshgen.neural not installed")
+@pytest.mark.slow
 def test_neural_method_trains_meshes_and_reuses_its_checkpoint(run_cli, tmp_path):
     import torch
 

@@ -1,7 +1,7 @@
 """Elliptic (Winslow) meshes: the discrete equations, the multigrid solver and the CLI.
 
 The reference implementation below is written independently of meshgen.winslow: node-array
-layout, the cofactors as det(g) g^-1 (so it also checks DESIGN section 5's formulas with their
+layout, the cofactors as det(g) g^-1 (so it also checks design notes §5's formulas with their
 squares), every derivative spelled out on a uniform grid, and a plain point-Jacobi iteration.
 """
 
@@ -76,7 +76,7 @@ def plain_jacobi(X, sweeps=200000, tol=1e-14):
 
 
 def min_angles(X):
-    """Smallest face-corner angle of every cell in degrees (DESIGN section 7): at each corner and
+    """Smallest face-corner angle of every cell in degrees (design notes §7): at each corner and
     each pair of index directions, the angle between the two cell edges leaving the corner."""
     dim = X.shape[-1]
     cells = tuple(n - 1 for n in X.shape[:-1])

@@ -382,6 +382,7 @@ def test_cell_data_of_the_wrong_size_is_refused_before_writing(tmp_path):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.needs_cgnscheck
 def test_cli_writes_a_cgns_file_that_passes_cgnscheck(run_cli, tmp_path):
     result = run_cli("mesh", "-m", "tfi", "--dims", 4, 4, 4, "-o", "out.cgns")
     assert result.returncode == 0, result.stderr

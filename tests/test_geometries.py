@@ -1,4 +1,4 @@
-"""Geometry plugins: every discoverable geometry against the contract of DESIGN section 3
+"""Geometry plugins: every discoverable geometry against the contract of design notes §3
 (boundary reproduced by TFI, continuity across the cube's edges, positive orientation), the
 built-ins' surfaces against closed-form volumes and areas, and plugin discovery from all three
 sources (built-in name, ``.py`` file, entry point)."""

@@ -1,14 +1,14 @@
-"""Hardening (issue 9): bad inputs, faults and untrusted files.
+"""Hardening: bad inputs, faults and untrusted files.
 
-meshgen runs unattended in pipelines and on files from elsewhere. Every row of the issue has a
+meshgen runs unattended in pipelines and on files from elsewhere. Every case below has a
 test: here (``test_hardening.py::...``; ``[id]`` names a row of the BAD_INPUTS, PLUGIN_FAULTS or
-FULL_DISK tables below) or in an older file (``file::test[id]``). ``test_the_table_names_real_tests``
+FULL_DISK tables below) or in another file (``file::test[id]``). ``test_the_table_names_real_tests``
 checks that every test named here exists.
 
 Bad input: one line ``Error: ...`` naming the problem on stderr, exit status 2, no traceback,
 nothing in the folder created or changed (all files compared byte for byte).
 
-| row of the issue                      | command           | test                                                                                                  |
+| case                                  | command           | test                                                                                                  |
 |---------------------------------------|-------------------|-------------------------------------------------------------------------------------------------------|
 | unknown geometry                      | mesh              | test_cli_foundation.py::test_bad_input_gives_one_line_exit_2_and_writes_nothing[unknown-geometry]     |
 | unknown geometry                      | geometries show   | test_cli_foundation.py::test_bad_input_gives_one_line_exit_2_and_writes_nothing[unknown-geometry-show]|
@@ -64,7 +64,7 @@ nothing in the folder created or changed (all files compared byte for byte).
 
 Untrusted files:
 
-| row of the issue                                   | test                                                                            |
+| case                                               | test                                                                            |
 |----------------------------------------------------|---------------------------------------------------------------------------------|
 | checkpoint with a pickled payload: mesh            | test_mesh_neural.py::test_a_checkpoint_carrying_code_is_refused_without_running_it |
 | checkpoint with a pickled payload: train, compare  | test_hardening.py::test_bad_input[train-resume-payload], [compare-checkpoint-payload] |
@@ -73,7 +73,7 @@ Untrusted files:
 
 Faults:
 
-| row of the issue                                   | test                                                                            |
+| case                                               | test                                                                            |
 |----------------------------------------------------|---------------------------------------------------------------------------------|
 | SIGINT during training: checkpoint, --resume       | test_neural_cli.py::test_ctrl_c_saves_a_checkpoint_and_resume_finishes_the_run  |
 | SIGINT during a checkpoint write: saves, resumes   | test_hardening.py::test_ctrl_c_during_a_checkpoint_write_saves_and_stops        |
@@ -86,7 +86,7 @@ Faults:
 
 Plugins (message names the plugin and what is wrong):
 
-| row of the issue                                   | test                                                                            |
+| case                                               | test                                                                            |
 |----------------------------------------------------|---------------------------------------------------------------------------------|
 | raises, wrong shape, non-finite, not numbers: mesh | test_cli_foundation.py::test_bad_input_gives_one_line_exit_2_and_writes_nothing[plugin-*] |
 | not continuous across cube edges (checked at load) | test_cli_foundation.py::...[plugin-discontinuous]; test_geometries.py::test_discontinuous_plugin_is_rejected_with_its_name |
@@ -96,13 +96,13 @@ Plugins (message names the plugin and what is wrong):
 
 Repeatability (CPU, same seed):
 
-| row of the issue                                   | test                                                                            |
+| case                                               | test                                                                            |
 |----------------------------------------------------|---------------------------------------------------------------------------------|
 | same seed, same weights (in-process train())       | test_neural_train.py::test_the_same_seed_repeats_a_cpu_run_and_another_seed_does_not |
 | same seed: every tensor of the checkpoint, meshes  | test_hardening.py::test_same_seed_gives_bit_identical_checkpoints_and_meshes    |
 
-How each new test was checked against the protection it guards (the guard disabled once, the
-test seen to fail, the guard restored):
+Each test was checked against the protection it guards (the guard disabled, the test seen to
+fail, the guard restored):
 - atomic_path writing to the target itself: the SIGKILL tests and the second-Ctrl-C test fail
   (half a checkpoint under checkpoint.pt, or none at all; the old mesh changed), and so do the
   full-disk rows (the write no longer goes through the temporary name: it lands on the old file);
@@ -110,12 +110,11 @@ test seen to fail, the guard restored):
 - torch.load(weights_only=False) in load_checkpoint: the payload rows fail (the marker appears);
 - yaml.unsafe_load in meshgen.neural.config: the python-tag rows fail (the marker appears);
 - the sampler seeded from the clock: the repeatability test fails at the first weight;
-- every other new row failed before the fix in meshgen/ that its commit names (evaluate's report
+- every other row fails without the guard in meshgen/ that it covers (evaluate's report
   paths, train's run folder, random-byte YAML, sys.exit in a plugin, inf coordinates, the file
   name of a Plot3D read error, the checkpoint messages, the resumed history's duplicated row, a
   full disk under torch.save or at config.yaml, the empty run folder a failed run left), or
-  passed from the start where the guard already existed (e.g. [compare-dims-zero]): those rows
-  document the guard and keep it.
+  documents a guard that no change has yet broken (e.g. [compare-dims-zero]).
 """
 
 from __future__ import annotations

@@ -113,7 +113,7 @@ def test_hermite_interpolation_is_exact_for_cubics_and_keeps_edges():
 
 
 def test_semicylinder_elliptic_beats_the_smoothed_gmsh_figure(semicylinder):
-    """Issue 16: at 30^3 the smoothed elliptic mesh reaches gmsh's smoothed transfinite 74.42 (to 74.4)."""
+    """At 30^3 the smoothed elliptic mesh reaches gmsh's smoothed transfinite 74.42 (to 74.4)."""
     dims = (30, 30, 30)
     X, info = elliptic(semicylinder, dims)
     report = quality_report(X, semicylinder)
@@ -188,11 +188,11 @@ Mesh.Smoothing = {steps};
 @pytest.mark.skipif(GMSH is None, reason="gmsh not installed (Debian package gmsh)")
 @pytest.mark.parametrize("cells", [30, 100])
 def test_every_section_of_the_semicylinder_is_gmshs_smoothed_transfinite_mesh(tmp_path, semicylinder, cells):
-    """Issue 16's reference: gmsh's transfinite mesh of the section with its elliptic smoother run
+    """The reference: gmsh's transfinite mesh of the section with its elliptic smoother run
     to convergence (2 n^2 steps). The default elliptic mesh is its extrusion: every layer has gmsh's
     nodes, so the mean min angle is gmsh's (measured here on gmsh's own quads), 74.42 at 30^3 and
-    74.79 at 100^3 (the issue's "74.8" is the latter rounded up: no layout beats it while the mesh
-    stays an extrusion, which potentialFoam's exact answer needs)."""
+    74.79 at 100^3 (no layout beats it while the mesh stays an extrusion, which potentialFoam's
+    exact answer needs)."""
     import meshio
 
     geo = tmp_path / "section.geo"
@@ -220,4 +220,4 @@ def test_every_section_of_the_semicylinder_is_gmshs_smoothed_transfinite_mesh(tm
         assert distance.max() < 1e-5  # the volume solver stops at updates of 1e-6 of the length (2)
     angle = quality_report(X, semicylinder)["metrics"]["min_angle"]["mean"]
     assert angle == pytest.approx(gmsh_angle, abs=1e-4)
-    assert angle == pytest.approx({30: 74.42, 100: 74.79}[cells], abs=0.005)  # the issue's figures
+    assert angle == pytest.approx({30: 74.42, 100: 74.79}[cells], abs=0.005)  # gmsh's own figures

@@ -196,7 +196,7 @@ def test_correction_is_the_tfi_of_the_boundary_error_and_exact_on_the_boundary(r
     old_name = run_cli("mesh", "--checkpoint", soft_3d, "--no-snap", "--dims", *dims, "-o", "o.vtu")
     assert corrected.returncode == raw.returncode == old_name.returncode == 0, corrected.stderr + raw.stderr
     X, X_raw = read_points(tmp_path / "s.vtu", dims), read_points(tmp_path / "r.vtu", dims)
-    np.testing.assert_array_equal(read_points(tmp_path / "o.vtu", dims), X_raw)  # --no-snap: the old name
+    np.testing.assert_array_equal(read_points(tmp_path / "o.vtu", dims), X_raw)  # --no-snap: the alias of --no-correct
     coords = parametric_grid(dims)
     grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)
     on_boundary = boundary_mask(X.shape[:-1])
@@ -326,7 +326,7 @@ def test_device_cpu_and_auto_give_the_same_mesh_on_a_cpu_machine(run_cli, tmp_pa
 
 
 def test_default_preset_corrected_is_valid_and_near_elliptic_at_every_resolution(tmp_path, semidisk):
-    """Issue 13 part 1 on a small case: the default preset (the paper's method: soft boundary,
+    """The boundary correction on a small case: the default preset (the paper's method: soft boundary,
     reweighting, PCGrad), shortened and on the 2D semidisk, leaves the boundary visibly off; its
     corrected mesh has no inverted cell, the exact boundary, and a mean minimum angle within 0.3
     degrees of the converged elliptic mesh's, at every resolution (the same network)."""
@@ -408,6 +408,7 @@ def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylind
 # which model
 
 
+@pytest.mark.slow
 def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_path, soft_2d, soft_3d):
     runs = tmp_path / "runs"
     for name, source, age in (("semicylinder-old", soft_3d, 200), ("semidisk-new", soft_2d, 100)):

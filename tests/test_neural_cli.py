@@ -1,5 +1,5 @@
 """``meshgen train`` end to end: a run folder, the final lines, Ctrl-C and --resume, and every bad
-input of the issue (one-line error, exit 2, nothing written)."""
+input (one-line error, exit 2, nothing written)."""
 
 import csv
 import signal
@@ -65,6 +65,7 @@ def test_list_presets_shows_one_line_each(run_cli):
     assert all(len(line.split(None, 1)) == 2 for line in lines)
 
 
+@pytest.mark.slow
 def test_ctrl_c_saves_a_checkpoint_and_resume_finishes_the_run(tmp_path):
     from conftest import REPO
 

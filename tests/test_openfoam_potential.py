@@ -3,7 +3,7 @@
 Inflow U = (0, 0, 1) on the cap zeta0 (z = 0), outlet on zeta1 (z = L), slip walls elsewhere:
 the exact answer is U = (0, 0, 1) in every cell. A finite-volume solver reproduces it on a mesh
 whose cells are prisms along the flow (an extruded section); cells skewed along z (the fixed
-layout's elliptic mesh: Coons caps, Winslow layers behind them) give errors of order one (issue 16).
+layout's elliptic mesh: Coons caps, Winslow layers behind them) give errors of order one.
 The mesh goes through Plot3D ASCII (.fmt) and ``plot3dToFoam -noBlank``; ``topoSet`` and
 ``createPatch`` cut the inlet and outlet out of its one boundary patch.
 """

@@ -320,7 +320,7 @@ def test_cgns_zone_bc_passes_cgnscheck_and_reads_back(tmp_path, name, dims):
 
 @needs_openfoam
 def test_potential_foam_is_exact_on_the_elliptic_mesh_as_meshgen_mesh_writes_it(run_cli, tmp_path):
-    """Issue 16 through the OpenFOAM writer: uniform flow on the default (smoothed-boundary)
+    """The smoothed boundary layout through the OpenFOAM writer: uniform flow on the default (smoothed-boundary)
     elliptic mesh is reproduced to solver accuracy; the fixed layout's bent end layers are not."""
     errors = {}
     for layout in ("smoothed", "fixed"):
@@ -346,4 +346,4 @@ def test_potential_foam_is_exact_on_the_elliptic_mesh_as_meshgen_mesh_writes_it(
         U = read_vector_field(case / "0" / "U")
         errors[layout] = np.abs(U - [0.0, 0.0, 1.0]).max()
     assert errors["smoothed"] < 1e-3
-    assert errors["fixed"] > 1e-2  # the check can fail: the old layout does
+    assert errors["fixed"] > 1e-2  # the check can fail: the fixed layout does

@@ -5,7 +5,7 @@ boundary patches: ``write(path, X, cell_data, metadata, patches)``, ``patches`` 
 ``meshgen.patches.Patch`` covering every cube face, and ``read_patches(path)``; where names are
 restricted, ``check_patch_name(name)``) and, where meshgen can read it back,
 ``read(path) -> meshio.Mesh``. A folder format (OpenFOAM) also has ``check_output(path)`` and writes
-atomically itself. ``X`` is the node array of DESIGN section 2;
+atomically itself. ``X`` is the node array of design notes §2;
 ``cell_data`` maps names to per-cell arrays in C order of the cells (i, j[, k]); ``metadata`` is a
 JSON-serialisable dict (geometry, parameters, method, meshgen version) stored where the format
 allows (every format but Plot3D, which has no place for it); ``metadata_of`` reads it back.

@@ -1,4 +1,4 @@
-"""The neural method (3DMeshNet, DESIGN section 6): a tanh MLP trained on the Winslow equations.
+"""The neural method (3DMeshNet, design notes §6): a tanh MLP trained on the Winslow equations.
 
 Modules, each usable alone:
 

@@ -1,4 +1,4 @@
-"""Derivatives of the network's output with respect to its input (DESIGN section 6).
+"""Derivatives of the network's output with respect to its input (design notes §6).
 
 Three ways, one set of formulas:
 

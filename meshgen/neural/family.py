@@ -3,7 +3,7 @@
 A family is a geometry with some parameters varied over ranges (``--vary twist=0:180``), the
 others fixed. Each varied parameter p in [lo, hi] enters the network normalised to
 q = 2 (p - lo) / (hi - lo) - 1 in [-1, 1], beside u = 2 xi - 1. The map is the exact-boundary form
-(DESIGN section 10) of the member:
+(design notes §10) of the member:
 
     X(xi; p) = TFI[g_p](xi) + S b(xi) N(xi, q(p)),    b = 4^d prod_i xi_i (1 - xi_i),
 

@@ -1,4 +1,4 @@
-"""Training points and the two losses (DESIGN section 6).
+"""Training points and the two losses (design notes §6).
 
 L1 = mean over interior points of |R|^2, R the scale-free Winslow residual (``winslow``).
 L2 = mean over boundary points of w |e|^2 with e = N(xi) - B(xi), B the normalised boundary map,

@@ -1,10 +1,10 @@
-"""Training a mesh network (DESIGN section 6): the loop and the pieces it calls.
+"""Training a mesh network (design notes §6): the loop and the pieces it calls.
 
 One run goes through up to three stages, each a number of steps in the configuration:
 
 1. ``pretrain``: an L-BFGS least-squares fit of the network to TFI, so that training starts from
    a valid map that meets the boundary instead of a random one that first cuts the geometry's
-   corners (DESIGN section 10);
+   corners (design notes §10);
 2. ``adam``: the method proper. Each step samples a training grid (fd) or random interior points
    (autograd) and boundary points, computes L1 (Winslow residual) and L2 (boundary), their
    gradients g1, g2 on the network's weights, combines them (PCGrad or a plain sum), gives the

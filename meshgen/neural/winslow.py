@@ -1,4 +1,4 @@
-"""The Winslow residual (DESIGN section 5), written as on paper.
+"""The Winslow residual (design notes §5), written as on paper.
 
 With r = (x, y, z) and the covariant metric g_ij = r_i . r_j (derivatives in xi^1..3), the
 3D system is, for each component of r,

@@ -1,4 +1,4 @@
-"""Mesh quality (DESIGN section 7): per-cell metrics, their summaries and the validity verdict.
+"""Mesh quality (design notes §7): per-cell metrics, their summaries and the validity verdict.
 
 Where things are:
 

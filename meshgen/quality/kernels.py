@@ -1,4 +1,4 @@
-"""Cell kernels: the per-cell metrics of DESIGN section 7 on one block of cells.
+"""Cell kernels: the per-cell metrics of design notes §7 on one block of cells.
 
 Per cell, for hexahedra (quadrilaterals: the one face, edges instead of faces):
 
