@@ -11,17 +11,10 @@ from neural_helpers import Recorder, tiny_config
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.cudagraph import CapturedFunction
 from meshgen.neural.model import MLP, normalisation, normalised_boundary
+from meshgen.neural.problem import Problem, boundary_pool, sample_step
 from meshgen.neural.reweighting import UncertaintyWeights
-from meshgen.neural.train import (
-    DEVICE_BLOCK,
-    Problem,
-    TermRunner,
-    Training,
-    adam_gradients,
-    boundary_pool,
-    sample_step,
-    train,
-)
+from meshgen.neural.steps import DEVICE_BLOCK, TermRunner, Training, adam_gradients
+from meshgen.neural.train import train
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device is available to torch here")
 

@@ -19,16 +19,14 @@ from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import resolve_config
 from meshgen.neural.family import (
-    LBFGS_RESAMPLE,
     FamilyMesher,
-    covering_members,
     family_from_checkpoint,
     make_family,
     mesh_member,
     network_from_model,
     parse_vary,
-    train_family,
 )
+from meshgen.neural.family_train import LBFGS_RESAMPLE, covering_members, train_family
 from meshgen.neural.inference import load_model
 from meshgen.neural.model import bubble
 from meshgen.tfi import parametric_grid, tfi

@@ -147,7 +147,8 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
 
 def _family_report(run, result) -> None:
     """What a finished family run prints: the summarised members and how to mesh one."""
-    from meshgen.neural.family import range_text, summary_table
+    from meshgen.neural.family import range_text
+    from meshgen.neural.family_train import summary_table
 
     family = run.family
     echo(

@@ -146,6 +146,7 @@ def prepare_run(
         geometry = geometry or "semicylinder"
         geometry_object = load_geometry(geometry, parse_params(params))
         if vary:
+            _refuse_family_keys(config, preset, overrides)
             family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
     if config.dim is not None and config.dim != geometry_object.dim:
         raise ConfigError(
@@ -161,6 +162,30 @@ def prepare_run(
         torch.set_num_threads(threads)
     run_dir = choose_run_dir(out, resume_path, geometry_object.name)
     return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
+
+
+def _flat(mapping: dict, prefix: str = "") -> dict:
+    """A nested configuration mapping as {dotted key: value}."""
+    flat = {}
+    for name, value in mapping.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{name}."))
+        else:
+            flat[f"{prefix}{name}"] = value
+    return flat
+
+
+def _refuse_family_keys(config, preset, overrides) -> None:
+    """A family refuses the keys it cannot use (``family_train.FAMILY_UNUSED_KEYS``) when the user
+    sets them: every such ``--set`` key, and such a key of ``--config FILE`` whose value differs from
+    the preset's (a family run's own config.yaml holds every key, at the preset's values)."""
+    from meshgen.neural.config import parse_override, resolve_config, to_dict
+    from meshgen.neural.family_train import check_family_keys
+
+    given = [parse_override(text)[0] for text in overrides]
+    chosen, preset_only = _flat(to_dict(config)), _flat(to_dict(resolve_config(preset or "family")))
+    changed = [key for key in chosen if key not in given and chosen[key] != preset_only.get(key)]
+    check_family_keys(given + changed)
 
 
 def _family(config, geometry, spec: str, params, vary):
@@ -208,7 +233,7 @@ def run_training(run: Run, quiet: bool = False):
     try:
         with reporter:
             if run.family is not None:
-                from meshgen.neural.family import train_family
+                from meshgen.neural.family_train import train_family
 
                 return train_family(
                     run.config,
