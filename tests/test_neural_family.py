@@ -26,12 +26,13 @@ from meshgen.neural.family import (
     network_from_model,
     parse_vary,
 )
-from meshgen.neural.family_train import LBFGS_RESAMPLE, covering_members, train_family
+from meshgen.neural.family_train import FAMILY_UNUSED_KEYS, LBFGS_RESAMPLE, covering_members, train_family
 from meshgen.neural.inference import load_model
 from meshgen.neural.model import bubble
 from meshgen.tfi import parametric_grid, tfi
 
-TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
+# the tiny settings a family uses (it refuses the others)
+TINY_ARGS = [arg for item in TINY if item.split("=")[0] not in FAMILY_UNUSED_KEYS for arg in ("--set", item)]
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
@@ -336,3 +337,35 @@ def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_
     }
     assert row["elliptic_min_angle_mean"] == pytest.approx(angles["fixed"], abs=1e-9)
     assert abs(angles["smoothed"] - angles["fixed"]) > 0.1  # the two references differ: the test tells them apart
+
+
+@pytest.mark.parametrize(
+    "items, named",
+    [
+        (["points.boundary=100"], "points.boundary"),
+        (["method.point_weights=2", "pretrain.steps=5", "adam.lr=1e-3"], "method.point_weights, pretrain.steps"),
+    ],
+)
+def test_configuration_keys_a_family_cannot_use_are_a_one_line_error(tmp_path, capsys, items, named):
+    sets = [arg for item in items for arg in ("--set", item)]
+    out = tmp_path / "run"
+    code, _, err = run_meshgen(capsys, "train", "-g", "flower", "--vary", "twist=0:180", *sets, "--out", out)
+    assert code == 2 and not out.exists()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"--set {named}: a family (--vary) cannot use" in lines[0], err
+    assert "adam.lr" not in lines[0]  # a key the family uses is not named
+
+
+def test_a_family_refuses_unused_keys_in_python_and_from_a_configuration_file(tmp_path, flower_run):
+    from meshgen.errors import ParameterError
+    from meshgen.neural.session import prepare_run
+
+    with pytest.raises(ParameterError, match=r"^overrides test.interior: a family \(--vary\) cannot use it: .*fixed members"):
+        prepare_run(geometry="flower", vary=["twist=0:180"], overrides=["test.interior=10"], out=tmp_path / "a")
+    changed = tmp_path / "changed.yaml"
+    changed.write_text("method:\n  point_weights: 2.0\nadam:\n  lr: 0.01\n")
+    with pytest.raises(ParameterError, match=r"^config_file method.point_weights: .*no boundary loss"):
+        prepare_run(geometry="flower", vary=["twist=0:180"], config_file=changed, out=tmp_path / "b")
+    # a family run's own config.yaml repeats it: every key at the family preset's values passes
+    run = prepare_run(geometry="flower", vary=["twist=0:180"], config_file=flower_run / "config.yaml", out=tmp_path / "c")
+    assert run.family is not None and run.config.adam.lr == 1e-3

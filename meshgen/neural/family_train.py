@@ -85,13 +85,16 @@ FAMILY_UNUSED_KEYS = {
 }
 
 
-def check_family_keys(keys) -> None:
+def check_family_keys(keys, parameter: str = "overrides") -> None:
     """Raise a one-line ParameterError naming the configuration ``keys`` (dotted names the user
-    set) that a family cannot use, with why; keys a family uses pass."""
+    set through ``parameter``) that a family cannot use, with why; keys a family uses pass."""
     unused = [key for key in keys if key in FAMILY_UNUSED_KEYS]
     if unused:
         reasons = "; ".join(dict.fromkeys(FAMILY_UNUSED_KEYS[key] for key in unused))
-        raise ParameterError(f"--vary cannot use {', '.join(unused)}: {reasons}")
+        raise ParameterError(
+            parameter,
+            f"{{name}} {', '.join(unused)}: a family (--vary) cannot use {'it' if len(unused) == 1 else 'them'}: {reasons}",
+        )
 
 
 @dataclass

@@ -185,7 +185,8 @@ def _refuse_family_keys(config, preset, overrides) -> None:
     given = [parse_override(text)[0] for text in overrides]
     chosen, preset_only = _flat(to_dict(config)), _flat(to_dict(resolve_config(preset or "family")))
     changed = [key for key in chosen if key not in given and chosen[key] != preset_only.get(key)]
-    check_family_keys(given + changed)
+    check_family_keys(given)
+    check_family_keys(changed, "config_file")
 
 
 def _family(config, geometry, spec: str, params, vary):
