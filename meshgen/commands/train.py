@@ -7,6 +7,9 @@ import click
 from meshgen.commands._options import geometry_options
 from meshgen.commands._text import echo
 
+__all__ = ["MESH_HINT", "train"]
+
+
 MESH_HINT = "meshgen mesh --method neural --checkpoint {checkpoint} --dims {dims} -o mesh.vtu"
 
 

@@ -1,4 +1,4 @@
-"""Derivatives of the network's output with respect to its input (DESIGN section 6).
+"""Derivatives of the network's output with respect to its input (design notes §6).
 
 Three ways, one set of formulas:
 
@@ -20,6 +20,8 @@ from __future__ import annotations
 import itertools
 
 import torch
+
+__all__ = ["grid_derivatives", "training_grid", "grid_from_draws", "grid_points", "stencil_derivatives", "autograd_derivatives"]
 
 
 def _shifted(values: torch.Tensor, offsets) -> torch.Tensor:

@@ -1,4 +1,4 @@
-"""The network and its plain-data description (DESIGN section 6).
+"""The network and its plain-data description (design notes §6).
 
 A trained map is fully described by ``checkpoint["model"]``, plain data that needs none of the
 training code::

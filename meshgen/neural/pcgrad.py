@@ -1,4 +1,4 @@
-"""Gradient projection between the PDE and boundary gradients (PCGrad; DESIGN section 6).
+"""Gradient projection between the PDE and boundary gradients (PCGrad; design notes §6).
 
 If g1 . g2 < 0 the two objectives conflict: each gradient is projected onto the normal plane of
 the other's original gradient, g1' = g1 - (g1.g2 / |g2|^2) g2 and g2' = g2 - (g1.g2 / |g1|^2) g1,
@@ -9,6 +9,8 @@ part; the reweighting parameters take their own gradient.
 from __future__ import annotations
 
 import torch
+
+__all__ = ["project_conflicting", "flatten", "assign"]
 
 
 def project_conflicting(g1: torch.Tensor, g2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -1,4 +1,4 @@
-"""Uncertainty reweighting of the two losses (DESIGN section 6).
+"""Uncertainty reweighting of the two losses (design notes §6).
 
     L = L1 / (2 a1^2) + L2 / (2 a2^2) + log(1 + a1^2 + a2^2)
 
@@ -13,6 +13,8 @@ from __future__ import annotations
 import math
 
 import torch
+
+__all__ = ["UncertaintyWeights"]
 
 
 class UncertaintyWeights(torch.nn.Module):

@@ -13,6 +13,9 @@ from pathlib import Path
 
 from meshgen.errors import MeshgenError
 
+__all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
+
+
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
 # would make the checkpoint's weights or optimiser state mean something else.

@@ -1,4 +1,4 @@
-"""The Winslow residual (DESIGN section 5), written as on paper.
+"""The Winslow residual (design notes §5), written as on paper.
 
 With r = (x, y, z) and the covariant metric g_ij = r_i . r_j (derivatives in xi^1..3), the
 3D system is, for each component of r,
@@ -23,6 +23,9 @@ from __future__ import annotations
 import torch
 
 from meshgen.winslow import cofactors as metric_cofactors
+
+__all__ = ["SCALE_FLOOR", "cofactor_terms", "cofactors", "winslow_residual"]
+
 
 SCALE_FLOOR = 1e-6  # in units of (normalised length)^4; a healthy normalised map has a trace ~ 0.1-3
 
