@@ -12,6 +12,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
+from meshgen.geometry import load_geometry, parse_params
+from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.progress import reporter_for
 
 __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
 
@@ -70,9 +73,10 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
 
 
 def _geometry_spec(spec: str) -> str:
-    from meshgen.geometry import _looks_like_path
-
-    return str(Path(spec).resolve()) if _looks_like_path(spec) else spec
+    """How to load the geometry again: a plugin path made absolute (as ``load_geometry`` tells a
+    path from a name: a ``.py`` ending or a folder separator), a name as it is."""
+    is_path = spec.endswith(".py") or "/" in spec or "\\" in spec
+    return str(Path(spec).resolve()) if is_path else spec
 
 
 def prepare_run(
@@ -96,8 +100,6 @@ def prepare_run(
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
     """
-    from meshgen.geometry import load_geometry, parse_params
-    from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
     checkpoint = resume_path = family = None
     if resume is not None and vary:
@@ -182,7 +184,6 @@ def _refuse_family_keys(config, preset, overrides) -> None:
     """A family refuses the keys it cannot use (``family_train.FAMILY_UNUSED_KEYS``) when the user
     sets them: every such ``--set`` key, and such a key of ``--config FILE`` whose value differs from
     the preset's (a family run's own config.yaml holds every key, at the preset's values)."""
-    from meshgen.neural.config import parse_override, resolve_config, to_dict
     from meshgen.neural.family_train import check_family_keys
 
     given = [parse_override(text)[0] for text in overrides]
@@ -194,8 +195,6 @@ def _refuse_family_keys(config, preset, overrides) -> None:
 
 def _family(config, geometry, spec: str, params, vary):
     """The checked family of ``--vary`` items (``meshgen.neural.family.make_family``)."""
-    from meshgen.geometry import parse_params
-    from meshgen.neural.config import ConfigError
     from meshgen.neural.family import make_family, parse_vary
 
     ranges = parse_vary(vary)
@@ -216,7 +215,6 @@ def _family(config, geometry, spec: str, params, vary):
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-    from meshgen.neural.progress import reporter_for
     from meshgen.neural.train import train
 
     created = not run.run_dir.exists()
