@@ -93,7 +93,7 @@ def pretrain_step(network, problem, optimizer, pool) -> dict:
         return {"total": (network(pool["points"]) - pool["targets"]).square().sum(-1).mean()}
 
 
-def term_gradients(training: Training, pde_sample, boundary_sample_, factors):
+def term_gradients(training: Training, pde_sample, boundary_points, factors):
     """L1 and L2 on one sample each, and g1, g2: the gradients of the weighted terms on the
     network's weights (flat), computed side by side (``Training.terms``)."""
     network, problem, config = training.network, training.problem, training.config
@@ -108,7 +108,7 @@ def term_gradients(training: Training, pde_sample, boundary_sample_, factors):
         if problem.exact:
             zero = torch.zeros((), device=problem.device)
             return zero, torch.zeros(sum(p.numel() for p in parameters), device=problem.device)
-        boundary = boundary_term(network, problem, config, boundary_sample_)
+        boundary = boundary_term(network, problem, config, boundary_points)
         return boundary, flatten(torch.autograd.grad(factors[1] * boundary, parameters))
 
     (pde, g1), (boundary, g2) = training.terms(pde_part, boundary_part)
@@ -116,7 +116,7 @@ def term_gradients(training: Training, pde_sample, boundary_sample_, factors):
 
 
 def adam_gradients(training: Training, inputs: dict, pool=None) -> dict:
-    """The device part of one step of the method, from the step's :func:`sample_step` inputs (on
+    """The device part of one step of the method, from the step's ``meshgen.neural.problem.sample_step`` inputs (on
     the device): L1, L2, their gradients g1, g2 combined into the update of the network's weights
     (PCGrad or the sum; zero when a loss is not finite, and the loop restores the last good state),
     L and its gradient on the reweighting parameters (``a_gradient``, learned weights only), and
