@@ -369,3 +369,36 @@ def test_a_family_refuses_unused_keys_in_python_and_from_a_configuration_file(tm
     # a family run's own config.yaml repeats it: every key at the family preset's values passes
     run = prepare_run(geometry="flower", vary=["twist=0:180"], config_file=flower_run / "config.yaml", out=tmp_path / "c")
     assert run.family is not None and run.config.adam.lr == 1e-3
+
+
+def test_a_non_finite_family_loss_restores_the_last_good_state_and_lowers_the_learning_rate(tmp_path, monkeypatch):
+    """The family runs the single shape's loop: its divergence guard too."""
+    import math
+
+    import meshgen.neural.family_train as family_train
+
+    real, calls = family_train.family_residual_loss, {"n": 0}
+
+    def sometimes_nan(*args):
+        calls["n"] += 1
+        loss = real(*args)
+        return loss * math.nan if calls["n"] == 3 else loss
+
+    monkeypatch.setattr(family_train, "family_residual_loss", sometimes_nan)
+    family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
+    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=5", "lbfgs.steps=0", "points.interior=27"])
+    messages = []
+
+    class Messages:
+        def stage(self, *args): ...
+
+        def update(self, *args): ...
+
+        def message(self, text):
+            messages.append(text)
+
+    result = train_family(config, family, tmp_path, reporter=Messages(), summary=False)
+    assert result.step == 5 and result.checkpoint["guard"]["lr_reductions"] == 1
+    assert len(messages) == 1 and f"learning rate lowered to {config.adam.lr * config.guard.lr_factor:.3g}" in messages[0]
+    lr = [float(line.split(",")[8]) for line in (tmp_path / "history.csv").read_text().splitlines()[1:]]
+    assert lr[:2] == [config.adam.lr] * 2 and lr[2:] == [config.adam.lr * config.guard.lr_factor] * 3
