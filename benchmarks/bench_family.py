@@ -44,7 +44,8 @@ def measure_case(name: str, ranges: dict, members: int, cells: int, overrides=()
     from meshgen.elliptic import elliptic
     from meshgen.geometry import load_geometry
     from meshgen.neural.config import resolve_config
-    from meshgen.neural.family import make_family, mesh_member, train_family
+    from meshgen.neural.family import make_family, mesh_member
+    from meshgen.neural.family_train import train_family
     from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid
 

@@ -32,8 +32,10 @@ from meshgen.geometry import load_geometry  # noqa: E402
 from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.neural.config import resolve_config  # noqa: E402
 from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, normalised_boundary  # noqa: E402
+from meshgen.neural.problem import Problem  # noqa: E402
 from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
-from meshgen.neural.train import DEVICE_BLOCK, Problem, adam_step, boundary_pool, corrected, make_optimizer, train  # noqa: E402
+from meshgen.neural.steps import DEVICE_BLOCK, TermRunner, Training, make_optimizer  # noqa: E402
+from meshgen.neural.train import adam_steps, corrected, train  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.tfi import parametric_grid  # noqa: E402
 
@@ -42,8 +44,9 @@ SIZES = {"default": [48, 48, 48], "paper": [85, 85, 85, 85]}
 
 
 def setup(preset, widths, geometry, interior=4096, boundary=6000):
-    """A network, weights, optimiser and the problem of ``preset`` at the given sizes (16^3 grid
-    nodes for fd, as many random points for autograd)."""
+    """The Adam stage's steps (``meshgen.neural.train.adam_steps``: the training loop's own step,
+    terms one after the other) with their optimiser and scheduler, for ``preset`` at the given sizes
+    (16^3 grid nodes for fd, as many random points for autograd)."""
     config = resolve_config(
         preset, None, [f"model.widths={widths}", f"points.interior={interior}", f"points.boundary={boundary}"]
     )
@@ -59,8 +62,9 @@ def setup(preset, widths, geometry, interior=4096, boundary=6000):
     torch.manual_seed(0)
     network = MLP(geometry.dim, config.model.widths)
     weights = UncertaintyWeights(learned=config.method.reweighting)
+    training = Training(network, weights, problem, config, torch.Generator().manual_seed(0), TermRunner(False))
     optimizer, scheduler = make_optimizer("adam", network, weights, config)
-    return config, problem, network, weights, optimizer, scheduler, boundary_pool(problem, config)
+    return adam_steps(training), optimizer, scheduler
 
 
 def step_times(presets, widths, geometry, repeats):
@@ -69,9 +73,8 @@ def step_times(presets, widths, geometry, repeats):
     so a change in the load of a shared machine slows all of them alike and leaves their ratios."""
     states = {}
     for preset in presets:
-        config, problem, network, weights, optimizer, scheduler, pool = setup(preset, widths, geometry)
-        generator = torch.Generator().manual_seed(0)
-        step = functools.partial(adam_step, network, weights, problem, config, optimizer, scheduler, generator, pool)
+        steps, optimizer, scheduler = setup(preset, widths, geometry)
+        step = functools.partial(steps, optimizer, scheduler)
         for _ in range(3):
             step()
         states[preset] = (step, [], [])

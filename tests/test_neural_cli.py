@@ -14,7 +14,8 @@ from neural_helpers import TINY, tiny_config
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import from_dict, preset_paths
-from meshgen.neural.train import HISTORY_COLUMNS, train
+from meshgen.neural.history import HISTORY_COLUMNS
+from meshgen.neural.train import train
 
 TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
 

@@ -11,17 +11,10 @@ from neural_helpers import Recorder, tiny_config
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.cudagraph import CapturedFunction
 from meshgen.neural.model import MLP, normalisation, normalised_boundary
+from meshgen.neural.problem import Problem, boundary_pool, sample_step
 from meshgen.neural.reweighting import UncertaintyWeights
-from meshgen.neural.train import (
-    DEVICE_BLOCK,
-    Problem,
-    TermRunner,
-    Training,
-    adam_gradients,
-    boundary_pool,
-    sample_step,
-    train,
-)
+from meshgen.neural.steps import DEVICE_BLOCK, TermRunner, Training, adam_gradients
+from meshgen.neural.train import train
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device is available to torch here")
 
@@ -78,3 +71,31 @@ def test_a_run_on_cuda_trains_checkpoints_and_resumes_on_the_cpu(tmp_path, semic
     second = train(config, semicylinder, tmp_path, device="cpu", resume=saved, summary=False)
     assert not second.interrupted and second.step == 2 + steps + 2
     assert second.test_loss["total"] < saved["test_loss"]["total"]
+
+
+def test_a_family_step_captured_equals_the_eager_step_at_every_replay():
+    """The family's Adam step goes through the same capture: the replayed gradients are the eager
+    ones for new members and grids at every replay."""
+    from meshgen.geometry import load_geometry
+    from meshgen.neural.config import resolve_config
+    from meshgen.neural.family import FamilyMLP, family_scale, make_family
+    from meshgen.neural.family_train import FamilyProblem, family_gradients, family_sample
+
+    family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
+    config = resolve_config("family", None, ["model.widths=[16,16]", "points.interior=216"])
+    center, scale = family_scale(family)
+    problem = FamilyProblem(family, center, scale, torch.device("cuda"))
+    torch.manual_seed(0)
+    network = FamilyMLP(3, 1, config.model.widths).cuda()
+    weights = UncertaintyWeights(0.5, 0.5, learned=False).cuda()
+    training = Training(network, weights, problem, config, torch.Generator().manual_seed(0), TermRunner(False))
+    captured = CapturedFunction(lambda inputs: family_gradients(training, inputs), torch.device("cuda"))
+    for _ in range(3):
+        inputs = family_sample(training)
+        replayed = {k: v.clone() for k, v in captured(inputs).items()}
+        eager = family_gradients(training, {k: v.cuda() for k, v in inputs.items()})
+        for name in eager:
+            torch.testing.assert_close(replayed[name], eager[name], rtol=1e-5, atol=1e-7)
+        with torch.no_grad():
+            for parameter in network.parameters():
+                parameter.add_(1e-2 * torch.randn_like(parameter))

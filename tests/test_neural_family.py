@@ -19,22 +19,21 @@ from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import resolve_config
 from meshgen.neural.family import (
-    LBFGS_RESAMPLE,
     FamilyMesher,
-    covering_members,
     family_from_checkpoint,
     make_family,
     mesh_member,
     network_from_model,
     parse_vary,
-    train_family,
 )
+from meshgen.neural.family_train import FAMILY_UNUSED_KEYS, LBFGS_RESAMPLE, covering_members, train_family
 from meshgen.neural.model import bubble
 from meshgen.neural.models import load_model
 from meshgen.tfi import parametric_grid, tfi
 
-TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
-README = Path(__file__).resolve().parents[1] / "README.md"
+# the tiny settings a family uses (it refuses the others)
+TINY_ARGS = [arg for item in TINY if item.split("=")[0] not in FAMILY_UNUSED_KEYS for arg in ("--set", item)]
+METHODS_PAGE = Path(__file__).resolve().parents[1] / "docs" / "methods.md"
 
 
 def run_meshgen(capsys, *args):
@@ -244,14 +243,14 @@ def test_autograd_derivative_in_each_parameter_matches_a_finite_difference_of_th
         mesher.mesh({"radius": 2.5}, dims)
 
 
-def test_the_readme_example_runs(flower_run, tmp_path, monkeypatch):
-    text = README.read_text()
+def test_the_documented_example_runs(flower_run, tmp_path, monkeypatch):
+    text = METHODS_PAGE.read_text()
     block = re.search(r"<!-- family-example -->\s*```python\n(.*?)```", text, re.S).group(1)
     assert 8 <= len(block.strip().splitlines()) <= 16
     shutil.copytree(flower_run, tmp_path / "runs" / "flower-family")
     monkeypatch.chdir(tmp_path)
     scope = {}
-    exec(compile(block, "README.md", "exec"), scope)
+    exec(compile(block, "docs/methods.md", "exec"), scope)
     twist = scope["twist"].detach()
     assert 0.0 <= float(twist) <= 180.0 and float(twist) != 60.0  # it moved, and stayed in range
 
@@ -324,7 +323,7 @@ def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_
     from meshgen.elliptic import elliptic
     from meshgen.quality import quality_report
 
-    sys.path.insert(0, str(README.parent / "benchmarks"))
+    sys.path.insert(0, str(METHODS_PAGE.parents[1] / "benchmarks"))
     import bench_family
 
     tiny = ["model.widths=[8,8]", "adam.steps=2", "lbfgs.steps=0", "points.interior=64"]
@@ -338,3 +337,68 @@ def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_
     }
     assert row["elliptic_min_angle_mean"] == pytest.approx(angles["fixed"], abs=1e-9)
     assert abs(angles["smoothed"] - angles["fixed"]) > 0.1  # the two references differ: the test tells them apart
+
+
+@pytest.mark.parametrize(
+    "items, named",
+    [
+        (["points.boundary=100"], "points.boundary"),
+        (["method.point_weights=2", "pretrain.steps=5", "adam.lr=1e-3"], "method.point_weights, pretrain.steps"),
+    ],
+)
+def test_configuration_keys_a_family_cannot_use_are_a_one_line_error(tmp_path, capsys, items, named):
+    sets = [arg for item in items for arg in ("--set", item)]
+    out = tmp_path / "run"
+    code, _, err = run_meshgen(capsys, "train", "-g", "flower", "--vary", "twist=0:180", *sets, "--out", out)
+    assert code == 2 and not out.exists()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"--set {named}: a family (--vary) cannot use" in lines[0], err
+    assert "adam.lr" not in lines[0]  # a key the family uses is not named
+
+
+def test_a_family_refuses_unused_keys_in_python_and_from_a_configuration_file(tmp_path, flower_run):
+    from meshgen.errors import ParameterError
+    from meshgen.neural.session import prepare_run
+
+    with pytest.raises(ParameterError, match=r"^overrides test.interior: a family \(--vary\) cannot use it: .*fixed members"):
+        prepare_run(geometry="flower", vary=["twist=0:180"], overrides=["test.interior=10"], out=tmp_path / "a")
+    changed = tmp_path / "changed.yaml"
+    changed.write_text("method:\n  point_weights: 2.0\nadam:\n  lr: 0.01\n")
+    with pytest.raises(ParameterError, match=r"^config_file method.point_weights: .*no boundary loss"):
+        prepare_run(geometry="flower", vary=["twist=0:180"], config_file=changed, out=tmp_path / "b")
+    # a family run's own config.yaml repeats it: every key at the family preset's values passes
+    run = prepare_run(geometry="flower", vary=["twist=0:180"], config_file=flower_run / "config.yaml", out=tmp_path / "c")
+    assert run.family is not None and run.config.adam.lr == 1e-3
+
+
+def test_a_non_finite_family_loss_restores_the_last_good_state_and_lowers_the_learning_rate(tmp_path, monkeypatch):
+    """The family runs the single shape's loop: its divergence guard too."""
+    import math
+
+    import meshgen.neural.family_train as family_train
+
+    real, calls = family_train.family_residual_loss, {"n": 0}
+
+    def sometimes_nan(*args):
+        calls["n"] += 1
+        loss = real(*args)
+        return loss * math.nan if calls["n"] == 3 else loss
+
+    monkeypatch.setattr(family_train, "family_residual_loss", sometimes_nan)
+    family = make_family(load_geometry("semicylinder"), "semicylinder", {"radius": (0.5, 2.0)})
+    config = resolve_config("family", None, ["model.widths=[8,8]", "adam.steps=5", "lbfgs.steps=0", "points.interior=27"])
+    messages = []
+
+    class Messages:
+        def stage(self, *args): ...
+
+        def update(self, *args): ...
+
+        def message(self, text):
+            messages.append(text)
+
+    result = train_family(config, family, tmp_path, reporter=Messages(), summary=False)
+    assert result.step == 5 and result.checkpoint["guard"]["lr_reductions"] == 1
+    assert len(messages) == 1 and f"learning rate lowered to {config.adam.lr * config.guard.lr_factor:.3g}" in messages[0]
+    lr = [float(line.split(",")[8]) for line in (tmp_path / "history.csv").read_text().splitlines()[1:]]
+    assert lr[:2] == [config.adam.lr] * 2 and lr[2:] == [config.adam.lr * config.guard.lr_factor] * 3

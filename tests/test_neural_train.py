@@ -8,9 +8,12 @@ import pytest
 import torch
 from neural_helpers import Recorder, tiny_config
 
-import meshgen.neural.train as training
+import meshgen.neural.problem as problem_module
+import meshgen.neural.steps as steps
 from meshgen.neural.checkpoint import load_checkpoint
-from meshgen.neural.train import TrainingDiverged, evaluate_losses, lbfgs_points, train
+from meshgen.neural.problem import evaluate_losses, lbfgs_points
+from meshgen.neural.stages import TrainingDiverged
+from meshgen.neural.train import train
 
 
 @pytest.mark.parametrize("derivatives", ["fd", "autograd"])
@@ -54,14 +57,15 @@ def test_pretraining_fits_tfi(tmp_path, semidisk):
 
 def test_a_non_finite_loss_restores_the_last_good_state_and_lowers_the_learning_rate(tmp_path, semidisk, monkeypatch):
     calls = {"n": 0}
-    real = training.pde_term
+    real = problem_module.pde_term
 
     def sometimes_nan(*args):
         calls["n"] += 1
         loss = real(*args)
         return loss * math.nan if calls["n"] in (4, 5) else loss
 
-    monkeypatch.setattr(training, "pde_term", sometimes_nan)
+    for module in (problem_module, steps):  # the steps and the balance start
+        monkeypatch.setattr(module, "pde_term", sometimes_nan)
     recorder = Recorder()
     config = tiny_config("lbfgs.steps=0", "adam.lr=1e-3")
     result = train(config, semidisk, tmp_path, reporter=recorder, summary=False)
@@ -75,7 +79,7 @@ def test_a_non_finite_loss_restores_the_last_good_state_and_lowers_the_learning_
 
 
 def test_repeated_failure_stops_and_keeps_the_last_good_checkpoint(tmp_path, semidisk, monkeypatch):
-    real = training.pde_term
+    real = problem_module.pde_term
     calls = {"n": 0}
 
     def nan_after_a_while(*args):
@@ -83,7 +87,8 @@ def test_repeated_failure_stops_and_keeps_the_last_good_checkpoint(tmp_path, sem
         loss = real(*args)
         return loss * math.nan if calls["n"] > 7 else loss
 
-    monkeypatch.setattr(training, "pde_term", nan_after_a_while)
+    for module in (problem_module, steps):  # the steps and the balance start
+        monkeypatch.setattr(module, "pde_term", nan_after_a_while)
     config = tiny_config("lbfgs.steps=0", "guard.max_retries=3")
     with pytest.raises(TrainingDiverged, match="diverged.*after 3 learning-rate reductions.*checkpoint.pt"):
         train(config, semidisk, tmp_path, summary=False)
@@ -125,7 +130,7 @@ def test_correction_of_a_shifted_mesh_shifts_it_back(semidisk):
 
 def test_losses_at_fixed_points_are_reproducible(semidisk):
     from meshgen.neural.model import MLP, normalisation, normalised_boundary
-    from meshgen.neural.train import Problem
+    from meshgen.neural.problem import Problem
 
     config = tiny_config()
     center, scale = normalisation(semidisk)

@@ -6,6 +6,12 @@ import click
 
 from meshgen.commands._options import geometry_options
 from meshgen.commands._text import echo
+from meshgen.neural.config import list_presets as preset_list
+from meshgen.neural.progress import FIELD_HELP
+from meshgen.neural.session import prepare_run, run_training
+
+__all__ = ["MESH_HINT", "train"]
+
 
 MESH_HINT = "meshgen mesh --method neural --checkpoint {checkpoint} --dims {dims} -o mesh.vtu"
 
@@ -13,8 +19,6 @@ MESH_HINT = "meshgen mesh --method neural --checkpoint {checkpoint} --dims {dims
 def _epilog() -> str:
     """What the figures of the progress line mean (only those the preset uses are shown)."""
     import textwrap
-
-    from meshgen.neural.progress import FIELD_HELP  # plain Python: no torch
 
     lines = ["\b", "Progress line: stage, bar, step/total, ETA, then the figures the preset uses:"]
     for name, text in FIELD_HELP.items():
@@ -89,7 +93,6 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
     # share tens of times slower (measured: 386 ms instead of 18 ms per step); the user's own
     # setting wins.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-    from meshgen.neural.config import list_presets as preset_list
 
     if list_presets:
         presets = preset_list()
@@ -97,7 +100,6 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
         for name, description in presets:
             click.echo(f"{name:<{width}}  {description}")
         return
-    from meshgen.neural.session import prepare_run, run_training
 
     run = prepare_run(
         geometry=geometry,
@@ -147,7 +149,8 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
 
 def _family_report(run, result) -> None:
     """What a finished family run prints: the summarised members and how to mesh one."""
-    from meshgen.neural.family import range_text, summary_table
+    from meshgen.neural.family import range_text
+    from meshgen.neural.family_train import summary_table
 
     family = run.family
     echo(

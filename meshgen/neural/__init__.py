@@ -10,8 +10,16 @@ Modules, each usable alone:
 - ``pcgrad``: gradient projection between the PDE and boundary gradients
 - ``config``: the training configuration, presets, overrides
 - ``checkpoint``: saving and loading plain-data checkpoints
-- ``train``: the training loop and the end-of-training summary
+- ``problem``: what a single shape is trained on: its map, residual, losses and point draws
+- ``steps``: one step of each stage (the Adam step, eager or as a CUDA graph via ``cudagraph``; L-BFGS)
+- ``history``: the run's state, ``history.csv`` and the divergence guard
+- ``stages``: the stage runner, one training loop for a shape and for a family
+- ``train``: a single shape's stage table and end-of-training summary
+- ``family``: a family of shapes (``--vary``), its network and meshing a member;
+  ``family_train``: its stage table, losses and summary
 - ``progress``: progress bar and log lines; ``session``: what ``meshgen train`` checks and runs
 
 Nothing here is imported by ``meshgen --help``; torch is imported by the modules that need it.
 """
+
+__all__: list[str] = []  # a namespace package: import the submodules

@@ -8,7 +8,7 @@ Layout (``FORMAT_VERSION`` 1)::
     geometry    {"name", "spec", "dim", "params"}: what to load to mesh it again
     config      the resolved training configuration (meshgen.neural.config)
     stage, stage_step, step, elapsed_seconds, history, guard
-                where training stands (``meshgen.neural.train.TrainState``, written and read by
+                where training stands (``meshgen.neural.history.TrainState``, written and read by
                 ``state_to_checkpoint`` / ``state_from_checkpoint``): the stage ("pretrain" |
                 "adam" | "lbfgs" | "done"), the steps done in it and in all, the training
                 seconds, history {"rows", "last": the last history row}, guard {"lr_reductions"}
@@ -30,6 +30,9 @@ import torch
 
 from meshgen.atomic import atomic_path
 from meshgen.errors import MeshgenError
+
+__all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
+
 
 FORMAT = "meshgen-checkpoint"
 FORMAT_VERSION = 1

@@ -16,6 +16,35 @@ from pathlib import Path
 
 from meshgen.errors import MeshgenError, did_you_mean, unknown_name
 
+__all__ = [
+    "ConfigError",
+    "ModelConfig",
+    "MethodConfig",
+    "PointsConfig",
+    "PretrainConfig",
+    "AdamConfig",
+    "LbfgsConfig",
+    "CheckpointConfig",
+    "GuardConfig",
+    "TestConfig",
+    "TrainConfig",
+    "CHOICES",
+    "schema",
+    "set_key",
+    "apply_mapping",
+    "parse_override",
+    "presets_dir",
+    "preset_paths",
+    "read_yaml",
+    "load_preset",
+    "list_presets",
+    "resolve_config",
+    "from_dict",
+    "to_dict",
+    "to_yaml",
+    "validate",
+]
+
 
 class ConfigError(MeshgenError):
     """A preset, configuration file or override is unknown, malformed or inconsistent."""

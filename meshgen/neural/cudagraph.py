@@ -18,6 +18,9 @@ from collections.abc import Callable
 
 import torch
 
+__all__ = ["WARMUP_RUNS", "CapturedFunction"]
+
+
 WARMUP_RUNS = 2  # eager runs on a side stream before the capture (cuBLAS workspaces, autograd's state)
 
 

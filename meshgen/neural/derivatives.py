@@ -21,6 +21,8 @@ import itertools
 
 import torch
 
+__all__ = ["grid_derivatives", "training_grid", "grid_from_draws", "grid_points", "stencil_derivatives", "autograd_derivatives"]
+
 
 def _shifted(values: torch.Tensor, offsets) -> torch.Tensor:
     """The interior block of a haloed grid moved by ``offsets`` (one of -1, 0, 1 per spatial axis).

@@ -18,6 +18,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+__all__ = ["TANGENT_STEP", "SIZE_FLOOR", "sample_interior", "sample_boundary", "pde_loss", "boundary_local_size", "boundary_loss"]
+
+
 TANGENT_STEP = 1e-4  # parametric step of the central differences of boundary_local_size
 SIZE_FLOOR = 1e-2  # boundary_local_size: at least this fraction of the median (a pole cannot take L2 over)
 

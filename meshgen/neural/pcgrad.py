@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import torch
 
+__all__ = ["project_conflicting", "flatten", "assign"]
+
 
 def project_conflicting(g1: torch.Tensor, g2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Combine two flat gradients (P,) as PCGrad does. Returns (update (P,), conflict: 0-d bool).

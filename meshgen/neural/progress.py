@@ -11,6 +11,9 @@ import collections
 import sys
 import time
 
+__all__ = ["STAGE_TITLES", "FIELD_HELP", "shown_fields", "describe_row", "RichReporter", "LogReporter", "reporter_for"]
+
+
 STAGE_TITLES = {"pretrain": "TFI fit", "adam": "Adam", "lbfgs": "L-BFGS"}
 # What the optional figures of a progress line mean; ``meshgen train --help`` prints these.
 FIELD_HELP = {

@@ -14,6 +14,8 @@ import math
 
 import torch
 
+__all__ = ["UncertaintyWeights"]
+
 
 class UncertaintyWeights(torch.nn.Module):
     """a1, a2 (PDE, boundary), learned or fixed, started from the weights w_k = 1 / (2 a_k^2)."""

@@ -12,6 +12,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
+from meshgen.geometry import load_geometry, looks_like_path, parse_params
+from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.progress import reporter_for
+
+__all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
+
 
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
@@ -67,8 +73,7 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
 
 
 def _geometry_spec(spec: str) -> str:
-    from meshgen.geometry import looks_like_path
-
+    """How to load the geometry again: a plugin path made absolute, a name as it is."""
     return str(Path(spec).resolve()) if looks_like_path(spec) else spec
 
 
@@ -93,8 +98,6 @@ def prepare_run(
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
     """
-    from meshgen.geometry import load_geometry, parse_params
-    from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
     checkpoint = resume_path = family = None
     if resume is not None and vary:
@@ -146,6 +149,7 @@ def prepare_run(
         geometry = geometry or "semicylinder"
         geometry_object = load_geometry(geometry, parse_params(params))
         if vary:
+            _refuse_family_keys(config, preset, overrides)
             family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
     if config.dim is not None and config.dim != geometry_object.dim:
         raise ConfigError(
@@ -163,10 +167,32 @@ def prepare_run(
     return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
 
 
+def _flat(mapping: dict, prefix: str = "") -> dict:
+    """A nested configuration mapping as {dotted key: value}."""
+    flat = {}
+    for name, value in mapping.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{name}."))
+        else:
+            flat[f"{prefix}{name}"] = value
+    return flat
+
+
+def _refuse_family_keys(config, preset, overrides) -> None:
+    """A family refuses the keys it cannot use (``family_train.FAMILY_UNUSED_KEYS``) when the user
+    sets them: every such ``--set`` key, and such a key of ``--config FILE`` whose value differs from
+    the preset's (a family run's own config.yaml holds every key, at the preset's values)."""
+    from meshgen.neural.family_train import check_family_keys
+
+    given = [parse_override(text)[0] for text in overrides]
+    chosen, preset_only = _flat(to_dict(config)), _flat(to_dict(resolve_config(preset or "family")))
+    changed = [key for key in chosen if key not in given and chosen[key] != preset_only.get(key)]
+    check_family_keys(given)
+    check_family_keys(changed, "config_file")
+
+
 def _family(config, geometry, spec: str, params, vary):
     """The checked family of ``--vary`` items (``meshgen.neural.family.make_family``)."""
-    from meshgen.geometry import parse_params
-    from meshgen.neural.config import ConfigError
     from meshgen.neural.family import make_family, parse_vary
 
     ranges = parse_vary(vary)
@@ -187,7 +213,6 @@ def _family(config, geometry, spec: str, params, vary):
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-    from meshgen.neural.progress import reporter_for
     from meshgen.neural.train import train
 
     created = not run.run_dir.exists()
@@ -208,7 +233,7 @@ def run_training(run: Run, quiet: bool = False):
     try:
         with reporter:
             if run.family is not None:
-                from meshgen.neural.family import train_family
+                from meshgen.neural.family_train import train_family
 
                 return train_family(
                     run.config,

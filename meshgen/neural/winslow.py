@@ -24,6 +24,9 @@ import torch
 
 from meshgen.winslow import cofactors as metric_cofactors
 
+__all__ = ["SCALE_FLOOR", "cofactor_terms", "cofactors", "winslow_residual"]
+
+
 SCALE_FLOOR = 1e-6  # in units of (normalised length)^4; a healthy normalised map has a trace ~ 0.1-3
 
 
