@@ -505,7 +505,7 @@ def write_wrong_network(path):
         (None, ["--checkpoint", BUNDLED, "--param", "radius=3", "--dims", 4, 4, 4], "trained with radius=1, not radius=3"),
         (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both"], "malformed --cluster"),
         (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both:0.5"], "growth ratio must be a number >= 1"),
-        (None, ["-g", "canal", "--dims", 4, 4, 4], "no trained model for canal"),
+        (None, ["-m", "neural", "-g", "canal", "--dims", 4, 4, 4], "no trained model for canal"),
         (None, ["-m", "tfi", "--checkpoint", BUNDLED, "--dims", 4, 4, 4], "--checkpoint applies to the neural method"),
         (None, ["--tol", "1e-3", "--dims", 4, 4, 4], "--tol does not apply to method 'neural'"),
         (None, ["-m", "tfi", "--no-snap", "--dims", 4, 4, 4], "--correct does not apply to method 'tfi'"),
