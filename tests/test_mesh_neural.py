@@ -436,9 +436,18 @@ def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_
     assert chosen.stdout.startswith("model: runs/semicylinder-old/checkpoint.pt (")
     assert json.loads((tmp_path / "b.vtu.quality.json").read_text())["method_info"]["model"]["source"] == "run"
     # a run trained with other parameters is skipped; no run and no bundled model for radius 2
-    other = run_cli("mesh", "-g", "semicylinder", "--param", "radius=2", "--dims", 3, 3, 3, "-o", "c.vtu")
-    assert one_line_error(other) and "meshgen train -g semicylinder" in other.stderr and "--method tfi" in other.stderr
+    # --method neural says so; the default method meshes with elliptic and one line says why.
+    other = ("-g", "semicylinder", "--param", "radius=2", "--dims", 3, 3, 3, "-o", "c.vtu")
+    neural = run_cli("mesh", "-m", "neural", *other)
+    assert one_line_error(neural) and "meshgen train -g semicylinder" in neural.stderr and "--method tfi" in neural.stderr
     assert not (tmp_path / "c.vtu").exists()
+    fallback = run_cli("mesh", *other)
+    assert fallback.returncode == 0, fallback.stderr
+    assert fallback.stdout.startswith(
+        "note: no trained model for 'semicylinder': meshing with elliptic (meshgen train -g semicylinder trains one)\n"
+    )
+    recorded = json.loads((tmp_path / "c.vtu.quality.json").read_text())
+    assert recorded["method"] == "elliptic" and recorded["params"]["radius"] == 2.0
     (runs / "semicylinder-old" / "checkpoint.pt").unlink()
     bundled = run_cli("mesh", "-g", "semicylinder", "--dims", 3, 3, 3, "-o", "d.vtu")
     assert bundled.returncode == 0 and f"model: {BUNDLED} (bundled, exact" in bundled.stdout

@@ -63,6 +63,7 @@ __all__ = [
     "markdown",
     "method_names",
     "neural_method",
+    "notes",
     "parse_checkpoints",
     "parse_methods",
     "prepare_out_dir",
