@@ -6,7 +6,7 @@ the method wants recorded (iterations, residual, ...).
 The neural methods are one function, ``meshgen.neural.inference.build_neural`` (a trained network
 evaluated at the nodes, its boundary corrected onto the geometry), registered once as ``neural``
 (any trained model) and once per training preset (``3dmeshnet``, ``exact``, ``pinn`` ...: the
-methods of DESIGN section 6, which ``meshgen compare`` trains with that preset). So a mesh of the
+methods of design notes §6, which ``meshgen compare`` trains with that preset). So a mesh of the
 same checkpoint is the same mesh, whichever command makes it.
 """
 
@@ -16,6 +16,10 @@ import importlib
 from dataclasses import dataclass
 
 from meshgen.errors import ParameterError, unknown_name
+from meshgen.layout import with_layout
+from meshgen.tfi import tfi
+
+__all__ = ["METHODS", "NEURAL", "NEURAL_OPTIONS", "TRAINED", "Method", "build_tfi", "get_method", "make_mesh", "register_method"]
 
 
 @dataclass(frozen=True)
@@ -58,7 +62,7 @@ register_method(
 register_method(
     Method("neural", NEURAL, "a network trained with meshgen train (3DMeshNet), evaluated at the nodes", options=NEURAL_OPTIONS)
 )
-# The trained methods of DESIGN section 6: name -> training preset (presets/<preset>.yaml).
+# The trained methods of design notes §6: name -> training preset (presets/<preset>.yaml).
 TRAINED = {
     "3dmeshnet": "default",
     "exact": "exact",
@@ -80,9 +84,6 @@ def get_method(name: str) -> Method:
 def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
     """TFI of the geometry's boundary map ("fixed", the default: the algebraic reference), or of
     the smoothed boundary layout (``meshgen.layout``)."""
-    from meshgen.layout import with_layout
-    from meshgen.tfi import tfi
-
     return tfi(with_layout(geometry, boundary_layout), None, coords), {"boundary_layout": boundary_layout}
 
 

@@ -529,3 +529,17 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(run_cli, tmp_path, setu
     assert one_line_error(result), result.stderr
     assert message in result.stderr
     assert sorted(os.listdir(tmp_path)) == before
+
+
+@pytest.mark.parametrize(("geometry", "dims"), [("topcurve", (4, 4, 4)), ("semidisk", (6, 4))])
+def test_default_method_without_a_model_meshes_with_elliptic_and_says_so(run_cli, tmp_path, geometry, dims):
+    result = run_cli("mesh", "-g", geometry, "--dims", *dims, "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[0] == (
+        f"note: no trained model for '{geometry}': meshing with elliptic (meshgen train -g {geometry} trains one)"
+    )
+    assert f"elliptic mesh of {geometry}" in result.stdout
+    recorded = json.loads((tmp_path / "m.vtu.quality.json").read_text())
+    assert recorded["method"] == "elliptic" and recorded["method_info"]["converged"] and recorded["dims"] == list(dims)
+    quiet = run_cli("mesh", "-g", geometry, "--dims", *dims, "-o", "q.vtu", "-q")
+    assert quiet.returncode == 0 and quiet.stdout == ""
