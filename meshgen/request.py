@@ -133,7 +133,8 @@ def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cl
         if name in options:
             fields[name] = options.pop(name)
     if options:
-        raise ParameterError(sorted(options)[0], f"{{name}} is no option of method '{method}'")
+        known = "model, tol, max_iter, correct, device, boundary_layout, orthogonal"
+        raise ParameterError(sorted(options)[0], f"{{name}} is no option of mesh() (options: {known})")
     if isinstance(fields.get("orthogonal"), str):
         fields["orthogonal"] = (fields["orthogonal"],)
     request = MeshRequest(tuple(dims), geometry, params, method, clusters=tuple(cluster), quality=False, **fields)
