@@ -16,6 +16,10 @@ import importlib
 from dataclasses import dataclass
 
 from meshgen.errors import ParameterError, unknown_name
+from meshgen.layout import with_layout
+from meshgen.tfi import tfi
+
+__all__ = ["METHODS", "NEURAL", "NEURAL_OPTIONS", "TRAINED", "Method", "build_tfi", "get_method", "make_mesh", "register_method"]
 
 
 @dataclass(frozen=True)
@@ -80,9 +84,6 @@ def get_method(name: str) -> Method:
 def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
     """TFI of the geometry's boundary map ("fixed", the default: the algebraic reference), or of
     the smoothed boundary layout (``meshgen.layout``)."""
-    from meshgen.layout import with_layout
-    from meshgen.tfi import tfi
-
     return tfi(with_layout(geometry, boundary_layout), None, coords), {"boundary_layout": boundary_layout}
 
 

@@ -14,12 +14,11 @@ import sys
 import numpy as np
 import pytest
 
-from meshgen import compare as comparing
+from meshgen import comparison as comparing
 from meshgen import plots
 from meshgen.tables import number
 
 HAVE_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
-HAVE_NEURAL = importlib.util.find_spec("meshgen.neural") is not None
 
 
 def png_size(path) -> tuple[int, int]:
@@ -250,14 +249,6 @@ def test_files_and_methods_do_not_mix(run_cli, tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.skipif(HAVE_NEURAL, reason="meshgen.neural is installed: the adapter trains instead")
-def test_neural_methods_without_the_neural_package_fail_clearly(run_cli, tmp_path):
-    result = run_cli("compare", "-g", "semidisk", "--dims", "4", "3", "--methods", "tfi,pinn", "--out", "out")
-    assert result.returncode == 2
-    assert "neural methods need meshgen.neural" in result.stderr
-    assert not (tmp_path / "out").exists()
-
-
 # ---------------------------------------------------------------------------------------------
 # the parts
 
@@ -328,7 +319,7 @@ def test_3d_sections_and_loss_curves_figures(tmp_path):
     from meshgen.geometry import load_geometry
 
     geometry = load_geometry("semicylinder")
-    outcome = comparing.compare_methods(geometry, [np.linspace(0, 1, n + 1) for n in (5, 4, 3)], ["tfi"])
+    outcome = comparing.compare_methods(geometry, (5, 4, 3), ["tfi"])
     history = tmp_path / "history.csv"
     steps = np.arange(1, 41)
     with open(history, "w") as handle:
@@ -351,11 +342,39 @@ def plots_picture(label, **fields):
     return comparing.Picture(label, **fields)
 
 
-def test_timed_runs_the_mesher_n_times():
-    calls = []
-    result, timings = comparing.timed(lambda: calls.append(1) or len(calls), 4)
-    assert result == 4 and len(timings) == 4 and len(calls) == 4
-    assert statistics.median(timings) >= min(timings) and all(math.isfinite(t) for t in timings)
+def test_timing_repeats_mesh_n_times_and_report_the_median(monkeypatch, semidisk):
+    import meshgen.methods
+    from meshgen.request import MeshRequest, carry_out
+
+    calls, build = [], meshgen.methods.build_tfi
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return build(*args, **kwargs)
+
+    monkeypatch.setattr(meshgen.methods, "build_tfi", counted)
+    made = carry_out(MeshRequest((4, 3), semidisk, method="tfi", timing_repeats=4))
+    assert len(calls) == 4 and len(made.timings) == 4
+    assert made.seconds == statistics.median(made.timings) and all(math.isfinite(t) for t in made.timings)
+
+
+def test_compare_sidecar_records_the_clustering_and_meshes_as_meshgen_mesh(run_cli, tmp_path):
+    from meshgen.formats import read_mesh
+
+    args = ("-g", "semidisk", "--dims", 6, 4, "--cluster", "eta:0:1.2")
+    compared = run_cli("compare", *args, "--methods", "tfi,elliptic", "--out", "cmp", "-q")
+    assert compared.returncode == 0, compared.stderr
+    for method in ("tfi", "elliptic"):
+        sidecar = json.loads((tmp_path / "cmp" / f"{method}.vtu.quality.json").read_text())
+        assert sidecar["cluster"] == ["eta:0:1.2"] and sidecar["method"] == method and sidecar["dims"] == [6, 4]
+        made = run_cli("mesh", "-m", method, *args, "-o", f"{method}.vtu", "-q")
+        assert made.returncode == 0, made.stderr
+        mesh_sidecar = json.loads((tmp_path / f"{method}.vtu.quality.json").read_text())
+        recorded = ("meshgen_version", "method", "geometry", "params", "dims", "cluster")
+        assert {k: sidecar[k] for k in recorded} == {k: mesh_sidecar[k] for k in recorded}
+        np.testing.assert_array_equal(
+            read_mesh(tmp_path / f"{method}.vtu").points, read_mesh(tmp_path / "cmp" / f"{method}.vtu").points
+        )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -372,7 +391,6 @@ TINY_BUDGET = [
 ]  # fmt: skip
 
 
-@pytest.mark.skipif(not HAVE_NEURAL, reason="meshgen.neural not installed")
 @pytest.mark.slow
 def test_neural_method_trains_meshes_and_reuses_its_checkpoint(run_cli, tmp_path):
     import torch

@@ -431,9 +431,18 @@ def test_newest_run_of_the_geometry_is_used_then_the_bundled_model(run_cli, tmp_
     assert chosen.stdout.startswith("model: runs/semicylinder-old/checkpoint.pt (")
     assert json.loads((tmp_path / "b.vtu.quality.json").read_text())["method_info"]["model"]["source"] == "run"
     # a run trained with other parameters is skipped; no run and no bundled model for radius 2
-    other = run_cli("mesh", "-g", "semicylinder", "--param", "radius=2", "--dims", 3, 3, 3, "-o", "c.vtu")
-    assert one_line_error(other) and "meshgen train -g semicylinder" in other.stderr and "--method tfi" in other.stderr
+    # --method neural says so; the default method meshes with elliptic and one line says why.
+    other = ("-g", "semicylinder", "--param", "radius=2", "--dims", 3, 3, 3, "-o", "c.vtu")
+    neural = run_cli("mesh", "-m", "neural", *other)
+    assert one_line_error(neural) and "meshgen train -g semicylinder" in neural.stderr and "--method tfi" in neural.stderr
     assert not (tmp_path / "c.vtu").exists()
+    fallback = run_cli("mesh", *other)
+    assert fallback.returncode == 0, fallback.stderr
+    assert fallback.stdout.startswith(
+        "note: no trained model for 'semicylinder': meshing with elliptic (meshgen train -g semicylinder trains one)\n"
+    )
+    recorded = json.loads((tmp_path / "c.vtu.quality.json").read_text())
+    assert recorded["method"] == "elliptic" and recorded["params"]["radius"] == 2.0
     (runs / "semicylinder-old" / "checkpoint.pt").unlink()
     bundled = run_cli("mesh", "-g", "semicylinder", "--dims", 3, 3, 3, "-o", "d.vtu")
     assert bundled.returncode == 0 and f"model: {BUNDLED} (bundled, exact" in bundled.stdout
@@ -500,7 +509,7 @@ def write_wrong_network(path):
         (None, ["--checkpoint", BUNDLED, "--param", "radius=3", "--dims", 4, 4, 4], "trained with radius=1, not radius=3"),
         (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both"], "malformed --cluster"),
         (None, ["--dims", 4, 4, 4, "--cluster", "zeta:both:0.5"], "growth ratio must be a number >= 1"),
-        (None, ["-g", "canal", "--dims", 4, 4, 4], "no trained model for canal"),
+        (None, ["-m", "neural", "-g", "canal", "--dims", 4, 4, 4], "no trained model for canal"),
         (None, ["-m", "tfi", "--checkpoint", BUNDLED, "--dims", 4, 4, 4], "--checkpoint applies to the neural method"),
         (None, ["--tol", "1e-3", "--dims", 4, 4, 4], "--tol does not apply to method 'neural'"),
         (None, ["-m", "tfi", "--no-snap", "--dims", 4, 4, 4], "--correct does not apply to method 'tfi'"),
@@ -515,3 +524,17 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(run_cli, tmp_path, setu
     assert one_line_error(result), result.stderr
     assert message in result.stderr
     assert sorted(os.listdir(tmp_path)) == before
+
+
+@pytest.mark.parametrize(("geometry", "dims"), [("topcurve", (4, 4, 4)), ("semidisk", (6, 4))])
+def test_default_method_without_a_model_meshes_with_elliptic_and_says_so(run_cli, tmp_path, geometry, dims):
+    result = run_cli("mesh", "-g", geometry, "--dims", *dims, "-o", "m.vtu")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines()[0] == (
+        f"note: no trained model for '{geometry}': meshing with elliptic (meshgen train -g {geometry} trains one)"
+    )
+    assert f"elliptic mesh of {geometry}" in result.stdout
+    recorded = json.loads((tmp_path / "m.vtu.quality.json").read_text())
+    assert recorded["method"] == "elliptic" and recorded["method_info"]["converged"] and recorded["dims"] == list(dims)
+    quiet = run_cli("mesh", "-g", geometry, "--dims", *dims, "-o", "q.vtu", "-q")
+    assert quiet.returncode == 0 and quiet.stdout == ""

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import meshgen
-from meshgen import compare as comparing
+from meshgen import comparison as comparing
 from meshgen.cli import cli, message_for_command_line
+from meshgen.clustering import node_coordinates
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean
 from meshgen.methods import METHODS, TRAINED, get_method, make_mesh
 from meshgen.neural.config import preset_paths
@@ -32,11 +32,12 @@ def test_compare_neural_row_is_the_mesh_that_meshgen_mesh_makes(tmp_path, run_cl
     run = tmp_path / "run"
     run.mkdir()
     train(tiny_config("adam.steps=3"), semidisk, run, summary=False)
-    coords = meshgen.node_coordinates((9, 5), ["eta:1:1.2"])
+    coords = node_coordinates((9, 5), ["eta:1:1.2"])
     outcome = comparing.compare_methods(
         semidisk,
-        coords,
+        (9, 5),
         ["3dmeshnet"],
+        clusters=["eta:1:1.2"],
         checkpoints={"3dmeshnet": run / "checkpoint.pt"},
         out_dir=tmp_path / "cmp",
     )
@@ -81,31 +82,31 @@ def test_mesh_command_names_its_methods_and_refuses_trained_ones(tmp_path):
     ("call", "parameter", "library", "command_line"),
     [
         (
-            lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), tol=-1.0),
+            lambda g: make_mesh("elliptic", g, node_coordinates((4, 4)), tol=-1.0),
             "tol",
             "tol must be a positive number, got -1.0",
             "--tol must be a positive number",
         ),
         (
-            lambda g: make_mesh("elliptic", g, meshgen.node_coordinates((4, 4)), max_iter=0),
+            lambda g: make_mesh("elliptic", g, node_coordinates((4, 4)), max_iter=0),
             "max_iter",
             "max_iter must be a positive integer, got 0",
             "--max-iter must be a positive integer",
         ),
         (
-            lambda g: make_mesh("tfi", g, meshgen.node_coordinates((4, 4)), tol=1e-3),
+            lambda g: make_mesh("tfi", g, node_coordinates((4, 4)), tol=1e-3),
             "tol",
             "tol does not apply to method 'tfi'",
             "--tol does not apply to method 'tfi'",
         ),
         (
-            lambda g: meshgen.node_coordinates((4, 4), ["zeta:both:1.1"]),
+            lambda g: node_coordinates((4, 4), ["zeta:both:1.1"]),
             "cluster",
             "cluster axis zeta does not exist in a 2D mesh",
             "--cluster axis zeta does not exist",
         ),
         (
-            lambda g: meshgen.node_coordinates((4, 4), ["eta:both"]),
+            lambda g: node_coordinates((4, 4), ["eta:both"]),
             "cluster",
             "malformed cluster 'eta:both'",
             "malformed --cluster 'eta:both'",
@@ -117,15 +118,13 @@ def test_mesh_command_names_its_methods_and_refuses_trained_ones(tmp_path):
             "malformed --checkpoint 'pinn'",
         ),
         (
-            lambda g: comparing.compare_methods(
-                g, meshgen.node_coordinates((4, 4)), ["tfi"], budget=comparing.Budget(overrides=("adam.lr=1",))
-            ),
+            lambda g: comparing.compare_methods(g, (4, 4), ["tfi"], budget=comparing.Budget(overrides=("adam.lr=1",))),
             "overrides",
             "overrides applies to neural methods only",
             "--set applies to neural methods only",
         ),
         (
-            lambda g: comparing.compare_methods(g, meshgen.node_coordinates((4, 4)), ["tfi"], method_options={"max_iter": 3}),
+            lambda g: comparing.compare_methods(g, (4, 4), ["tfi"], method_options={"max_iter": 3}),
             "max_iter",
             "max_iter applies to none of the compared methods",
             "--max-iter applies to none",

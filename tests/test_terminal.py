@@ -172,7 +172,7 @@ def test_compare_at_a_real_terminal_shows_training_and_fits_the_table(tmp_path):
 
 
 def test_compare_table_keeps_its_full_width_in_a_file(run_cli):
-    from meshgen.compare import COLUMNS
+    from meshgen.comparison import COLUMNS
 
     result = run_cli(*COMPARE, "--methods", "tfi,elliptic")
     assert result.returncode == 0, result.stderr

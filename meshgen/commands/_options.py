@@ -6,6 +6,11 @@ import re
 
 import click
 
+from meshgen.errors import GeometryError
+from meshgen.geometry import load_geometry, parse_params
+
+__all__ = ["DimsCommand", "dims_option", "geometry_options", "load_selected_geometry", "parse_dims"]
+
 _DIM_VALUE = re.compile(r"^(-?\d.*|[^-].*)$")  # anything but an option (negative numbers included)
 _NUMBER = re.compile(r"^[-+]?[\d.]+([eE][-+]?\d+)?$")
 
@@ -83,9 +88,6 @@ def geometry_options(default="semicylinder"):
 
 def load_selected_geometry(spec, params, dims=None):
     """Load the geometry chosen on the command line; check dims against its dimension."""
-    from meshgen.errors import GeometryError
-    from meshgen.geometry import load_geometry, parse_params
-
     geometry = load_geometry(spec, parse_params(params))
     if dims is not None and len(dims) != geometry.dim:
         raise GeometryError(

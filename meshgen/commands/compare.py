@@ -6,10 +6,21 @@ Exit status: 0, 1 when a method failed (its row says so), 2 for usage errors.
 
 from __future__ import annotations
 
+import struct
+from pathlib import Path
+
 import click
 
-from meshgen.commands._options import DimsCommand, dims_option, geometry_options
-from meshgen.tables import METRIC_LABELS
+from meshgen import comparison as comparing
+from meshgen import plots
+from meshgen.commands._options import DimsCommand, dims_option, geometry_options, load_selected_geometry
+from meshgen.formats import format_for
+from meshgen.geometry import load_geometry, parse_params
+from meshgen.methods import METHODS
+from meshgen.neural.progress import reporter_for
+from meshgen.tables import METRIC_LABELS, print_table
+
+__all__ = ["EPILOG", "compare"]
 
 EPILOG = """\b
 Columns: means of min angle, max angle, equiangle skewness, aspect ratio, centroid skewness and
@@ -34,10 +45,7 @@ Examples:
 
 
 def _methods_help() -> str:
-    from meshgen.compare import DEFAULT_METHODS
-    from meshgen.methods import METHODS
-
-    return f"Comma-separated methods: {', '.join(METHODS)} [default: {','.join(DEFAULT_METHODS)}]."
+    return f"Comma-separated methods: {', '.join(METHODS)} [default: {','.join(comparing.DEFAULT_METHODS)}]."
 
 
 @click.command("compare", cls=DimsCommand, epilog=EPILOG)
@@ -145,9 +153,6 @@ def compare(
     With MESH files: measure them as 'meshgen evaluate' does (boundary deviation against the
     geometry each file records, or --geometry).
     """
-    from pathlib import Path
-
-    from meshgen import compare as comparing
 
     def say(text):
         if not quiet:
@@ -179,21 +184,14 @@ def compare(
 
     # Everything the command line can get wrong fails before anything is created or written.
     if meshes:
-        from meshgen.geometry import load_geometry, parse_params
-
         parsed = parse_params(params)
         chosen = load_geometry(geometry, parsed) if geometry else None
         comparing.check_mesh_files(meshes)
         out = comparing.prepare_out_dir(out_dir) if out_dir is not None else None
     else:
-        from meshgen.clustering import node_coordinates
-        from meshgen.commands._options import load_selected_geometry
-        from meshgen.formats import format_for
-
         names = comparing.parse_methods(methods or ",".join(comparing.DEFAULT_METHODS))
         reuse = comparing.parse_checkpoints(checkpoints)
         chosen = load_selected_geometry(geometry or "semicylinder", params, dims)
-        coords = node_coordinates(dims, clusters)
         if out_dir is not None:
             format_for("mesh" + mesh_format)
         out = Path(out_dir) if out_dir is not None else None  # compare_methods creates it after its checks
@@ -203,8 +201,9 @@ def compare(
     else:
         outcome = comparing.compare_methods(
             chosen,
-            coords,
+            dims,
             names,
+            clusters=clusters,
             method_options={"tol": tol, "max_iter": max_iter},
             budget=comparing.Budget(steps, tuple(overrides), seed, device),
             checkpoints=reuse,
@@ -221,8 +220,6 @@ def compare(
         written += [row["file"] for row in comparison["rows"] if row.get("file") and row["kind"] != "file"]
         written += [str(p) for p in _pictures(outcome, metric, out, say)]
         written += [str(p) for p in comparing.write_tables(comparison, out)]  # last: they record the pictures
-
-    from meshgen.tables import print_table
 
     header, rows, highlight = comparing.table(comparison, short=True)
     print_table(
@@ -245,14 +242,10 @@ def compare(
 def _training_reporter(config):
     """The training progress of a neural row, as ``meshgen train`` shows it (imported only when a
     neural row trains)."""
-    from meshgen.neural.progress import reporter_for
-
     return reporter_for(config)
 
 
 def _short(path, out) -> str:
-    from pathlib import Path
-
     try:
         return str(Path(path).relative_to(out))
     except ValueError:
@@ -261,8 +254,6 @@ def _short(path, out) -> str:
 
 def _pictures(outcome, metric, out, say) -> list:
     """Write sections.png and loss_curves.png; without matplotlib say how to get them."""
-    from meshgen import plots
-
     comparison = outcome.comparison
     if not plots.plotting_available():
         say(f"no pictures: {plots.INSTALL_HINT}")
@@ -291,8 +282,6 @@ def _pictures(outcome, metric, out, say) -> list:
 
 def _png_size(path) -> tuple[int, int]:
     """(width, height) from a PNG's IHDR chunk."""
-    import struct
-
     with open(path, "rb") as handle:
         head = handle.read(24)
     return struct.unpack(">II", head[16:24])

@@ -9,6 +9,7 @@ from meshgen.commands._text import echo
 from meshgen.neural.config import list_presets as preset_list
 from meshgen.neural.progress import FIELD_HELP
 from meshgen.neural.session import prepare_run, run_training
+from meshgen.quality import summary_lines
 
 __all__ = ["MESH_HINT", "train"]
 
@@ -120,8 +121,6 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
         click.echo(f"Interrupted at step {result.step} ({result.stage}); checkpoint saved: {result.checkpoint_path}")
         click.echo(f"Continue with: meshgen train --resume {result.checkpoint_path}")
         raise click.exceptions.Exit(130)
-    from meshgen.quality import summary_lines
-
     summary = result.summary
     if run.family is not None:
         _family_report(run, result)

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from meshgen.errors import MeshgenError, did_you_mean, unknown_name
+from meshgen.geometry import builtin_dir
 
 __all__ = [
     "ConfigError",
@@ -266,8 +267,6 @@ def parse_override(text: str) -> tuple[str, typing.Any]:
 
 
 def presets_dir() -> Path:
-    from meshgen.geometry import builtin_dir
-
     return builtin_dir("presets")
 
 

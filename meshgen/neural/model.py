@@ -23,6 +23,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from meshgen.cube import face_samples
+from meshgen.geometry import load_geometry
+from meshgen.layout import trained_layout, with_layout
 from meshgen.neural.checkpoint import load_checkpoint
 
 __all__ = ["MLP", "bubble", "normalisation", "describe", "load_checkpoint", "mesh_from_checkpoint"]
@@ -55,8 +58,6 @@ def bubble(xi):
 def normalisation(geometry, samples: int = 17) -> tuple[np.ndarray, float]:
     """Centre and scale that map the geometry into [-1/2, 1/2]^d: the centre of the bounding box of
     the boundary (sampled on a ``samples``-per-edge grid of every face) and its largest extent."""
-    from meshgen.cube import face_samples
-
     mapped = geometry.boundary(face_samples(geometry.dim, samples))
     low, high = mapped.min(axis=0), mapped.max(axis=0)
     return (low + high) / 2.0, float(np.max(high - low))
@@ -98,7 +99,6 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
     Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.inference``).
     Returns the node array X, shape (len(coords[0]), ..., dim), float64.
     """
-    from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
 
     model = checkpoint["model"]
@@ -111,7 +111,5 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
 
 def geometry_from_checkpoint(checkpoint: dict):
     """The geometry a checkpoint was trained on, with its parameters (by name or plugin path)."""
-    from meshgen.geometry import load_geometry
-
     entry = checkpoint["geometry"]
     return load_geometry(entry["spec"], dict(entry["params"]))

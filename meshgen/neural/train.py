@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from meshgen.correction import correct_boundary
 from meshgen.layout import with_layout
 from meshgen.neural.config import TrainConfig
 from meshgen.neural.history import TrainState, state_from_checkpoint
@@ -202,8 +203,6 @@ def start_training(config: TrainConfig, geometry, device: torch.device, resume: 
 def corrected(X: np.ndarray, geometry, coords) -> np.ndarray:
     """A copy of node array ``X`` corrected to X + TFI[g - X] (what ``meshgen mesh`` makes of a
     network's mesh by default; ``meshgen.correction.correct_boundary``)."""
-    from meshgen.correction import correct_boundary
-
     X = X.copy()
     correct_boundary(X, geometry, coords)
     return X
