@@ -30,6 +30,7 @@ import torch
 
 from meshgen.atomic import atomic_path
 from meshgen.errors import MeshgenError
+from meshgen.publish import reason
 
 FORMAT = "meshgen-checkpoint"
 FORMAT_VERSION = 1
@@ -50,9 +51,9 @@ def save_checkpoint(path: str | os.PathLike, checkpoint: dict) -> None:
             # a full disk as "unexpected pos 704 vs 598" instead of the OSError (ENOSPC).
             with open(temporary, "wb", buffering=0) as handle:
                 torch.save(checkpoint, handle)
-    except OSError as exc:
+    except (OSError, RuntimeError) as exc:  # torch reports some write failures as RuntimeError
         raise CheckpointError(
-            f"could not write checkpoint {path}: {exc.strerror or exc} (any previous checkpoint there is kept)"
+            f"could not write checkpoint {path}: {reason(exc)} (any previous checkpoint there is kept)"
         ) from exc
 
 

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
+from meshgen.publish import make_fresh_folder, output_lock
+from meshgen.signals import TERMINATING_SIGNALS
 
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
@@ -29,6 +31,8 @@ class Run:
     resume: dict | None = None  # the loaded checkpoint when resuming
     resume_path: Path | None = None
     family: object | None = None  # meshgen.neural.family.Family when parameters are varied (--vary)
+    fresh_name: bool = False  # run_dir is a default name: the run takes it, or the next free one
+    force: bool = False  # --force: overwrite a run folder of another geometry or configuration
 
 
 def is_run_folder(path: Path) -> bool:
@@ -47,11 +51,8 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     elif resume_path is not None:
         path = resume_path.parent
     else:
-        base = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
-        path, number = base, 1
-        while path.exists():
-            number += 1
-            path = base.with_name(f"{base.name}-{number}")
+        # The name is taken when the folder is made (make_fresh_folder): -2, -3 ... when taken by then.
+        path = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
     if path.exists():
         if not path.is_dir():
             raise MeshgenError(f"output folder {path} exists and is a file")
@@ -64,6 +65,34 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     if not os.access(existing, os.W_OK | os.X_OK):
         raise MeshgenError(f"output folder {existing} is not writable")
     return path
+
+
+def check_run_folder(run_dir: Path, config, geometry, force: bool) -> None:
+    """Refuse (MeshgenError) to train into a folder whose checkpoint is of another geometry,
+    other parameters or another configuration, unless ``force``: the two runs' files would mix.
+    A run of the same geometry and configuration is repeated in place."""
+    from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
+    from meshgen.neural.config import to_dict
+
+    path = Path(run_dir) / "checkpoint.pt"
+    if force or not path.is_file():
+        return
+    try:
+        checkpoint = load_checkpoint(path)
+        recorded = checkpoint["geometry"]
+        same = (
+            recorded["name"] == geometry.name
+            and dict(recorded["params"]) == dict(geometry.values)
+            and checkpoint["config"] == to_dict(config)
+        )
+        what = f"a run of {recorded['name']} with another configuration or parameters"
+    except (CheckpointError, KeyError, TypeError):
+        same, what = False, "a checkpoint this meshgen cannot read"
+    if not same:
+        raise MeshgenError(
+            f"output folder {run_dir} holds {what}: choose another --out, continue it with --resume {path}, "
+            "or replace it with --force"
+        )
 
 
 def _geometry_spec(spec: str) -> str:
@@ -85,6 +114,7 @@ def prepare_run(
     device="auto",
     threads=None,
     vary=(),
+    force=False,
 ) -> Run:
     """Check every input of ``meshgen train`` and return what to run; writes nothing.
 
@@ -92,6 +122,7 @@ def prepare_run(
     unknown or ill-typed keys, a preset for the other dimension, a missing, truncated or foreign
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
+    ``force``: train into an ``out`` folder that holds a run of another geometry or configuration.
     """
     from meshgen.geometry import load_geometry, parse_params
     from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
@@ -160,7 +191,12 @@ def prepare_run(
 
         torch.set_num_threads(threads)
     run_dir = choose_run_dir(out, resume_path, geometry_object.name)
-    return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
+    if out is not None and resume is None:
+        check_run_folder(run_dir, config, geometry_object, force)
+    fresh_name = out is None and resume is None
+    return Run(
+        config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force
+    )
 
 
 def _family(config, geometry, spec: str, params, vary):
@@ -187,14 +223,32 @@ def _family(config, geometry, spec: str, params, vary):
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
+
+    try:
+        if run.fresh_name:
+            run.run_dir = make_fresh_folder(run.run_dir)
+            created = True
+        else:
+            run.run_dir.parent.mkdir(parents=True, exist_ok=True)
+            created = not run.run_dir.exists()
+    except OSError as exc:
+        raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
+    # One training per run folder at a time: a second one into the same folder stops here.
+    with output_lock(run.run_dir, wait=False):
+        try:
+            if not run.fresh_name:
+                if run.resume is None:
+                    check_run_folder(run.run_dir, run.config, run.geometry, run.force)  # again, now that it is ours
+                run.run_dir.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
+        return _train_in(run, quiet, created)
+
+
+def _train_in(run: Run, quiet: bool, created: bool):
     from meshgen.neural.progress import reporter_for
     from meshgen.neural.train import train
 
-    created = not run.run_dir.exists()
-    try:
-        run.run_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
     reporter = reporter_for(run.config, quiet)
     stop_requested = threading.Event()
 
@@ -204,7 +258,9 @@ def run_training(run: Run, quiet: bool = False):
         stop_requested.set()
         reporter.message("Stopping after this step to save a checkpoint (Ctrl-C again to abort without saving)")
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
+    # SIGTERM and SIGHUP (a batch system, a closed terminal) stop the run like Ctrl-C: saved, resumable.
+    handled = [signal.SIGINT] + [signum for signum in TERMINATING_SIGNALS if signal.getsignal(signum) is not signal.SIG_IGN]
+    previous = {signum: signal.signal(signum, on_interrupt) for signum in handled}
     try:
         with reporter:
             if run.family is not None:
@@ -236,4 +292,5 @@ def run_training(run: Run, quiet: bool = False):
             run.run_dir.rmdir()
         raise
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
