@@ -1,6 +1,7 @@
 """SIGTERM and SIGHUP end meshgen the way Ctrl-C does: as an exception (``Terminated``, a
-KeyboardInterrupt) that unwinds the stack, so every write's cleanup runs (temporaries removed,
-previous files kept), instead of the default of dying on the spot. Installed once, by the
+BaseException like KeyboardInterrupt, so no ``except Exception`` swallows it) that unwinds the
+stack, so every write's cleanup runs (temporaries removed, previous files kept), instead of the
+default of dying on the spot. Installed once, by the
 command-line entry (``meshgen.cli.main``); a signal the parent set to be ignored (``nohup``) stays
 ignored."""
 
@@ -13,7 +14,7 @@ __all__ = ["TERMINATING_SIGNALS", "Terminated", "install_termination_handlers", 
 TERMINATING_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
-class Terminated(KeyboardInterrupt):
+class Terminated(BaseException):
     """The process was asked to stop by ``signum`` (SIGTERM, SIGHUP); the CLI exits 128 + signum."""
 
     def __init__(self, signum: int):
