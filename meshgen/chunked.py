@@ -193,7 +193,7 @@ def write_chunked_mesh(
     slices = [s[:-1] for s in slices_from_chunks(X.chunks)]
     report, timings = None, {}
     try:
-        with publishing(path), atomic_path(path) as temporary:  # the mesh and its sidecar together, or neither
+        with publishing(path) as publication, atomic_path(path) as temporary:  # the mesh and its sidecar together, or neither
             start = time.perf_counter()
             with writer.stream(temporary, node_shape, dim, metadata or {}, patches=patches) as zone:
                 for done, (index, block) in enumerate(compute_in_order_of_completion(blocks, client), start=1):
@@ -208,6 +208,8 @@ def write_chunked_mesh(
                 timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
             if report is not None:
                 write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
+            else:
+                publication.remove(sidecar_path(path))  # a previous mesh's sidecar describes another mesh
     except (OSError, RuntimeError) as exc:  # h5py reports a full disk as either
         raise MeshgenError(f"could not write {path}: {reason(exc)}") from exc
     return report, timings

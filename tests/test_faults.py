@@ -176,6 +176,46 @@ def test_two_trainings_started_in_one_folder_get_their_own_run_folders(two_runs)
     assert leftovers(two_runs) == []
 
 
+def same_data(a, b) -> bool:
+    """Equal plain data; tensors equal bit for bit."""
+    import torch
+
+    if isinstance(a, torch.Tensor):
+        return isinstance(b, torch.Tensor) and a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b)
+    if isinstance(a, dict):
+        return isinstance(b, dict) and list(a) == list(b) and all(same_data(a[key], b[key]) for key in a)
+    if isinstance(a, (list, tuple)):
+        return type(a) is type(b) and len(a) == len(b) and all(same_data(x, y) for x, y in zip(a, b))
+    return a == b or (a != a and b != b)
+
+
+def test_two_identical_seeded_trainings_differ_only_in_their_timings(two_runs):
+    """The two runs above had the same seed and configuration: their run folders are the same
+    but for the wall-clock timings the design notes name ("Same input, same bytes"): config.yaml
+    byte for byte, the checkpoint's every tensor and entry, the history but
+    its ``seconds`` column, the summary but its ``*_seconds`` keys."""
+    import csv
+
+    import torch
+
+    from meshgen.formats.metadata import without_timings
+
+    a, b = (two_runs / "runs" / name for name in ("semidisk-20260101-000000", "semidisk-20260101-000000-2"))
+    assert (a / "config.yaml").read_bytes() == (b / "config.yaml").read_bytes()
+    checkpoints = [torch.load(run / "checkpoint.pt", weights_only=True) for run in (a, b)]
+    for checkpoint in checkpoints:
+        assert checkpoint["elapsed_seconds"] > 0
+        del checkpoint["elapsed_seconds"], checkpoint["history"]["last"]["seconds"]
+    assert same_data(*checkpoints)
+    histories = []
+    for run in (a, b):
+        with open(run / "history.csv", newline="") as handle:
+            histories.append([{k: v for k, v in row.items() if k != "seconds"} for row in csv.DictReader(handle)])
+    assert histories[0] == histories[1]
+    summaries = [json.loads((run / "summary.json").read_text()) for run in (a, b)]
+    assert without_timings(summaries[0]) == without_timings(summaries[1])
+
+
 def test_training_into_a_run_of_another_configuration_refuses_unless_forced(two_runs, tmp_path):
     run = two_runs / "runs" / "semidisk-20260101-000000"
     before = snapshot(run)
@@ -308,6 +348,18 @@ def test_a_checkpoint_write_failing_in_torch_is_one_line(tmp_path, monkeypatch):
     with pytest.raises(CheckpointError, match=r"could not write checkpoint .*unexpected pos .*previous checkpoint there is kept"):
         save_checkpoint(path, {"step": 2})
     assert path.read_bytes() == before and os.listdir(tmp_path) == ["checkpoint.pt"]
+
+
+@pytest.mark.parametrize("chunked", [False, True], ids=["vtu", "cgns-chunked"])
+def test_a_mesh_written_without_its_sidecar_removes_the_previous_one(tmp_path, chunked):
+    """``--no-quality`` publishes the mesh alone: the sidecar of the previous mesh under that name
+    goes with it (it would describe, and time, another mesh)."""
+    name = "m.cgns" if chunked else "m.vtu"
+    mesh = ["mesh", "-m", "tfi", "-g", "semidisk", "-o", name, "-q", *(["--chunked"] if chunked else []), "--dims"]
+    assert invoke(*mesh, 3, 2).exit_code == 0 and (tmp_path / f"{name}.quality.json").is_file()
+    result = invoke(*mesh, 6, 5, "--no-quality")
+    assert result.exit_code == 0, result.output
+    assert sorted(os.listdir(tmp_path)) == [name] and metadata_of(tmp_path / name)["dims"] == [6, 5]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -157,11 +157,11 @@ def mesh(
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
     from meshgen.errors import MeshgenError
-    from meshgen.formats import check_output_path, check_patches, format_for, streaming_writer, write_mesh
+    from meshgen.formats import check_output_path, check_patches, format_for, streaming_writer
     from meshgen.meshing import Mesh
     from meshgen.methods import get_method, make_mesh
     from meshgen.patches import geometry_patches, parse_patch_options
-    from meshgen.quality import write_mesh_with_quality
+    from meshgen.quality import write_mesh_alone, write_mesh_with_quality
     from meshgen.resources import check_free_space, needs_chunking
     from meshgen.scheduler import connect, scheduler_address
 
@@ -243,7 +243,7 @@ def mesh(
         # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
         report = write_mesh_with_quality(output, X, geometry, metadata, **write_options)
     else:
-        write_mesh(output, X, metadata=metadata, **write_options)
+        write_mesh_alone(output, X, metadata, **write_options)  # and a previous mesh's sidecar is removed
         report = None
     _print_result(method, geometry, dims, info, seconds, output, output_format, patches, report, quiet)
 

@@ -32,6 +32,7 @@ __all__ = [
     "recorded_metadata",
     "sidecar_path",
     "write_json",
+    "write_mesh_alone",
     "write_mesh_with_quality",
 ]
 
@@ -103,6 +104,16 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
         written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
         write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
     return report
+
+
+def write_mesh_alone(path, X, metadata: dict | None = None, **write_options) -> Path:
+    """Write node array ``X`` to ``path`` without quality arrays or sidecar (``meshgen mesh
+    --no-quality``); the sidecar of a previous mesh under that name is removed in the same
+    publication, so no sidecar describes a mesh it was not written with. Returns the path written."""
+    with publishing(path, FormatError) as publication:
+        written = write_mesh(path, X, metadata=metadata, **write_options)
+        publication.remove(sidecar_path(written))
+    return written
 
 
 # ---------------------------------------------------------------------------------------------
