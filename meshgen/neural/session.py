@@ -12,8 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
-from meshgen.publish import make_fresh_folder, output_lock
-from meshgen.signals import TERMINATING_SIGNALS
+from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
 
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
@@ -51,7 +50,7 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     elif resume_path is not None:
         path = resume_path.parent
     else:
-        # The name is taken when the folder is made (make_fresh_folder): -2, -3 ... when taken by then.
+        # Taken when the folder is made (meshgen.neural.run_folder): -2, -3 ... if taken by then.
         path = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
     if path.exists():
         if not path.is_dir():
@@ -65,34 +64,6 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     if not os.access(existing, os.W_OK | os.X_OK):
         raise MeshgenError(f"output folder {existing} is not writable")
     return path
-
-
-def check_run_folder(run_dir: Path, config, geometry, force: bool) -> None:
-    """Refuse (MeshgenError) to train into a folder whose checkpoint is of another geometry,
-    other parameters or another configuration, unless ``force``: the two runs' files would mix.
-    A run of the same geometry and configuration is repeated in place."""
-    from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
-    from meshgen.neural.config import to_dict
-
-    path = Path(run_dir) / "checkpoint.pt"
-    if force or not path.is_file():
-        return
-    try:
-        checkpoint = load_checkpoint(path)
-        recorded = checkpoint["geometry"]
-        same = (
-            recorded["name"] == geometry.name
-            and dict(recorded["params"]) == dict(geometry.values)
-            and checkpoint["config"] == to_dict(config)
-        )
-        what = f"a run of {recorded['name']} with another configuration or parameters"
-    except (CheckpointError, KeyError, TypeError):
-        same, what = False, "a checkpoint this meshgen cannot read"
-    if not same:
-        raise MeshgenError(
-            f"output folder {run_dir} holds {what}: choose another --out, continue it with --resume {path}, "
-            "or replace it with --force"
-        )
 
 
 def _geometry_spec(spec: str) -> str:
@@ -223,32 +194,10 @@ def _family(config, geometry, spec: str, params, vary):
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-
-    try:
-        if run.fresh_name:
-            run.run_dir = make_fresh_folder(run.run_dir)
-            created = True
-        else:
-            run.run_dir.parent.mkdir(parents=True, exist_ok=True)
-            created = not run.run_dir.exists()
-    except OSError as exc:
-        raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
-    # One training per run folder at a time: a second one into the same folder stops here.
-    with output_lock(run.run_dir, wait=False):
-        try:
-            if not run.fresh_name:
-                if run.resume is None:
-                    check_run_folder(run.run_dir, run.config, run.geometry, run.force)  # again, now that it is ours
-                run.run_dir.mkdir(exist_ok=True)
-        except OSError as exc:
-            raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
-        return _train_in(run, quiet, created)
-
-
-def _train_in(run: Run, quiet: bool, created: bool):
     from meshgen.neural.progress import reporter_for
     from meshgen.neural.train import train
 
+    created, release = claim_run_folder(run)  # a folder of its own, locked while the run trains
     reporter = reporter_for(run.config, quiet)
     stop_requested = threading.Event()
 
@@ -259,8 +208,7 @@ def _train_in(run: Run, quiet: bool, created: bool):
         reporter.message("Stopping after this step to save a checkpoint (Ctrl-C again to abort without saving)")
 
     # SIGTERM and SIGHUP (a batch system, a closed terminal) stop the run like Ctrl-C: saved, resumable.
-    handled = [signal.SIGINT] + [signum for signum in TERMINATING_SIGNALS if signal.getsignal(signum) is not signal.SIG_IGN]
-    previous = {signum: signal.signal(signum, on_interrupt) for signum in handled}
+    previous = {signum: signal.signal(signum, on_interrupt) for signum in stop_signals()}
     try:
         with reporter:
             if run.family is not None:
@@ -294,3 +242,4 @@ def _train_in(run: Run, quiet: bool, created: bool):
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        release()
