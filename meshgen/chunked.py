@@ -37,6 +37,7 @@ from meshgen.errors import MeshgenError
 from meshgen.formats import check_output_path, check_patches, streaming_writer
 from meshgen.grid import BLOCK_NODES, block_slices
 from meshgen.patches import geometry_patches
+from meshgen.publish import publishing, reason
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
 from meshgen.resources import check_free_space
@@ -192,7 +193,7 @@ def write_chunked_mesh(
     slices = [s[:-1] for s in slices_from_chunks(X.chunks)]
     report, timings = None, {}
     try:
-        with atomic_path(path) as temporary:
+        with publishing(path) as publication, atomic_path(path) as temporary:  # the mesh and its sidecar together, or neither
             start = time.perf_counter()
             with writer.stream(temporary, node_shape, dim, metadata or {}, patches=patches) as zone:
                 for done, (index, block) in enumerate(compute_in_order_of_completion(blocks, client), start=1):
@@ -205,8 +206,10 @@ def write_chunked_mesh(
                 start = time.perf_counter()
                 report = chunked_report(temporary, geometry, client=client, progress=progress)
                 timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
-    except OSError as exc:
-        raise MeshgenError(f"could not write {path}: {exc.strerror or exc}") from exc
-    if report is not None:
-        write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
+            if report is not None:
+                write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
+            else:
+                publication.remove(sidecar_path(path))  # a previous mesh's sidecar describes another mesh
+    except (OSError, RuntimeError) as exc:  # h5py reports a full disk as either
+        raise MeshgenError(f"could not write {path}: {reason(exc)}") from exc
     return report, timings

@@ -3,7 +3,8 @@ only when it runs, so ``meshgen --help`` stays fast (no torch, no trimesh, no nu
 
 Errors a user can act on (MeshgenError, click usage errors, and an OSError that no command
 turned into one: a full disk, no permission) are printed as one line with exit status 2; Ctrl-C
-exits with status 130. Set MESHGEN_DEBUG=1 to see tracebacks.
+exits with status 130, SIGTERM and SIGHUP (unwound like Ctrl-C: ``meshgen.signals``) with 128 + the
+signal's number. Set MESHGEN_DEBUG=1 to see tracebacks.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import click
 
 from meshgen import __version__
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean
+from meshgen.signals import Terminated, install_termination_handlers
 
 __all__ = ["COMMANDS", "FLAGS", "MeshgenGroup", "cli", "flag_of", "main", "message_for_command_line", "one_line"]
 
@@ -101,6 +103,9 @@ class MeshgenGroup(click.Group):
                 raise
             click.echo(f"Error: {one_line(message_for_command_line(exc))}", err=True)
             sys.exit(2)
+        except Terminated as exc:  # SIGTERM, SIGHUP: unwound like Ctrl-C, every write cleaned up
+            click.echo(f"Terminated ({exc}).", err=True)
+            sys.exit(128 + exc.signum)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
             sys.exit(130)
@@ -137,4 +142,5 @@ def main():
     # Before torch starts its OpenMP threads (train, compare's neural rows, neural meshes): spinning
     # threads make a CPU that other processes share tens of times slower; the user's setting wins.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    install_termination_handlers()
     cli.main()

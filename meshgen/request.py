@@ -1,6 +1,6 @@
 """One path from a request to a mesh: ``MeshRequest`` (plain data: what to mesh, how, and where
 to write it) and ``carry_out(request) -> Mesh``, which ``meshgen mesh``, every method row of
-``meshgen compare`` and ``meshgen.mesh()`` all call (design notes: docs/design-request.md).
+``meshgen compare`` and ``meshgen.mesh()`` all call (design notes §14).
 
 ``carry_out`` loads and checks the geometry, resolves the method (``auto``: a trained model of the
 geometry, else ``elliptic`` with a note saying so), decides between the in-memory and the chunked
@@ -20,13 +20,13 @@ from pathlib import Path
 from meshgen.chunked import CHUNKED_METHODS, neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
 from meshgen.clustering import node_coordinates
 from meshgen.errors import MeshgenError, ParameterError
-from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer, write_mesh
+from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer
 from meshgen.geometry import Geometry, bind, check_boundary, load_geometry
 from meshgen.layout import trained_layout, with_layout
 from meshgen.meshing import Mesh
 from meshgen.methods import get_method, make_mesh
 from meshgen.patches import geometry_patches, parse_patch_options
-from meshgen.quality import quality_report, write_mesh_with_quality
+from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
 from meshgen.resources import check_free_space, needs_chunking
 from meshgen.scheduler import connect, scheduler_address
 from meshgen.tfi import check_axes
@@ -343,7 +343,7 @@ def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
         # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
         mesh.quality_report = write_mesh_with_quality(plan.output, X, plan.geometry, mesh.metadata(), **write_options)
     else:
-        write_mesh(plan.output, X, metadata=mesh.metadata(), **write_options)
+        write_mesh_alone(plan.output, X, mesh.metadata(), **write_options)  # and a previous mesh's sidecar is removed
     return mesh
 
 

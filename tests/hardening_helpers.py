@@ -4,8 +4,10 @@ instead of at a random moment.
 
     python tests/hardening_helpers.py KIND MARKER N meshgen-arguments...
 
-KIND is ``torch-save`` (the N-th ``torch.save``: a checkpoint) or ``plot3d-record`` (the N-th
-record of a Plot3D file). The stalled write puts the first half of its bytes where the real
+KIND is ``torch-save`` (the N-th ``torch.save``: a checkpoint), ``plot3d-record`` (the N-th
+record of a Plot3D file), ``openfoam-polymesh`` (after the N-th polyMesh is written under its
+temporary name), ``publish-rename`` (after the N-th rename of a publication, its lock held), or
+``same-second`` (no stall: the clock that names run folders reads one fixed second). The stalled write puts the first half of its bytes where the real
 write would have put them (whatever file meshgen handed it: a temporary name or the target
 itself), flushes them to disk, writes MARKER (holding that file's name) and waits: for the file
 MARKER.go, after which it writes the rest, or to be killed. Only the timing is staged: the file,
@@ -28,6 +30,11 @@ def _stall(handle, marker: str, where) -> None:
     (the test lets the write finish) or the process is killed; at most ``STALL_SECONDS``."""
     handle.flush()
     os.fsync(handle.fileno())
+    _wait(marker, where)
+
+
+def _wait(marker: str, where) -> None:
+    """Write ``marker`` (holding ``where``), then wait for ``marker``.go or to be killed."""
     temporary = Path(marker + ".part")
     temporary.write_text(str(where))
     os.replace(temporary, marker)  # the marker appears whole: the test never reads half a name
@@ -79,9 +86,58 @@ def stall_plot3d_record(marker: str, call: int) -> None:
     _plot3d._write_record = write_record
 
 
+def stall_openfoam_poly_mesh(marker: str, call: int) -> None:
+    """Stop once the N-th polyMesh is written under its temporary name (the case folder made)."""
+    from meshgen.formats import _openfoam
+
+    real_write = _openfoam._write_poly_mesh
+    calls = [0]
+
+    def write_poly_mesh(folder, *args):
+        real_write(folder, *args)
+        calls[0] += 1
+        if calls[0] == call:
+            _wait(marker, folder)
+
+    _openfoam._write_poly_mesh = write_poly_mesh
+
+
+def stall_publish_rename(marker: str, call: int) -> None:
+    """Stop after the N-th rename of a publication (meshgen.publish), its lock held: the mesh has
+    its name, the sidecar not yet."""
+    from meshgen import publish
+
+    real_replace = publish.replace_into
+    calls = [0]
+
+    def replace_into(source, target):
+        aside = real_replace(source, target)
+        calls[0] += 1
+        if calls[0] == call:
+            _wait(marker, target)
+        return aside
+
+    publish.replace_into = replace_into
+
+
+def same_second(marker: str, call: int) -> None:
+    """No stall: the clock reads the same second in every process, as for two runs started at once."""
+    import time
+
+    real_strftime = time.strftime
+    time.strftime = lambda text, *rest: "20260101-000000" if text == "%Y%m%d-%H%M%S" else real_strftime(text, *rest)
+
+
 def main() -> None:
     kind, marker, call, *arguments = sys.argv[1:]
-    {"torch-save": stall_torch_save, "plot3d-record": stall_plot3d_record}[kind](marker, int(call))
+    stalls = {
+        "torch-save": stall_torch_save,
+        "plot3d-record": stall_plot3d_record,
+        "openfoam-polymesh": stall_openfoam_poly_mesh,
+        "publish-rename": stall_publish_rename,
+        "same-second": same_second,
+    }
+    stalls[kind](marker, int(call))
     from meshgen.cli import main as meshgen_main
 
     sys.argv = ["meshgen", *arguments]

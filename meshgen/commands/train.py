@@ -79,14 +79,23 @@ def _epilog() -> str:
     metavar="NAME=LOW:HIGH",
     help="Train one network for a family of shapes: vary this geometry parameter over [LOW, HIGH] (repeatable), e.g. --vary twist=0:180; the preset defaults to family.",
 )
+@click.option(
+    "--force",
+    is_flag=True,
+    help="Train into an --out folder that holds a run of another geometry or configuration, replacing it.",
+)
 @click.option("--list-presets", is_flag=True, help="List the presets with one line each and exit.")
-def train(geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, vary, list_presets):
+def train(
+    geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, vary, force, list_presets
+):
     """Train a network that maps the unit cube onto a geometry (the 3DMeshNet method).
 
     Writes a run folder holding checkpoint.pt, config.yaml (the resolved configuration),
     history.csv (one row per step) and summary.json (quality of a 30^3 mesh, 2D 30^2, next to TFI's).
     The geometry defaults to semicylinder, or with --resume to the checkpoint's. Ctrl-C saves a
-    checkpoint and stops; --resume continues it. An existing run folder given with --out is reused.
+    checkpoint and stops (so do SIGTERM and SIGHUP); --resume continues it. An existing run folder given
+    with --out is reused for the same geometry and configuration (else --force); a default folder name
+    already taken gets -2, -3 ...
     """
     import os
 
@@ -115,6 +124,7 @@ def train(geometry, params, preset, config_file, overrides, steps, out, resume, 
         device=device,
         threads=threads,
         vary=vary,
+        force=force,
     )
     result = run_training(run, quiet=quiet)
     if result.interrupted:

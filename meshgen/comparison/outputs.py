@@ -11,6 +11,7 @@ from pathlib import Path
 from meshgen.atomic import atomic_write
 from meshgen.comparison.columns import HEADLINE_METRICS, table, title
 from meshgen.errors import MeshgenError, ParameterError
+from meshgen.publish import publishing
 from meshgen.quality import VALID_RULE, write_json
 from meshgen.tables import markdown_table
 
@@ -104,11 +105,13 @@ def prepare_out_dir(out_dir) -> Path:
 
 
 def write_tables(comparison: dict, out_dir) -> list[Path]:
-    """``compare.json``, ``compare.md`` and ``compare.csv`` in ``out_dir``, each written atomically."""
+    """``compare.json``, ``compare.md`` and ``compare.csv`` in ``out_dir``, published together
+    (``meshgen.publish``): all three of one comparison, or the previous ones."""
     out_dir = Path(out_dir)
-    written = [write_json(out_dir / "compare.json", comparison)]
-    for name, text in (("compare.md", markdown(comparison)), ("compare.csv", csv_text(comparison))):
-        with atomic_write(out_dir / name) as temporary:
-            temporary.write_text(text)
-        written.append(out_dir / name)
+    with publishing(out_dir / "compare.json"):
+        written = [write_json(out_dir / "compare.json", comparison)]
+        for name, text in (("compare.md", markdown(comparison)), ("compare.csv", csv_text(comparison))):
+            with atomic_write(out_dir / name) as temporary:
+                temporary.write_text(text)
+            written.append(out_dir / name)
     return written

@@ -33,6 +33,7 @@ from meshgen.atomic import atomic_write, check_output_file
 from meshgen.errors import FormatError, MeshgenError
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.patches import check_covers
+from meshgen.publish import publishing
 
 __all__ = [
     "FORMATS",
@@ -226,14 +227,14 @@ def write_mesh(
     arguments = (X, cell_data, dict(metadata or {})) + ((patches,) if fmt.patches else ())
     if not fmt.folder and options:
         raise FormatError(f"{fmt.name} takes no option {', '.join(options)}")
-    if fmt.folder:
-        try:
+    # One publication (meshgen.publish): the file, or the case's files, take their names together
+    # under the output's lock, with the sidecar when the caller publishes one with it.
+    with publishing(path, FormatError):
+        if fmt.folder:
             writer.write(path, *arguments, **options)
-        except OSError as exc:
-            raise FormatError(f"could not write {path}: {exc.strerror or exc}") from exc
-    else:
-        with atomic_write(path, FormatError) as temporary:
-            writer.write(temporary, *arguments)
+        else:
+            with atomic_write(path, FormatError) as temporary:
+                writer.write(temporary, *arguments)
     return path
 
 

@@ -29,11 +29,9 @@ gives outward normals.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +43,7 @@ from meshgen.formats._structured import boundary_elements, face_nodes, orientati
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import Patch, flow_role
+from meshgen.publish import publishing, remove_stale_temporaries
 
 __all__ = [
     "CONTROL_DICT",
@@ -179,38 +178,23 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     shape = [int(n) for n in X.shape[:-1]]
     record = f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "metadata": {metadata_json(metadata)}}}'
 
-    created = not case.exists()
-    constant = case / "constant"
-    made = [folder for folder in (case, constant, case / "system") if not folder.exists()]
-    temporary = constant / f".polyMesh.tmp-{os.getpid()}"
-    old = constant / f".polyMesh.old-{os.getpid()}"
-    try:
-        for folder in made:
-            folder.mkdir()
-        temporary.mkdir()
-        _write_poly_mesh(temporary, X3, patches, binary)
-        (temporary / RECORD_NAME).write_text(record)
-        target = constant / "polyMesh"
-        if target.exists():
-            os.replace(target, old)
-        os.replace(temporary, target)
-        shutil.rmtree(old, ignore_errors=True)
+    # Inside the publication of write_mesh (meshgen.publish): the polyMesh, the system files and
+    # the starting fields are staged and take their names together under the case's lock; a
+    # failure removes what this run staged and the folders it made, never another run's.
+    with publishing(case, FormatError) as publication:
+        remove_stale_temporaries(case)
+        for folder in (case, case / "constant", case / "system"):
+            publication.make_folder(folder)
+            remove_stale_temporaries(folder)
+        with atomic_path(case / "constant" / "polyMesh") as temporary:
+            temporary.mkdir()
+            _write_poly_mesh(temporary, X3, patches, binary)
+            (temporary / RECORD_NAME).write_text(record)
         for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):
             _write_if_missing(case / "system" / name, _header("dictionary", "system", name) + text)
         if not (case / "0").exists() and _has_inlet_and_outlet(patches):
             _write_starting_fields(case / "0", patches)
         _write_if_missing(case / f"{case.resolve().name}.foam", "")
-    except BaseException:
-        shutil.rmtree(temporary, ignore_errors=True)
-        if old.exists() and not (constant / "polyMesh").exists():
-            os.replace(old, constant / "polyMesh")
-        if created:
-            shutil.rmtree(case, ignore_errors=True)
-        else:
-            for folder in reversed(made):
-                with contextlib.suppress(OSError):
-                    shutil.rmtree(folder)
-        raise
 
 
 def extrude(X: np.ndarray) -> np.ndarray:
@@ -351,20 +335,16 @@ def _write_starting_fields(folder: Path, patches) -> None:
         body = "".join(f"    {name}\n    {{\n        {entry}\n    }}\n" for name, entry in entries.items())
         return f"dimensions      {dimensions};\n\ninternalField   uniform {internal};\n\nboundaryField\n{{\n{body}}}\n"
 
-    temporary = folder.with_name(f".0.tmp-{os.getpid()}")
-    try:
+    with atomic_path(folder, keep_existing=True) as temporary:
         temporary.mkdir()
         (temporary / "U").write_text(_header("volVectorField", "0", "U") + field(U, "[0 1 -1 0 0 0 0]", "(0 0 0)"))
         (temporary / "p").write_text(_header("volScalarField", "0", "p") + field(p, "[0 2 -2 0 0 0 0]", "0"))
-        os.replace(temporary, folder)
-    finally:
-        shutil.rmtree(temporary, ignore_errors=True)
 
 
 def _write_if_missing(path: Path, text: str) -> None:
     if path.exists():
         return
-    with atomic_path(path) as temporary:
+    with atomic_path(path, keep_existing=True) as temporary:
         temporary.write_text(text)
 
 

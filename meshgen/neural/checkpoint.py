@@ -30,6 +30,7 @@ import torch
 
 from meshgen.atomic import atomic_path
 from meshgen.errors import MeshgenError
+from meshgen.publish import reason
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
 
@@ -53,10 +54,10 @@ def save_checkpoint(path: str | os.PathLike, checkpoint: dict) -> None:
             # a full disk as "unexpected pos 704 vs 598" instead of the OSError (ENOSPC).
             with open(temporary, "wb", buffering=0) as handle:
                 torch.save(checkpoint, handle)
-    except OSError as exc:
-        raise CheckpointError(
-            f"could not write checkpoint {path}: {exc.strerror or exc} (any previous checkpoint there is kept)"
-        ) from exc
+    except (OSError, RuntimeError) as exc:
+        # torch reports a write the file system cut short (a full tmpfs) as "unexpected pos N vs M".
+        why = f"torch could not write it (is the disk full?): {reason(exc)}" if isinstance(exc, RuntimeError) else reason(exc)
+        raise CheckpointError(f"could not write checkpoint {path}: {why} (any previous checkpoint there is kept)") from exc
 
 
 def load_checkpoint(path: str | os.PathLike) -> dict:

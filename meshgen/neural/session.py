@@ -15,6 +15,7 @@ from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, looks_like_path, parse_params
 from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
 from meshgen.neural.progress import reporter_for
+from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
 
 __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
 
@@ -35,6 +36,8 @@ class Run:
     resume: dict | None = None  # the loaded checkpoint when resuming
     resume_path: Path | None = None
     family: object | None = None  # meshgen.neural.family.Family when parameters are varied (--vary)
+    fresh_name: bool = False  # run_dir is a default name: the run takes it, or the next free one
+    force: bool = False  # --force: overwrite a run folder of another geometry or configuration
 
 
 def is_run_folder(path: Path) -> bool:
@@ -53,11 +56,8 @@ def choose_run_dir(out, resume_path: Path | None, geometry_name: str) -> Path:
     elif resume_path is not None:
         path = resume_path.parent
     else:
-        base = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
-        path, number = base, 1
-        while path.exists():
-            number += 1
-            path = base.with_name(f"{base.name}-{number}")
+        # Taken when the folder is made (meshgen.neural.run_folder): -2, -3 ... if taken by then.
+        path = Path("runs") / f"{geometry_name}-{time.strftime('%Y%m%d-%H%M%S')}"
     if path.exists():
         if not path.is_dir():
             raise MeshgenError(f"output folder {path} exists and is a file")
@@ -90,6 +90,7 @@ def prepare_run(
     device="auto",
     threads=None,
     vary=(),
+    force=False,
 ) -> Run:
     """Check every input of ``meshgen train`` and return what to run; writes nothing.
 
@@ -97,6 +98,7 @@ def prepare_run(
     unknown or ill-typed keys, a preset for the other dimension, a missing, truncated or foreign
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
+    ``force``: train into an ``out`` folder that holds a run of another geometry or configuration.
     """
 
     checkpoint = resume_path = family = None
@@ -164,7 +166,12 @@ def prepare_run(
 
         torch.set_num_threads(threads)
     run_dir = choose_run_dir(out, resume_path, geometry_object.name)
-    return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
+    if out is not None and resume is None:
+        check_run_folder(run_dir, config, geometry_object, force)
+    fresh_name = out is None and resume is None
+    return Run(
+        config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force
+    )
 
 
 def _flat(mapping: dict, prefix: str = "") -> dict:
@@ -215,11 +222,7 @@ def run_training(run: Run, quiet: bool = False):
     (a second one aborts). Returns the TrainResult."""
     from meshgen.neural.train import train
 
-    created = not run.run_dir.exists()
-    try:
-        run.run_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise MeshgenError(f"cannot create the run folder {run.run_dir}: {exc.strerror or exc}") from None
+    created, release = claim_run_folder(run)  # a folder of its own, locked while the run trains
     reporter = reporter_for(run.config, quiet)
     stop_requested = threading.Event()
 
@@ -229,7 +232,8 @@ def run_training(run: Run, quiet: bool = False):
         stop_requested.set()
         reporter.message("Stopping after this step to save a checkpoint (Ctrl-C again to abort without saving)")
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
+    # SIGTERM and SIGHUP (a batch system, a closed terminal) stop the run like Ctrl-C: saved, resumable.
+    previous = {signum: signal.signal(signum, on_interrupt) for signum in stop_signals()}
     try:
         with reporter:
             if run.family is not None:
@@ -261,4 +265,6 @@ def run_training(run: Run, quiet: bool = False):
             run.run_dir.rmdir()
         raise
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        release()

@@ -23,6 +23,7 @@ from meshgen.quality.files import (
     recorded_metadata,
     sidecar_path,
     write_json,
+    write_mesh_alone,
     write_mesh_with_quality,
 )
 from meshgen.quality.kernels import (
@@ -74,5 +75,6 @@ __all__ = [
     "summarize",
     "summary_lines",
     "write_json",
+    "write_mesh_alone",
     "write_mesh_with_quality",
 ]

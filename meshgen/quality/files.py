@@ -11,11 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import atomic_path
-from meshgen.errors import GeometryError, MeshgenError
+from meshgen.errors import FormatError, GeometryError, MeshgenError
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
+from meshgen.formats.metadata import is_timing
 from meshgen.geometry import load_geometry
 from meshgen.grid import cell_connectivity
 from meshgen.patches import geometry_patches
+from meshgen.publish import publishing
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.report import assess, build_report
@@ -30,6 +32,7 @@ __all__ = [
     "recorded_metadata",
     "sidecar_path",
     "write_json",
+    "write_mesh_alone",
     "write_mesh_with_quality",
 ]
 
@@ -97,9 +100,20 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
     metrics, degenerate, info = assess(check_node_array(X))
     report = build_report(metrics, degenerate, info, geometry)
     report["quality_seconds"] = time.perf_counter() - start
-    written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
-    write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
+    with publishing(path, FormatError):  # the mesh and its sidecar take their names together, or neither does
+        written = write_mesh(path, X, cell_data=metrics, metadata=metadata, **write_options)
+        write_json(sidecar_path(written), {"mesh": os.path.basename(written), **(metadata or {}), **report})
     return report
+
+
+def write_mesh_alone(path, X, metadata: dict | None = None, **write_options) -> Path:
+    """Write node array ``X`` to ``path`` without quality arrays or sidecar (``meshgen mesh
+    --no-quality``); the sidecar of a previous mesh under that name is removed in the same
+    publication, so no sidecar describes a mesh it was not written with. Returns the path written."""
+    with publishing(path, FormatError) as publication:
+        written = write_mesh(path, X, metadata=metadata, **write_options)
+        publication.remove(sidecar_path(written))
+    return written
 
 
 # ---------------------------------------------------------------------------------------------
@@ -108,19 +122,22 @@ def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None
 
 def recorded_metadata(path, mesh) -> dict:
     """meshgen's metadata of a mesh file: what the file records (geometry, params, method, dims),
-    else its ``<mesh>.quality.json`` sidecar (marked ``"source": "sidecar"``), else {}."""
+    with the timings of its ``<mesh>.quality.json`` sidecar (mesh files keep none:
+    ``meshgen.formats.metadata``), else the sidecar's (marked ``"source": "sidecar"``), else {}."""
     metadata = metadata_of(mesh)
-    if metadata:
-        return {**metadata, "source": "file"}
     sidecar = sidecar_path(path)
+    recorded = {}
     if sidecar.is_file():
         try:
             recorded = json.loads(sidecar.read_text())
         except (OSError, ValueError):
-            return {}
-        if isinstance(recorded, dict):
-            return {**recorded, "source": "sidecar"}
-    return {}
+            recorded = {}
+        recorded = recorded if isinstance(recorded, dict) else {}
+    if metadata:
+        if recorded.get("mesh") == Path(path).name:
+            metadata.update({key: value for key, value in recorded.items() if is_timing(key) and key not in metadata})
+        return {**metadata, "source": "file"}
+    return {**recorded, "source": "sidecar"} if recorded else {}
 
 
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
