@@ -116,13 +116,13 @@ def mean_value_matrix(vertices: np.ndarray, triangles: np.ndarray):
 
     rows, cols, values = [], [], []
     for k in range(3):
-        i, j, l = triangles[:, k], triangles[:, (k + 1) % 3], triangles[:, (k + 2) % 3]
-        e1, e2 = vertices[j] - vertices[i], vertices[l] - vertices[i]
+        i, j, o = triangles[:, k], triangles[:, (k + 1) % 3], triangles[:, (k + 2) % 3]
+        e1, e2 = vertices[j] - vertices[i], vertices[o] - vertices[i]
         n1, n2 = np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)
         cross = np.linalg.norm(np.cross(e1, e2), axis=1)
         half_tan = cross / np.maximum(n1 * n2 + (e1 * e2).sum(1), 1e-300)  # tan(angle / 2)
         rows += [i, i]
-        cols += [j, l]
+        cols += [j, o]
         values += [half_tan / np.maximum(n1, 1e-300), half_tan / np.maximum(n2, 1e-300)]
     n = len(vertices)
     return sparse.csr_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
