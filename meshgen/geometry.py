@@ -254,14 +254,22 @@ def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
 
 
 def _looks_like_path(spec: str) -> bool:
-    return spec.endswith(".py") or "/" in spec or "\\" in spec
+    from meshgen.shapes.loader import is_shape_file
+
+    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec)
 
 
 def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
-    (shape, finiteness, continuity across the cube's edges)."""
-    if _looks_like_path(spec):
+    (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
+    OBJ, PLY, or a YAML geometry file: ``meshgen.shapes.loader``) gives a geometry without
+    parameters."""
+    from meshgen.shapes.loader import is_shape_file, load_shape
+
+    if is_shape_file(spec):
+        geometry = load_shape(spec)
+    elif _looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")

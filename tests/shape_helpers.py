@@ -45,3 +45,76 @@ def random_patch(triangles: int, seed: int):
     picks = rng.integers(0, quarter, 4) + np.arange(4) * quarter
     corners = boundary_order[picks]
     return vertices, tri, corners
+
+
+DUCT_NAMES = ("inlet", "outlet", "inner", "outer", "floor", "ceiling")
+
+
+def duct_point(theta, a, b, bend_radius=2.0):
+    """The bent duct's point at bend angle ``theta`` (0 .. pi/2), radial offset ``a`` from the
+    bend's centre line and height ``b``: ((R + a) cos theta, b, (R + a) sin theta)."""
+    r = bend_radius + a
+    return np.stack([r * np.cos(theta), b, r * np.sin(theta)], axis=-1)
+
+
+def duct_surface(n_bend=24, n_width=8, n_height=6, width=1.0, height=0.6, seed=0):
+    """A 90 degree bend of a width x height rectangle as a closed triangulated surface with
+    outward normals: vertices (n, 3), triangles (m, 3), labels (m,) indices into DUCT_NAMES. The
+    lattice of each face is jittered in the surface's own parameters (so every vertex stays on the
+    exact surface) and each quad is split along a random diagonal."""
+    rng = np.random.default_rng(seed)
+    shape = (n_bend, n_width, n_height)
+    lattice, triangles, labels = [], [], []
+    offset = 0
+    # faces: (axis, side, label) with axis 0 = bend angle, 1 = width, 2 = height
+    for axis, side, label in ((0, 0, 0), (0, 1, 1), (1, 0, 2), (1, 1, 3), (2, 0, 4), (2, 1, 5)):
+        p, q = (d for d in range(3) if d != axis)
+        u, v = np.meshgrid(np.arange(shape[p] + 1), np.arange(shape[q] + 1), indexing="ij")
+        nodes = np.empty(u.shape + (3,), dtype=np.int64)
+        nodes[..., axis], nodes[..., p], nodes[..., q] = side * shape[axis], u, v
+        index = np.arange(u.size).reshape(u.shape) + offset
+        a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+        diagonal = rng.random(len(a)) < 0.5
+        first = np.where(diagonal[:, None], np.stack([a, b, c], 1), np.stack([a, b, d], 1))
+        second = np.where(diagonal[:, None], np.stack([a, c, d], 1), np.stack([b, c, d], 1))
+        tri = np.concatenate([first, second])
+        # (p, q, axis) cyclic -> the lattice normal is +axis: outward on side 1
+        cyclic = (p, q, axis) in ((1, 2, 0), (2, 0, 1), (0, 1, 2))
+        tri = tri if cyclic == bool(side) else tri[:, ::-1]
+        triangles.append(tri)
+        labels.append(np.full(len(tri), label))
+        lattice.append(nodes.reshape(-1, 3))
+        offset += u.size
+    lattice = np.concatenate([*lattice])
+    unique, inverse = np.unique(lattice, axis=0, return_inverse=True)
+    triangles = inverse.reshape(-1)[np.concatenate(triangles)]
+    t = unique / np.array(shape, dtype=float)
+    inside = (t > 0) & (t < 1)
+    spacing = 1.0 / np.array(shape, dtype=float)
+    t = t + inside * rng.uniform(-0.3, 0.3, t.shape) * spacing
+    vertices = duct_point(0.5 * np.pi * t[:, 0], width * (t[:, 1] - 0.5), height * (t[:, 2] - 0.5))
+    # orientation: theta and the (width, height) pair... fix by the enclosed volume's sign
+    p, q, r = (vertices[triangles[:, k]] for k in range(3))
+    if np.einsum("ij,ij->i", p, np.cross(q, r)).sum() < 0:
+        triangles = triangles[:, ::-1]
+    return vertices, triangles, np.concatenate(labels)
+
+
+def write_ascii_stl(path, vertices, triangles, labels=None, names=DUCT_NAMES):
+    """An ASCII STL with one ``solid NAME`` block per label (all in one block without labels);
+    coordinates written exactly (17 significant digits)."""
+    blocks = []
+    groups = [(names[k], triangles[labels == k]) for k in range(len(names))] if labels is not None else [("surface", triangles)]
+    for name, tris in groups:
+        lines = [f"solid {name}"]
+        for tri in tris:
+            lines.append("  facet normal 0 0 0\n    outer loop")
+            lines += [f"      vertex {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices[tri]]
+            lines.append("    endloop\n  endfacet")
+        lines.append(f"endsolid {name}")
+        blocks.append("\n".join(lines))
+    path.write_text("\n".join(blocks) + "\n")
+    return path
+
+
+DUCT_CORNERS = [(t, a, b) for t in (0.0, 0.5 * np.pi) for a in (-0.5, 0.5) for b in (-0.3, 0.3)]
