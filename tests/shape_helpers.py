@@ -118,3 +118,29 @@ def write_ascii_stl(path, vertices, triangles, labels=None, names=DUCT_NAMES):
 
 
 DUCT_CORNERS = [(t, a, b) for t in (0.0, 0.5 * np.pi) for a in (-0.5, 0.5) for b in (-0.3, 0.3)]
+
+
+def distance_to_triangles(points, vertices, triangles) -> np.ndarray:
+    """Distance (N,) from each point to a triangulated surface, by VTK's cell locator (an
+    implementation independent of meshgen's)."""
+    import vtk
+    from vtk.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+
+    poly = vtk.vtkPolyData()
+    vtk_points = vtk.vtkPoints()
+    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(vertices, dtype=float), deep=True))
+    poly.SetPoints(vtk_points)
+    cells = vtk.vtkCellArray()
+    offsets = np.arange(0, 3 * len(triangles) + 1, 3, dtype=np.int64)
+    connectivity = np.ascontiguousarray(triangles, dtype=np.int64).ravel()
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(connectivity, deep=True))
+    poly.SetPolys(cells)
+    locator = vtk.vtkCellLocator()
+    locator.SetDataSet(poly)
+    locator.BuildLocator()
+    closest, cell, sub, dist2 = [0.0, 0.0, 0.0], vtk.mutable(0), vtk.mutable(0), vtk.mutable(0.0)
+    out = np.empty(len(points))
+    for n, point in enumerate(np.asarray(points, dtype=float)):
+        locator.FindClosestPoint(point.tolist(), closest, cell, sub, dist2)
+        out[n] = np.sqrt(float(dist2))
+    return out

@@ -78,7 +78,7 @@ def surface_pieces(surface: Surface, assignment: dict, what: str, content_hash: 
         patch = parametrise(surface.vertices, triangles, ids, what=f"{what}: patch '{surface.names[label]}'")
         locator = build_locator(patch.uv, patch.triangles)
         faces[face.name] = _face_map(locator, patch.vertices)
-        for k, chain in enumerate(patch.sides):
+        for chain in patch.sides:
             chains[(int(chain[0]), int(chain[-1]))] = chain
     edges = {}
     for edge in cube.edges():
