@@ -144,3 +144,88 @@ def distance_to_triangles(points, vertices, triangles) -> np.ndarray:
         locator.FindClosestPoint(point.tolist(), closest, cell, sub, dist2)
         out[n] = np.sqrt(float(dist2))
     return out
+
+
+def write_twisted_loft(path, solids: int = 1):
+    """A loft through three rectangles, each turned and shifted (curved, twisted B-spline sides,
+    flat ends), built with gmsh's OCC kernel and written to ``path`` (.step, .iges, .brep).
+    ``solids=2`` writes a second, separate box beside it. Returns OCC's volume of the loft."""
+    import math
+
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = gmsh.model.getCurrent() if not started else None
+    gmsh.model.add(f"loft-{path.name}")
+    occ = gmsh.model.occ
+
+    def rectangle(z, w, h, angle, dx):
+        c, s = math.cos(angle), math.sin(angle)
+        points = [
+            occ.addPoint(c * x - s * y + dx, s * x + c * y, z)
+            for x, y in ((-w / 2, -h / 2), (w / 2, -h / 2), (w / 2, h / 2), (-w / 2, h / 2))
+        ]
+        return occ.addWire([occ.addLine(points[k], points[(k + 1) % 4]) for k in range(4)])
+
+    wires = [
+        rectangle(0.0, 2.0, 1.0, 0.0, 0.0),
+        rectangle(1.5, 1.4, 0.8, math.radians(35), 0.3),
+        rectangle(3.0, 1.8, 1.0, math.radians(70), 0.0),
+    ]
+    loft = occ.addThruSections(wires, makeSolid=True, makeRuled=False)
+    if solids == 2:
+        occ.addBox(5, 0, 0, 1, 1, 1)
+    occ.synchronize()
+    volume = occ.getMass(3, loft[0][1])
+    gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    elif previous:
+        gmsh.model.setCurrent(previous)
+    return volume
+
+
+def distance_to_cad(points, path) -> np.ndarray:
+    """Distance (N,) from each point to the nearest face of the CAD file ``path``, by gmsh's own
+    closest point on each face's surface (a model of its own, read afresh)."""
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = None if started else gmsh.model.getCurrent()
+    gmsh.model.add(f"check-{path.name}")
+    gmsh.model.occ.importShapes(str(path))
+    gmsh.model.occ.synchronize()
+    flat = np.asarray(points, dtype=float).ravel().tolist()
+    best = np.full(len(points), np.inf)
+    for _, tag in gmsh.model.getEntities(2):
+        closest, _ = gmsh.model.getClosestPoint(2, tag, flat)
+        best = np.minimum(best, np.linalg.norm(np.array(closest).reshape(-1, 3) - points, axis=1))
+    vertices = np.array([gmsh.model.getValue(0, tag, []) for _, tag in gmsh.model.getEntities(0)])
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    elif previous:
+        gmsh.model.setCurrent(previous)
+    return best, vertices
+
+
+def enclosed_volume(X) -> float:
+    """The volume inside the boundary quads of a node array X (n1+1, n2+1, n3+1, 3), each quad as
+    two triangles, by the divergence theorem; sign from the orientation of the first quad
+    turned outward by the mesh's index order (positive for a right-handed mesh)."""
+    total = 0.0
+    for axis in range(3):
+        for side, sign in ((0, -1.0), (-1, 1.0)):
+            face = np.take(X, side, axis=axis)  # (m, n, 3), the two other axes in increasing order
+            a, b, c, d = face[:-1, :-1], face[1:, :-1], face[1:, 1:], face[:-1, 1:]
+            orient = sign * (1.0 if axis != 1 else -1.0)
+            for p, q, r in ((a, b, c), (a, c, d)):
+                total += orient * np.einsum("...i,...i->...", p, np.cross(q, r)).sum() / 6.0
+    return float(total)
