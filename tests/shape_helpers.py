@@ -229,3 +229,34 @@ def enclosed_volume(X) -> float:
             for p, q, r in ((a, b, c), (a, c, d)):
                 total += orient * np.einsum("...i,...i->...", p, np.cross(q, r)).sum() / 6.0
     return float(total)
+
+
+def voxel_surface(cells):
+    """The closed boundary of a union of unit cubes (``cells``: integer (i, j, k) triples): every
+    cube face not shared by two cubes, as two triangles with the outward normal. Returns vertices
+    (n, 3), triangles (m, 3) and the outward normal axis and sign of each triangle (m, 2)."""
+    cells = {tuple(c) for c in cells}
+    quads, normals = [], []
+    for cell in cells:
+        for axis in range(3):
+            for sign in (-1, 1):
+                neighbour = list(cell)
+                neighbour[axis] += sign
+                if tuple(neighbour) in cells:
+                    continue
+                p, q = (axis + 1) % 3, (axis + 2) % 3  # (p, q, axis) cyclic: p x q = +axis
+                base = np.array(cell, dtype=float)
+                base[axis] += 1 if sign > 0 else 0
+                corners = []
+                for dp, dq in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    point = base.copy()
+                    point[p] += dp
+                    point[q] += dq
+                    corners.append(point)
+                quads.append(corners if sign > 0 else corners[::-1])
+                normals.append((axis, sign))
+    points = np.array(quads).reshape(-1, 3)
+    vertices, inverse = np.unique(points, axis=0, return_inverse=True)
+    quads = inverse.reshape(-1, 4)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    return vertices, triangles, np.concatenate([normals, normals])

@@ -142,7 +142,8 @@ class BoundaryPieces:
         self.reflect_eta = reflect_eta
         self.content_hash = content_hash
         self.what = what
-        self.face_lines: tuple[str, ...] = ()
+        self.face_lines: tuple[str, ...] = ()  # "xi0 <- name (type)" per face, for the user
+        self.surface_faces = None  # a triangulated surface's (vertices, triangles, cube face per triangle)
 
     def __call__(self, points, **_values):
         points = np.array(points, dtype=float)

@@ -133,4 +133,6 @@ def surface_block(
         assignment = swap_eta(assignment)
         pieces.reflect_eta = True
         corners = {(i, 1 - j, k): v for (i, j, k), v in corners.items()}
-    return SurfaceBlock(surface, assignment, corners, pieces)
+    block = SurfaceBlock(surface, assignment, corners, pieces)
+    pieces.surface_faces = (surface.vertices, surface.triangles, block.face_of_triangle())
+    return block
