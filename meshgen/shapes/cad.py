@@ -58,8 +58,10 @@ def gmsh_model(path: Path, model: str):
         gmsh.model.setCurrent(model)
         return gmsh
     gmsh.model.add(model)
-    # Sew faces that share edges and make solids of closed shells: an IGES file keeps no topology.
-    options = {"Geometry.OCCSewFaces": 1.0, "Geometry.OCCMakeSolids": 1.0}
+    # An IGES file keeps no topology: sew its faces along shared edges and make a solid of the
+    # closed shell (not for STEP and BREP, whose solids sewing would dissolve).
+    iges = path.suffix.lower() in (".iges", ".igs")
+    options = {"Geometry.OCCSewFaces": 1.0, "Geometry.OCCMakeSolids": 1.0} if iges else {}
     previous = {name: gmsh.option.getNumber(name) for name in options}
     try:
         for name, value in options.items():

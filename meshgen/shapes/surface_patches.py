@@ -71,12 +71,16 @@ def _ascii_stl_solids(data: bytes, path: Path):
             points = np.array(_VERTEX.findall(block), dtype=float)
         except ValueError:
             raise GeometryError(f"{path}: solid {index + 1} has a vertex that is not three numbers") from None
+        if len(points) == 0 and not block.strip(b" \t\r\n"):
+            continue  # an empty solid (some exporters write one per unused region)
         if len(points) == 0 or len(points) % 3:
             raise GeometryError(
                 f"{path} is not an STL surface: solid {index + 1} has {len(points)} vertices, not whole triangles"
             )
         name = match.group(1).decode("ascii", "replace").strip().split()[0] if match.group(1).strip() else f"solid{index + 1}"
         solids.append((name, points.reshape(-1, 3, 3)))
+    if not solids:
+        raise GeometryError(f"{path} is an STL file without triangles")
     return solids
 
 
