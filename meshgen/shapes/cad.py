@@ -34,7 +34,7 @@ from meshgen.shapes.faces import (
     swap_eta,
 )
 
-__all__ = ["CadBlock", "cad_block", "gmsh_model"]
+__all__ = ["CadBlock", "cad_block", "gmsh_model", "quiet_stdout"]
 
 ARC_SAMPLES = 2001  # parameter samples per curve for its arc length
 SIDE_SAMPLES = 513  # arc-length samples per face side for its (u, v) trace
@@ -66,7 +66,7 @@ def gmsh_model(path: Path, model: str):
     try:
         for name, value in options.items():
             gmsh.option.setNumber(name, value)
-        with _quiet_stdout():  # OCC's readers print to the process's stdout
+        with quiet_stdout():  # OCC's readers print to the process's stdout
             gmsh.model.occ.importShapes(str(path))
         gmsh.model.occ.synchronize()
     except Exception as exc:  # gmsh raises a bare Exception with its last error
@@ -80,7 +80,7 @@ def gmsh_model(path: Path, model: str):
 
 
 @contextlib.contextmanager
-def _quiet_stdout():
+def quiet_stdout():
     """File descriptor 1 sent to the null device for the duration (C++ code writes there)."""
     sys.stdout.flush()
     try:

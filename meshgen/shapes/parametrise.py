@@ -180,23 +180,28 @@ def _split_dividing_edges(vertices, triangles, side_sets, table):
     # triangles made by earlier splits are searched too.
     order = np.argsort(triangles.ravel(), kind="stable")
     starts = np.searchsorted(triangles.ravel()[order], np.arange(len(vertices) + 1))
-    triangles = triangles.tolist()
-    added_from = len(triangles)
+    triangles = triangles.copy()
+    original = len(triangles)
+    added: list[list[int]] = []  # triangles made by the splits, numbered from original on
     new_points = []
     for a, b in dividing.tolist():
         m = len(vertices) + len(new_points)
         new_points.append(0.5 * (vertices[a] + vertices[b]))
-        around = (order[starts[a] : starts[a + 1]] // 3).tolist() + list(range(added_from, len(triangles)))
+        around = (order[starts[a] : starts[a + 1]] // 3).tolist() + list(range(original, original + len(added)))
         for t in around:
-            tri = triangles[t]
+            tri = triangles[t].tolist() if t < original else added[t - original]
             if a not in tri or b not in tri:
                 continue
             while {tri[0], tri[1]} != {a, b}:  # rotate: the edge first, in the triangle's own order
                 tri = tri[1:] + tri[:1]
             p, q, r = tri
-            triangles[t] = [p, m, r]
-            triangles.append([m, q, r])
-    return np.concatenate([vertices, np.array(new_points)]), np.array(triangles, dtype=np.int64)
+            if t < original:
+                triangles[t] = (p, m, r)
+            else:
+                added[t - original] = [p, m, r]
+            added.append([m, q, r])
+    triangles = np.concatenate([triangles, np.array(added, dtype=np.int64).reshape(-1, 3)])
+    return np.concatenate([vertices, np.array(new_points)]), triangles
 
 
 def parametrise(vertices: np.ndarray, triangles: np.ndarray, corners, what: str = "patch") -> PatchMap:
