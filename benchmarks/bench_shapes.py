@@ -198,7 +198,7 @@ def run(quick: bool = False, neural: bool = False) -> dict:
             )
         except ImportError:
             print("step_loft    skipped: the gmsh Python package is not installed", flush=True)
-        shape, dims = ((24, 8, 6), (6, 4, 12)) if quick else ((140, 40, 24), (12, 8, 40))
+        shape, dims = ((24, 8, 6), (6, 4, 12)) if quick else ((120, 32, 20), (12, 8, 40))
         row = results["stl_duct"] = bench_duct(folder, shape, dims)
         for method in ("tfi", "elliptic"):
             m = row[method]
