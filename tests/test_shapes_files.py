@@ -109,3 +109,25 @@ def test_an_openfoam_case_of_a_step_solid_passes_check_mesh(tmp_path, run_cli):
     report = check_mesh(tmp_path / "case")
     assert report["ok"], report["log"][-2000:]
     assert set(report["patches"]) == {"inlet", "outlet", "wall"}
+
+
+def test_geometries_lists_the_shape_formats(run_cli):
+    result = run_cli("geometries")
+    assert result.returncode == 0, result.stderr
+    for extension in (".step", ".stp", ".iges", ".igs", ".brep", ".stl", ".obj", ".ply", ".yaml"):
+        assert extension in result.stdout
+
+
+def test_show_of_a_step_file_samples_its_faces(tmp_path, run_cli):
+    pytest.importorskip("gmsh", reason="CAD files need the gmsh Python package (pip install gmsh)")
+    import meshio
+
+    write_twisted_loft(tmp_path / "part.step")
+    result = run_cli("geometries", "show", "part.step", "-o", "faces.vtu", "--resolution", "4")
+    assert result.returncode == 0, result.stderr
+    written = meshio.read(tmp_path / "faces.vtu")
+    face = written.cell_data["cube_face"][0]
+    assert np.array_equal(np.bincount(face), [32] * 6)  # 2 x 4 x 4 triangles on each cube face
+    # the zeta0 triangles lie on the loft's flat end z = 0
+    zeta0 = written.cells_dict["triangle"][face == 4]
+    assert np.abs(written.points[zeta0][..., 2]).max() < 1e-9
