@@ -2,6 +2,8 @@
 ASCII STL, a single-solid STL split at its sharp edges, OBJ and PLY; meshes checked against the
 surface itself (trimesh's closest point), the duct's closed-form corners and OpenFOAM's checkMesh."""
 
+import re
+
 import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam
@@ -59,14 +61,14 @@ def test_a_single_solid_splits_at_its_sharp_edges(tmp_path):
     assert quality_report(X, geometry)["inverted"]["count"] == 0
 
 
-@pytest.mark.parametrize("extension", ["obj", "ply"])
-def test_obj_and_ply_surfaces(tmp_path, extension):
+@pytest.mark.parametrize("extension", ["obj", "ply", "stl"])
+def test_obj_ply_and_binary_stl_surfaces(tmp_path, extension):
     import trimesh
 
     vertices, triangles, _ = duct_surface(n_bend=12, n_width=4, n_height=3)
     path = tmp_path / f"duct.{extension}"
     trimesh.Trimesh(vertices, triangles, process=False).export(path)
-    geometry = load_geometry(str(path))
+    geometry = load_geometry(str(path))  # one piece: split at its sharp edges
     X = meshgen.mesh(geometry, (4, 3, 8), method="tfi").X
     assert quality_report(X, geometry)["inverted"]["count"] == 0
     written = trimesh.load(path, process=False)  # the file's own (rounded) coordinates
@@ -83,3 +85,14 @@ def test_an_openfoam_case_of_the_duct_passes_check_mesh(run_cli, duct, tmp_path)
     report = check_mesh(tmp_path / "case")
     assert report["ok"], report["log"][-2000:]
     assert set(report["patches"]) == set(DUCT_NAMES)
+
+
+def test_solids_whose_shared_points_differ_in_the_last_digits_are_welded(tmp_path):
+    vertices, triangles, labels = duct_surface(n_bend=8, n_width=3, n_height=2)
+    path = write_ascii_stl(tmp_path / "duct.stl", vertices, triangles, labels)
+    # rewrite one solid with 12 significant digits: its edge points no longer match bit for bit
+    text = path.read_text().split("endsolid inlet\n", 1)
+    rounded = re.sub(r"vertex (\S+) (\S+) (\S+)", lambda m: "vertex " + " ".join(f"{float(w):.12g}" for w in m.groups()), text[0])
+    path.write_text(rounded + "endsolid inlet\n" + text[1])
+    geometry = load_geometry(str(path))
+    assert sorted(name for name, _ in geometry.patches.values()) == sorted(DUCT_NAMES)

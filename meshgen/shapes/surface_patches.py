@@ -29,6 +29,7 @@ __all__ = [
 ]
 
 DEFAULT_FEATURE_ANGLE = 40.0  # degrees between neighbouring triangles' normals
+WELD_TOLERANCE = 1e-10  # points closer than this times the surface's size are one vertex
 SURFACE_FORMATS = (".stl", ".obj", ".ply")
 _SOLID = re.compile(rb"^\s*solid[ \t]*([^\r\n]*)$", re.MULTILINE)
 _ENDSOLID = re.compile(rb"^\s*endsolid\b", re.MULTILINE)
@@ -85,10 +86,15 @@ def _ascii_stl_solids(data: bytes, path: Path):
 
 
 def _weld(corner_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Triangle corner points (m, 3, 3) -> unique vertices (n, 3) and triangles (m, 3), points
-    equal bit for bit being one vertex."""
-    vertices, inverse = np.unique(corner_points.reshape(-1, 3), axis=0, return_inverse=True)
-    return vertices, inverse.reshape(-1, 3)
+    """Triangle corner points (m, 3, 3) -> vertices (n, 3) and triangles (m, 3): points closer than
+    ``WELD_TOLERANCE`` times the bounding-box diagonal are one vertex (files written by different
+    exporters, or solids written apart, may differ in the last digits), which keeps the
+    coordinates of its first occurrence."""
+    points = corner_points.reshape(-1, 3)
+    size = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0))) or 1.0
+    cells = np.round((points - points.min(axis=0)) / (WELD_TOLERANCE * size)).astype(np.int64)
+    _, first, inverse = np.unique(cells, axis=0, return_index=True, return_inverse=True)
+    return points[first], inverse.reshape(-1, 3)
 
 
 def read_surfaces(paths, names=None) -> Surface:
