@@ -57,3 +57,21 @@ def test_the_loft_ends_go_on_zeta_and_faces_are_named(loft):
     assert sorted(names) == [f"face{k}" for k in range(1, 7)]
     # the two flat ends (faces 5 and 6 of the loft) are the smallest opposite pair
     assert {geometry.patches["zeta0"][0], geometry.patches["zeta1"][0]} == {"face5", "face6"}
+
+
+def test_yaml_corners_of_a_step_solid(loft, tmp_path):
+    import itertools
+    import math
+
+    def corner(i, j, k):  # the loft's end rectangles (tests/shape_helpers.write_twisted_loft)
+        w, h, angle, z = (2.0, 1.0, 0.0, 0.0) if k == 0 else (1.8, 1.0, math.radians(70), 3.0)
+        x, y = (i - 0.5) * w, (j - 0.5) * h
+        return [math.cos(angle) * x - math.sin(angle) * y, math.sin(angle) * x + math.cos(angle) * y, z]
+
+    corners = [corner(*ijk) for ijk in itertools.product((0, 1), repeat=3)]
+    (tmp_path / "part.yaml").write_text(f"surface: {loft[0]}\ncorners: {corners}\n")
+    geometry = load_geometry(str(tmp_path / "part.yaml"))
+    assert geometry.patches["zeta0"][0] == "face5" and geometry.patches["zeta1"][0] == "face6"
+    X = meshgen.mesh(geometry, (3, 3, 4), method="tfi").X
+    for i, j, k in itertools.product((0, 1), repeat=3):
+        assert np.allclose(X[(0, -1)[i], (0, -1)[j], (0, -1)[k]], corner(i, j, k), atol=1e-12)

@@ -7,7 +7,7 @@ import shutil
 import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam
-from shape_helpers import DUCT_NAMES, duct_surface, write_ascii_stl, write_twisted_loft
+from shape_helpers import DUCT_NAMES, duct_point, duct_surface, write_ascii_stl, write_twisted_loft
 
 import meshgen
 from meshgen.geometry import Geometry, load_geometry
@@ -131,3 +131,35 @@ def test_show_of_a_step_file_samples_its_faces(tmp_path, run_cli):
     # the zeta0 triangles lie on the loft's flat end z = 0
     zeta0 = written.cells_dict["triangle"][face == 4]
     assert np.abs(written.points[zeta0][..., 2]).max() < 1e-9
+
+
+def test_yaml_corners_fix_the_assignment(duct):
+    import itertools
+
+    from meshgen.errors import GeometryError
+
+    folder, (vertices, triangles, labels) = duct
+    write_ascii_stl(folder / "bend.stl", vertices, triangles, labels)
+    # xi across the width (inner to outer), eta up, zeta along the bend: right-handed
+    corners = [duct_point(0.5 * np.pi * k, i - 0.5, 0.6 * j - 0.3).tolist() for i, j, k in itertools.product((0, 1), repeat=3)]
+    (folder / "bend.yaml").write_text(f"surface: bend.stl\ncorners: {corners}\n")
+    geometry = load_geometry(str(folder / "bend.yaml"))
+    assert {face: name for face, (name, _) in geometry.patches.items()} == {
+        "xi0": "inner",
+        "xi1": "outer",
+        "eta0": "floor",
+        "eta1": "ceiling",
+        "zeta0": "inlet",
+        "zeta1": "outlet",
+    }
+    X = meshgen.mesh(geometry, (3, 3, 6), method="tfi").X
+    assert np.array_equal(X[0, 0, 0], duct_point(0.0, -0.5, -0.3)) and np.array_equal(
+        X[-1, -1, -1], duct_point(0.5 * np.pi, 0.5, 0.3)
+    )
+    swapped = [corners[i * 4 + k * 2 + j] for i, j, k in itertools.product((0, 1), repeat=3)]  # eta <-> zeta: left-handed
+    (folder / "left.yaml").write_text(f"surface: bend.stl\ncorners: {swapped}\n")
+    with pytest.raises(GeometryError, match="left-handed"):
+        load_geometry(str(folder / "left.yaml"))
+    (folder / "off.yaml").write_text(f"surface: bend.stl\ncorners: {[[9.0, 9.0, 9.0]] + corners[1:]}\n")
+    with pytest.raises(GeometryError, match=r"corner \(0, 0, 0\) \(9, 9, 9\) is no corner"):
+        load_geometry(str(folder / "off.yaml"))

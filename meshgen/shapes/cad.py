@@ -30,6 +30,7 @@ from meshgen.shapes.faces import (
     corner_of_cube,
     edge_ends,
     face_corners,
+    faces_from_corners,
     signed_volume,
     swap_eta,
 )
@@ -171,7 +172,7 @@ class _Curve:
         return np.interp(np.asarray(s, dtype=float), self.fraction, self.t)
 
 
-def cad_block(path, given_faces: dict | None = None, content_hash: str = "") -> CadBlock:
+def cad_block(path, given_faces: dict | None = None, content_hash: str = "", given_corners=None) -> CadBlock:
     """Read a CAD file and assign its six faces to the cube's (``faces.assign_faces``)."""
     path = Path(path)
     model = f"meshgen-{content_hash[:16]}"
@@ -184,6 +185,9 @@ def cad_block(path, given_faces: dict | None = None, content_hash: str = "") -> 
         names.append(name if name and name not in names else f"face{k + 1}")
     areas = [gmsh.model.occ.getMass(2, face) for face in faces]
     what = str(path)
+    if given_corners is not None:
+        positions = {tag: np.array(gmsh.model.getValue(0, tag, [])) for tag in set().union(*corner_sets)}
+        given_faces = faces_from_corners(corner_sets, positions, given_corners, names, what)
     assignment = assign_faces(corner_sets, areas, names, what, given_faces)
     corners = corner_of_cube(assignment, corner_sets, what)
     ensure = _Ensure(path, model)

@@ -28,6 +28,7 @@ __all__ = [
     "OPPOSITE",
     "BoundaryPieces",
     "assign_faces",
+    "faces_from_corners",
     "corner_of_cube",
     "face_corners",
     "edge_ends",
@@ -91,6 +92,37 @@ def assign_faces(corner_sets: list[set], areas, names, what: str, given: dict | 
     xi0 = rest[0]
     eta = [p for p in rest if p not in (xi0, opposite_of[xi0])]
     return {"xi0": xi0, "xi1": opposite_of[xi0], "eta0": eta[0], "eta1": eta[1], "zeta0": zeta[0], "zeta1": zeta[1]}
+
+
+def faces_from_corners(corner_sets: list[set], positions: dict, given, names, what: str) -> dict[str, str]:
+    """Face name -> patch name from the eight corner points ``given`` (8, 3), listed at the cube's
+    corners (xi, eta, zeta) in (0,0,0), (0,0,1), (0,1,0), ... order: each snaps to the nearest corner
+    vertex (``positions``: corner id -> (3,) point), within 1e-6 of the corners' extent."""
+    given = np.asarray(given, dtype=float)
+    ids = sorted(set().union(*corner_sets))
+    points = np.array([positions[i] for i in ids])
+    size = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0))) or 1.0
+    chosen = []
+    for ijk, point in zip(itertools.product((0, 1), repeat=3), given):
+        distance = np.linalg.norm(points - point, axis=1)
+        nearest = int(np.argmin(distance))
+        if distance[nearest] > 1e-6 * size:
+            where = ", ".join(f"{c:.6g}" for c in point)
+            raise GeometryError(
+                f"{what}: corner {ijk} ({where}) is no corner of the patches (nearest at distance {distance[nearest]:.3g})"
+            )
+        chosen.append(ids[nearest])
+    if len(set(chosen)) != 8:
+        raise GeometryError(f"{what}: two of the eight corners given are the same corner vertex")
+    by_cube = dict(zip(itertools.product((0, 1), repeat=3), chosen))
+    faces = {}
+    for face in cube.faces(3):
+        wanted = {v for ijk, v in by_cube.items() if ijk[face.axis] == face.side}
+        patch = next((p for p, corners in enumerate(corner_sets) if corners == wanted), None)
+        if patch is None:
+            raise GeometryError(f"{what}: the corners given for face {face.name} are not the four corners of one patch")
+        faces[face.name] = names[patch]
+    return faces
 
 
 def swap_eta(assignment: dict[str, int]) -> dict[str, int]:

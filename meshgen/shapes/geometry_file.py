@@ -13,16 +13,21 @@ and patch names and types, so that ``meshgen mesh -g duct.yaml`` is explicit and
       xi1: outer
       eta0: floor
       eta1: ceiling
+    # corners:                 # instead of faces: the eight corner points at the cube's corners
+    #   [[x, y, z], ...]        # (xi, eta, zeta) = (0,0,0), (0,0,1), (0,1,0), (0,1,1), (1,0,0), ...
     rename: {patch1: inlet}    # patch names as written to the mesh files
     types: {inlet: patch, outlet: patch, floor: symmetry}   # default: by name (wall otherwise)
 
-Every key is optional except ``surface`` or ``patches``. ``faces`` must name all six faces; a
-left-handed assignment is refused.
+Every key is optional except ``surface`` or ``patches``. ``faces`` must name all six faces;
+``corners`` (eight points, each within 1e-6 of the size of a corner vertex) fixes the assignment
+instead. A left-handed assignment is refused.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import numpy as np
 
 from meshgen.errors import GeometryError
 from meshgen.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, shape_geometry
@@ -32,7 +37,7 @@ from meshgen.shapes.triangulated import surface_block
 
 __all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "read_geometry_file"]
 
-GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "rename", "types")
+GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types")
 
 
 def read_geometry_file(path: Path) -> dict:
@@ -67,6 +72,16 @@ def read_geometry_file(path: Path) -> dict:
     faces = data.get("faces")
     if faces is not None and sorted(faces) != sorted(FACE_NAMES):
         raise GeometryError(f"geometry file {path}: 'faces' must name each of {', '.join(FACE_NAMES)} once")
+    corners = data.get("corners")
+    if corners is not None:
+        if faces is not None:
+            raise GeometryError(f"geometry file {path}: give 'faces' or 'corners', not both")
+        try:
+            array = np.array(corners, dtype=float)
+        except (TypeError, ValueError):
+            array = np.zeros(0)
+        if array.shape != (8, 3) or not np.all(np.isfinite(array)):
+            raise GeometryError(f"geometry file {path}: 'corners' must be eight points [x, y, z]")
     angle = data.get("feature_angle")
     if angle is not None and (isinstance(angle, bool) or not isinstance(angle, (int, float)) or not 0 < angle < 180):
         raise GeometryError(f"geometry file {path}: 'feature_angle' must be a number of degrees between 0 and 180")
@@ -89,16 +104,19 @@ def load_geometry_file(path) -> object:
     base = path.parent
     types = dict(data.get("types") or {})
     faces = data.get("faces")
+    corners = data.get("corners")
     rename = dict(data.get("rename") or {})
     if "surface" in data:
         file = _named_file(base, data["surface"], path, "'surface'")
         suffix = file.suffix.lower()
-        options = {"faces": faces, "feature_angle": data.get("feature_angle"), "yaml": path.read_bytes().hex()}
+        options = {"yaml": path.read_bytes().hex()}  # the whole file: faces, corners, angle
         if suffix in CAD_FORMATS:
-            block = cad_block(file, faces, content_hash([file], options))
+            block = cad_block(file, faces, content_hash([file], options), corners)
             kind = "CAD solid"
         elif suffix in TRIANGULATED_FORMATS:
-            block = surface_block([file], str(file), None, data.get("feature_angle"), faces, content_hash([file], options))
+            block = surface_block(
+                [file], str(file), None, data.get("feature_angle"), faces, content_hash([file], options), corners
+            )
             kind = "surface"
         else:
             raise GeometryError(f"geometry file {path}: 'surface' {data['surface']}: unknown format {suffix or '(none)'}")
@@ -119,7 +137,7 @@ def load_geometry_file(path) -> object:
             raise GeometryError(
                 f"geometry file {path}: patch file {bad[0].name} is not a surface ({', '.join(TRIANGULATED_FORMATS)})"
             )
-        options = {"faces": faces, "names": names, "yaml": path.read_bytes().hex()}
-        block = surface_block(files, str(path), names, None, faces, content_hash(files, options))
+        options = {"yaml": path.read_bytes().hex()}
+        block = surface_block(files, str(path), names, None, faces, content_hash(files, options), corners)
         kind = "surface"
     return shape_geometry(block, path, kind, types, rename)

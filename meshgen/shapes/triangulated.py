@@ -18,6 +18,7 @@ from meshgen.shapes.faces import (
     corner_of_cube,
     edge_ends,
     face_corners,
+    faces_from_corners,
     signed_volume,
     swap_eta,
 )
@@ -112,15 +113,20 @@ def surface_block(
     feature_angle: float | None = None,
     given_faces: dict | None = None,
     content_hash: str = "",
+    given_corners=None,
 ) -> SurfaceBlock:
     """Read, check, split and assign a triangulated surface (one file, or one file per patch
-    with ``names``); ``given_faces``: face -> patch name (else the automatic rule)."""
+    with ``names``); ``given_faces``: face -> patch name, or ``given_corners`` the eight corner
+    points (``faces.faces_from_corners``); else the automatic rule."""
     surface = read_surfaces(paths, names)
     check_closed(surface, what)
     if len(surface.names) == 0:
         surface = split_at_sharp_edges(surface, DEFAULT_FEATURE_ANGLE if feature_angle is None else feature_angle)
     check_patches_connected(surface, what)
     corner_sets = patch_corners(surface)
+    if given_corners is not None:
+        positions = {v: surface.vertices[v] for v in set().union(*corner_sets)}
+        given_faces = faces_from_corners(corner_sets, positions, given_corners, surface.names, what)
     assignment = assign_faces(corner_sets, _patch_area(surface), surface.names, what, given_faces)
     pieces, corners = surface_pieces(surface, assignment, what, content_hash)
     volume = signed_volume(pieces)
