@@ -163,3 +163,24 @@ def test_yaml_corners_fix_the_assignment(duct):
     (folder / "off.yaml").write_text(f"surface: bend.stl\ncorners: {[[9.0, 9.0, 9.0]] + corners[1:]}\n")
     with pytest.raises(GeometryError, match=r"corner \(0, 0, 0\) \(9, 9, 9\) is no corner"):
         load_geometry(str(folder / "off.yaml"))
+
+
+def test_the_parametrisation_is_kept_between_runs(duct, monkeypatch):
+    from meshgen import cube
+    from meshgen.shapes import triangulated
+    from meshgen.shapes.assemble import content_hash
+
+    folder, (vertices, triangles, labels) = duct
+    path = write_ascii_stl(folder / "duct.stl", vertices, triangles, labels)
+    key = content_hash([path], {"test": "kept"})
+    first = triangulated.surface_block([path], "duct", content_hash=key)
+    points = cube.face_samples(3, 7)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("parametrised again")
+
+    monkeypatch.setattr(triangulated, "parametrise", refuse)
+    again = triangulated.surface_block([path], "duct", content_hash=key)  # from the cache file
+    assert np.array_equal(first.pieces(points), again.pieces(points))
+    with pytest.raises(AssertionError, match="parametrised again"):
+        triangulated.surface_block([path], "duct", content_hash=content_hash([path], {"test": "other"}))

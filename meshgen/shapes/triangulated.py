@@ -1,7 +1,7 @@
 """A Geometry from a closed triangulated surface (STL, OBJ, PLY): patches, faces, boundary map.
 
 Each of the six patches is parametrised onto its cube face (``parametrise``) with its corners on
-the face's corners; its face map is the piecewise-linear surface over that parametrisation, so
+the face's corners (kept between runs per file content and assignment: ``cache``); its face map is the piecewise-linear surface over that parametrisation, so
 every boundary node lies on a triangle of the surface. Each cube edge is the vertex chain the two
 patches share, by arc length from its lower corner.
 """
@@ -12,7 +12,9 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import GeometryError
+from meshgen.shapes.cache import parametrisation_path, read_patch_maps, write_patch_maps
 from meshgen.shapes.faces import (
+    FACE_NAMES,
     BoundaryPieces,
     assign_faces,
     corner_of_cube,
@@ -71,14 +73,19 @@ def surface_pieces(surface: Surface, assignment: dict, what: str, content_hash: 
     """The boundary map of ``surface`` with patches on the faces as ``assignment`` says."""
     corner_sets = patch_corners(surface)
     corners = corner_of_cube(assignment, corner_sets, what)
+    cache = parametrisation_path(content_hash, assignment, corners)
+    maps = read_patch_maps(cache, FACE_NAMES)
+    if maps is None:
+        maps = {}
+        for face in cube.faces(3):
+            label = assignment[face.name]
+            triangles = surface.triangles[surface.labels == label]
+            ids = face_corners(face, corners)
+            maps[face.name] = parametrise(surface.vertices, triangles, ids, what=f"{what}: patch '{surface.names[label]}'")
+        write_patch_maps(cache, maps)
     faces, chains = {}, {}
-    for face in cube.faces(3):
-        label = assignment[face.name]
-        triangles = surface.triangles[surface.labels == label]
-        ids = face_corners(face, corners)
-        patch = parametrise(surface.vertices, triangles, ids, what=f"{what}: patch '{surface.names[label]}'")
-        locator = build_locator(patch.uv, patch.triangles)
-        faces[face.name] = _face_map(locator, patch.vertices)
+    for name, patch in maps.items():
+        faces[name] = _face_map(build_locator(patch.uv, patch.triangles), patch.vertices)
         for chain in patch.sides:
             chains[(int(chain[0]), int(chain[-1]))] = chain
     edges = {}
