@@ -30,17 +30,15 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 
-from meshgen import cube
+from meshgen.domain import Geometry, bind
 from meshgen.errors import GeometryError, MeshgenError, did_you_mean
-from meshgen.patches import as_records, face_assignment, geometry_patches, patches_from_assignment
-from meshgen.surface import boundary_surface
+from meshgen.patches import face_assignment, patches_from_assignment
+from meshgen.shapes.loader import is_shape_file, load_shape
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -64,89 +62,6 @@ def builtin_dir(kind: str) -> Path:
     package_dir = Path(__file__).resolve().parent
     installed = package_dir / "_builtin" / kind
     return installed if installed.is_dir() else package_dir.parent / kind
-
-
-@dataclass(frozen=True)
-class Geometry:
-    """A geometry plugin with its parameter values bound.
-
-    ``boundary(points)`` maps ``(N, dim)`` points on the boundary of the unit cube to ``(N, dim)``
-    physical points (float64), checked for shape and finiteness.
-    """
-
-    name: str
-    dim: int
-    description: str
-    defaults: dict[str, float]
-    values: dict[str, float]
-    boundary_map: Callable = field(repr=False)
-    length_map: Callable | None = field(default=None, repr=False)
-    source: str = ""
-    patches: dict = field(default_factory=dict)  # cube face -> (patch name, type), as declared
-
-    def boundary(self, points: np.ndarray) -> np.ndarray:
-        points = np.asarray(points, dtype=float)
-        if points.ndim != 2 or points.shape[1] != self.dim:
-            raise GeometryError(f"geometry '{self.name}': boundary points must have shape (N, {self.dim}), got {points.shape}")
-        try:
-            mapped = self.boundary_map(points, **self.values)
-        except GeometryError:
-            raise
-        # A plugin is foreign code: report it with its name and file. SystemExit too: sys.exit() in
-        # a plugin must not end meshgen with the plugin's status (0 would read as success).
-        except (Exception, SystemExit) as exc:
-            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}") from exc
-        try:
-            mapped = np.asarray(mapped, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() returned something that is not "
-                f"an array of numbers ({type(mapped).__name__})"
-            ) from exc
-        if mapped.shape != points.shape:
-            raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} for input shape {points.shape}"
-            )
-        if not np.all(np.isfinite(mapped)):
-            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() returned non-finite values")
-        return mapped
-
-    @property
-    def characteristic_length(self) -> float:
-        """Length scale for relative figures: the plugin's own, else the bounding-box diagonal."""
-        if self.length_map is not None:
-            try:
-                length = float(self.length_map(**self.values))
-            except (Exception, SystemExit) as exc:  # foreign code, as in boundary()
-                raise GeometryError(
-                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised {type(exc).__name__}: {exc}"
-                ) from exc
-            if not (np.isfinite(length) and length > 0):
-                raise GeometryError(
-                    f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive number, got {length!r}"
-                )
-            return length
-        samples = np.concatenate([cube.corners(self.dim), cube.face_samples(self.dim, 9)])
-        mapped = self.boundary(samples)
-        return float(np.linalg.norm(mapped.max(axis=0) - mapped.min(axis=0)))
-
-    def with_params(self, **values: float) -> Geometry:
-        """The same plugin with some parameter values replaced (names checked)."""
-        return bind(self, values)
-
-    def describe(self) -> dict:
-        return {
-            "name": self.name,
-            "dim": self.dim,
-            "description": self.description,
-            "params": dict(self.defaults),
-            "patches": as_records(geometry_patches(self)),
-        }
-
-    def surface(self, resolution: int = 64):
-        """Closed boundary surface as a watertight ``trimesh.Trimesh`` (3D), or the filled
-        domain triangulated in the z = 0 plane (2D)."""
-        return boundary_surface(self, resolution)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -236,40 +151,21 @@ def _declared_patches(declared, dim: int, source: str) -> dict:
     return declared
 
 
-def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
-    """``geometry`` with parameter ``values`` (a subset of its parameters) replacing the current ones."""
-    values = dict(values or {})
-    unknown = sorted(set(values) - set(geometry.defaults))
-    if unknown:
-        valid = ", ".join(geometry.defaults) or "none"
-        hint = did_you_mean(unknown[0], geometry.defaults)
-        raise GeometryError(f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}")
-    merged = {**geometry.values, **{k: float(v) for k, v in values.items()}}
-    bad = [k for k, v in merged.items() if not np.isfinite(v)]
-    if bad:
-        raise GeometryError(f"geometry '{geometry.name}': parameter {bad[0]!r} must be a finite number")
-    return Geometry(
-        geometry.name,
-        geometry.dim,
-        geometry.description,
-        geometry.defaults,
-        merged,
-        geometry.boundary_map,
-        geometry.length_map,
-        geometry.source,
-        geometry.patches,
-    )
-
-
 def looks_like_path(spec: str) -> bool:
-    return spec.endswith(".py") or "/" in spec or "\\" in spec
+    """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, or anything with a folder
+    separator) rather than a built-in or installed geometry."""
+    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec)
 
 
 def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
-    (shape, finiteness, continuity across the cube's edges)."""
-    if looks_like_path(spec):
+    (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
+    OBJ, PLY, or a YAML geometry file: ``meshgen.shapes.loader``) gives a geometry without
+    parameters."""
+    if is_shape_file(spec):
+        geometry = load_shape(spec)
+    elif looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")

@@ -406,10 +406,12 @@ def layout_of(geometry, cells: int = RESOLUTION) -> Layout:
 def cache_path(geometry, cells: int = RESOLUTION):
     """The file that keeps the layout of ``geometry`` between runs: in ``$MESHGEN_CACHE_DIR``, else
     ``$XDG_CACHE_HOME/meshgen``, else ``~/.cache/meshgen``, under ``layouts/``, named by a hash of
-    meshgen's version, the plugin's name and source text, its parameter values and ``cells``.
+    meshgen's version, the plugin's name and source text (a shape file's: the hash of its content
+    and options, ``meshgen.shapes.loader.content_hash``), its parameter values and ``cells``.
     None for a plugin whose source file cannot be read (its layout is then computed every run)."""
+    content = getattr(geometry.boundary_map, "content_hash", None)  # a shape file: its bytes' hash
     try:
-        source = Path(geometry.source).read_bytes()
+        source = content.encode() if content else Path(geometry.source).read_bytes()
     except (OSError, TypeError, ValueError):
         return None
     identity = json.dumps([__version__, geometry.name, sorted(geometry.values.items()), cells]).encode()

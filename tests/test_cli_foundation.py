@@ -18,7 +18,7 @@ nothing. One test per row (ids in brackets); ``mesh`` and ``geometries show`` sh
 | dims-word               | mesh --dims 4 4 four -o m.vtu                               | positive integers, got 'four'        |
 | unknown-extension       | mesh --dims 4 4 4 -o m.foo                                  | unknown output extension .foo        |
 | no-extension            | mesh --dims 4 4 4 -o mesh                                   | unknown output extension (none)      |
-| unknown-extension-show  | geometries show semicylinder -o s.vtu                       | unknown surface extension .vtu       |
+| unknown-extension-show  | geometries show semicylinder -o s.xyz                       | unknown surface extension .xyz       |
 | missing-folder          | mesh --dims 4 4 4 -o nowhere/m.vtu                          | output folder nowhere does not exist |
 | missing-folder-show     | geometries show semicylinder -o nowhere/s.stl               | output folder nowhere does not exist |
 | folder-is-a-file        | mesh --dims 4 4 4 -o afile/m.vtu   (afile a plain file)    | afile                                |
@@ -116,7 +116,7 @@ BAD_INPUTS = {
     "dims-word": (["mesh", "--dims", "4", "4", "four", "-o", "m.vtu"], ["positive integers, got 'four'"]),
     "unknown-extension": (MESH[:-1] + ["m.foo"], ["unknown output extension .foo", ".vtu"]),
     "no-extension": (MESH[:-1] + ["mesh"], ["unknown output extension (none)"]),
-    "unknown-extension-show": (SHOW[:-1] + ["s.vtu"], ["unknown surface extension .vtu", ".stl"]),
+    "unknown-extension-show": (SHOW[:-1] + ["s.xyz"], ["unknown surface extension .xyz", ".stl"]),
     "missing-folder": (MESH[:-1] + ["nowhere/m.vtu"], ["output folder nowhere does not exist"]),
     "missing-folder-show": (SHOW[:-1] + ["nowhere/s.stl"], ["output folder nowhere does not exist"]),
     "folder-is-a-file": (MESH[:-1] + ["afile/m.vtu"], ["afile"]),

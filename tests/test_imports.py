@@ -70,6 +70,8 @@ LAYERS = [
         "meshgen.orthogonal",
         "meshgen.patches",
         "meshgen.surface",
+        "meshgen.domain",
+        "meshgen.shapes",
         "meshgen.geometry",
     ],
     ["meshgen.layout", "meshgen.elliptic", "meshgen.deviation"],

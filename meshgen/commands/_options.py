@@ -78,8 +78,9 @@ def geometry_options(default="semicylinder"):
             "-g",
             default=default,
             show_default=default is not None,
-            metavar="NAME|FILE.py",
-            help="Built-in or installed geometry name, or a path to a plugin file.",
+            metavar="NAME|FILE",
+            help="Built-in or installed geometry name, a plugin file (.py), or a shape file "
+            "(.step .stp .iges .igs .brep .stl .obj .ply, or a .yaml geometry file).",
         )(function)
         return function
 
@@ -89,6 +90,8 @@ def geometry_options(default="semicylinder"):
 def load_selected_geometry(spec, params, dims=None):
     """Load the geometry chosen on the command line; check dims against its dimension."""
     geometry = load_geometry(spec, parse_params(params))
+    for line in getattr(geometry.boundary_map, "face_lines", ()):  # a shape file's face assignment
+        click.echo(f"{geometry.name}: {line}", err=True)
     if dims is not None and len(dims) != geometry.dim:
         raise GeometryError(
             f"geometry '{geometry.name}' is {geometry.dim}D: --dims needs {geometry.dim} numbers, got {len(dims)}"

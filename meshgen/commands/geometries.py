@@ -1,4 +1,5 @@
-"""``meshgen geometries``: list the available geometries; ``show NAME -o FILE.stl`` writes a surface."""
+"""``meshgen geometries``: list the available geometries and the shape files accepted; ``show NAME
+-o FILE.stl`` writes a surface, ``show FILE -o faces.vtu`` the surface with each triangle's cube face."""
 
 from __future__ import annotations
 
@@ -6,9 +7,12 @@ import json
 
 import click
 
+from meshgen.atomic import check_output_file
 from meshgen.commands._options import load_selected_geometry
 from meshgen.errors import GeometryError
 from meshgen.geometry import available_names, load_geometry
+from meshgen.shapes.loader import FORMAT_HELP
+from meshgen.shapes.show import write_face_surface
 from meshgen.surface import check_surface_path, write_surface
 
 __all__ = ["geometries", "show"]
@@ -19,7 +23,8 @@ __all__ = ["geometries", "show"]
 @click.pass_context
 def geometries(ctx, as_json):
     """List the available geometries (built-in, installed plugins) with their parameters and
-    boundary patches (name, type: cube faces)."""
+    boundary patches (name, type: cube faces), and the shape files -g also takes: STEP/IGES/BREP
+    solids, STL/OBJ/PLY surfaces and YAML geometry files (docs: shapes-from-files)."""
     if ctx.invoked_subcommand is not None:
         return
     described = []
@@ -41,16 +46,38 @@ def geometries(ctx, as_json):
         params = ", ".join(f"{k}={v:g}" for k, v in item["params"].items()) or "-"
         patches = "\n".join(f"{p['name']} ({p['type']}: {' '.join(p['faces'])})" for p in item["patches"])
         table.add_row(item["name"], f"{item['dim']}D", item["description"], params, patches)
-    Console().print(table)
+    console = Console()
+    console.print(table)
+
+    formats = Table(title="shape files (-g FILE): a block bounded by six four-cornered faces")
+    for column in ("kind", "extensions", "what it must hold"):
+        formats.add_column(column)
+    for row in FORMAT_HELP:
+        formats.add_row(*row)
+    console.print(formats)
 
 
-@geometries.command("show", short_help="Write a geometry's boundary surface (.stl .ply .obj .off).")
+@geometries.command("show", short_help="Write a geometry's boundary surface (.stl .ply .obj .off; .vtu with cube faces).")
 @click.argument("name")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE", help="Set a geometry parameter (repeatable).")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="Surface file (.stl, .ply, .obj, .off).")
+@click.option(
+    "-o", "--output", required=True, type=click.Path(dir_okay=False), help="Surface file (.stl, .ply, .obj, .off, or .vtu)."
+)
 @click.option("--resolution", default=64, show_default=True, type=click.IntRange(2, 2048), help="Samples per face edge.")
 def show(name, params, output, resolution):
-    """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0)."""
+    """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0). With a
+    .vtu output: the surface with the cell arrays cube_face (0..5: xi0 xi1 eta0 eta1 zeta0 zeta1)
+    and patch, to check a shape file's face assignment before meshing (a triangulated surface's own
+    triangles; otherwise the boundary map sampled)."""
+
+    if output.lower().endswith(".vtu"):
+        check_output_file(output, "faces.vtu")
+        geometry = load_selected_geometry(name, params)
+        if geometry.dim != 3:
+            raise click.BadParameter("a .vtu of cube faces needs a 3D geometry", param_hint="--output")
+        path, count = write_face_surface(geometry, output, resolution)
+        click.echo(f"wrote {path}: {count} triangles with cell arrays cube_face and patch")
+        return
     check_surface_path(output)  # before loading: a bad path fails fast, whatever the geometry
     geometry = load_selected_geometry(name, params)
     path, surface = write_surface(geometry, output, resolution)

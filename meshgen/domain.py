@@ -1,0 +1,116 @@
+"""The domain a mesh fills: the ``Geometry`` object that a plugin or a shape file gives (a boundary
+map with its parameter values bound, design notes §3), and ``bind`` for other parameter values.
+Finding and loading geometries is ``meshgen.geometry``."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.errors import GeometryError, did_you_mean
+from meshgen.patches import as_records, geometry_patches
+from meshgen.surface import boundary_surface
+
+__all__ = ["Geometry", "bind"]
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """A geometry plugin with its parameter values bound.
+
+    ``boundary(points)`` maps ``(N, dim)`` points on the boundary of the unit cube to ``(N, dim)``
+    physical points (float64), checked for shape and finiteness.
+    """
+
+    name: str
+    dim: int
+    description: str
+    defaults: dict[str, float]
+    values: dict[str, float]
+    boundary_map: Callable = field(repr=False)
+    length_map: Callable | None = field(default=None, repr=False)
+    source: str = ""
+    patches: dict = field(default_factory=dict)  # cube face -> (patch name, type), as declared
+
+    def boundary(self, points: np.ndarray) -> np.ndarray:
+        points = np.asarray(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != self.dim:
+            raise GeometryError(f"geometry '{self.name}': boundary points must have shape (N, {self.dim}), got {points.shape}")
+        try:
+            mapped = self.boundary_map(points, **self.values)
+        except GeometryError:
+            raise
+        # A plugin is foreign code: report it with its name and file. SystemExit too: sys.exit() in
+        # a plugin must not end meshgen with the plugin's status (0 would read as success).
+        except (Exception, SystemExit) as exc:
+            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}") from exc
+        try:
+            mapped = np.asarray(mapped, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise GeometryError(
+                f"geometry '{self.name}' ({self.source}): boundary() returned something that is not "
+                f"an array of numbers ({type(mapped).__name__})"
+            ) from exc
+        if mapped.shape != points.shape:
+            raise GeometryError(
+                f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} for input shape {points.shape}"
+            )
+        if not np.all(np.isfinite(mapped)):
+            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() returned non-finite values")
+        return mapped
+
+    @property
+    def characteristic_length(self) -> float:
+        """Length scale for relative figures: the plugin's own, else the bounding-box diagonal."""
+        if self.length_map is not None:
+            try:
+                length = float(self.length_map(**self.values))
+            except (Exception, SystemExit) as exc:  # foreign code, as in boundary()
+                raise GeometryError(
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised {type(exc).__name__}: {exc}"
+                ) from exc
+            if not (np.isfinite(length) and length > 0):
+                raise GeometryError(
+                    f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive number, got {length!r}"
+                )
+            return length
+        samples = np.concatenate([cube.corners(self.dim), cube.face_samples(self.dim, 9)])
+        mapped = self.boundary(samples)
+        return float(np.linalg.norm(mapped.max(axis=0) - mapped.min(axis=0)))
+
+    def with_params(self, **values: float) -> Geometry:
+        """The same plugin with some parameter values replaced (names checked)."""
+        return bind(self, values)
+
+    def describe(self) -> dict:
+        return {
+            "name": self.name,
+            "dim": self.dim,
+            "description": self.description,
+            "params": dict(self.defaults),
+            "patches": as_records(geometry_patches(self)),
+        }
+
+    def surface(self, resolution: int = 64):
+        """Closed boundary surface as a watertight ``trimesh.Trimesh`` (3D), or the filled
+        domain triangulated in the z = 0 plane (2D)."""
+        return boundary_surface(self, resolution)
+
+
+def bind(geometry: Geometry, values: dict[str, float] | None) -> Geometry:
+    """``geometry`` with parameter ``values`` (a subset of its parameters) replacing the current ones."""
+    values = dict(values or {})
+    unknown = sorted(set(values) - set(geometry.defaults))
+    if unknown:
+        valid = ", ".join(geometry.defaults) or "none"
+        hint = did_you_mean(unknown[0], geometry.defaults)
+        raise GeometryError(f"geometry '{geometry.name}' has no parameter {unknown[0]!r} (parameters: {valid}){hint}")
+    merged = {**geometry.values, **{k: float(v) for k, v in values.items()}}
+    bad = [k for k, v in merged.items() if not np.isfinite(v)]
+    if bad:
+        raise GeometryError(f"geometry '{geometry.name}': parameter {bad[0]!r} must be a finite number")
+    return dataclasses.replace(geometry, values=merged)

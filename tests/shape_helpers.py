@@ -1,0 +1,265 @@
+"""Test shapes built by the tests themselves: random four-cornered surface patches, a bent
+rectangular duct written as a multi-solid ASCII STL, a twisted loft exported to STEP by gmsh."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def random_patch(triangles: int, seed: int):
+    """A random four-cornered patch of about ``triangles`` triangles: the Delaunay triangulation
+    of random points in the unit disk (a share of them on its circle) with ears added on its boundary, lifted onto a random bumpy
+    height field with an in-plane warp, randomly oriented. Returns (vertices (n, 3), triangles
+    (m, 3), corners: four boundary vertex indices in boundary order)."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    n_points = triangles // 2 + 2
+    n_circle = max(int(8 * np.sqrt(n_points)), 12)
+    angles = np.sort(rng.uniform(0.0, 2 * np.pi, n_circle))
+    radius = np.sqrt(rng.uniform(0.0, 0.97**2, n_points - n_circle))
+    theta = rng.uniform(0.0, 2 * np.pi, n_points - n_circle)
+    xy = np.concatenate(
+        [np.column_stack([np.cos(angles), np.sin(angles)]), np.column_stack([radius * np.cos(theta), radius * np.sin(theta)])]
+    )
+    tri = Delaunay(xy).simplices
+    d1, d2 = xy[tri[:, 1]] - xy[tri[:, 0]], xy[tri[:, 2]] - xy[tri[:, 0]]
+    area = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    tri = np.where((area < 0)[:, None], tri[:, ::-1], tri)
+    # Ears: a new vertex just outside some boundary edges (a, b) and the triangle (a, new, b),
+    # whose three vertices all lie on the boundary: its edge a-b joins two vertices of one side.
+    eared = rng.choice(n_circle, n_circle // 8, replace=False)
+    mid = angles[eared] + 0.5 * (np.append(angles, angles[0] + 2 * np.pi)[eared + 1] - angles[eared])
+    ear_xy = 1.01 * np.column_stack([np.cos(mid), np.sin(mid)])
+    new = len(xy) + np.arange(len(eared))
+    tri = np.concatenate([tri, np.column_stack([eared, new, (eared + 1) % n_circle])])
+    xy = np.concatenate([xy, ear_xy])
+    boundary_order = np.concatenate([np.arange(n_circle), new])[np.argsort(np.concatenate([angles, np.mod(mid, 2 * np.pi)]))]
+    a, b, c = rng.uniform(0.5, 3.0, 3)
+    warp = 0.15 * np.column_stack([np.sin(a * xy[:, 1]), np.sin(b * xy[:, 0])])
+    height = 0.4 * np.sin(a * xy[:, 0] + 1.0) * np.cos(b * xy[:, 1]) + 0.3 * np.sin(c * (xy[:, 0] + xy[:, 1]))
+    vertices = np.column_stack([xy + warp, height])
+    if rng.random() < 0.5:
+        tri = tri[:, ::-1]
+    quarter = len(boundary_order) // 4
+    picks = rng.integers(0, quarter, 4) + np.arange(4) * quarter
+    corners = boundary_order[picks]
+    return vertices, tri, corners
+
+
+DUCT_NAMES = ("inlet", "outlet", "inner", "outer", "floor", "ceiling")
+
+
+def duct_point(theta, a, b, bend_radius=2.0):
+    """The bent duct's point at bend angle ``theta`` (0 .. pi/2), radial offset ``a`` from the
+    bend's centre line and height ``b``: ((R + a) cos theta, b, (R + a) sin theta)."""
+    r = bend_radius + a
+    return np.stack([r * np.cos(theta), b, r * np.sin(theta)], axis=-1)
+
+
+def duct_surface(n_bend=24, n_width=8, n_height=6, width=1.0, height=0.6, seed=0):
+    """A 90 degree bend of a width x height rectangle as a closed triangulated surface with
+    outward normals: vertices (n, 3), triangles (m, 3), labels (m,) indices into DUCT_NAMES. The
+    lattice of each face is jittered in the surface's own parameters (so every vertex stays on the
+    exact surface) and each quad is split along a random diagonal."""
+    rng = np.random.default_rng(seed)
+    shape = (n_bend, n_width, n_height)
+    lattice, triangles, labels = [], [], []
+    offset = 0
+    # faces: (axis, side, label) with axis 0 = bend angle, 1 = width, 2 = height
+    for axis, side, label in ((0, 0, 0), (0, 1, 1), (1, 0, 2), (1, 1, 3), (2, 0, 4), (2, 1, 5)):
+        p, q = (d for d in range(3) if d != axis)
+        u, v = np.meshgrid(np.arange(shape[p] + 1), np.arange(shape[q] + 1), indexing="ij")
+        nodes = np.empty(u.shape + (3,), dtype=np.int64)
+        nodes[..., axis], nodes[..., p], nodes[..., q] = side * shape[axis], u, v
+        index = np.arange(u.size).reshape(u.shape) + offset
+        a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+        diagonal = rng.random(len(a)) < 0.5
+        first = np.where(diagonal[:, None], np.stack([a, b, c], 1), np.stack([a, b, d], 1))
+        second = np.where(diagonal[:, None], np.stack([a, c, d], 1), np.stack([b, c, d], 1))
+        tri = np.concatenate([first, second])
+        # (p, q, axis) cyclic -> the lattice normal is +axis: outward on side 1
+        cyclic = (p, q, axis) in ((1, 2, 0), (2, 0, 1), (0, 1, 2))
+        tri = tri if cyclic == bool(side) else tri[:, ::-1]
+        triangles.append(tri)
+        labels.append(np.full(len(tri), label))
+        lattice.append(nodes.reshape(-1, 3))
+        offset += u.size
+    lattice = np.concatenate([*lattice])
+    unique, inverse = np.unique(lattice, axis=0, return_inverse=True)
+    triangles = inverse.reshape(-1)[np.concatenate(triangles)]
+    t = unique / np.array(shape, dtype=float)
+    inside = (t > 0) & (t < 1)
+    spacing = 1.0 / np.array(shape, dtype=float)
+    t = t + inside * rng.uniform(-0.3, 0.3, t.shape) * spacing
+    vertices = duct_point(0.5 * np.pi * t[:, 0], width * (t[:, 1] - 0.5), height * (t[:, 2] - 0.5))
+    # orientation: theta and the (width, height) pair... fix by the enclosed volume's sign
+    p, q, r = (vertices[triangles[:, k]] for k in range(3))
+    if np.einsum("ij,ij->i", p, np.cross(q, r)).sum() < 0:
+        triangles = triangles[:, ::-1]
+    return vertices, triangles, np.concatenate(labels)
+
+
+def write_ascii_stl(path, vertices, triangles, labels=None, names=DUCT_NAMES):
+    """An ASCII STL with one ``solid NAME`` block per label (all in one block without labels);
+    coordinates written exactly (17 significant digits)."""
+    blocks = []
+    groups = [(names[k], triangles[labels == k]) for k in range(len(names))] if labels is not None else [("surface", triangles)]
+    for name, tris in groups:
+        lines = [f"solid {name}"]
+        for tri in tris:
+            lines.append("  facet normal 0 0 0\n    outer loop")
+            lines += [f"      vertex {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices[tri]]
+            lines.append("    endloop\n  endfacet")
+        lines.append(f"endsolid {name}")
+        blocks.append("\n".join(lines))
+    path.write_text("\n".join(blocks) + "\n")
+    return path
+
+
+DUCT_CORNERS = [(t, a, b) for t in (0.0, 0.5 * np.pi) for a in (-0.5, 0.5) for b in (-0.3, 0.3)]
+
+
+def distance_to_triangles(points, vertices, triangles) -> np.ndarray:
+    """Distance (N,) from each point to a triangulated surface, by VTK's cell locator (an
+    implementation independent of meshgen's)."""
+    import vtk
+    from vtk.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+
+    poly = vtk.vtkPolyData()
+    vtk_points = vtk.vtkPoints()
+    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(vertices, dtype=float), deep=True))
+    poly.SetPoints(vtk_points)
+    cells = vtk.vtkCellArray()
+    offsets = np.arange(0, 3 * len(triangles) + 1, 3, dtype=np.int64)
+    connectivity = np.ascontiguousarray(triangles, dtype=np.int64).ravel()
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(connectivity, deep=True))
+    poly.SetPolys(cells)
+    locator = vtk.vtkCellLocator()
+    locator.SetDataSet(poly)
+    locator.BuildLocator()
+    closest, cell, sub, dist2 = [0.0, 0.0, 0.0], vtk.mutable(0), vtk.mutable(0), vtk.mutable(0.0)
+    out = np.empty(len(points))
+    for n, point in enumerate(np.asarray(points, dtype=float)):
+        locator.FindClosestPoint(point.tolist(), closest, cell, sub, dist2)
+        out[n] = np.sqrt(float(dist2))
+    return out
+
+
+def write_twisted_loft(path, solids: int = 1):
+    """A loft through three rectangles, each turned and shifted (curved, twisted B-spline sides,
+    flat ends), built with gmsh's OCC kernel and written to ``path`` (.step, .iges, .brep).
+    ``solids=2`` writes a second, separate box beside it. Returns OCC's volume of the loft."""
+    import math
+
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = gmsh.model.getCurrent() if not started else None
+    gmsh.model.add(f"loft-{path.name}")
+    occ = gmsh.model.occ
+
+    def rectangle(z, w, h, angle, dx):
+        c, s = math.cos(angle), math.sin(angle)
+        points = [
+            occ.addPoint(c * x - s * y + dx, s * x + c * y, z)
+            for x, y in ((-w / 2, -h / 2), (w / 2, -h / 2), (w / 2, h / 2), (-w / 2, h / 2))
+        ]
+        return occ.addWire([occ.addLine(points[k], points[(k + 1) % 4]) for k in range(4)])
+
+    wires = [
+        rectangle(0.0, 2.0, 1.0, 0.0, 0.0),
+        rectangle(1.5, 1.4, 0.8, math.radians(35), 0.3),
+        rectangle(3.0, 1.8, 1.0, math.radians(70), 0.0),
+    ]
+    loft = occ.addThruSections(wires, makeSolid=True, makeRuled=False)
+    if solids == 2:
+        occ.addBox(5, 0, 0, 1, 1, 1)
+    occ.synchronize()
+    volume = occ.getMass(3, loft[0][1])
+    from meshgen.shapes.cad import quiet_stdout
+
+    with quiet_stdout():  # OCC's writers print statistics to the process's stdout
+        gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    elif previous:
+        gmsh.model.setCurrent(previous)
+    return volume
+
+
+def distance_to_cad(points, path) -> np.ndarray:
+    """Distance (N,) from each point to the nearest face of the CAD file ``path``, by gmsh's own
+    closest point on each face's surface (a model of its own, read afresh)."""
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = None if started else gmsh.model.getCurrent()
+    gmsh.model.add(f"check-{path.name}")
+    gmsh.model.occ.importShapes(str(path))
+    gmsh.model.occ.synchronize()
+    flat = np.asarray(points, dtype=float).ravel().tolist()
+    best = np.full(len(points), np.inf)
+    for _, tag in gmsh.model.getEntities(2):
+        closest, _ = gmsh.model.getClosestPoint(2, tag, flat)
+        best = np.minimum(best, np.linalg.norm(np.array(closest).reshape(-1, 3) - points, axis=1))
+    vertices = np.array([gmsh.model.getValue(0, tag, []) for _, tag in gmsh.model.getEntities(0)])
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    elif previous:
+        gmsh.model.setCurrent(previous)
+    return best, vertices
+
+
+def enclosed_volume(X) -> float:
+    """The volume inside the boundary quads of a node array X (n1+1, n2+1, n3+1, 3), each quad as
+    two triangles, by the divergence theorem; sign from the orientation of the first quad
+    turned outward by the mesh's index order (positive for a right-handed mesh)."""
+    total = 0.0
+    for axis in range(3):
+        for side, sign in ((0, -1.0), (-1, 1.0)):
+            face = np.take(X, side, axis=axis)  # (m, n, 3), the two other axes in increasing order
+            a, b, c, d = face[:-1, :-1], face[1:, :-1], face[1:, 1:], face[:-1, 1:]
+            orient = sign * (1.0 if axis != 1 else -1.0)
+            for p, q, r in ((a, b, c), (a, c, d)):
+                total += orient * np.einsum("...i,...i->...", p, np.cross(q, r)).sum() / 6.0
+    return float(total)
+
+
+def voxel_surface(cells):
+    """The closed boundary of a union of unit cubes (``cells``: integer (i, j, k) triples): every
+    cube face not shared by two cubes, as two triangles with the outward normal. Returns vertices
+    (n, 3), triangles (m, 3) and the outward normal axis and sign of each triangle (m, 2)."""
+    cells = {tuple(c) for c in cells}
+    quads, normals = [], []
+    for cell in cells:
+        for axis in range(3):
+            for sign in (-1, 1):
+                neighbour = list(cell)
+                neighbour[axis] += sign
+                if tuple(neighbour) in cells:
+                    continue
+                p, q = (axis + 1) % 3, (axis + 2) % 3  # (p, q, axis) cyclic: p x q = +axis
+                base = np.array(cell, dtype=float)
+                base[axis] += 1 if sign > 0 else 0
+                corners = []
+                for dp, dq in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    point = base.copy()
+                    point[p] += dp
+                    point[q] += dq
+                    corners.append(point)
+                quads.append(corners if sign > 0 else corners[::-1])
+                normals.append((axis, sign))
+    points = np.array(quads).reshape(-1, 3)
+    vertices, inverse = np.unique(points, axis=0, return_inverse=True)
+    quads = inverse.reshape(-1, 4)
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    return vertices, triangles, np.concatenate([normals, normals])
