@@ -38,6 +38,7 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import MeshgenError, ParameterError
+from meshgen.neural.polish import polish as polish_mesh
 from meshgen.tfi import add_face_terms, blending, boundary_faces, face_terms, transfinite_on_grid
 
 CHUNK_NODES = 8192
@@ -594,11 +595,13 @@ def _default_params(name: str) -> dict:
 # the method
 
 
-def build_neural(geometry, coords, model=None, correct=True, device="auto"):
+def build_neural(geometry, coords, model=None, correct=True, device="auto", polish=True):
     """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
     a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
     ``coords``, evaluated on ``device`` ("cpu", "cuda" or "auto"), then corrected to
-    X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False. Returns (X, info) with info {"model", "correction",
+    X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False, then (``polish``, with
+    ``correct``) polished: faces and interior brought to the discrete Winslow equations at the
+    mesh's resolution (``meshgen.neural.polish``), which is what a flow solver needs. Returns (X, info) with info {"model", "correction",
     "warnings"}; ``info["correction"]["error_before"]`` is the network's boundary error, reported
     the same way whether or not the mesh is corrected."""
     if model is None:
@@ -616,4 +619,6 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto"):
         info["correction"] = correct_boundary(X, geometry, coords)
     else:
         info["correction"] = {"corrected": False, "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
+    if correct and polish:  # the discrete Winslow equations at the mesh's resolution (meshgen.neural.polish)
+        info["polish"] = polish_mesh(X, geometry, coords)
     return X, info
