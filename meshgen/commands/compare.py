@@ -13,7 +13,7 @@ from meshgen.tables import METRIC_LABELS
 
 EPILOG = """\b
 Columns: means of min angle, max angle, equiangle skewness, aspect ratio, centroid skewness and
-non-orthogonality; inverted cells (count and %); valid (inverted <= 0.5% of cells); boundary
+non-orthogonality; inverted cells (count and %); valid (no inverted cell); boundary
 deviation (largest distance of a boundary node from the true boundary, and its fraction of the
 characteristic length L); test-set loss and training time (neural methods); meshing time.
 The best value per column is highlighted: closest to 90 degrees for the angles, else smallest.

@@ -1,0 +1,121 @@
+"""Grid smoothness figures that predict a flow solver's discretisation error, on a node array.
+
+Mean and minimum angles do not see a grid whose spacing jumps from one cell to the next or whose
+grid lines wiggle; a finite-volume solver does (its interpolation weights and gradient stencils
+assume smoothly varying cells). Two per-cell figures:
+
+- ``expansion_ratio`` (grid-line definition, as structured-grid guides use it): a cell's size along
+  axis a is the mean length of its edges along a (4 in 3D, 2 in 2D); across each face shared with a
+  neighbour along a, the ratio of the larger of the two sizes to the smaller. A cell's figure is the
+  largest over its faces (1 on a uniform grid; q on a grid graded geometrically by q; 1 for a cell
+  with no neighbour). Not the ratio of neighbouring volumes, which a cell stretched along one axis
+  and squeezed along another hides.
+- ``grid_smoothness``: at each node and axis with a node on both sides, the second difference of
+  node positions along the grid line relative to the local spacing,
+  |X_(i+1) - 2 X_i + X_(i-1)| / ((|X_(i+1) - X_i| + |X_i - X_(i-1)|) / 2): 0 on straight, evenly
+  spaced lines; 2 sin(dtheta / 2) on a circle sampled every dtheta; 2 (q - 1) / (q + 1) where the
+  spacing grows by q. A cell's figure is the largest over its corners' grid lines.
+
+``smoothness_figures(X)`` gives both with their summaries and worst cells (JSON-ready).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["DEFINITIONS", "expansion_ratio", "grid_smoothness", "smoothness_figures"]
+
+DEFINITIONS = {
+    "expansion_ratio": (
+        "largest over a cell's faces of max(s, s')/min(s, s'), s and s' the two cells' mean edge lengths along the axis "
+        "normal to the shared face (grid-line size ratio; 1 uniform, q for geometric grading q)"
+    ),
+    "grid_smoothness": (
+        "largest over a cell's corners and axes of |X(i+1) - 2 X(i) + X(i-1)| divided by the mean of the two adjacent "
+        "edge lengths along that grid line (0: straight, evenly spaced lines)"
+    ),
+}
+
+
+def _cell_sizes(X: np.ndarray, axis: int) -> np.ndarray:
+    """Mean length of each cell's edges along ``axis``: (n1, n2[, n3])."""
+    dim = X.ndim - 1
+    edges = np.linalg.norm(np.diff(X, axis=axis), axis=-1)  # edges along axis: n_axis cells, nodes elsewhere
+    for other in range(dim):
+        if other != axis:
+            edges = 0.5 * (
+                np.take(edges, range(edges.shape[other] - 1), axis=other)
+                + np.take(edges, range(1, edges.shape[other]), axis=other)
+            )
+    return edges
+
+
+def expansion_ratio(X: np.ndarray) -> np.ndarray:
+    """Per cell (n1, n2[, n3]): the expansion ratio (module docstring) of node array ``X``."""
+    X = np.asarray(X, dtype=float)
+    dim = X.ndim - 1
+    result = np.ones(tuple(n - 1 for n in X.shape[:-1]))
+    for axis in range(dim):
+        size = _cell_sizes(X, axis)
+        if size.shape[axis] < 2:
+            continue
+        low, high = np.take(size, range(size.shape[axis] - 1), axis=axis), np.take(size, range(1, size.shape[axis]), axis=axis)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.maximum(low, high) / np.minimum(low, high)
+        ratio = np.where(np.isfinite(ratio), ratio, np.inf)
+        lower = [slice(None)] * dim
+        upper = [slice(None)] * dim
+        lower[axis], upper[axis] = slice(0, -1), slice(1, None)
+        result[tuple(lower)] = np.fmax(result[tuple(lower)], ratio)
+        result[tuple(upper)] = np.fmax(result[tuple(upper)], ratio)
+    return result
+
+
+def node_smoothness(X: np.ndarray) -> np.ndarray:
+    """Per node (n1+1, n2+1[, n3+1]): the largest over axes of the relative second difference
+    (module docstring); 0 where no axis has a node on both sides."""
+    X = np.asarray(X, dtype=float)
+    dim = X.ndim - 1
+    result = np.zeros(X.shape[:-1])
+    for axis in range(dim):
+        n = X.shape[axis]
+        if n < 3:
+            continue
+        before, here, after = (np.take(X, range(s, n - 2 + s), axis=axis) for s in (0, 1, 2))
+        second = np.linalg.norm(after - 2.0 * here + before, axis=-1)
+        spacing = 0.5 * (np.linalg.norm(after - here, axis=-1) + np.linalg.norm(here - before, axis=-1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relative = np.where(spacing > 0, second / spacing, np.where(second > 0, np.inf, 0.0))
+        inner = [slice(None)] * dim
+        inner[axis] = slice(1, -1)
+        result[tuple(inner)] = np.fmax(result[tuple(inner)], relative)
+    return result
+
+
+def grid_smoothness(X: np.ndarray) -> np.ndarray:
+    """Per cell (n1, n2[, n3]): the largest :func:`node_smoothness` over the cell's corners."""
+    nodes = node_smoothness(X)
+    dim = nodes.ndim
+    result = None
+    for corner in np.ndindex(*(2,) * dim):
+        part = nodes[tuple(slice(c, n - 1 + c) for c, n in zip(corner, nodes.shape))]
+        result = part.copy() if result is None else np.fmax(result, part)
+    return result
+
+
+def _summary(values: np.ndarray) -> dict:
+    finite = values[np.isfinite(values)]
+    worst = int(np.argmax(np.where(np.isnan(values), -np.inf, values)))
+    p99 = float(np.percentile(finite, 99.0)) if finite.size else None
+    return {
+        "mean": float(finite.mean()) if finite.size else None,
+        "max": float(values.reshape(-1)[worst]),
+        "p99": p99,
+        "worst_cell": [int(i) for i in np.unravel_index(worst, values.shape)],
+    }
+
+
+def smoothness_figures(X: np.ndarray) -> dict:
+    """{"expansion_ratio": {...}, "grid_smoothness": {...}} of node array ``X``, each with mean,
+    max, p99 and ``worst_cell`` (the (i, j[, k]) of the max). JSON-ready."""
+    return {"expansion_ratio": _summary(expansion_ratio(X)), "grid_smoothness": _summary(grid_smoothness(X))}
