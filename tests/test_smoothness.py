@@ -64,3 +64,12 @@ def test_figures_name_the_worst_cell():
     worst = figures["grid_smoothness"]["worst_cell"]
     assert worst[0] in (2, 3) and worst[1] in (1, 2) and worst[2] in (0, 1)
     assert figures["grid_smoothness"]["max"] == pytest.approx(0.06 / 0.1, rel=1e-12)
+
+
+def test_smoothness_by_axis_separates_the_lines():
+    dtheta = np.pi / 10
+    theta, r = np.arange(8) * dtheta, np.linspace(1.0, 2.0, 5)
+    T, R = np.meshgrid(theta, r, indexing="ij")
+    X = np.stack([R * np.cos(T), R * np.sin(T)], axis=-1)
+    by_axis = smoothness_figures(X)["grid_smoothness"]["max_by_axis"]
+    assert by_axis[0] == pytest.approx(2 * np.sin(dtheta / 2), rel=1e-12) and by_axis[1] < 1e-12

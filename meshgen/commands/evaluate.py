@@ -46,9 +46,11 @@ def solver_figure_rows(report) -> list[tuple[str, str]]:
     rows = []
     for name, label in (("expansion_ratio", "expansion ratio"), ("grid_smoothness", "grid smoothness")):
         figure = figures[name]
-        rows.append(
-            (f"{label} max", f"{_number(figure['max'])} at cell {_cell(figure['worst_cell'])} (mean {_number(figure['mean'])})")
-        )
+        text = f"{_number(figure['max'])} at cell {_cell(figure['worst_cell'])} (mean {_number(figure['mean'])}"
+        if "max_by_axis" in figure:
+            lines = zip(("xi", "eta", "zeta"), figure["max_by_axis"])
+            text += "; along " + ", ".join(f"{axis} lines {_number(value)}" for axis, value in lines)
+        rows.append((f"{label} max", text + ")"))
     for name, label in (
         ("non_orthogonality_internal", "non-orthogonality, internal faces (checkMesh)"),
         ("non_orthogonality_boundary", "non-orthogonality, boundary faces"),

@@ -57,6 +57,15 @@ METHOD_HELP = (
     "interior moves smoothly (also block by block with --chunked); --no-correct keeps the raw network [default: --correct; --snap/--no-snap: old names].",
 )
 @click.option(
+    "--polish/--no-polish",
+    "polish",
+    default=None,
+    help="neural: after the correction, solve the discrete Winslow equations from the network's mesh (faces "
+    "relaxed, multigrid cycles), which a flow solver needs (a raw network mesh gives potentialFoam errors "
+    "thousands of times the elliptic mesh's); --no-polish keeps the corrected network mesh. Not with --chunked "
+    "[default: --polish].",
+)
+@click.option(
     "--device",
     type=click.Choice(["auto", "cpu", "cuda"]),
     default=None,
@@ -126,6 +135,7 @@ def mesh(
     ascii_files,
     checkpoint,
     correct,
+    polish,
     device,
     tol,
     max_iter,
@@ -199,6 +209,7 @@ def mesh(
         "tol": tol,
         "max_iter": max_iter,
         "correct": correct,
+        "polish": polish,
         "device": device,
         "boundary_layout": boundary_layout,
         "orthogonal": orthogonal or None,
@@ -265,6 +276,12 @@ def _print_result(method, geometry, dims, info, seconds, output, output_format, 
         )
     if "correction" in info:
         echo(_correction_line(info["correction"]))
+    if "polish" in info:
+        polished = info["polish"]
+        echo(
+            f"polished: {polished['cycles']} Winslow cycles in {polished['seconds']:.2f} s, nodes moved up to "
+            f"{polished['largest_move_rel']:.2g} of L (--no-polish keeps the network's mesh)"
+        )
     if "chunked" in info:
         blocks = info["chunked"]
         line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"

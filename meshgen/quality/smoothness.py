@@ -71,13 +71,14 @@ def expansion_ratio(X: np.ndarray) -> np.ndarray:
     return result
 
 
-def node_smoothness(X: np.ndarray) -> np.ndarray:
-    """Per node (n1+1, n2+1[, n3+1]): the largest over axes of the relative second difference
-    (module docstring); 0 where no axis has a node on both sides."""
+def node_smoothness(X: np.ndarray, axes=None) -> np.ndarray:
+    """Per node (n1+1, n2+1[, n3+1]): the largest over ``axes`` (default all) of the relative
+    second difference along that axis's grid line (module docstring); 0 where none of them has a
+    node on both sides."""
     X = np.asarray(X, dtype=float)
     dim = X.ndim - 1
     result = np.zeros(X.shape[:-1])
-    for axis in range(dim):
+    for axis in range(dim) if axes is None else axes:
         n = X.shape[axis]
         if n < 3:
             continue
@@ -92,9 +93,10 @@ def node_smoothness(X: np.ndarray) -> np.ndarray:
     return result
 
 
-def grid_smoothness(X: np.ndarray) -> np.ndarray:
-    """Per cell (n1, n2[, n3]): the largest :func:`node_smoothness` over the cell's corners."""
-    nodes = node_smoothness(X)
+def grid_smoothness(X: np.ndarray, axes=None) -> np.ndarray:
+    """Per cell (n1, n2[, n3]): the largest :func:`node_smoothness` (along ``axes``, default all)
+    over the cell's corners."""
+    nodes = node_smoothness(X, axes)
     dim = nodes.ndim
     result = None
     for corner in np.ndindex(*(2,) * dim):
@@ -117,5 +119,9 @@ def _summary(values: np.ndarray) -> dict:
 
 def smoothness_figures(X: np.ndarray) -> dict:
     """{"expansion_ratio": {...}, "grid_smoothness": {...}} of node array ``X``, each with mean,
-    max, p99 and ``worst_cell`` (the (i, j[, k]) of the max). JSON-ready."""
-    return {"expansion_ratio": _summary(expansion_ratio(X)), "grid_smoothness": _summary(grid_smoothness(X))}
+    max, p99 and ``worst_cell`` (the (i, j[, k]) of the max); the smoothness also with
+    ``max_by_axis`` (along the xi, eta[, zeta] grid lines alone: a wall's curvature shows on the
+    lines along the wall, a kink between layers on the lines across them). JSON-ready."""
+    smoothness = _summary(grid_smoothness(X))
+    smoothness["max_by_axis"] = [float(np.max(node_smoothness(X, [axis]))) for axis in range(X.ndim - 1)]
+    return {"expansion_ratio": _summary(expansion_ratio(X)), "grid_smoothness": smoothness}

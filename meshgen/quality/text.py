@@ -37,7 +37,8 @@ def summary_lines(report: dict) -> list[str]:
         lines.append(
             f"  expansion ratio max {_format(figures['expansion_ratio']['max'], 3)} "
             f"(cell {tuple(figures['expansion_ratio']['worst_cell'])}), grid smoothness max "
-            f"{_format(figures['grid_smoothness']['max'], 3)} (cell {tuple(figures['grid_smoothness']['worst_cell'])}), "
+            f"{_format(figures['grid_smoothness']['max'], 3)} (cell {tuple(figures['grid_smoothness']['worst_cell'])}; by axis "
+            f"{', '.join(_format(v, 2) for v in figures['grid_smoothness']['max_by_axis'])}), "
             f"checkMesh non-orthogonality max {_format(internal['max'], 3)} average {_format(internal['average'], 3)} deg "
             f"(boundary faces max {_format(boundary['max'], 3)})"
         )
