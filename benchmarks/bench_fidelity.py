@@ -83,19 +83,20 @@ def row(geometry: str, dims, method: str, label: str, **options) -> dict:
         "inverted": report["inverted"]["count"],
         "meshing_seconds": seconds,
     }
+    figures = report["solver_figures"]
     for name in ("expansion_ratio", "grid_smoothness", "non_orthogonality_internal"):
-        if name in metrics:
-            result[f"{name}_max"] = metrics[name]["max"]
+        result[f"{name}_max"] = figures[name]["max"]
+    result["zeta_line_smoothness_max"] = figures["grid_smoothness"]["max_by_axis"][2]
     polish = mesh.info.get("polish")
     if polish:
         result["polish_cycles"] = polish["cycles"]
-        result["polish_seconds"] = polish["seconds"]
     return result
 
 
 def print_row(result: dict, reference: float | None) -> None:
     ratio = "" if reference is None else f"{result['max_velocity_error'] / reference:9.3g}x"
-    extra = "".join(f"  {key[:-4]} {result[key]:.4g}" for key in ("expansion_ratio_max", "grid_smoothness_max") if key in result)
+    names = ("expansion_ratio_max", "grid_smoothness_max", "zeta_line_smoothness_max", "non_orthogonality_internal_max")
+    extra = "".join(f"  {key[:-4]} {result[key]:.3g}" for key in names)
     print(
         f"{result['geometry']:13s} {'x'.join(map(str, result['dims'])):10s} {result['method']:22s} "
         f"max|U-U*| {result['max_velocity_error']:9.3g} {ratio:>10s}  min angle {result['min_angle_mean']:.3f}  "

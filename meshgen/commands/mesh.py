@@ -279,7 +279,7 @@ def _print_result(method, geometry, dims, info, seconds, output, output_format, 
     if "polish" in info:
         polished = info["polish"]
         echo(
-            f"polished: {polished['cycles']} Winslow cycles in {polished['seconds']:.2f} s, nodes moved up to "
+            f"polished: {polished['cycles']} Winslow cycles, nodes moved up to "
             f"{polished['largest_move_rel']:.2g} of L (--no-polish keeps the network's mesh)"
         )
     if "chunked" in info:
