@@ -118,7 +118,9 @@ EPILOG = """\b
 Gate quantities: METRIC.STAT, METRIC one of min_angle, max_angle, equiangle_skewness,
 aspect_ratio, centroid_skewness, non_orthogonality, scaled_jacobian and STAT one of mean, min,
 max, p01, p99; inverted.count, inverted.fraction, inverted.percent, valid (true/false), cells,
-boundary_deviation.max, .mean, .max_rel, .mean_rel. Operators: < <= > >= == !=.
+boundary_deviation.max, .mean, .max_rel, .mean_rel; for meshgen's structured meshes
+expansion_ratio and grid_smoothness .max, .mean, .p99, non_orthogonality_internal (checkMesh's)
+and non_orthogonality_boundary .max, .average. Operators: < <= > >= == !=.
 
 \b
 Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that cannot be evaluated.
