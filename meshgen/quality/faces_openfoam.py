@@ -54,22 +54,32 @@ def _face_corners(X: np.ndarray, axis: int) -> list[np.ndarray]:
 def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """OpenFOAM's face centres and area vectors (module docstring) of the faces normal to ``axis``
     of the 3D node array ``X``: two arrays shaped like the face grid (node layers along ``axis``,
-    cells along the others) + (3,); area vectors along +``axis`` for a right-handed map."""
-    corners = _face_corners(X, axis)
-    estimate = 0.25 * (corners[0] + corners[1] + corners[2] + corners[3])
-    sum_n = np.zeros_like(estimate)
-    sum_a = np.zeros(estimate.shape[:-1])
-    sum_ac = np.zeros_like(estimate)
+    cells along the others) + (3,); area vectors along +``axis`` for a right-handed map.
+    Computed component by component (plain arrays, no (.., 3) temporaries)."""
+    corners = [[np.ascontiguousarray(corner[..., c]) for c in range(3)] for corner in _face_corners(X, axis)]
+    estimate = [0.25 * (corners[0][c] + corners[1][c] + corners[2][c] + corners[3][c]) for c in range(3)]
+    shape = estimate[0].shape
+    sum_n = [np.zeros(shape) for _ in range(3)]
+    sum_a = np.zeros(shape)
+    sum_ac = [np.zeros(shape) for _ in range(3)]
     for m in range(4):
         point, following = corners[m], corners[(m + 1) % 4]
-        n = np.cross(following - point, estimate - point)
-        a = np.linalg.norm(n, axis=-1)
-        sum_n += n
+        e = [following[c] - point[c] for c in range(3)]
+        f = [estimate[c] - point[c] for c in range(3)]
+        n = (e[1] * f[2] - e[2] * f[1], e[2] * f[0] - e[0] * f[2], e[0] * f[1] - e[1] * f[0])
+        a = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
         sum_a += a
-        sum_ac += a[..., None] * (point + following + estimate)
+        for c in range(3):
+            sum_n[c] += n[c]
+            sum_ac[c] += a * (point[c] + following[c] + estimate[c])
+    centres = np.empty(shape + (3,))
+    areas = np.empty(shape + (3,))
     with np.errstate(divide="ignore", invalid="ignore"):
-        centres = np.where(sum_a[..., None] > 0, sum_ac / (3.0 * sum_a[..., None]), estimate)
-    return centres, 0.5 * sum_n
+        scale = np.where(sum_a > 0, 1.0 / (3.0 * sum_a), 0.0)
+    for c in range(3):
+        centres[..., c] = np.where(sum_a > 0, sum_ac[c] * scale, estimate[c])
+        areas[..., c] = 0.5 * sum_n[c]
+    return centres, areas
 
 
 def _along(array: np.ndarray, axis: int, start: int, stop: int | None) -> np.ndarray:
@@ -119,7 +129,8 @@ def _extruded(X: np.ndarray) -> np.ndarray:
 def _angles(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     """cosines of the angle between vectors d and S (.., 3), as OpenFOAM's faceOrthogonality."""
     dot = np.einsum("...i,...i->...", d, S)
-    return dot / (np.linalg.norm(d, axis=-1) * np.linalg.norm(S, axis=-1) + ROOT_VSMALL)
+    lengths = np.sqrt(np.einsum("...i,...i->...", d, d)) * np.sqrt(np.einsum("...i,...i->...", S, S))
+    return dot / (lengths + ROOT_VSMALL)
 
 
 def non_orthogonality(X: np.ndarray) -> dict:

@@ -37,37 +37,62 @@ DEFINITIONS = {
 }
 
 
-def _cell_sizes(X: np.ndarray, axis: int) -> np.ndarray:
-    """Mean length of each cell's edges along ``axis``: (n1, n2[, n3])."""
-    dim = X.ndim - 1
-    edges = np.linalg.norm(np.diff(X, axis=axis), axis=-1)  # edges along axis: n_axis cells, nodes elsewhere
+def _norm(vectors: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("...i,...i->...", vectors, vectors))
+
+
+def _slice(axis: int, dim: int, part: slice) -> tuple:
+    index = [slice(None)] * dim
+    index[axis] = part
+    return tuple(index)
+
+
+def _cell_sizes(edges: np.ndarray, axis: int) -> np.ndarray:
+    """Mean length of each cell's edges along ``axis`` from ``edges`` (lengths of the grid's edges
+    along ``axis``: n_axis along it, nodes along the others): (n1, n2[, n3])."""
+    dim = edges.ndim
     for other in range(dim):
         if other != axis:
-            edges = 0.5 * (
-                np.take(edges, range(edges.shape[other] - 1), axis=other)
-                + np.take(edges, range(1, edges.shape[other]), axis=other)
-            )
+            edges = 0.5 * (edges[_slice(other, dim, slice(0, -1))] + edges[_slice(other, dim, slice(1, None))])
     return edges
+
+
+def _edge_lengths(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
+    """The edge vectors along ``axis`` of node array ``X`` and their lengths."""
+    edges = np.diff(X, axis=axis)
+    return edges, _norm(edges)
+
+
+def _ratio(size: np.ndarray, axis: int, result: np.ndarray) -> None:
+    """Fold the size ratio across the faces normal to ``axis`` into the per-cell ``result``."""
+    dim = size.ndim
+    if size.shape[axis] < 2:
+        return
+    low, high = size[_slice(axis, dim, slice(0, -1))], size[_slice(axis, dim, slice(1, None))]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.maximum(low, high) / np.minimum(low, high)
+    ratio = np.where(np.isnan(ratio), np.inf, ratio)
+    for part in (slice(0, -1), slice(1, None)):
+        np.fmax(result[_slice(axis, dim, part)], ratio, out=result[_slice(axis, dim, part)])
+
+
+def _second(vectors: np.ndarray, lengths: np.ndarray, axis: int) -> np.ndarray:
+    """Relative second differences at the inner nodes along ``axis`` from the edge ``vectors``
+    and their ``lengths`` along it."""
+    dim = lengths.ndim
+    first, last = _slice(axis, dim, slice(0, -1)), _slice(axis, dim, slice(1, None))
+    second = _norm(vectors[last] - vectors[first])
+    spacing = 0.5 * (lengths[last] + lengths[first])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(spacing > 0, second / spacing, np.where(second > 0, np.inf, 0.0))
 
 
 def expansion_ratio(X: np.ndarray) -> np.ndarray:
     """Per cell (n1, n2[, n3]): the expansion ratio (module docstring) of node array ``X``."""
     X = np.asarray(X, dtype=float)
-    dim = X.ndim - 1
     result = np.ones(tuple(n - 1 for n in X.shape[:-1]))
-    for axis in range(dim):
-        size = _cell_sizes(X, axis)
-        if size.shape[axis] < 2:
-            continue
-        low, high = np.take(size, range(size.shape[axis] - 1), axis=axis), np.take(size, range(1, size.shape[axis]), axis=axis)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.maximum(low, high) / np.minimum(low, high)
-        ratio = np.where(np.isfinite(ratio), ratio, np.inf)
-        lower = [slice(None)] * dim
-        upper = [slice(None)] * dim
-        lower[axis], upper[axis] = slice(0, -1), slice(1, None)
-        result[tuple(lower)] = np.fmax(result[tuple(lower)], ratio)
-        result[tuple(upper)] = np.fmax(result[tuple(upper)], ratio)
+    for axis in range(X.ndim - 1):
+        _ratio(_cell_sizes(_edge_lengths(X, axis)[1], axis), axis, result)
     return result
 
 
@@ -79,30 +104,27 @@ def node_smoothness(X: np.ndarray, axes=None) -> np.ndarray:
     dim = X.ndim - 1
     result = np.zeros(X.shape[:-1])
     for axis in range(dim) if axes is None else axes:
-        n = X.shape[axis]
-        if n < 3:
+        if X.shape[axis] < 3:
             continue
-        before, here, after = (np.take(X, range(s, n - 2 + s), axis=axis) for s in (0, 1, 2))
-        second = np.linalg.norm(after - 2.0 * here + before, axis=-1)
-        spacing = 0.5 * (np.linalg.norm(after - here, axis=-1) + np.linalg.norm(here - before, axis=-1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            relative = np.where(spacing > 0, second / spacing, np.where(second > 0, np.inf, 0.0))
-        inner = [slice(None)] * dim
-        inner[axis] = slice(1, -1)
-        result[tuple(inner)] = np.fmax(result[tuple(inner)], relative)
+        inner = _slice(axis, dim, slice(1, -1))
+        np.fmax(result[inner], _second(*_edge_lengths(X, axis), axis), out=result[inner])
+    return result
+
+
+def _corner_max(nodes: np.ndarray) -> np.ndarray:
+    """Per cell: the largest value at its corners."""
+    dim = nodes.ndim
+    result = None
+    for corner in np.ndindex(*(2,) * dim):
+        part = nodes[tuple(slice(c, n - 1 + c) for c, n in zip(corner, nodes.shape))]
+        result = part.copy() if result is None else np.fmax(result, part, out=result)
     return result
 
 
 def grid_smoothness(X: np.ndarray, axes=None) -> np.ndarray:
     """Per cell (n1, n2[, n3]): the largest :func:`node_smoothness` (along ``axes``, default all)
     over the cell's corners."""
-    nodes = node_smoothness(X, axes)
-    dim = nodes.ndim
-    result = None
-    for corner in np.ndindex(*(2,) * dim):
-        part = nodes[tuple(slice(c, n - 1 + c) for c, n in zip(corner, nodes.shape))]
-        result = part.copy() if result is None else np.fmax(result, part)
-    return result
+    return _corner_max(node_smoothness(X, axes))
 
 
 def _summary(values: np.ndarray) -> dict:
@@ -121,7 +143,23 @@ def smoothness_figures(X: np.ndarray) -> dict:
     """{"expansion_ratio": {...}, "grid_smoothness": {...}} of node array ``X``, each with mean,
     max, p99 and ``worst_cell`` (the (i, j[, k]) of the max); the smoothness also with
     ``max_by_axis`` (along the xi, eta[, zeta] grid lines alone: a wall's curvature shows on the
-    lines along the wall, a kink between layers on the lines across them). JSON-ready."""
-    smoothness = _summary(grid_smoothness(X))
-    smoothness["max_by_axis"] = [float(np.max(node_smoothness(X, [axis]))) for axis in range(X.ndim - 1)]
-    return {"expansion_ratio": _summary(expansion_ratio(X)), "grid_smoothness": smoothness}
+    lines along the wall, a kink between layers on the lines across them). JSON-ready. One pass
+    over each axis's edges serves both figures."""
+    X = np.asarray(X, dtype=float)
+    dim = X.ndim - 1
+    ratio = np.ones(tuple(n - 1 for n in X.shape[:-1]))
+    nodes = np.zeros(X.shape[:-1])
+    by_axis = []
+    for axis in range(dim):
+        vectors, lengths = _edge_lengths(X, axis)
+        _ratio(_cell_sizes(lengths, axis), axis, ratio)
+        if X.shape[axis] < 3:
+            by_axis.append(0.0)
+            continue
+        second = _second(vectors, lengths, axis)
+        by_axis.append(float(np.max(second)))
+        inner = _slice(axis, dim, slice(1, -1))
+        np.fmax(nodes[inner], second, out=nodes[inner])
+    smoothness = _summary(_corner_max(nodes))
+    smoothness["max_by_axis"] = by_axis
+    return {"expansion_ratio": _summary(ratio), "grid_smoothness": smoothness}
