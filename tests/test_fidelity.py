@@ -48,3 +48,21 @@ def test_elliptic_and_polished_neural_meshes_reproduce_uniform_flow(tmp_path):
     result = potential_flow_error(raw.X, raw.geometry, tmp_path / "raw")
     assert result["max"] > 100 * max(reference, 1e-6)
     assert result["worst_cell"][2] <= 2  # next to the inlet
+
+
+@needs_potential_foam
+def test_velocity_from_the_fluxes_is_openfoams_reconstruction_and_measures_the_canal(tmp_path):
+    from meshgen.fidelity import _read_vectors, reconstructed_velocity
+
+    semicylinder = meshgen.mesh("semicylinder", (5, 4, 6), method="tfi")
+    semicylinder.X[2, 2, 3] += [0.02, -0.01, 0.03]  # an interior node moved: the flow is no longer uniform
+    potential_flow_error(semicylinder.X, semicylinder.geometry, tmp_path / "s")
+    written = _read_vectors(tmp_path / "s" / "0" / "U", 5 * 4 * 6)
+    ours = reconstructed_velocity(tmp_path / "s")
+    assert np.abs(ours - [0.0, 0.0, 1.0]).max() > 1e-3  # a flow the check can tell apart
+    # OpenFOAM v1912's written U agrees with the reconstruction in every x component; its y and z
+    # are off in some cells (docs/design-fidelity.md), so only x is compared.
+    np.testing.assert_allclose(ours[:, 0], written[:, 0], rtol=0, atol=1e-8)
+    canal = meshgen.mesh("canal", (8, 8, 16), method="elliptic")
+    result = potential_flow_error(canal.X, canal.geometry, tmp_path / "c")
+    assert result["max_from_fluxes"] < 0.1  # the vortex to discretisation error
