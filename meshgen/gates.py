@@ -31,6 +31,13 @@ __all__ = [
 OPERATORS = {"<=": operator.le, ">=": operator.ge, "==": operator.eq, "!=": operator.ne, "<": operator.lt, ">": operator.gt}
 _GATE = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z0-9_]+)?)\s*(<=|>=|==|!=|<|>)\s*([^\s<>=!]+)\s*$")
 DEVIATION_FIELDS = ("max", "mean", "max_rel", "mean_rel")
+# The solver figures of a structured mesh (``meshgen.quality.report.solver_figures``).
+SOLVER_FIGURES = {
+    "expansion_ratio": ("max", "mean", "p99"),
+    "grid_smoothness": ("max", "mean", "p99"),
+    "non_orthogonality_internal": ("max", "average"),
+    "non_orthogonality_boundary": ("max", "average"),
+}
 OTHER_NAMES = (
     "inverted.count",
     "inverted.fraction",
@@ -38,6 +45,7 @@ OTHER_NAMES = (
     "valid",
     "cells",
     *(f"boundary_deviation.{field}" for field in DEVIATION_FIELDS),
+    *(f"{name}.{field}" for name, fields in SOLVER_FIGURES.items() for field in fields),
 )
 
 
@@ -111,6 +119,13 @@ def gate_value(report: dict, name: str):
                 "pass --geometry NAME [--param k=v]"
             )
         return deviation[field]
+    if head in SOLVER_FIGURES:
+        figures = report.get("solver_figures")
+        if figures is None:
+            raise GateError(
+                f"--fail-if on {name} needs a structured mesh: {report.get('file', 'the mesh')} is not meshgen's grid"
+            )
+        return figures[head][field]
     raise GateError(f"unknown quantity {name!r}")
 
 

@@ -47,7 +47,7 @@ def register_method(method: Method) -> None:
 
 
 NEURAL = "meshgen.neural.models:build_neural"
-NEURAL_OPTIONS = ("model", "correct", "device")
+NEURAL_OPTIONS = ("model", "correct", "device", "polish")
 register_method(
     Method("tfi", "meshgen.methods:build_tfi", "transfinite interpolation (Gordon-Hall), algebraic", options=("boundary_layout",))
 )

@@ -47,7 +47,7 @@ class MeshRequest:
     ``checkpoint``, else the newest ./runs/*/checkpoint.pt trained on the geometry, else the model
     bundled for it, else ``elliptic``), or a method of ``meshgen.methods``. Method options (None:
     the method's default; an option the method does not take is an error): ``tol``, ``max_iter``,
-    ``orthogonal`` (faces), ``boundary_layout`` (elliptic, tfi); ``correct``, ``device``,
+    ``orthogonal`` (faces), ``boundary_layout`` (elliptic, tfi); ``correct``, ``polish``, ``device``,
     ``checkpoint`` (a path or a loaded ``TrainedModel``) for the neural methods. ``clusters``: wall
     clustering specs such as ``"zeta:both:1.1"``. ``output``: the file (or OpenFOAM case) to write,
     None to keep the mesh in memory only; ``format``: its format instead of the extension's;
@@ -66,6 +66,7 @@ class MeshRequest:
     tol: float | None = None
     max_iter: int | None = None
     correct: bool | None = None
+    polish: bool | None = None
     device: str | None = None
     boundary_layout: str | None = None
     orthogonal: tuple[str, ...] = ()
@@ -118,15 +119,15 @@ def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cl
     (``meshgen.methods``). ``params``: geometry parameters over its defaults; ``cluster``: wall
     clustering specs such as ``"zeta:both:1.1"``; ``progress``: a callback ``progress(done,
     **figures)`` for methods that report it; ``options``: the method's own (``tol``,
-    ``max_iter``, ``orthogonal``, ``boundary_layout``; ``model``, ``correct``, ``device`` for the
+    ``max_iter``, ``orthogonal``, ``boundary_layout``; ``model``, ``correct``, ``polish``, ``device`` for the
     neural map). Nothing is written (``Mesh.write``). Raises MeshgenError (ParameterError naming
     the parameter) for bad input."""
     fields = {"checkpoint": options.pop("model", None)}
-    for name in ("tol", "max_iter", "correct", "device", "boundary_layout", "orthogonal"):
+    for name in ("tol", "max_iter", "correct", "polish", "device", "boundary_layout", "orthogonal"):
         if name in options:
             fields[name] = options.pop(name)
     if options:
-        known = "model, tol, max_iter, correct, device, boundary_layout, orthogonal"
+        known = "model, tol, max_iter, correct, polish, device, boundary_layout, orthogonal"
         raise ParameterError(sorted(options)[0], f"{{name}} is no option of mesh() (options: {known})")
     if isinstance(fields.get("orthogonal"), str):
         fields["orthogonal"] = (fields["orthogonal"],)
@@ -197,6 +198,8 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
                 f"method '{method}' cannot be computed block by block (a mesh of {node_count} nodes needs it); "
                 f"methods that can: {', '.join(CHUNKED_METHODS)}"
             )
+        if request.polish:
+            raise ParameterError("polish", "{name} solves the whole mesh at once: it does not apply to a chunked mesh")
         streaming_writer(output, output_format.name)  # a format that cannot stream fails before any work
     elif address is not None:
         raise ParameterError("scheduler", "{name} runs the chunked path; leave out --in-memory")
@@ -306,6 +309,7 @@ def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
         "tol": request.tol,
         "max_iter": request.max_iter,
         "correct": request.correct,
+        "polish": request.polish,
         "device": request.device,
         "boundary_layout": request.boundary_layout,
         "orthogonal": tuple(request.orthogonal or ()) or None,

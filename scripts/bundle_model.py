@@ -10,8 +10,8 @@
    L-BFGS history is most of the file), saved with meshgen's own ``save_checkpoint`` to
    ``meshgen/_models/GEOMETRY/checkpoint.pt``;
 3. ``model.json`` beside it: the command, preset, versions, date, training seconds, and the quality
-   of the model's 30^d and 100^d meshes, raw (--no-correct) and corrected to N + TFI[g - N] (the
-   default; inverted cells, mean min angle, boundary deviation, cells inverted by the correction)
+   of the model's 30^d and 100^d meshes, raw (--no-correct), corrected to N + TFI[g - N], and
+   corrected and polished (the default; inverted cells, mean min angle, boundary deviation, cells inverted by the correction)
    next to TFI's and elliptic's at 30^d, all computed by
    ``meshgen.quality`` on the node arrays that ``meshgen mesh`` would write.
 """
@@ -50,10 +50,12 @@ def figures(X, geometry) -> dict:
 
 
 def neural_figures(model, geometry, cells: int) -> dict:
-    """Figures of the network's own mesh (--no-correct) and of the corrected one (the default)."""
+    """Figures of the network's own mesh (--no-correct), of the corrected one (--no-polish) and of
+    the corrected and polished one (the default: ``meshgen.polish``)."""
     from meshgen.correction import correct_boundary
     from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.inference import mesh_from_model
+    from meshgen.polish import polish
     from meshgen.tfi import parametric_grid
 
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it learnt, as meshgen mesh does
@@ -63,12 +65,19 @@ def neural_figures(model, geometry, cells: int) -> dict:
     seconds = time.perf_counter() - start
     raw = figures(X, geometry)
     correction = correct_boundary(X, geometry, coords, count_inverted=True)
+    corrected = figures(X, geometry)
+    start = time.perf_counter()
+    polishing = polish(X, geometry, coords)
+    polish_seconds = time.perf_counter() - start
     return {
         "dims": [cells] * geometry.dim,
         "meshing_seconds": seconds,
         "no_correction": raw,
-        "corrected": figures(X, geometry),
+        "corrected": corrected,
         "inverted_by_correction": correction["inverted_by_correction"],
+        "polished": figures(X, geometry),
+        "polish_seconds": polish_seconds,
+        "polish_cycles": polishing["cycles"],
     }
 
 

@@ -214,3 +214,24 @@ def test_help_names_every_gate_quantity(run_cli):
     for name in gate_names():
         head, _, field = name.partition(".")
         assert head in text and (not field or field in text), name
+
+
+def test_solver_figures_of_our_own_mesh_and_their_gates(run_cli, tmp_path, semicylinder):
+    from meshgen.quality.faces_openfoam import non_orthogonality
+    from meshgen.quality.smoothness import expansion_ratio
+
+    dims = (4, 5, 6)
+    assert run_cli("mesh", "-g", "semicylinder", "--method", "tfi", "--dims", *dims, "-o", "m.vtu").returncode == 0
+    report, _ = evaluate_json(run_cli, tmp_path, "m.vtu")
+    figures = report["solver_figures"]
+    X = tfi(semicylinder, dims)  # the structured path's node array, computed independently here
+    internal = non_orthogonality(X)["non_orthogonality_internal"]
+    assert figures["non_orthogonality_internal"]["max"] == pytest.approx(internal["max"], abs=1e-9)
+    assert figures["expansion_ratio"]["max"] == pytest.approx(expansion_ratio(X).max(), rel=1e-12)
+    below, above = internal["max"] - 0.01, internal["max"] + 0.01
+    assert run_cli("evaluate", "m.vtu", "--fail-if", f"non_orthogonality_internal.max>{below}").returncode == 1
+    assert run_cli("evaluate", "m.vtu", "--fail-if", f"non_orthogonality_internal.max>{above}").returncode == 0
+    # a foreign unstructured file has no grid lines: the gate says so (usage error)
+    write_gmsh(tmp_path / "box.msh", sheared_box((3, 2, 2), 0.7))
+    foreign = run_cli("evaluate", "box.msh", "--fail-if", "expansion_ratio.max>2")
+    assert foreign.returncode == 2 and "structured mesh" in foreign.stderr

@@ -95,11 +95,11 @@ def test_bundled_model_meshes_30_cubed_with_no_inverted_cell(run_cli, tmp_path):
     assert sidecar["inverted"]["count"] == 0 and sidecar["boundary_deviation"]["max_rel"] < 1e-12
     # The figures recorded beside the model are those of this mesh.
     record = json.loads((BUNDLED.parent / "model.json").read_text())
-    assert record["preset"] == "exact" and record["quality"]["neural_30"]["corrected"]["inverted"] == 0
-    assert record["quality"]["neural_30"]["corrected"]["min_angle_mean"] == pytest.approx(
+    assert record["preset"] == "exact" and record["quality"]["neural_30"]["polished"]["inverted"] == 0
+    assert record["quality"]["neural_30"]["polished"]["min_angle_mean"] == pytest.approx(
         sidecar["metrics"]["min_angle"]["mean"], rel=1e-6
     )
-    assert record["quality"]["neural_100"]["corrected"]["inverted"] == 0
+    assert record["quality"]["neural_100"]["polished"]["inverted"] == 0
     assert BUNDLED.stat().st_size < 1 << 20 and record["sha256"] == model["sha256"]
 
 
@@ -191,7 +191,7 @@ def boundary_mask(shape):
 
 def test_correction_is_the_tfi_of_the_boundary_error_and_exact_on_the_boundary(run_cli, tmp_path, soft_3d, semicylinder):
     dims = (6, 5, 7)
-    corrected = run_cli("mesh", "--checkpoint", soft_3d, "--dims", *dims, "-o", "s.vtu")
+    corrected = run_cli("mesh", "--checkpoint", soft_3d, "--no-polish", "--dims", *dims, "-o", "s.vtu")
     raw = run_cli("mesh", "--checkpoint", soft_3d, "--no-correct", "--dims", *dims, "-o", "r.vtu")
     old_name = run_cli("mesh", "--checkpoint", soft_3d, "--no-snap", "--dims", *dims, "-o", "o.vtu")
     assert corrected.returncode == raw.returncode == old_name.returncode == 0, corrected.stderr + raw.stderr
@@ -386,7 +386,7 @@ def test_corrected_mesh_of_a_blown_up_map_stays_valid(run_cli, tmp_path, soft_2d
 
 def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylinder):
     dims = (4, 4, 20)
-    result = run_cli("mesh", "--dims", *dims, "--cluster", "zeta:both:1.15", "-o", "m.vtu")
+    result = run_cli("mesh", "--no-polish", "--dims", *dims, "--cluster", "zeta:both:1.15", "-o", "m.vtu")
     assert result.returncode == 0, result.stderr
     X = read_points(tmp_path / "m.vtu", dims)
     coords = node_coordinates(dims, ["zeta:both:1.15"])

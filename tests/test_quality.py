@@ -98,7 +98,7 @@ def inside_out(n_cells):
     return X, k + 1
 
 
-def test_a_cell_turned_inside_out_is_inverted_and_the_half_percent_rule_holds():
+def test_a_cell_turned_inside_out_is_inverted_and_makes_the_mesh_invalid():
     X, bad = inside_out(200)
     metrics = cell_metrics(X)
     np.testing.assert_allclose(metrics["scaled_jacobian"][bad], -1.0, atol=1e-14)
@@ -107,9 +107,8 @@ def test_a_cell_turned_inside_out_is_inverted_and_the_half_percent_rule_holds():
     np.testing.assert_allclose(metrics["min_angle"][bad], 90.0, atol=1e-12)
     report = quality_report(X)
     assert report["inverted"] == {"count": 1, "fraction": 1 / 200, "degenerate": 0}
-    assert report["valid"]  # 1 of 200 is exactly 0.5%
-    report = quality_report(inside_out(199)[0])
-    assert report["inverted"]["count"] == 1 and not report["valid"]  # 1 of 199 is above 0.5%
+    assert not report["valid"]  # strict: one inverted cell of 200 is one too many
+    assert quality_report(box((200, 1, 1)))["valid"]
 
 
 def test_a_quad_turned_over_is_inverted_against_the_mesh_orientation():

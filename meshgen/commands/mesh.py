@@ -59,6 +59,15 @@ METHOD_HELP = (
     help="neural: a checkpoint from meshgen train (it sets the geometry and its parameters).",
 )
 @click.option(
+    "--polish/--no-polish",
+    "polish",
+    default=None,
+    help="neural: after the correction, solve the discrete Winslow equations from the network's mesh (faces "
+    "relaxed, multigrid cycles), which a flow solver needs (a raw network mesh gives potentialFoam errors "
+    "thousands of times the elliptic mesh's); --no-polish keeps the corrected network mesh. Not with --chunked "
+    "[default: --polish].",
+)
+@click.option(
     "--correct/--no-correct",
     "--snap/--no-snap",
     "correct",
@@ -136,6 +145,7 @@ def mesh(
     ascii_files,
     checkpoint,
     correct,
+    polish,
     device,
     tol,
     max_iter,
@@ -173,6 +183,7 @@ def mesh(
         tol=tol,
         max_iter=max_iter,
         correct=correct,
+        polish=polish,
         device=device,
         boundary_layout=boundary_layout,
         orthogonal=tuple(orthogonal),
@@ -212,6 +223,12 @@ def _print_result(made, output_format, quiet):
         )
     if "correction" in info:
         echo(_correction_line(info["correction"]))
+    if "polish" in info:
+        polished = info["polish"]
+        echo(
+            f"polished: {polished['cycles']} Winslow cycles, nodes moved up to "
+            f"{polished['largest_move_rel']:.2g} of L (--no-polish keeps the network's mesh)"
+        )
     if "chunked" in info:
         blocks = info["chunked"]
         line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"

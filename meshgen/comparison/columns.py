@@ -4,7 +4,7 @@ A row's ``headline`` holds the table's figures at full precision:
 
 - ``min_angle`` ... ``non_orthogonality``: the means of the per-cell metrics (degrees for angles
   and non-orthogonality);
-- ``inverted_count``, ``inverted_percent``, ``valid`` (inverted cells <= 0.5% of all cells);
+- ``inverted_count``, ``inverted_percent``, ``valid`` (no inverted cell);
 - ``boundary_deviation_max``, ``_max_rel`` (relative to the characteristic length), ``_mean``,
   ``_mean_rel``: distance of the boundary nodes from the true boundary (None without a geometry);
 - ``test_loss``: the trained network's loss on the held-out points (neural methods);

@@ -371,8 +371,8 @@ def train_family(
 def write_family_summary(checkpoint: dict, run_dir) -> dict:
     """Mesh ``SUMMARY_CELLS``^d cells of the range's corners and middle with the family network and
     with TFI, measure them (``meshgen.quality``, boundary deviation included), write
-    ``summary.json`` in ``run_dir`` and return it; ``worst`` indexes the member of the lowest mean
-    minimum angle."""
+    ``summary.json`` in ``run_dir`` and return it; ``worst`` indexes the worst member
+    (:func:`worst_member`: most inverted cells, then lowest mean minimum angle)."""
     family = family_from_checkpoint(checkpoint)
     coords = parametric_grid([SUMMARY_CELLS] * family.base.dim)
     members = []
@@ -389,18 +389,30 @@ def write_family_summary(checkpoint: dict, run_dir) -> dict:
                 "meshing_seconds": seconds,
             }
         )
-    angles = [m["network"]["metrics"]["min_angle"]["mean"] for m in members]
     summary = {
         "dims": [SUMMARY_CELLS] * family.base.dim,
         "ranges": checkpoint["family"]["ranges"],
         "members": members,
-        "worst": int(np.argmin(angles)),
+        "worst": worst_member(members),
         "test_loss": checkpoint["test_loss"],
         "step": checkpoint["step"],
         "training_seconds": checkpoint["elapsed_seconds"],
     }
     write_json(Path(run_dir) / "summary.json", summary)  # atomic; non-finite figures as null
     return summary
+
+
+def worst_member(members) -> int:
+    """Index of the worst of ``members`` (each with a ``"network"`` quality report): the most
+    inverted cells first (an invalid mesh is worse than any valid one), then the lowest mean
+    minimum angle (an undefined angle counts as the lowest)."""
+
+    def badness(index):
+        report = members[index]["network"]
+        angle = report["metrics"]["min_angle"]["mean"]
+        return (report["inverted"]["count"], -(angle if angle is not None else -np.inf))
+
+    return max(range(len(members)), key=badness)
 
 
 def summary_table(summary: dict) -> list[str]:

@@ -25,6 +25,7 @@ from meshgen.layout import trained_layout, with_layout
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import ConfigError, preset_paths, resolve_config, schema, to_dict
 from meshgen.neural.inference import mesh_from_model, network_layers
+from meshgen.polish import polish as polish_mesh
 
 __all__ = [
     "MODELS_DIR",
@@ -251,11 +252,13 @@ def _default_params(name: str) -> dict:
 # the method
 
 
-def build_neural(geometry, coords, model=None, correct=True, device="auto"):
+def build_neural(geometry, coords, model=None, correct=True, device="auto", polish=True):
     """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
     a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
     ``coords``, evaluated on ``device`` ("cpu", "cuda" or "auto"), then corrected to
-    X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False. Returns (X, info) with info {"model", "correction",
+    X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False, then (``polish``, with
+    ``correct``) polished: faces and interior brought to the discrete Winslow equations at the
+    mesh's resolution (``meshgen.polish``), which is what a flow solver needs. Returns (X, info) with info {"model", "correction",
     "warnings"}; ``info["correction"]["error_before"]`` is the network's boundary error, reported
     the same way whether or not the mesh is corrected."""
     if model is None:
@@ -271,4 +274,6 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto"):
         info["correction"] = correct_boundary(X, geometry, coords)
     else:
         info["correction"] = {"corrected": False, "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
+    if correct and polish:
+        info["polish"] = polish_mesh(X, geometry, coords)
     return X, info

@@ -8,7 +8,11 @@ import numpy as np
 from meshgen.deviation import boundary_deviation, grid_boundary_nodes
 from meshgen.errors import MeshgenError
 from meshgen.quality.faces import cells_for_quality, unstructured_metrics
+from meshgen.quality.faces_openfoam import DEFINITIONS as FACE_DEFINITIONS
+from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
+from meshgen.quality.smoothness import DEFINITIONS as SMOOTHNESS_DEFINITIONS
+from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import check_node_array, structured_metrics
 
 __all__ = ["assemble_report", "assess", "build_report", "quality_report", "summarize"]
@@ -42,6 +46,7 @@ def _assess_quietly(X_or_mesh):
         metrics, degenerate, info = structured_metrics(X)
         info["dim"] = X.shape[-1]
         info["boundary"] = lambda: grid_boundary_nodes(X)
+        info["solver_figures"] = lambda: solver_figures(X)
         return metrics, degenerate, info
     skipped = {}
     if isinstance(X_or_mesh, tuple):
@@ -54,6 +59,14 @@ def _assess_quietly(X_or_mesh):
     return metrics, degenerate, info
 
 
+def solver_figures(X: np.ndarray) -> dict:
+    """The figures of a node array that predict a flow solver's error, JSON-ready: expansion ratio
+    and grid smoothness (``meshgen.quality.smoothness``, with worst cells), and checkMesh's
+    internal-face non-orthogonality with the boundary-face figure beside it
+    (``meshgen.quality.faces_openfoam``, with worst faces)."""
+    return {**smoothness_figures(X), **non_orthogonality(X)}
+
+
 def quality_report(X_or_mesh, geometry=None) -> dict:
     """JSON-ready quality report of a mesh (the ``meshgen evaluate --json`` schema).
 
@@ -62,8 +75,10 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
     ``geometry``: a ``meshgen.geometry.Geometry``; adds ``boundary_deviation``.
 
     Keys: ``cells``, ``dim``, ``metrics`` ({name: {mean, min, max, p01, p99}}), ``inverted``
-    ({count, fraction, degenerate}), ``valid``, ``valid_rule``, ``units`` and, when known,
-    ``boundary_deviation``, ``skipped``, ``warnings``. Summaries leave degenerate cells out.
+    ({count, fraction, degenerate}), ``valid`` (no inverted cell), ``valid_rule``, ``units`` and,
+    when known, ``boundary_deviation``, ``skipped``, ``warnings``; for a node array (and a file
+    that is meshgen's structured grid) ``solver_figures`` (:func:`solver_figures`). Summaries
+    leave degenerate cells out.
     """
     return build_report(*assess(X_or_mesh), geometry)
 
@@ -115,6 +130,11 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
         warnings.append(f"{info['nonmanifold_faces']} faces are shared by more than two cells; treated as boundary faces")
     if info.get("skipped"):
         report["skipped"] = dict(info["skipped"])
+    if "solver_figures" in info:
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            report["solver_figures"] = info["solver_figures"]()
+        report["definitions"].update(SMOOTHNESS_DEFINITIONS)
+        report["definitions"].update(FACE_DEFINITIONS)
     if geometry is not None:
         if geometry.dim != dim:
             raise MeshgenError(

@@ -27,12 +27,23 @@ def summary_lines(report: dict) -> list[str]:
         f"equiangle skewness {_format(m['equiangle_skewness']['mean'], 3)}, "
         f"aspect ratio {_format(m['aspect_ratio']['mean'], 3)}",
         f"  centroid skewness {_format(m['centroid_skewness']['mean'], 3)}, "
-        f"non-orthogonality {_format(m['non_orthogonality']['mean'], 3)} deg (worst {_format(m['non_orthogonality']['max'], 3)}), "
+        f"cell non-orthogonality (boundary faces included) {_format(m['non_orthogonality']['mean'], 3)} deg (worst {_format(m['non_orthogonality']['max'], 3)}), "
         f"scaled Jacobian min {_format(m['scaled_jacobian']['min'], 3)}",
         f"  inverted cells: {inv['count']} ({100 * inv['fraction']:.2f}%): "
         + ("valid" if report["valid"] else "NOT VALID")
-        + " (valid: inverted <= 0.5% of cells)",
+        + " (valid: no inverted cell)",
     ]
+    figures = report.get("solver_figures")
+    if figures:
+        internal, boundary = figures["non_orthogonality_internal"], figures["non_orthogonality_boundary"]
+        lines.append(
+            f"  expansion ratio max {_format(figures['expansion_ratio']['max'], 3)} "
+            f"(cell {tuple(figures['expansion_ratio']['worst_cell'])}), grid smoothness max "
+            f"{_format(figures['grid_smoothness']['max'], 3)} (cell {tuple(figures['grid_smoothness']['worst_cell'])}; by axis "
+            f"{', '.join(_format(v, 2) for v in figures['grid_smoothness']['max_by_axis'])}), "
+            f"checkMesh non-orthogonality max {_format(internal['max'], 3)} average {_format(internal['average'], 3)} deg "
+            f"(boundary faces max {_format(boundary['max'], 3)})"
+        )
     deviation = report.get("boundary_deviation")
     if deviation:
         if deviation["max"] is None:
