@@ -56,6 +56,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from helpers import files_in as snapshot
 
 import meshgen
 from meshgen.cli import COMMANDS, cli
@@ -163,11 +164,6 @@ def prepare(row, folder: Path) -> list[str]:
     if args is None:
         args = ["mesh", "-g", "plugin.py", "--dims", "4", "4", "4", "-o", "m.vtu"]
     return args
-
-
-def snapshot(folder: Path) -> dict:
-    """Every file under ``folder`` with its size; Python's own bytecode caches left out."""
-    return {str(p.relative_to(folder)): p.stat().st_size for p in folder.rglob("*") if "__pycache__" not in p.parts}
 
 
 def assert_one_line_error(exit_code, stdout, stderr, fragments):

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from helpers import files_in as snapshot
 from neural_helpers import TINY
 
 from meshgen.cli import cli
@@ -82,14 +83,6 @@ def start_stalled(children, folder: Path, kind: str, call: int, *args) -> tuple[
 
 def leftovers(folder: Path) -> list[str]:
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if LEFTOVER.match(p.name))
-
-
-def snapshot(folder: Path, skip=()) -> dict:
-    return {
-        str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
-        for p in sorted(folder.rglob("*"))
-        if p.name not in skip and not p.name.startswith("stalled")
-    }
 
 
 def one_line(stderr: str, *fragments) -> str:

@@ -8,6 +8,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from vtk.util.numpy_support import vtk_to_numpy
 
 from meshgen.errors import FormatError
 from meshgen.formats import extensions, metadata_of, read_mesh, write_mesh
@@ -67,12 +68,6 @@ def expected_corners(X):
     )
 
 
-def vtk_numpy(array):
-    from vtk.util.numpy_support import vtk_to_numpy
-
-    return vtk_to_numpy(array)
-
-
 # --- round trips ---------------------------------------------------------------------------
 
 
@@ -126,12 +121,12 @@ def test_vtk_reads_the_unstructured_files_with_cell_data_and_metadata(tmp_path, 
     reader.SetFileName(str(path))
     reader.Update()
     grid = reader.GetOutput()
-    np.testing.assert_array_equal(vtk_numpy(grid.GetPoints().GetData()), padded_points(X))
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetPoints().GetData()), padded_points(X))
     assert grid.GetNumberOfCells() == len(cell_data["index"])
-    np.testing.assert_array_equal(vtk_numpy(grid.GetCellData().GetArray("scaled_jacobian")), cell_data["scaled_jacobian"])
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetCellData().GetArray("scaled_jacobian")), cell_data["scaled_jacobian"])
     stored = grid.GetFieldData().GetAbstractArray("meshgen")
     assert stored is not None
-    assert json.loads(vtk_numpy(stored).tobytes()) == metadata_of(path)
+    assert json.loads(vtk_to_numpy(stored).tobytes()) == metadata_of(path)
 
 
 def test_vtk_reads_the_xdmf_file(tmp_path, mesh):
@@ -144,8 +139,8 @@ def test_vtk_reads_the_xdmf_file(tmp_path, mesh):
     reader.SetFileName(str(path))
     reader.Update()
     grid = reader.GetOutputDataObject(0)
-    np.testing.assert_array_equal(vtk_numpy(grid.GetPoints().GetData()), padded_points(X))
-    np.testing.assert_array_equal(vtk_numpy(grid.GetCellData().GetArray("index")), cell_data["index"])
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetPoints().GetData()), padded_points(X))
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetCellData().GetArray("index")), cell_data["index"])
 
 
 def test_vtk_reads_the_cgns_file_with_equal_coordinates_and_cell_data(tmp_path, mesh):
@@ -167,10 +162,10 @@ def test_vtk_reads_the_cgns_file_with_equal_coordinates_and_cell_data(tmp_path, 
     dims = [0, 0, 0]
     grids[0].GetDimensions(dims)
     assert dims == [*X.shape[:-1], 1][:3]
-    np.testing.assert_array_equal(vtk_numpy(grids[0].GetPoints().GetData()), fortran_points(X))
+    np.testing.assert_array_equal(vtk_to_numpy(grids[0].GetPoints().GetData()), fortran_points(X))
     # VTK's cells run i fastest; ours in C order (k fastest).
     cell_shape = tuple(n - 1 for n in X.shape[:-1])
-    index = vtk_numpy(grids[0].GetCellData().GetArray("index"))
+    index = vtk_to_numpy(grids[0].GetCellData().GetArray("index"))
     np.testing.assert_array_equal(index, cell_data["index"].reshape(cell_shape).T.reshape(-1))
 
 
@@ -196,7 +191,7 @@ def test_vtk_plot3d_reader_reads_the_grid_with_the_documented_options(tmp_path, 
         reader.Update()
         output = reader.GetOutput()
         assert output.GetNumberOfBlocks() == 1
-        np.testing.assert_array_equal(vtk_numpy(output.GetBlock(0).GetPoints().GetData()), fortran_points(X))
+        np.testing.assert_array_equal(vtk_to_numpy(output.GetBlock(0).GetPoints().GetData()), fortran_points(X))
 
 
 def test_cells_are_positively_oriented_by_vtk_mesh_quality(tmp_path):
@@ -210,7 +205,7 @@ def test_cells_are_positively_oriented_by_vtk_mesh_quality(tmp_path):
         quality.SetInputConnection(reader.GetOutputPort())
         quality.SetHexQualityMeasureToScaledJacobian()
         quality.Update()
-        return vtk_numpy(quality.GetOutput().GetCellData().GetArray("Quality")).min()
+        return vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality")).min()
 
     assert smallest_scaled_jacobian(X, "mesh.vtu") > 0
     # Control: the same mesh mirrored in i (a left-handed map) must read as inverted.

@@ -152,6 +152,7 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
+from helpers import files_in as snapshot
 from neural_helpers import TINY, tiny_config
 
 from meshgen.cli import cli
@@ -176,16 +177,6 @@ def semidisk_checkpoint(tmp_path_factory) -> bytes:
     folder = tmp_path_factory.mktemp("semidisk-run")
     train(tiny_config(), load_geometry("semidisk"), folder, stop=lambda: True, summary=False)
     return (folder / "checkpoint.pt").read_bytes()
-
-
-def snapshot(folder: Path) -> dict:
-    """Every file under ``folder`` with its bytes, every folder with None; Python's bytecode
-    caches left out."""
-    return {
-        str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
-        for p in sorted(folder.rglob("*"))
-        if "__pycache__" not in p.parts
-    }
 
 
 def invoke(*args):

@@ -9,6 +9,7 @@ import time
 
 import pytest
 import torch
+from helpers import files_in as snapshot
 from neural_helpers import TINY, tiny_config
 
 from meshgen.geometry import load_geometry
@@ -26,10 +27,6 @@ def semidisk_checkpoint(tmp_path_factory):
     folder = tmp_path_factory.mktemp("semidisk-run")
     train(tiny_config(), load_geometry("semidisk"), folder, stop=lambda: True, summary=False)
     return folder / "checkpoint.pt"
-
-
-def snapshot(folder):
-    return {p.relative_to(folder): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
 def test_train_writes_a_run_folder_and_says_how_to_mesh(run_cli, tmp_path):

@@ -10,6 +10,7 @@ import zlib
 
 import numpy as np
 import pytest
+from vtk.util.numpy_support import vtk_to_numpy
 
 from meshgen.formats import _vtu, metadata_of, read_mesh, write_mesh
 from meshgen.geometry import load_geometry
@@ -39,19 +40,13 @@ def read_with_vtk(path):
     return reader.GetOutput()
 
 
-def vtk_numpy(array):
-    from vtk.util.numpy_support import vtk_to_numpy
-
-    return vtk_to_numpy(array)
-
-
 def vtk_cells(grid) -> tuple[np.ndarray, np.ndarray]:
     """(cell types, connectivity as (cells, corners)) of a vtkUnstructuredGrid."""
     cells = grid.GetCells()
-    offsets = vtk_numpy(cells.GetOffsetsArray())
+    offsets = vtk_to_numpy(cells.GetOffsetsArray())
     corners = np.diff(offsets)
     assert (corners == corners[0]).all()
-    connectivity = vtk_numpy(cells.GetConnectivityArray()).reshape(-1, corners[0])
+    connectivity = vtk_to_numpy(cells.GetConnectivityArray()).reshape(-1, corners[0])
     types = np.array([grid.GetCellType(i) for i in range(grid.GetNumberOfCells())])
     return types, connectivity
 
@@ -72,17 +67,17 @@ def check_meshio_reads(path, X, cell_data, metadata):
 
 def check_vtk_reads(path, X, cell_data, metadata):
     grid = read_with_vtk(path)
-    np.testing.assert_array_equal(vtk_numpy(grid.GetPoints().GetData()), flat_points(X))
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetPoints().GetData()), flat_points(X))
     types, connectivity = vtk_cells(grid)
     np.testing.assert_array_equal(types, VTK_HEXAHEDRON if X.ndim == 4 else VTK_QUAD)
     np.testing.assert_array_equal(connectivity, cell_connectivity(X.shape[:-1]))
     assert grid.GetCellData().GetNumberOfArrays() == len(cell_data)
     for name, values in cell_data.items():
-        np.testing.assert_array_equal(vtk_numpy(grid.GetCellData().GetArray(name)), values)
+        np.testing.assert_array_equal(vtk_to_numpy(grid.GetCellData().GetArray(name)), values)
     stored = grid.GetFieldData().GetAbstractArray("meshgen")
     if metadata:
         assert stored.GetDataTypeAsString() == "unsigned char"
-        assert json.loads(vtk_numpy(stored).tobytes()) == metadata
+        assert json.loads(vtk_to_numpy(stored).tobytes()) == metadata
     else:
         assert stored is None
 
@@ -105,7 +100,7 @@ def test_without_cell_data_or_metadata(tmp_path, mesh):
 def test_2d_mesh_is_quads_in_the_plane_z_0(tmp_path):
     X = tfi(load_geometry("semidisk"), (5, 4))
     grid = read_with_vtk(write_mesh(tmp_path / "mesh.vtu", X))
-    points = vtk_numpy(grid.GetPoints().GetData())
+    points = vtk_to_numpy(grid.GetPoints().GetData())
     assert points.shape == (30, 3)
     np.testing.assert_array_equal(points[:, 2], 0.0)
     np.testing.assert_array_equal(points[:, :2], X.reshape(-1, 2))
@@ -190,11 +185,11 @@ def test_30_cubed_with_quality_arrays_vtk_recomputes_the_stored_scaled_jacobian(
     quality.SetHexQualityMeasureToScaledJacobian()
     quality.Update()
     output = quality.GetOutput()
-    verdict = vtk_numpy(output.GetCellData().GetArray("Quality"))
+    verdict = vtk_to_numpy(output.GetCellData().GetArray("Quality"))
     for name in METRICS:
-        np.testing.assert_array_equal(vtk_numpy(output.GetCellData().GetArray(name)), mesh.cell_data[name][0])
+        np.testing.assert_array_equal(vtk_to_numpy(output.GetCellData().GetArray(name)), mesh.cell_data[name][0])
     np.testing.assert_allclose(mesh.cell_data["scaled_jacobian"][0], verdict, rtol=0, atol=1e-10)
-    assert json.loads(vtk_numpy(output.GetFieldData().GetAbstractArray("meshgen")).tobytes()) == METADATA
+    assert json.loads(vtk_to_numpy(output.GetFieldData().GetAbstractArray("meshgen")).tobytes()) == METADATA
 
 
 def test_blocks_where_string_matches_find_little_are_run_length_coded():
