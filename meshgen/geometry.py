@@ -41,6 +41,7 @@ from meshgen import cube
 from meshgen.errors import GeometryError, MeshgenError, did_you_mean
 from meshgen.patches import as_records, face_assignment, geometry_patches, patches_from_assignment
 from meshgen.surface import boundary_surface
+from meshgen.trust import check_plugin_name, note_given_plugin, recorded_spec
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -51,6 +52,7 @@ __all__ = [
     "check_boundary",
     "list_geometries",
     "load_geometry",
+    "load_recorded_geometry",
     "looks_like_path",
     "parse_params",
 ]
@@ -196,8 +198,7 @@ def _from_module(module, source: str) -> Geometry:
 
     name, dim, description = need("name"), need("dim"), need("description")
     boundary_map, params = need("boundary"), getattr(module, "params", {})
-    if not isinstance(name, str) or not name:
-        raise GeometryError(f"geometry plugin {source}: 'name' must be a non-empty string")
+    check_plugin_name(name, source)
     if dim not in (2, 3):
         raise GeometryError(f"geometry plugin {source}: 'dim' must be 2 or 3, got {dim!r}")
     if not callable(boundary_map):
@@ -274,6 +275,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
         geometry = _from_module(_import_file(path), str(path))
+        note_given_plugin(path)  # named by the user: a file recording this path may load it too
     else:
         builtins = _builtin_files()
         if spec in builtins:
@@ -294,6 +296,13 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
     if check:
         check_boundary(geometry)
     return geometry
+
+
+def load_recorded_geometry(spec, params: dict[str, float] | None = None, check: bool = True, where: str = "the file"):
+    """``load_geometry`` of a geometry recorded in a file (``where`` names it): by name among
+    built-ins and entry points only, never a plugin file the user did not name
+    (``meshgen.trust.recorded_spec``; UntrustedGeometry otherwise)."""
+    return load_geometry(recorded_spec(spec, where), params, check)
 
 
 def list_geometries() -> list[Geometry]:

@@ -51,7 +51,17 @@ LAZY_LIBRARIES = (
 # The layers of the design notes, bottom first: a module imports from its own layer or lower ones.
 # A name covers the module and, for a package, every module in it (the longest name that fits wins).
 LAYERS = [
-    ["meshgen", "meshgen.errors", "meshgen.atomic", "meshgen.cube", "meshgen.grid", "meshgen.resources", "meshgen.scheduler"],
+    [
+        "meshgen",
+        "meshgen.errors",
+        "meshgen.atomic",
+        "meshgen.cube",
+        "meshgen.grid",
+        "meshgen.resources",
+        "meshgen.scheduler",
+        "meshgen.limits",
+        "meshgen.inputs",
+    ],
     [
         "meshgen.clustering",
         "meshgen.tfi",
@@ -60,6 +70,8 @@ LAYERS = [
         "meshgen.orthogonal",
         "meshgen.patches",
         "meshgen.surface",
+        "meshgen.trust",
+        "meshgen.plugin_calls",
         "meshgen.geometry",
     ],
     ["meshgen.layout", "meshgen.elliptic", "meshgen.deviation"],

@@ -340,7 +340,7 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
     """The model to mesh with (``meshgen.neural.models.find_model``) and the geometry it was
     trained on, with its parameters. The geometry is loaded and checked once: the one given on the
     command line when the model was trained on it, else the model's."""
-    from meshgen.geometry import bind, check_boundary, load_geometry, looks_like_path, parse_params
+    from meshgen.geometry import bind, check_boundary, load_geometry, load_recorded_geometry, looks_like_path, parse_params
     from meshgen.neural.models import find_model
 
     given_params = parse_params(params)
@@ -376,7 +376,7 @@ def _neural_model(checkpoint, spec, params, geometry_given, dims):
         if geometry.values != chosen.values:
             check_boundary(geometry)
     else:
-        geometry = load_geometry(entry["spec"], dict(entry["params"]))
+        geometry = load_recorded_geometry(entry["spec"], dict(entry["params"]), where=f"checkpoint {model.path}")
     if len(dims) != model.dim:
         raise click.BadParameter(
             f"model {model.path} ({geometry.name}) is {model.dim}D: --dims needs {model.dim} numbers, got {len(dims)}",

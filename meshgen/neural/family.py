@@ -556,12 +556,14 @@ def _lbfgs_step(network, problem, optimizer, fixed) -> float:
 
 
 def family_from_checkpoint(checkpoint: dict) -> Family:
-    """The Family a checkpoint was trained on (its geometry loaded by name or plugin path)."""
-    from meshgen.geometry import load_geometry
+    """The Family a checkpoint was trained on (its geometry loaded by name, or by a plugin path the
+    user gave: ``meshgen.trust``)."""
+    from meshgen.geometry import load_recorded_geometry
 
     entry = checkpoint["geometry"]
     ranges = {k: (float(lo), float(hi)) for k, (lo, hi) in checkpoint["family"]["ranges"].items()}
-    return Family(load_geometry(entry["spec"], dict(entry["params"]), check=False), entry["spec"], ranges)
+    base = load_recorded_geometry(entry["spec"], dict(entry["params"]), check=False, where="the checkpoint")
+    return Family(base, entry["spec"], ranges)
 
 
 def is_family(checkpoint: dict) -> bool:
@@ -583,7 +585,7 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
     command line, as a ``meshgen.neural.models.TrainedModel`` whose model is the member's plain
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
     Returns None when ``path`` is no family checkpoint."""
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry import load_recorded_geometry
     from meshgen.neural.models import TrainedModel, display_path
 
     path = Path(path)
@@ -611,7 +613,7 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
 
     member = FamilyMember(path, {**checkpoint, "model": model}, "checkpoint")
     entry = checkpoint["geometry"]
-    return member, load_geometry(entry["spec"], {**entry["params"], **values})
+    return member, load_recorded_geometry(entry["spec"], {**entry["params"], **values}, where=f"checkpoint {path}")
 
 
 # ---------------------------------------------------------------------------------------------

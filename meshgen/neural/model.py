@@ -111,7 +111,7 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
 
 def geometry_from_checkpoint(checkpoint: dict):
     """The geometry a checkpoint was trained on, with its parameters (by name or plugin path)."""
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry import load_recorded_geometry
 
     entry = checkpoint["geometry"]
-    return load_geometry(entry["spec"], dict(entry["params"]))
+    return load_recorded_geometry(entry["spec"], dict(entry["params"]), where="the checkpoint")

@@ -93,7 +93,7 @@ def prepare_run(
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
     """
-    from meshgen.geometry import load_geometry, parse_params
+    from meshgen.geometry import load_geometry, load_recorded_geometry, parse_params
     from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, validate
 
     checkpoint = resume_path = family = None
@@ -124,7 +124,11 @@ def prepare_run(
         validate(config)
         trained_on = checkpoint["geometry"]
         spec = trained_on["spec"]
-        geometry_object = load_geometry(geometry or spec, {**trained_on["params"], **parse_params(params)})
+        merged = {**trained_on["params"], **parse_params(params)}
+        if geometry:
+            geometry_object = load_geometry(geometry, merged)
+        else:
+            geometry_object = load_recorded_geometry(spec, merged, where=f"checkpoint {resume_path}")
         if geometry_object.name != trained_on["name"] or geometry_object.values != dict(trained_on["params"]):
             raise CheckpointError(
                 f"checkpoint {resume_path} was trained on {trained_on['name']} {trained_on['params']}, "

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import atomic_path
-from meshgen.errors import GeometryError, MeshgenError
+from meshgen.errors import GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
-from meshgen.geometry import load_geometry
+from meshgen.geometry import load_geometry, load_recorded_geometry
 from meshgen.grid import cell_connectivity
 from meshgen.patches import geometry_patches
 from meshgen.quality.chunked import chunked_report
@@ -21,6 +21,7 @@ from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.report import assess, build_report
 from meshgen.quality.structured import check_node_array
 from meshgen.resources import needs_chunking
+from meshgen.trust import UntrustedGeometry
 
 __all__ = [
     "EVALUATE_BYTES_PER_NODE",
@@ -212,16 +213,34 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
         geometry = geometry.with_params(**params)
     elif geometry is None and metadata.get("geometry"):
         source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
+        recorded = metadata["geometry"]
         try:
-            geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
+            values = {**_recorded_params(metadata), **(params or {})}
+            geometry = load_recorded_geometry(recorded, values, where=source.removeprefix("recorded in ").replace("the ", "", 1))
+        except UntrustedGeometry:
+            notes.append(
+                f"recorded geometry is the plugin file {excerpt(recorded)}, which a file cannot make meshgen run: "
+                "no boundary deviation (pass -g PATH to use it)"
+            )
+            geometry = None
         except GeometryError as exc:
             notes.append(
-                f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation"
+                f"recorded geometry {excerpt(repr(recorded))} is not available ({exc}); pass --geometry for boundary deviation"
             )
             geometry = None
     elif params:
         raise MeshgenError(f"--param needs --geometry: {path} records no geometry")
     return geometry, source, notes
+
+
+def _recorded_params(metadata) -> dict:
+    """The recorded parameters of a geometry: a mapping of names to numbers, else GeometryError."""
+    params = metadata.get("params", {})
+    if not isinstance(params, dict) or not all(
+        isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) for k, v in params.items()
+    ):
+        raise GeometryError("its recorded parameters are not a mapping of names to numbers")
+    return params
 
 
 def _finish_file_report(path, report, source, notes, metadata, structured) -> dict:

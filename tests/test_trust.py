@@ -1,0 +1,118 @@
+"""The trust boundary (design notes, "Trust boundary and faults"): files are data and never run
+code, sizes and numbers are checked before anything is allocated, untrusted files are read
+defensively, and plugin code is contained. Each test drives the real command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from neural_helpers import tiny_config
+
+from meshgen.cli import cli
+from meshgen.formats import write_mesh
+from meshgen.geometry import load_geometry
+from meshgen.neural.train import train
+from meshgen.tfi import tfi
+
+# A valid 2D plugin (the unit square) whose import writes MARKER: if MARKER appears, meshgen ran it.
+MARKER_PLUGIN = """
+import numpy as np
+open({marker!r}, "w").write("ran")
+name = {name!r}
+dim = 2
+description = "the unit square, and a side effect"
+
+def boundary(points):
+    return np.array(points, dtype=float)
+"""
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def one_line_error(result, *fragments):
+    assert result.exit_code == 2, (result.exit_code, result.output)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Error: "), result.stderr
+    for fragment in fragments:
+        assert fragment in lines[0], (fragment, lines[0])
+
+
+def snapshot(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None for p in sorted(folder.rglob("*"))}
+
+
+@pytest.fixture
+def evil(tmp_path) -> tuple[Path, Path]:
+    """(plugin file that would write the marker, the marker's path)."""
+    marker = tmp_path / "pwned"
+    plugin = tmp_path / "evil.py"
+    plugin.write_text(MARKER_PLUGIN.format(marker=str(marker), name="square"))
+    return plugin, marker
+
+
+@pytest.fixture(scope="module")
+def semidisk_checkpoint(tmp_path_factory) -> dict:
+    folder = tmp_path_factory.mktemp("semidisk")
+    train(tiny_config(), load_geometry("semidisk"), folder, stop=lambda: True, summary=False)
+    return torch.load(folder / "checkpoint.pt", weights_only=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# 1. data never runs code
+
+
+SQUARE = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 4), indexing="ij"), axis=-1)
+
+
+@pytest.mark.parametrize("where", ["vtu", "cgns", "sidecar"])
+def test_a_mesh_naming_a_plugin_file_is_evaluated_without_running_it(where, tmp_path, evil):
+    plugin, marker = evil
+    recorded = {"geometry": str(plugin), "params": {}, "dims": [4, 3]}
+    if where == "sidecar":  # a Plot3D file records nothing itself: its sidecar names the plugin
+        path = write_mesh(tmp_path / "m.xyz", SQUARE)
+        sidecar = {"mesh": "m.xyz", "cells": 12, **recorded}
+        (tmp_path / "m.xyz.quality.json").write_text(json.dumps(sidecar))
+    else:
+        path = write_mesh(tmp_path / f"m.{where}", SQUARE, metadata=recorded)
+    result = invoke("evaluate", path)
+    assert result.exit_code == 0, result.output
+    assert not marker.exists()
+    warnings = [line for line in result.stderr.splitlines() if "evil.py" in line]
+    assert len(warnings) == 1 and "no boundary deviation" in warnings[0] and "-g PATH" in warnings[0], result.stderr
+    # Named by the user, the same plugin is run, and the boundary deviation measured.
+    given = invoke("evaluate", path, "-g", plugin, "--json", "-")
+    assert given.exit_code == 0, given.output
+    assert marker.exists()
+    assert json.loads(given.stdout)["boundary_deviation"]["max"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_checkpoint_naming_a_plugin_file_asks_for_it(tmp_path, evil, semidisk_checkpoint):
+    plugin, marker = evil
+    hostile = {**semidisk_checkpoint, "geometry": {**semidisk_checkpoint["geometry"], "spec": str(plugin)}}
+    torch.save(hostile, tmp_path / "hostile.pt")
+    before = snapshot(tmp_path)
+    result = invoke("mesh", "--checkpoint", "hostile.pt", "--dims", 4, 4, "-o", "out.vtu")
+    one_line_error(result, "evil.py", "pass -g PATH")
+    resumed = invoke("train", "--resume", "hostile.pt", "-q")
+    one_line_error(resumed, "evil.py", "pass -g PATH")
+    assert not marker.exists() and snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "/tmp/abs", "a/b", "", "x" * 65, "dot.dot"])
+def test_a_plugin_name_never_becomes_a_path(name, tmp_path):
+    plugin = tmp_path / "named.py"
+    plugin.write_text(MARKER_PLUGIN.format(marker=str(tmp_path / "imported"), name=name))
+    (tmp_path / "work").mkdir()
+    before = snapshot(tmp_path)
+    result = CliRunner().invoke(cli, ["train", "-g", str(plugin), "--preset", "2d", "--set", "adam.steps=1", "-q"])
+    one_line_error(result, "named.py", "'name' must be")
+    after = snapshot(tmp_path)
+    after.pop("imported", None)  # the user named the file: it was imported, then refused
+    assert after == before
