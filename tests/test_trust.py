@@ -116,3 +116,75 @@ def test_a_plugin_name_never_becomes_a_path(name, tmp_path):
     after = snapshot(tmp_path)
     after.pop("imported", None)  # the user named the file: it was imported, then refused
     assert after == before
+
+
+# ---------------------------------------------------------------------------------------------
+# 6. plugins that misbehave are contained
+
+CONTAINED_PLUGIN = """
+import numpy as np
+name = "misbehaving"
+dim = 2
+description = "the unit square, misbehaving"
+params = {{"scale": 1.0}}
+
+class Unusual(BaseException):
+    pass
+
+def boundary(points, scale):
+    points = np.array(points, dtype=float)
+{body}
+    return points * scale
+"""
+
+MISBEHAVIOURS = {
+    "system-exit": ("    raise SystemExit(0)", "boundary() raised SystemExit"),
+    "generator-exit": ("    raise GeneratorExit()", "boundary() raised GeneratorExit"),
+    "base-exception": ("    raise Unusual('odd')", "boundary() raised Unusual: odd"),
+    "complex": ("    return points * (1 + 1j)", "boundary() returned complex numbers"),
+    "overflow": ("    points = points * np.exp(scale * 1000.0)", "boundary() raised FloatingPointError: overflow"),
+    "long-message": ("    raise ValueError('x' * 100000)", "boundary() raised ValueError: xxx"),
+}
+
+
+@pytest.mark.parametrize("row", list(MISBEHAVIOURS))
+def test_a_misbehaving_plugin_is_one_line_naming_it_and_the_function(row, tmp_path, run_cli):
+    body, message = MISBEHAVIOURS[row]
+    (tmp_path / "plugin.py").write_text(CONTAINED_PLUGIN.format(body=body))
+    before = snapshot(tmp_path)
+    result = run_cli("mesh", "-m", "tfi", "-g", "plugin.py", "--dims", 4, 4, "-o", "out.vtu")
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("Error: "), result.stderr
+    assert message in result.stderr and "'misbehaving'" in result.stderr and "plugin.py" in result.stderr
+    assert len(result.stderr) < 700  # a short excerpt of what the plugin said, never all of it
+    assert snapshot(tmp_path) == before
+
+
+TORN_BOX = """
+import numpy as np
+name = "tornbox"
+dim = 3
+description = "the unit box; face xi = 1 lifted off along 1% of its edge with eta = 0"
+
+def boundary(points):
+    torn = np.isclose(points[:, 0], 1.0) & (points[:, 1] > 0) & ({low} < points[:, 2]) & (points[:, 2] < {low} + 0.01)
+    return points + 0.01 * torn[:, None]
+"""
+
+
+@pytest.mark.parametrize("low", [0.5, 0.913, 0.0021])
+def test_a_tear_of_one_percent_of_an_edge_is_found(low, tmp_path):
+    """The face xi = 1 leaves its neighbour eta = 0 along 1% of their common edge, by 1% of the
+    box: the faces disagree there, and loading the plugin says where."""
+    from meshgen.errors import GeometryError
+    from meshgen.geometry import load_geometry as load
+
+    (tmp_path / "torn.py").write_text(TORN_BOX.format(low=low))
+    unchecked = load(str(tmp_path / "torn.py"), check=False)
+    edge = np.column_stack([np.ones(5), np.zeros(5), np.linspace(low, low + 0.01, 7)[1:-1]])
+    into_face = edge.copy()
+    into_face[:, 1] = 1e-3
+    gap = np.linalg.norm(unchecked.boundary(into_face) - unchecked.boundary(edge), axis=1)
+    assert gap.min() > 0.009  # the tear is real: the face moved off the edge by about 1%
+    with pytest.raises(GeometryError, match="not continuous across the cube's edge at \\(1, 0, "):
+        load(str(tmp_path / "torn.py"))
