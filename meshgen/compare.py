@@ -187,6 +187,9 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
         return run
 
     config = resolve_config(get_method(name).preset, overrides=budget.overrides, steps=budget.steps, seed=budget.seed)
+    from meshgen.neural.session import check_training_size
+
+    check_training_size(config, geometry.dim)  # a network too large for memory fails before any method runs
     device = inference_device(budget.device)
 
     def run(run_dir):

@@ -16,6 +16,7 @@ import importlib
 from dataclasses import dataclass
 
 from meshgen.errors import ParameterError, unknown_name
+from meshgen.limits import check_mesh_memory
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,7 @@ def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
 def make_mesh(method_name: str, geometry, coords, **options):
     """Run method ``method_name``; options it does not take are an error, unset ones (None) are dropped."""
     method = get_method(method_name)
+    check_mesh_memory([len(c) - 1 for c in coords], chunked=False)  # before the method allocates its node array
     given = {k: v for k, v in options.items() if v is not None}
     foreign = sorted(set(given) - set(method.options))
     if foreign:

@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 
 from meshgen.errors import GeometryError, excerpt
+from meshgen.limits import MAX_COORDINATE
 
 __all__ = ["call_plugin", "plugin_array"]
 
@@ -63,4 +64,8 @@ def plugin_array(plugin: str, function: str, value, shape: tuple[int, ...]) -> n
         raise GeometryError(f"geometry {plugin}: {function} returned shape {array.shape} for input shape {shape}")
     if not np.all(np.isfinite(array)):
         raise GeometryError(f"geometry {plugin}: {function} returned non-finite values")
+    if array.size and np.abs(array).max() > MAX_COORDINATE:
+        raise GeometryError(
+            f"geometry {plugin}: {function} returned values beyond {MAX_COORDINATE:g} (they overflow every measure)"
+        )
     return array

@@ -192,7 +192,10 @@ def compare(
 
         names = comparing.parse_methods(methods or ",".join(comparing.DEFAULT_METHODS))
         reuse = comparing.parse_checkpoints(checkpoints)
+        from meshgen.limits import check_mesh_memory
+
         chosen = load_selected_geometry(geometry or "semicylinder", params, dims)
+        check_mesh_memory(dims, chunked=False)  # compare meshes in memory: too large is an error before any method runs
         coords = node_coordinates(dims, clusters)
         if out_dir is not None:
             format_for("mesh" + mesh_format)

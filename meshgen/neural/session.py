@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
+from meshgen.limits import check_training_memory
 
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
@@ -156,6 +157,7 @@ def prepare_run(
             f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
             f"'{geometry_object.name}' is {geometry_object.dim}D"
         )
+    check_training_size(config, geometry_object.dim)
     from meshgen.neural.inference import inference_device
 
     device = inference_device(device)
@@ -165,6 +167,19 @@ def prepare_run(
         torch.set_num_threads(threads)
     run_dir = choose_run_dir(out, resume_path, geometry_object.name)
     return Run(config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family)
+
+
+def check_training_size(config, dim: int) -> None:
+    """MeshgenError, before the run folder exists, when the network and the points of one step
+    would not fit in memory (``meshgen.limits.training_bytes``): the finite-difference residual
+    evaluates the network at each point and its 2 dim neighbours."""
+    points = config.points
+    per_step = max(
+        points.interior * (2 * dim + 1) + points.boundary,
+        config.pretrain.points * 2,
+        config.test.interior * (2 * dim + 1) + config.test.boundary,
+    )
+    check_training_memory(config.model.widths, dim, per_step, config.lbfgs.history_size)
 
 
 def _family(config, geometry, spec: str, params, vary):
