@@ -98,11 +98,11 @@ def check_mesh_memory(dims, chunked: bool) -> None:
     """MeshgenError unless a mesh of ``dims`` cells fits in memory on the path it takes:
     ``chunked`` (blocks streamed into a .cgns file) or in memory."""
     shape = " x ".join(str(int(n)) for n in dims)
-    if chunked:
-        check_memory(
-            chunked_mesh_bytes(dims), f"a {shape} mesh ({node_count(dims):.3g} nodes), even block by block,", "pick fewer cells"
-        )
-    else:
+    # Too large even for the chunked path: say so, rather than suggest it.
+    check_memory(
+        chunked_mesh_bytes(dims), f"a {shape} mesh ({node_count(dims):.3g} nodes), even block by block,", "pick fewer cells"
+    )
+    if not chunked:
         check_memory(
             in_memory_mesh_bytes(dims),
             f"a {shape} mesh ({node_count(dims):.3g} nodes) in memory",

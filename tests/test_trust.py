@@ -17,7 +17,6 @@ from meshgen.cli import cli
 from meshgen.formats import write_mesh
 from meshgen.geometry import load_geometry
 from meshgen.neural.train import train
-from meshgen.tfi import tfi
 
 # A valid 2D plugin (the unit square) whose import writes MARKER: if MARKER appears, meshgen ran it.
 MARKER_PLUGIN = """
@@ -188,3 +187,85 @@ def test_a_tear_of_one_percent_of_an_edge_is_found(low, tmp_path):
     assert gap.min() > 0.009  # the tear is real: the face moved off the edge by about 1%
     with pytest.raises(GeometryError, match="not continuous across the cube's edge at \\(1, 0, "):
         load(str(tmp_path / "torn.py"))
+
+
+# ---------------------------------------------------------------------------------------------
+# 4. sizes and values are checked before anything is allocated
+
+TOO_LARGE = {
+    "mesh-one-long-axis": (
+        ["mesh", "-m", "tfi", "-g", "semidisk", "--dims", 10000000000, 1, "-o", "m.cgns"],
+        "even block by block",
+    ),
+    "mesh-in-memory": (
+        ["mesh", "-m", "tfi", "-g", "semicylinder", "--dims", 2000, 2000, 2000, "--in-memory", "-o", "m.cgns"],
+        "--chunked",
+    ),
+    "compare": (["compare", "-g", "semicylinder", "--dims", 100000, 100000, 100000, "--methods", "tfi"], "even block by block"),
+    "compare-in-memory": (["compare", "-g", "semicylinder", "--dims", 3000, 3000, 3000, "--methods", "tfi"], "in memory"),
+    "train-widths": (["train", "-g", "semidisk", "--preset", "2d", "--set", "model.widths=[100000,100000]"], "[1, 4096]"),
+    "train-points": (["train", "-g", "semidisk", "--preset", "2d", "--set", "points.interior=1000000000"], "'points.interior'"),
+    "train-memory": (["train", "-g", "semicylinder", "--set", "points.interior=10000000"], "of memory but"),
+    "train-lr-inf": (["train", "-g", "semidisk", "--preset", "2d", "--set", "adam.lr=.inf"], "finite number, got inf"),
+    "train-weight-nan": (["train", "-g", "semidisk", "--preset", "2d", "--set", "method.pde_weight=.nan"], "finite number"),
+    "compare-set-inf": (["compare", "-g", "semidisk", "--dims", 4, 4, "--methods", "pinn", "--set", "adam.lr=-.inf"], "finite"),
+    "gate-nan": (["evaluate", "m.vtu", "--fail-if", "min_angle.mean<nan"], "'nan' is not a finite number"),
+    "gate-inf": (["evaluate", "m.vtu", "--fail-if", "cells>inf"], "'inf' is not a finite number"),
+    "param-inf": (["mesh", "-m", "tfi", "-g", "semidisk", "--dims", 4, 4, "--param", "radius=inf", "-o", "o.vtu"], "finite"),
+    "param-huge": (["mesh", "-m", "tfi", "-g", "semidisk", "--dims", 4, 4, "--param", "radius=1e300", "-o", "o.vtu"], "1e+100"),
+    "cluster-nan": (
+        ["mesh", "-m", "tfi", "-g", "semidisk", "--dims", 4, 4, "--cluster", "eta:0:nan", "-o", "o.vtu"],
+        "--cluster",
+    ),
+    "tol-nan": (["mesh", "-m", "elliptic", "-g", "semidisk", "--dims", 4, 4, "--tol", "nan", "-o", "o.vtu"], "--tol"),
+    "vary-inf": (["train", "-g", "flower", "--preset", "family", "--vary", "twist=0:1e999"], "finite"),
+    "cgns-header": (["evaluate", "claims.cgns"], "claims (100001, 100001, 100001) nodes"),
+    "cgns-sparse": (["evaluate", "sparse.cgns"], "stores 0 GB"),
+}
+
+
+def crafted_cgns(folder: Path) -> None:
+    """claims.cgns: a zone header claiming 100001^3 nodes over 5 x 4 x 3 coordinates; sparse.cgns:
+    coordinate arrays of that size too, but with no bytes stored (an HDF5 dataset never written)."""
+    import h5py
+
+    box = np.stack(np.meshgrid(*(np.linspace(0, 1, n) for n in (5, 4, 3)), indexing="ij"), axis=-1)
+    for name in ("claims.cgns", "sparse.cgns"):
+        write_mesh(folder / name, box)
+        with h5py.File(folder / name, "r+") as root:
+            header = root["Base/Zone/ data"]
+            sizes = header[()]
+            sizes[0], sizes[1] = 100001, 100000
+            header[...] = sizes
+            if name == "sparse.cgns":
+                for axis in "XYZ":
+                    group = root[f"Base/Zone/GridCoordinates/Coordinate{axis}"]
+                    del group[" data"]
+                    group.create_dataset(" data", shape=(100001,) * 3, dtype="<f8", chunks=(1, 64, 64))
+
+
+@pytest.mark.parametrize("row", list(TOO_LARGE))
+def test_sizes_and_numbers_are_checked_before_anything_is_allocated(row, tmp_path):
+    args, fragment = TOO_LARGE[row]
+    write_mesh(tmp_path / "m.vtu", SQUARE)
+    crafted_cgns(tmp_path)
+    before = snapshot(tmp_path)
+    result = invoke(*args, *(["--out", "run", "-q"] if args[0] == "train" else []))
+    one_line_error(result, fragment)
+    assert snapshot(tmp_path) == before  # no run folder, no mesh, nothing
+
+
+def test_every_number_of_the_training_configuration_has_both_bounds():
+    """Each int and float key of the configuration schema has a range in BOUNDS, and a value one
+    past either end of it is refused."""
+    from meshgen.neural.config import BOUNDS, ConfigError, resolve_config, schema
+
+    numeric = {key for key, kind in schema().items() if "int" in str(kind) or "float" in str(kind)}
+    assert numeric == set(BOUNDS)
+    for key, (low, high) in BOUNDS.items():
+        if key in ("dim", "model.widths"):
+            continue
+        above = high + 1 if isinstance(high, int) else high * 2 + 1
+        for outside in (above, low - 1):
+            with pytest.raises(ConfigError, match=key.replace(".", "\\.")):
+                resolve_config("default", None, [f"{key}={outside}"])

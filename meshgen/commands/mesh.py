@@ -158,6 +158,7 @@ def mesh(
     from meshgen.commands._progress import progress_display
     from meshgen.errors import MeshgenError
     from meshgen.formats import check_output_path, check_patches, format_for, streaming_writer, write_mesh
+    from meshgen.limits import check_mesh_memory
     from meshgen.meshing import Mesh
     from meshgen.methods import get_method, make_mesh
     from meshgen.patches import geometry_patches, parse_patch_options
@@ -195,6 +196,7 @@ def mesh(
         streaming_writer(output, output_format.name)  # a format that cannot stream fails before any work
     elif address is not None:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
+    check_mesh_memory(dims, chunked)  # memory first: its message names the chunked path
     check_free_space(output, node_count * len(dims) * 8)
     options = {
         "tol": tol,
