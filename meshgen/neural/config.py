@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from meshgen.errors import MeshgenError, did_you_mean, excerpt, unknown_name
+from meshgen.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 
 class ConfigError(MeshgenError):
@@ -263,9 +264,11 @@ def parse_override(text: str) -> tuple[str, typing.Any]:
     if not sep or not key:
         raise ConfigError(f"malformed --set {text!r}: expected key=value, e.g. adam.steps=2000")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
+        value = load_yaml(raw, f"--set {excerpt(text)}") if raw.strip() else ""
+    except InputError as exc:
+        raise ConfigError(str(exc)) from None
     except yaml.YAMLError:
-        raise ConfigError(f"malformed --set {text!r}: {raw!r} is not a value") from None
+        raise ConfigError(f"malformed --set {excerpt(repr(text))}: {excerpt(repr(raw))} is not a value") from None
     return key, value
 
 
@@ -287,13 +290,13 @@ def read_yaml(path: Path, what: str):
     import yaml
 
     try:
-        text = Path(path).read_text()
-    except UnicodeDecodeError:
-        raise ConfigError(f"{what} {path} is not a text file (not UTF-8): a YAML file was expected") from None
-    except OSError as exc:
-        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
-    try:
-        return yaml.safe_load(text) or {}
+        text = read_input_text(path, what, MAX_YAML_BYTES)
+        return load_yaml(text, f"{what} {path}") or {}
+    except InputError as exc:
+        message = str(exc)
+        if message.endswith("(not UTF-8)"):
+            message += ": a YAML file was expected"
+        raise ConfigError(message) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

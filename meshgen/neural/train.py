@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from meshgen.errors import MeshgenError
+from meshgen.inputs import read_input_text
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.config import TrainConfig, to_dict, to_yaml
 from meshgen.neural.derivatives import (
@@ -633,13 +634,22 @@ def open_history(path: Path, keep_until_step: int | None):
     it, by a run killed before its next checkpoint, belong to the lost part)."""
     rows = []
     if keep_until_step is not None and path.is_file():
-        with open(path, newline="") as handle:
-            rows = [row for row in csv.DictReader(handle) if int(row["step"]) < keep_until_step]
+        # A row cut short by a kill (or an edited file) is dropped: a history is data, read leniently.
+        text = read_input_text(path, "history").splitlines()
+        rows = [row for row in csv.DictReader(text) if _history_step(row) is not None and _history_step(row) < keep_until_step]
     handle = open(path, "w", newline="")
     writer = csv.DictWriter(handle, fieldnames=HISTORY_COLUMNS, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
     return handle, writer
+
+
+def _history_step(row: dict) -> int | None:
+    """The step of a history row, None for a row that is not a whole one (missing columns)."""
+    try:
+        return int(row["step"]) if None not in row.values() and None not in row else None
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def _format_row(row: dict) -> dict:

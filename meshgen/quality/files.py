@@ -15,6 +15,7 @@ from meshgen.errors import GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.geometry import load_geometry, load_recorded_geometry
 from meshgen.grid import cell_connectivity
+from meshgen.inputs import read_input_text
 from meshgen.patches import geometry_patches
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.faces import cells_for_quality
@@ -116,14 +117,15 @@ def recorded_metadata(path, mesh) -> dict:
     sidecar = sidecar_path(path)
     if sidecar.is_file():
         try:
-            recorded = json.loads(sidecar.read_text())
-        except (OSError, ValueError):
+            recorded = json.loads(read_input_text(sidecar, "sidecar", MAX_SIDECAR_BYTES))
+        except (OSError, ValueError, MeshgenError, RecursionError):
             return {}
         if isinstance(recorded, dict):
             return {**recorded, "source": "sidecar"}
     return {}
 
 
+MAX_SIDECAR_BYTES = 16 * 2**20  # a sidecar is a report of a few kB: a larger file is not one
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
