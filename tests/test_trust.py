@@ -269,3 +269,157 @@ def test_every_number_of_the_training_configuration_has_both_bounds():
         for outside in (above, low - 1):
             with pytest.raises(ConfigError, match=key.replace(".", "\\.")):
                 resolve_config("default", None, [f"{key}={outside}"])
+
+
+# ---------------------------------------------------------------------------------------------
+# 5. untrusted files are read defensively
+
+ALIAS_BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{chr(98 + i)}: &{chr(98 + i)} [*{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}, *{chr(97 + i)}]\n"
+    for i in range(9)
+)
+
+
+@pytest.mark.parametrize(
+    "row",
+    ["fifo-evaluate", "zero-evaluate", "zero-config", "zero-checkpoint", "alias-bomb", "deep-nesting", "long-line"],
+)
+def test_untrusted_files_are_refused_in_one_short_line(row, tmp_path, run_cli):
+    """A FIFO or a link to /dev/zero is never read (a reader would wait or fill memory), a YAML
+    alias bomb and 5000 nested brackets are refused at once, an error never repeats a long input."""
+    import os
+
+    train = ["train", "-g", "semidisk", "--preset", "2d", "--out", "run", "-q"]
+    if row == "fifo-evaluate":
+        os.mkfifo(tmp_path / "m.vtu")
+        args, fragment = ["evaluate", "m.vtu"], "is a FIFO"
+    elif row.startswith("zero"):
+        name = {"zero-evaluate": "m.xyz", "zero-config": "c.yaml", "zero-checkpoint": "c.pt"}[row]
+        (tmp_path / name).symlink_to("/dev/zero")
+        args = {
+            "zero-evaluate": ["evaluate", name],
+            "zero-config": [*train, "--config", name],
+            "zero-checkpoint": ["mesh", "--checkpoint", name, "--dims", 4, 4, "-o", "o.vtu"],
+        }[row]
+        fragment = "is a character device"
+    elif row == "alias-bomb":
+        (tmp_path / "c.yaml").write_text(ALIAS_BOMB)
+        args, fragment = [*train, "--config", "c.yaml"], "anchor or alias at line 1"
+    elif row == "deep-nesting":
+        (tmp_path / "c.yaml").write_text("adam: " + "[" * 5000 + "]" * 5000 + "\n")
+        args, fragment = [*train, "--config", "c.yaml"], "nests deeper than"
+    else:
+        args, fragment = [*train, "--set", "adam.lr=" + "9" * 100000 + "x"], "adam.lr"
+    before = snapshot(tmp_path)
+    result = run_cli(*args, timeout=60)
+    assert result.returncode == 2, result.stderr[-2000:]
+    assert result.stderr.count("\n") == 1 and result.stderr.startswith("Error: "), result.stderr[-2000:]
+    assert fragment in result.stderr and len(result.stderr) < 700
+    assert snapshot(tmp_path) == before
+
+
+def test_the_alias_bomb_is_one():
+    """Loaded without the limits, the bomb's last key expands to 9 * 5^9 items: a real bomb."""
+    import yaml
+
+    assert len(yaml.safe_load(ALIAS_BOMB.replace("x, x, x, x, x, x, x, x, x", "x"))["j"]) == 5
+    data = yaml.safe_load("a: &a [x, x]\nb: [*a, *a]\n")
+    assert data["b"] == [["x", "x"], ["x", "x"]]
+
+
+def corrupt_list(path: Path, swap: tuple[int, int]) -> None:
+    """Swap two entries of an OpenFOAM label list (ASCII or binary) in place."""
+    from meshgen.formats._openfoam import read_list
+
+    labels = read_list(path, "labels")
+    data = path.read_bytes()
+    if b"format      binary" in data or b"format binary" in data or b"binary;" in data:
+        position = data.index(f"{len(labels)}\n(".encode()) + len(f"{len(labels)}\n(")
+        values = np.frombuffer(data, dtype="<i4", count=len(labels), offset=position).copy()
+        values[[swap[0], swap[1]]] = values[[swap[1], swap[0]]]
+        path.write_bytes(data[:position] + values.tobytes() + data[position + values.nbytes :])
+    else:
+        head, _, body = data.partition(f"{len(labels)}\n(\n".encode())
+        lines = body.split(b"\n")
+        lines[swap[0]], lines[swap[1]] = lines[swap[1]], lines[swap[0]]
+        path.write_bytes(head + f"{len(labels)}\n(\n".encode() + b"\n".join(lines))
+
+
+@pytest.mark.parametrize("ascii_files", [False, True])
+@pytest.mark.parametrize("damaged", ["owner", "neighbour"])
+def test_an_openfoam_case_with_a_corrupt_owner_or_neighbour_list_is_an_error(damaged, ascii_files, tmp_path):
+    from meshgen.formats._openfoam import read_list
+
+    args = ["mesh", "-m", "tfi", "-g", "semicylinder", "--dims", 4, 3, 2, "--format", "openfoam", "-o", "case", "-q"]
+    assert invoke(*args, *(["--ascii"] if ascii_files else [])).exit_code == 0
+    assert invoke("evaluate", "case").exit_code == 0
+    path = tmp_path / "case" / "constant" / "polyMesh" / damaged
+    before = read_list(path, "labels")
+    corrupt_list(path, (0, len(before) - 1))  # first and last labels differ: a real change
+    after = read_list(path, "labels")
+    assert not np.array_equal(before, after) and sorted(before) == sorted(after)
+    one_line_error(invoke("evaluate", "case"), "corrupt")
+
+
+def test_a_checkpoint_with_nan_weights_is_an_error_and_writes_nothing(tmp_path, semidisk_checkpoint):
+    model = semidisk_checkpoint["model"]
+    state = dict(model["state_dict"])
+    state["layers.0.weight"] = state["layers.0.weight"].clone()
+    state["layers.0.weight"][0, 0] = float("nan")
+    torch.save({**semidisk_checkpoint, "model": {**model, "state_dict": state}}, tmp_path / "nan.pt")
+    before = snapshot(tmp_path)
+    one_line_error(invoke("mesh", "--checkpoint", "nan.pt", "--dims", 4, 4, "-o", "o.vtu"), "non-finite weights")
+    one_line_error(invoke("train", "--resume", "nan.pt", "-q"), "non-finite weights")
+    assert snapshot(tmp_path) == before
+
+
+def test_a_non_finite_network_output_is_an_error(semidisk_checkpoint):
+    """Finite weights whose product overflows float32: the output check, not the weight check."""
+    from meshgen.errors import MeshgenError
+    from meshgen.neural.inference import evaluate_on_grid
+
+    model = dict(semidisk_checkpoint["model"])
+    state = dict(model["state_dict"])
+    last = max(int(k.split(".")[1]) for k in state)
+    state[f"layers.{last}.weight"] = torch.full_like(state[f"layers.{last}.weight"], 3e38)
+    model["state_dict"] = state
+    with pytest.raises(MeshgenError, match="non-finite"):
+        evaluate_on_grid(model, [np.linspace(0, 1, 5), np.linspace(0, 1, 4)])
+
+
+@pytest.fixture
+def interrupted_run(tmp_path) -> Path:
+    """A tiny semidisk run stopped after its 6th step (history rows 0..5, checkpoint at step 6)."""
+    polls = iter(range(1000))
+    (tmp_path / "run").mkdir()
+    train(tiny_config("lbfgs.steps=0"), load_geometry("semidisk"), tmp_path / "run", stop=lambda: next(polls) >= 6, summary=False)
+    return tmp_path / "run"
+
+
+def test_resume_survives_a_truncated_history(interrupted_run, run_cli):
+    history = interrupted_run / "history.csv"
+    lines = history.read_text().splitlines()
+    assert len(lines) == 7  # header and steps 0..5
+    history.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:3])  # the last row (step 5) cut short
+    resumed = run_cli("train", "--resume", "run/checkpoint.pt", "-q", cwd=interrupted_run.parent)
+    assert resumed.returncode == 0, resumed.stderr
+    import csv
+
+    rows = list(csv.DictReader(history.read_text().splitlines()))
+    steps = [int(r["step"]) for r in rows]
+    # The whole rows kept, the cut one (step 5) dropped, the resumed steps from the checkpoint's 6 on.
+    assert steps == [0, 1, 2, 3, 4, *range(6, 6 + len(steps) - 5)] and len(steps) >= 9
+    assert history.read_text().splitlines()[:6] == lines[:6]  # the whole rows kept as they were
+
+
+def test_a_damaged_checkpoint_fails_before_the_run_folder_changes(interrupted_run, run_cli):
+    """A checkpoint whose optimiser state is not its stage's (stitched by hand) fails with one line,
+    leaving config.yaml and history.csv as they were."""
+    checkpoint = torch.load(interrupted_run / "checkpoint.pt", weights_only=True)
+    stage = checkpoint["stage"]
+    torch.save({**checkpoint, "stage": "lbfgs" if stage != "lbfgs" else "adam"}, interrupted_run / "checkpoint.pt")
+    before = snapshot(interrupted_run)
+    result = run_cli("train", "--resume", "run/checkpoint.pt", "-q", cwd=interrupted_run.parent)
+    assert result.returncode == 2 and result.stderr.startswith("Error: ") and result.stderr.count("\n") == 1, result.stderr
+    assert "optimiser state" in result.stderr
+    assert snapshot(interrupted_run) == before

@@ -644,6 +644,23 @@ def open_history(path: Path, keep_until_step: int | None):
     return handle, writer
 
 
+def check_resumable(training: Training, resume: dict) -> None:
+    """CheckpointError unless the optimiser and scheduler states of ``resume`` load into its stage's
+    own (a damaged or stitched checkpoint fails here, before the run folder is written)."""
+    for stage in STAGE_TABLE:
+        if stage.name != resume["stage"]:
+            continue
+        optimizer, scheduler = stage.optimizer(training)
+        try:
+            optimizer.load_state_dict(resume["optimizer"])
+            if scheduler is not None:
+                scheduler.load_state_dict(resume["scheduler"])
+        except (KeyError, TypeError, ValueError, RuntimeError, IndexError) as exc:
+            raise checkpoints.CheckpointError(
+                f"the checkpoint's optimiser state does not fit its stage '{stage.name}' ({type(exc).__name__}): the file is damaged"
+            ) from None
+
+
 def _history_step(row: dict) -> int | None:
     """The step of a history row, None for a row that is not a whole one (missing columns)."""
     try:
@@ -761,6 +778,8 @@ def train(
     say = reporter.message if reporter is not None else (lambda text: None)
     training, state = start_training(config, geometry, torch.device(device), resume)
     saver = CheckpointWriter(training, geometry, geometry_spec, run_dir / "checkpoint.pt", state)
+    if resume is not None:
+        check_resumable(training, resume)  # before config.yaml and history.csv are touched
     (run_dir / "config.yaml").write_text(CONFIG_HEADER + to_yaml(config))
     history_file, history = open_history(run_dir / "history.csv", state.step if resume is not None else None)
     threads = torch.get_num_threads()
