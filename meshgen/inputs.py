@@ -56,7 +56,7 @@ def check_input_file(path, what: str = "input file", folder: bool = False) -> Pa
     try:
         mode = os.stat(path).st_mode
     except FileNotFoundError:
-        raise InputError(f"{what} {path} does not exist") from None
+        raise InputError(f"{what} {path} cannot be read: it does not exist") from None
     except OSError as exc:
         raise InputError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
     if stat.S_ISREG(mode) or (folder and stat.S_ISDIR(mode)):

@@ -423,3 +423,27 @@ def test_a_damaged_checkpoint_fails_before_the_run_folder_changes(interrupted_ru
     assert result.returncode == 2 and result.stderr.startswith("Error: ") and result.stderr.count("\n") == 1, result.stderr
     assert "optimiser state" in result.stderr
     assert snapshot(interrupted_run) == before
+
+
+def test_a_checkpoint_trained_on_a_plugin_file_meshes_with_that_file_named(tmp_path, run_cli):
+    """Trained on a plugin file, a checkpoint meshes when the user names the file with -g, and
+    asks for it otherwise (a fresh process: nothing was named before)."""
+    marker = tmp_path / "imported"
+    plugin = tmp_path / "square.py"
+    plugin.write_text(MARKER_PLUGIN.format(marker=str(marker), name="square"))
+    (tmp_path / "run").mkdir()
+    square = load_geometry(str(plugin))
+    train(
+        tiny_config("boundary_layout=fixed"),
+        square,
+        tmp_path / "run",
+        stop=lambda: True,
+        geometry_spec=str(plugin),
+        summary=False,
+    )
+    marker.unlink()
+    asked = run_cli("mesh", "--checkpoint", "run/checkpoint.pt", "--dims", 4, 4, "-o", "o.vtu")
+    assert asked.returncode == 2 and "pass -g PATH" in asked.stderr and not marker.exists(), asked.stderr
+    named = invoke("mesh", "--checkpoint", "run/checkpoint.pt", "-g", "square.py", "--dims", 4, 4, "-o", "o.vtu")
+    assert named.exit_code == 0, named.output
+    assert (tmp_path / "o.vtu").is_file()

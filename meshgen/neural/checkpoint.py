@@ -64,6 +64,8 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     meshgen (a higher ``format_version``).
     """
     path = Path(path)
+    if not path.exists():
+        raise CheckpointError(f"checkpoint {path} does not exist")
     try:
         check_input_file(path, "checkpoint")  # a FIFO or a device is never handed to torch
     except InputError as exc:
