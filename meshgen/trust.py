@@ -68,9 +68,9 @@ def recorded_spec(spec, where: str) -> str:
         raise GeometryError(f"{where} records no usable geometry ({excerpt(repr(spec))})")
     if NAME_PATTERN.fullmatch(spec):
         return spec  # looked up among built-ins and entry points only
-    if spec.endswith(".py") and is_given_plugin(spec):
+    if is_given_plugin(spec):
         return spec
     raise UntrustedGeometry(
-        f"{where} names the plugin file {excerpt(spec)}; a geometry named by a file is only looked up among "
-        f"built-in and installed geometries (a file never runs code): pass -g PATH to run that plugin"
+        f"{where} names the geometry file {excerpt(spec)}; a geometry named by a file is only looked up among "
+        f"built-in and installed geometries (a file never makes meshgen run or read another): pass -g PATH to use it"
     )
