@@ -400,13 +400,13 @@ def interrupted_run(tmp_path) -> Path:
     return tmp_path / "run"
 
 
-def test_resume_survives_a_truncated_history(interrupted_run, run_cli):
+def test_resume_survives_a_truncated_history(interrupted_run):
     history = interrupted_run / "history.csv"
     lines = history.read_text().splitlines()
     assert len(lines) == 7  # header and steps 0..5
     history.write_text("\n".join(lines[:-1]) + "\n" + lines[-1][:3])  # the last row (step 5) cut short
-    resumed = run_cli("train", "--resume", "run/checkpoint.pt", "-q", cwd=interrupted_run.parent)
-    assert resumed.returncode == 0, resumed.stderr
+    resumed = invoke("train", "--resume", interrupted_run / "checkpoint.pt", "-q")
+    assert resumed.exit_code == 0, resumed.output
     import csv
 
     rows = list(csv.DictReader(history.read_text().splitlines()))
@@ -416,38 +416,32 @@ def test_resume_survives_a_truncated_history(interrupted_run, run_cli):
     assert history.read_text().splitlines()[:6] == lines[:6]  # the whole rows kept as they were
 
 
-def test_a_damaged_checkpoint_fails_before_the_run_folder_changes(interrupted_run, run_cli):
+def test_a_damaged_checkpoint_fails_before_the_run_folder_changes(interrupted_run):
     """A checkpoint whose optimiser state is not its stage's (stitched by hand) fails with one line,
     leaving config.yaml and history.csv as they were."""
     checkpoint = torch.load(interrupted_run / "checkpoint.pt", weights_only=True)
     stage = checkpoint["stage"]
     torch.save({**checkpoint, "stage": "lbfgs" if stage != "lbfgs" else "adam"}, interrupted_run / "checkpoint.pt")
     before = snapshot(interrupted_run)
-    result = run_cli("train", "--resume", "run/checkpoint.pt", "-q", cwd=interrupted_run.parent)
-    assert result.returncode == 2 and result.stderr.startswith("Error: ") and result.stderr.count("\n") == 1, result.stderr
-    assert "optimiser state" in result.stderr
+    one_line_error(invoke("train", "--resume", interrupted_run / "checkpoint.pt", "-q"), "optimiser state")
     assert snapshot(interrupted_run) == before
 
 
-def test_a_checkpoint_trained_on_a_plugin_file_meshes_with_that_file_named(tmp_path, run_cli):
-    """Trained on a plugin file, a checkpoint meshes when the user names the file with -g, and
-    asks for it otherwise (a fresh process: nothing was named before)."""
+def test_a_checkpoint_trained_on_a_plugin_file_meshes_with_that_file_named(tmp_path, semidisk_checkpoint):
+    """A checkpoint recording a plugin file meshes when the user names the file with -g, and asks
+    for it otherwise (the plugin is not imported)."""
     marker = tmp_path / "imported"
-    plugin = tmp_path / "square.py"
-    plugin.write_text(MARKER_PLUGIN.format(marker=str(marker), name="square"))
-    (tmp_path / "run").mkdir()
-    square = load_geometry(str(plugin))
-    train(
-        tiny_config("boundary_layout=fixed"),
-        square,
-        tmp_path / "run",
-        stop=lambda: True,
-        geometry_spec=str(plugin),
-        summary=False,
+    plugin = tmp_path / "disk.py"
+    plugin.write_text(
+        MARKER_PLUGIN.format(marker=str(marker), name="semidisk")
+        .replace("description", 'params = {"radius": 1.0}\ndescription')
+        .replace("def boundary(points):", "def boundary(points, radius):")
     )
-    marker.unlink()
-    asked = run_cli("mesh", "--checkpoint", "run/checkpoint.pt", "--dims", 4, 4, "-o", "o.vtu")
-    assert asked.returncode == 2 and "pass -g PATH" in asked.stderr and not marker.exists(), asked.stderr
-    named = invoke("mesh", "--checkpoint", "run/checkpoint.pt", "-g", "square.py", "--dims", 4, 4, "-o", "o.vtu")
+    entry = {**semidisk_checkpoint["geometry"], "spec": str(plugin)}
+    torch.save({**semidisk_checkpoint, "geometry": entry}, tmp_path / "c.pt")
+    asked = invoke("mesh", "--checkpoint", "c.pt", "--dims", 4, 4, "-o", "o.vtu")
+    one_line_error(asked, "disk.py", "pass -g PATH")
+    assert not marker.exists()
+    named = invoke("mesh", "--checkpoint", "c.pt", "-g", "disk.py", "--dims", 4, 4, "-o", "o.vtu")
     assert named.exit_code == 0, named.output
-    assert (tmp_path / "o.vtu").is_file()
+    assert marker.exists() and (tmp_path / "o.vtu").is_file()
