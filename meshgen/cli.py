@@ -17,7 +17,17 @@ import click
 from meshgen import __version__
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean, excerpt
 
-__all__ = ["COMMANDS", "FLAGS", "MAX_ERROR_CHARS", "MeshgenGroup", "cli", "flag_of", "main", "message_for_command_line", "one_line"]
+__all__ = [
+    "COMMANDS",
+    "FLAGS",
+    "MAX_ERROR_CHARS",
+    "MeshgenGroup",
+    "cli",
+    "flag_of",
+    "main",
+    "message_for_command_line",
+    "one_line",
+]
 
 # name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
 COMMANDS = {

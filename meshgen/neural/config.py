@@ -374,6 +374,7 @@ def validate(config: TrainConfig) -> None:
             for part in key.split("."):
                 value = getattr(value, part)
             raise ConfigError(f"configuration key '{key}' {text}, got {excerpt(repr(value))}")
+
     for key, choices in CHOICES.items():
         section, name = key.split(".")
         need(getattr(getattr(config, section), name) in choices, key, f"must be one of {', '.join(choices)}")
