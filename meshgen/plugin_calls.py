@@ -5,8 +5,8 @@ and the function, never a traceback and never meshgen's own exit. ``call_plugin`
 function with NumPy's floating-point errors raised (an overflow or an invalid operation inside
 the plugin is an error, not a warning and a misleading message later) and turns every exception
 into that line: SystemExit (``sys.exit()`` in a plugin must not end meshgen with the plugin's
-status), GeneratorExit and any other BaseException. KeyboardInterrupt alone passes: it is the
-user's Ctrl-C. ``plugin_array`` checks what a plugin returned: real numbers (complex values are
+status), GeneratorExit and any other BaseException. KeyboardInterrupt (the user's Ctrl-C) and
+meshgen's own BaseExceptions (raised by its signal handlers) pass through. ``plugin_array`` checks what a plugin returned: real numbers (complex values are
 refused, not cast), the expected shape, finite.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 from meshgen.errors import GeometryError, excerpt
 from meshgen.limits import MAX_COORDINATE
 
-__all__ = ["call_plugin", "plugin_array"]
+__all__ = ["call_plugin", "passes_through", "plugin_array"]
 
 
 def call_plugin(plugin: str, function: str, code: Callable, *args, failed: str | None = None, **kwargs):
@@ -32,11 +32,19 @@ def call_plugin(plugin: str, function: str, code: Callable, *args, failed: str |
             return code(*args, **kwargs)
     except GeometryError:
         raise
-    except KeyboardInterrupt:
-        raise
     except BaseException as exc:  # noqa: BLE001 - foreign code: SystemExit and GeneratorExit too
+        if passes_through(exc):
+            raise
         detail = f": {excerpt(exc)}" if str(exc) else ""
         raise GeometryError(f"{failed or f'geometry {plugin}: {function} raised'} {type(exc).__name__}{detail}") from None
+
+
+def passes_through(exc: BaseException) -> bool:
+    """Whether ``exc`` ends meshgen rather than the plugin call: the user's Ctrl-C
+    (KeyboardInterrupt) and meshgen's own BaseException subclasses, which its signal handlers
+    raise (SIGTERM, SIGHUP) wherever the process is, a plugin's code included."""
+    own = type(exc).__module__.split(".")[0] == "meshgen" and not isinstance(exc, Exception)
+    return isinstance(exc, KeyboardInterrupt) or own
 
 
 def plugin_array(plugin: str, function: str, value, shape: tuple[int, ...]) -> np.ndarray:
@@ -45,7 +53,7 @@ def plugin_array(plugin: str, function: str, value, shape: tuple[int, ...]) -> n
     try:
         array = np.asarray(value)
     except BaseException as exc:  # noqa: BLE001 - a foreign object's __array__ is foreign code too
-        if isinstance(exc, KeyboardInterrupt):
+        if passes_through(exc):
             raise
         raise GeometryError(f"geometry {plugin}: {function} returned something that is not an array of numbers") from None
     if np.iscomplexobj(array):

@@ -445,3 +445,26 @@ def test_a_checkpoint_trained_on_a_plugin_file_meshes_with_that_file_named(tmp_p
     named = invoke("mesh", "--checkpoint", "c.pt", "-g", "disk.py", "--dims", 4, 4, "-o", "o.vtu")
     assert named.exit_code == 0, named.output
     assert marker.exists() and (tmp_path / "o.vtu").is_file()
+
+
+def test_ctrl_c_and_meshgen_signals_pass_through_a_plugin_call():
+    """The user's Ctrl-C, and a BaseException of meshgen's own (what its SIGTERM handler raises),
+    stop meshgen even inside plugin code; a plugin's own BaseException does not."""
+    import types
+
+    from meshgen.errors import GeometryError
+    from meshgen.plugin_calls import call_plugin
+
+    own = types.new_class("Stop", (BaseException,))
+    own.__module__ = "meshgen.signals"
+    foreign = types.new_class("Stop", (BaseException,))
+    foreign.__module__ = "meshgen_plugin_x"
+
+    def raising(kind):
+        raise kind()
+
+    for kind in (KeyboardInterrupt, own):
+        with pytest.raises(kind):
+            call_plugin("'x' (x.py)", "boundary()", raising, kind)
+    with pytest.raises(GeometryError, match="boundary\\(\\) raised Stop"):
+        call_plugin("'x' (x.py)", "boundary()", raising, foreign)
