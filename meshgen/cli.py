@@ -16,10 +16,20 @@ import sys
 import click
 
 from meshgen import __version__
-from meshgen.errors import MeshgenError, ParameterError, did_you_mean
+from meshgen.errors import MeshgenError, ParameterError, did_you_mean, excerpt
 from meshgen.signals import Terminated, install_termination_handlers
 
-__all__ = ["COMMANDS", "FLAGS", "MeshgenGroup", "cli", "flag_of", "main", "message_for_command_line", "one_line"]
+__all__ = [
+    "COMMANDS",
+    "FLAGS",
+    "MAX_ERROR_CHARS",
+    "MeshgenGroup",
+    "cli",
+    "flag_of",
+    "main",
+    "message_for_command_line",
+    "one_line",
+]
 
 # name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
 COMMANDS = {
@@ -31,8 +41,13 @@ COMMANDS = {
 }
 
 
+# The longest error line printed: a message that quotes a file's contents is cut here at the latest.
+MAX_ERROR_CHARS = 600
+
+
 def one_line(message: str) -> str:
-    return " ".join(str(message).split())
+    """``message`` on one line, at most ``MAX_ERROR_CHARS`` characters."""
+    return excerpt(message, MAX_ERROR_CHARS)
 
 
 # Library parameters whose flag is not their name with dashes.

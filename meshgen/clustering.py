@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshgen.errors import ParameterError
+from meshgen.limits import check_memory, chunked_mesh_bytes, node_count
 
 __all__ = ["AXES", "SIDES", "Cluster", "clustered_coordinates", "node_coordinates", "parse_cluster"]
 
@@ -94,7 +95,12 @@ def clustered_coordinates(n: int, cluster: Cluster) -> np.ndarray:
 
 def node_coordinates(dims, specs=()) -> list[np.ndarray]:
     """1D parametric node positions per axis: uniform, except along the axes that ``specs``
-    (strings or Cluster objects) cluster. Two specs on one axis, or an axis the mesh lacks, raise."""
+    (strings or Cluster objects) cluster. Two specs on one axis, or an axis the mesh lacks, raise;
+    so does a mesh that would not fit in memory even block by block (checked before allocating)."""
+    shape = " x ".join(str(int(n)) for n in dims)
+    check_memory(
+        chunked_mesh_bytes(dims), f"a {shape} mesh ({node_count(dims):.3g} nodes), even block by block,", "pick fewer cells"
+    )
     coords = [np.linspace(0.0, 1.0, int(n) + 1) for n in dims]
     seen = set()
     for spec in specs:

@@ -13,6 +13,7 @@ import numpy as np
 from meshgen import cube
 from meshgen.errors import GeometryError, did_you_mean
 from meshgen.patches import as_records, geometry_patches
+from meshgen.plugin_calls import call_plugin, plugin_array
 from meshgen.surface import boundary_surface
 
 __all__ = ["Geometry", "bind"]
@@ -40,40 +41,18 @@ class Geometry:
         points = np.asarray(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != self.dim:
             raise GeometryError(f"geometry '{self.name}': boundary points must have shape (N, {self.dim}), got {points.shape}")
-        try:
-            mapped = self.boundary_map(points, **self.values)
-        except GeometryError:
-            raise
-        # A plugin is foreign code: report it with its name and file. SystemExit too: sys.exit() in
-        # a plugin must not end meshgen with the plugin's status (0 would read as success).
-        except (Exception, SystemExit) as exc:
-            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() raised {type(exc).__name__}: {exc}") from exc
-        try:
-            mapped = np.asarray(mapped, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() returned something that is not "
-                f"an array of numbers ({type(mapped).__name__})"
-            ) from exc
-        if mapped.shape != points.shape:
-            raise GeometryError(
-                f"geometry '{self.name}' ({self.source}): boundary() returned shape {mapped.shape} for input shape {points.shape}"
-            )
-        if not np.all(np.isfinite(mapped)):
-            raise GeometryError(f"geometry '{self.name}' ({self.source}): boundary() returned non-finite values")
-        return mapped
+        plugin = f"'{self.name}' ({self.source})"
+        mapped = call_plugin(plugin, "boundary()", self.boundary_map, points, **self.values)
+        return plugin_array(plugin, "boundary()", mapped, points.shape)
 
     @property
     def characteristic_length(self) -> float:
         """Length scale for relative figures: the plugin's own, else the bounding-box diagonal."""
         if self.length_map is not None:
-            try:
-                length = float(self.length_map(**self.values))
-            except (Exception, SystemExit) as exc:  # foreign code, as in boundary()
-                raise GeometryError(
-                    f"geometry '{self.name}' ({self.source}): characteristic_length() raised {type(exc).__name__}: {exc}"
-                ) from exc
-            if not (np.isfinite(length) and length > 0):
+            plugin = f"'{self.name}' ({self.source})"
+            length = call_plugin(plugin, "characteristic_length()", self.length_map, **self.values)
+            length = float(plugin_array(plugin, "characteristic_length()", length, ()))
+            if not length > 0:
                 raise GeometryError(
                     f"geometry '{self.name}' ({self.source}): characteristic_length() must be a positive number, got {length!r}"
                 )

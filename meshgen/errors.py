@@ -2,7 +2,19 @@
 
 import difflib
 
-__all__ = ["FormatError", "GeometryError", "MeshgenError", "ParameterError", "did_you_mean", "unknown_name"]
+__all__ = [
+    "EXCERPT_CHARS",
+    "FormatError",
+    "GeometryError",
+    "MeshgenError",
+    "ParameterError",
+    "did_you_mean",
+    "excerpt",
+    "unknown_name",
+]
+
+# The most characters of a file's or a user's text that an error message repeats.
+EXCERPT_CHARS = 80
 
 
 class MeshgenError(Exception):
@@ -41,3 +53,10 @@ def unknown_name(kind: str, name: str, choices, error=MeshgenError) -> MeshgenEr
     """The error for an unknown ``kind`` (method, preset, ...): ``unknown method 'x' (methods: a,
     b); did you mean 'a'?``."""
     return error(f"unknown {kind} '{name}' ({kind}s: {', '.join(choices)}){did_you_mean(name, choices)}")
+
+
+def excerpt(text, limit: int = EXCERPT_CHARS) -> str:
+    """``text`` on one line, cut to ``limit`` characters (an ellipsis and the length marks a cut):
+    an error message never repeats more than a short excerpt of what it was given."""
+    flat = " ".join(str(text).split())
+    return flat if len(flat) <= limit else f"{flat[: limit - 1]}… ({len(flat)} characters)"

@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 
 from meshgen.errors import MeshgenError, did_you_mean
+from meshgen.limits import parse_finite
 from meshgen.quality import METRICS, STATS
 
 __all__ = [
@@ -92,9 +93,9 @@ def parse_gate(text: str) -> Gate:
         threshold = 1.0 if lowered == "true" else 0.0
     else:
         try:
-            threshold = float(raw)
-        except ValueError:
-            raise GateError(f"malformed --fail-if {text!r}: {raw!r} is not a number") from None
+            threshold = parse_finite(raw, f"malformed --fail-if {text!r}")
+        except MeshgenError as exc:
+            raise GateError(str(exc)) from None
     return Gate(text.strip(), name, op, threshold)
 
 

@@ -38,7 +38,9 @@ import numpy as np
 from meshgen.domain import Geometry, bind
 from meshgen.errors import GeometryError, MeshgenError, did_you_mean
 from meshgen.patches import face_assignment, patches_from_assignment
+from meshgen.plugin_calls import call_plugin
 from meshgen.shapes.loader import is_shape_file, load_shape
+from meshgen.trust import check_plugin_name, note_given_plugin, recorded_spec
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -49,6 +51,7 @@ __all__ = [
     "check_boundary",
     "list_geometries",
     "load_geometry",
+    "load_recorded_geometry",
     "looks_like_path",
     "parse_params",
 ]
@@ -94,10 +97,10 @@ def _import_file(path: Path) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     sys.modules[module_name] = module
     try:
-        spec.loader.exec_module(module)
-    except (Exception, SystemExit) as exc:
+        call_plugin(str(path), "import", spec.loader.exec_module, module, failed=f"geometry plugin {path} failed to load:")
+    except BaseException:
         del sys.modules[module_name]
-        raise GeometryError(f"geometry plugin {path} failed to load: {type(exc).__name__}: {exc}") from exc
+        raise
     return module
 
 
@@ -111,8 +114,7 @@ def _from_module(module, source: str) -> Geometry:
 
     name, dim, description = need("name"), need("dim"), need("description")
     boundary_map, params = need("boundary"), getattr(module, "params", {})
-    if not isinstance(name, str) or not name:
-        raise GeometryError(f"geometry plugin {source}: 'name' must be a non-empty string")
+    check_plugin_name(name, source)
     if dim not in (2, 3):
         raise GeometryError(f"geometry plugin {source}: 'dim' must be 2 or 3, got {dim!r}")
     if not callable(boundary_map):
@@ -170,6 +172,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
         geometry = _from_module(_import_file(path), str(path))
+        note_given_plugin(path)  # named by the user: a file recording this path may load it too
     else:
         builtins = _builtin_files()
         if spec in builtins:
@@ -179,17 +182,21 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
             if spec not in eps:
                 names = available_names()
                 raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
-            try:
-                module = eps[spec].load()
-            except (Exception, SystemExit) as exc:
-                raise GeometryError(
-                    f"geometry plugin '{spec}' ({eps[spec].value}) failed to load: {type(exc).__name__}: {exc}"
-                ) from exc
+            module = call_plugin(
+                f"'{spec}'", "import", eps[spec].load, failed=f"geometry plugin '{spec}' ({eps[spec].value}) failed to load:"
+            )
             geometry = _from_module(module, f"entry point {eps[spec].value}")
     geometry = bind(geometry, params)
     if check:
         check_boundary(geometry)
     return geometry
+
+
+def load_recorded_geometry(spec, params: dict[str, float] | None = None, check: bool = True, where: str = "the file"):
+    """``load_geometry`` of a geometry recorded in a file (``where`` names it): by name among
+    built-ins and entry points only, never a plugin file the user did not name
+    (``meshgen.trust.recorded_spec``; UntrustedGeometry otherwise)."""
+    return load_geometry(recorded_spec(spec, where), params, check)
 
 
 def list_geometries() -> list[Geometry]:
@@ -201,20 +208,43 @@ def list_geometries() -> list[Geometry]:
 # contract checks
 
 
+# Samples per cube edge of the first pass of check_boundary: spacing 1/256, so that a tear
+# narrower than 1% of an edge still falls on samples; refined where the edge's image bends.
+EDGE_SAMPLES = 257
+REFINE_LEVELS = 3
+
+
 def check_boundary(geometry: Geometry, tolerance: float = 1e-4) -> None:
     """Raise GeometryError unless the boundary map returns (N, dim) finite values and is
-    continuous across the cube's edges: at sample points of every edge, stepping 1e-7 into
-    each of the two adjacent faces must move the image by less than ``tolerance`` times
-    the domain's size."""
+    continuous across the cube's edges: at samples along every edge (``EDGE_SAMPLES`` per edge,
+    then ``REFINE_LEVELS`` bisections of the intervals where the edge's image bends most),
+    stepping 1e-7 into each of the two adjacent faces must move the image by less than
+    ``tolerance`` times the domain's size."""
+    dim = geometry.dim
+    if dim == 2:
+        _check_edge_points(geometry, tolerance, np.zeros(1), None)
+        return
+    free = np.linspace(0.0, 1.0, EDGE_SAMPLES)
+    size = None
+    for _ in range(REFINE_LEVELS + 1):
+        edge_images, size = _check_edge_points(geometry, tolerance, free, size)
+        # Bisect the intervals whose image is longest (a quarter of them): where the map bends or
+        # moves fastest, a narrow tear is most likely to hide.
+        lengths = np.linalg.norm(np.diff(edge_images, axis=1), axis=2).max(axis=0)
+        chosen = np.argsort(lengths)[-max(1, len(lengths) // 4) :]
+        free = np.sort(0.5 * (free[chosen] + free[chosen + 1]))
+        free = np.concatenate([[0.0], free, [1.0]]) if len(free) else free
+
+
+def _check_edge_points(geometry: Geometry, tolerance: float, free: np.ndarray, size: float | None):
+    """One pass of check_boundary at the parameters ``free`` along every edge (3D; one point per
+    edge in 2D). Returns the edges' images, shape (edges, len(free), dim), and the domain's size."""
     dim, step = geometry.dim, 1e-7
-    free = np.array([0.13, 0.5, 0.91])
     on_edge, from_a, from_b = [], [], []
     for axis_a, axis_b in itertools.combinations(range(dim), 2):
         for side_a, side_b in itertools.product((0.0, 1.0), repeat=2):
-            n = len(free) if dim == 3 else 1
-            base = np.empty((n, dim))
-            others = [d for d in range(dim) if d not in (axis_a, axis_b)]
-            for d in others:
+            base = np.empty((len(free), dim))
+            for d in (d for d in range(dim) if d not in (axis_a, axis_b)):
                 base[:, d] = free
             base[:, axis_a], base[:, axis_b] = side_a, side_b
             into_a = base.copy()  # stay on face axis_a = side_a, move off the edge along axis_b
@@ -222,10 +252,12 @@ def check_boundary(geometry: Geometry, tolerance: float = 1e-4) -> None:
             into_b = base.copy()
             into_b[:, axis_a] += step if side_a == 0.0 else -step
             on_edge.append(base), from_a.append(into_a), from_b.append(into_b)
+    edges = len(on_edge)
     on_edge, from_a, from_b = (np.concatenate(a) for a in (on_edge, from_a, from_b))
     images = geometry.boundary(np.concatenate([on_edge, from_a, from_b]))
     edge_img, a_img, b_img = np.split(images, 3)
-    size = max(float(np.ptp(edge_img, axis=0).max()), 1e-12)
+    if size is None:
+        size = max(float(np.ptp(edge_img, axis=0).max()), 1e-12)
     jump = np.maximum(np.linalg.norm(a_img - edge_img, axis=1), np.linalg.norm(b_img - edge_img, axis=1))
     worst = int(np.argmax(jump))
     if jump[worst] > tolerance * size:
@@ -234,6 +266,7 @@ def check_boundary(geometry: Geometry, tolerance: float = 1e-4) -> None:
             f"geometry '{geometry.name}' ({geometry.source}): boundary is not continuous across the cube's "
             f"edge at ({where}): the adjacent faces disagree by {jump[worst]:.3g}"
         )
+    return edge_img.reshape(edges, len(free), dim), size
 
 
 def parse_params(items: tuple[str, ...] | list[str]) -> dict[str, float]:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 from meshgen.errors import ParameterError, unknown_name
 from meshgen.layout import with_layout
+from meshgen.limits import check_mesh_memory
 from meshgen.tfi import tfi
 
 __all__ = ["METHODS", "NEURAL", "NEURAL_OPTIONS", "TRAINED", "Method", "build_tfi", "get_method", "make_mesh", "register_method"]
@@ -90,6 +91,7 @@ def build_tfi(geometry, coords, boundary_layout: str = "fixed"):
 def make_mesh(method_name: str, geometry, coords, **options):
     """Run method ``method_name``; options it does not take are an error, unset ones (None) are dropped."""
     method = get_method(method_name)
+    check_mesh_memory([len(c) - 1 for c in coords], chunked=False)  # before the method allocates its node array
     given = {k: v for k, v in options.items() if v is not None}
     foreign = sorted(set(given) - set(method.options))
     if foreign:

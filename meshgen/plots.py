@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import atomic_write
+from meshgen.inputs import read_input_text
 from meshgen.quality import cell_metrics, cell_metrics_unstructured
 from meshgen.tables import METRIC_LABELS
 
@@ -218,8 +219,7 @@ def sections_figure(pictures, metric: str, path, heading: str = "") -> Path | No
 def read_history(path) -> dict[str, np.ndarray]:
     """A training history CSV as float columns (step, L1, L2, total, ...); ``stage`` kept as
     strings. Non-numeric entries become NaN."""
-    with open(path, newline="") as handle:
-        rows = list(csv.DictReader(handle))
+    rows = list(csv.DictReader(read_input_text(path, "history").splitlines()))
     columns = {}
     for key in rows[0] if rows else ():
         if key == "stage":

@@ -21,8 +21,9 @@ from meshgen.chunked import CHUNKED_METHODS, neural_array, single_threaded_torch
 from meshgen.clustering import node_coordinates
 from meshgen.errors import MeshgenError, ParameterError
 from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer
-from meshgen.geometry import Geometry, bind, check_boundary, load_geometry
+from meshgen.geometry import Geometry, bind, check_boundary, load_geometry, load_recorded_geometry
 from meshgen.layout import trained_layout, with_layout
+from meshgen.limits import check_mesh_memory
 from meshgen.meshing import Mesh
 from meshgen.methods import get_method, make_mesh
 from meshgen.patches import geometry_patches, parse_patch_options
@@ -203,6 +204,7 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
         streaming_writer(output, output_format.name)  # a format that cannot stream fails before any work
     elif address is not None:
         raise ParameterError("scheduler", "{name} runs the chunked path; leave out --in-memory")
+    check_mesh_memory(dims, chunked)  # memory first: its message names the chunked path
     patches = []
     if output is not None:
         check_free_space(output, node_count * len(dims) * 8)
@@ -278,7 +280,7 @@ def _neural_model(request: MeshRequest, dims, warn, fallback: bool):
         if geometry.values != chosen.values:
             check_boundary(geometry)
     else:
-        geometry = load_geometry(entry["spec"], dict(entry["params"]))
+        geometry = load_recorded_geometry(entry["spec"], dict(entry["params"]), where=f"checkpoint {model.path}")
     return _check_model_dims(model, geometry, dims)
 
 

@@ -204,7 +204,8 @@ def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
         (["-m", "tfi", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.vtu"], "formats that can: .cgns"),
         (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "formats that can: .cgns"),
         (["-m", "elliptic", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.cgns"], "methods that can: tfi, neural"),
-        (["-m", "tfi", "--dims", "100000", "100000", "100000", "-o", "{dir}/x.cgns"], "GB free"),
+        (["-m", "tfi", "-g", "semidisk", "--dims", "1000000", "1000000", "-o", "{dir}/x.cgns"], "GB free"),
+        (["-m", "tfi", "--dims", "100000", "100000", "100000", "-o", "{dir}/x.cgns"], "even block by block"),
         (
             ["-m", "tfi", "--dims", "4", "4", "4", "--scheduler", "tcp://127.0.0.1:9", "-o", "{dir}/x.cgns"],
             "cannot reach the Dask scheduler",

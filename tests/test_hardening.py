@@ -71,6 +71,30 @@ Untrusted files:
 | YAML safe loader: --config and --set               | test_hardening.py::test_bad_input[train-config-python-tag], [train-set-python-tag] |
 | plugin files are code: the README says so          | test_hardening.py::test_readme_says_plugins_are_code                            |
 
+Trust boundary (design notes, "Trust boundary and faults"): data, sizes, files, plugins:
+
+| case                                                         | test |
+|--------------------------------------------------------------|------|
+| mesh metadata (.vtu, .cgns) names a plugin file: evaluate    | test_trust.py::test_a_mesh_naming_a_plugin_file_is_evaluated_without_running_it[vtu], [cgns] |
+| .quality.json sidecar names a plugin file: evaluate          | test_trust.py::test_a_mesh_naming_a_plugin_file_is_evaluated_without_running_it[sidecar] |
+| checkpoint's geometry.spec names a plugin: mesh, train       | test_trust.py::test_a_checkpoint_naming_a_plugin_file_asks_for_it |
+| plugin name ../../x, /abs, a/b: never a path                 | test_trust.py::test_a_plugin_name_never_becomes_a_path |
+| --dims 1e10 1, 100000^3 (mesh, compare), --in-memory         | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[mesh-one-long-axis], [compare] |
+| model.widths, points.interior too large; train memory        | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[train-widths], [train-memory] |
+| inf/NaN: --set, --fail-if, --param, --cluster, --tol, --vary | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[train-lr-inf], [gate-nan], [tol-nan] |
+| CGNS zone header claims 100001^3 nodes (or sparse data)      | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[cgns-header], [cgns-sparse] |
+| every config number bounded above and below                  | test_trust.py::test_every_number_of_the_training_configuration_has_both_bounds |
+| FIFO, link to /dev/zero (mesh, config, checkpoint)           | test_trust.py::test_untrusted_files_are_refused_in_one_short_line[fifo-evaluate], [zero-config] |
+| YAML alias bomb, 5000 nested brackets, 100 kB value          | test_trust.py::test_untrusted_files_are_refused_in_one_short_line[alias-bomb], [deep-nesting] |
+| OpenFOAM owner / neighbour list corrupt (binary, ASCII)      | test_trust.py::test_an_openfoam_case_with_a_corrupt_owner_or_neighbour_list_is_an_error |
+| checkpoint with NaN weights: mesh, train --resume            | test_trust.py::test_a_checkpoint_with_nan_weights_is_an_error_and_writes_nothing |
+| network output non-finite                                    | test_trust.py::test_a_non_finite_network_output_is_an_error |
+| history.csv cut mid-row: --resume                            | test_trust.py::test_resume_survives_a_truncated_history |
+| checkpoint's optimiser state damaged: history kept           | test_trust.py::test_a_damaged_checkpoint_fails_before_the_run_folder_changes |
+| plugin raises SystemExit, GeneratorExit, BaseException       | test_trust.py::test_a_misbehaving_plugin_is_one_line_naming_it_and_the_function[system-exit], [base-exception] |
+| plugin returns complex numbers, overflows, long message      | test_trust.py::test_a_misbehaving_plugin_is_one_line_naming_it_and_the_function[complex], [overflow] |
+| a tear of 1% of an edge between two faces                    | test_trust.py::test_a_tear_of_one_percent_of_an_edge_is_found |
+
 Faults:
 
 | case                                               | test                                                                            |

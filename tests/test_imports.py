@@ -61,6 +61,8 @@ LAYERS = [
         "meshgen.grid",
         "meshgen.resources",
         "meshgen.scheduler",
+        "meshgen.limits",
+        "meshgen.inputs",
     ],
     [
         "meshgen.clustering",
@@ -72,6 +74,8 @@ LAYERS = [
         "meshgen.surface",
         "meshgen.domain",
         "meshgen.shapes",
+        "meshgen.trust",
+        "meshgen.plugin_calls",
         "meshgen.geometry",
     ],
     ["meshgen.layout", "meshgen.elliptic", "meshgen.polish", "meshgen.deviation"],

@@ -16,6 +16,7 @@ from meshgen import plots
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options, load_selected_geometry
 from meshgen.formats import format_for
 from meshgen.geometry import load_geometry, parse_params
+from meshgen.limits import check_mesh_memory
 from meshgen.methods import METHODS
 from meshgen.neural.progress import reporter_for
 from meshgen.tables import METRIC_LABELS, print_table
@@ -201,6 +202,7 @@ def compare(
         names = comparing.parse_methods(methods or ",".join(comparing.DEFAULT_METHODS))
         reuse = comparing.parse_checkpoints(checkpoints)
         chosen = load_selected_geometry(geometry or "semicylinder", params, dims)
+        check_mesh_memory(dims, chunked=False)  # compare meshes in memory: too large is an error before any method runs
         if out_dir is not None:
             format_for("mesh" + mesh_format)
         out = Path(out_dir) if out_dir is not None else None  # compare_methods creates it after its checks

@@ -23,6 +23,7 @@ from meshgen.errors import MeshgenError, ParameterError
 from meshgen.formats import read_mesh
 from meshgen.methods import METHODS, TRAINED, get_method
 from meshgen.neural.config import resolve_config
+from meshgen.neural.session import check_training_size
 from meshgen.quality import VALID_RULE, as_node_array, cells_for_quality, evaluate_file, recorded_metadata
 from meshgen.request import MeshRequest, carry_out
 
@@ -137,6 +138,7 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
         return run
 
     config = resolve_config(get_method(name).preset, overrides=budget.overrides, steps=budget.steps, seed=budget.seed)
+    check_training_size(config, geometry.dim)  # a network too large for memory fails before any method runs
     device = inference_device(budget.device)
 
     def run(run_dir):

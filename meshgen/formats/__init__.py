@@ -30,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import atomic_write, check_output_file
-from meshgen.errors import FormatError, MeshgenError
+from meshgen.errors import FormatError, MeshgenError, excerpt
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.inputs import InputError, check_input_file
 from meshgen.patches import check_covers
 from meshgen.publish import publishing
 
@@ -176,6 +177,10 @@ def block_reader(path, format_name: str | None = None):
 def read_header(path) -> tuple[tuple[int, ...], dict]:
     """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of a structured mesh file that
     can be read block by block (CGNS), without reading the nodes."""
+    try:
+        check_input_file(path, "mesh file")
+    except InputError as exc:
+        raise FormatError(str(exc)) from None
     return block_reader(path).zone_header(path)
 
 
@@ -287,6 +292,10 @@ def read_mesh(path):
     path = Path(path)
     if not path.exists():
         raise FormatError(f"mesh file {path} does not exist")
+    try:
+        check_input_file(path, "mesh file", folder=True)  # a FIFO or a device is never handed to a reader
+    except InputError as exc:
+        raise FormatError(str(exc)) from None
     fmt = _reading_format(path)
     reader = importlib.import_module(fmt.module if fmt is not None else "meshgen.formats._meshio")
     captured = io.StringIO()
@@ -302,7 +311,7 @@ def read_mesh(path):
             raise
         raise FormatError(f"could not read {path}: {exc}") from exc  # the reader's reason, with the file
     except Exception as exc:
-        raise FormatError(f"could not read {path}: {type(exc).__name__}: {exc}") from exc
+        raise FormatError(f"could not read {path}: {type(exc).__name__}: {excerpt(exc, 200)}") from exc
     if captured.getvalue().strip():
         sys.stderr.write(captured.getvalue())  # the reader's warnings, kept off stdout
     return mesh

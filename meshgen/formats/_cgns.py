@@ -433,7 +433,31 @@ def _structured_zone(root, path):
     zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
     if zone_type != "Structured":
         raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
-    return base, zone, tuple(int(n) for n in _data(zone)[0])
+    return base, zone, _checked_node_shape(zone, path)
+
+
+def _checked_node_shape(zone, path) -> tuple[int, ...]:
+    """The zone's node shape, verified against what the file holds before anything is allocated:
+    2 or 3 counts of at least 2, coordinate arrays of that shape, and (uncompressed arrays) the
+    bytes stored for them. A header is data: it may claim more nodes than the file carries."""
+    sizes = np.asarray(_data(zone))
+    if sizes.ndim != 2 or sizes.shape[0] < 1 or sizes.shape[1] not in (2, 3) or sizes.dtype.kind not in "iu":
+        raise FormatError(f"{path}: zone '{_name(zone)}' has a malformed size header (shape {sizes.shape})")
+    node_shape = tuple(int(n) for n in sizes[0])
+    if min(node_shape) < 2:
+        raise FormatError(f"{path}: zone '{_name(zone)}' claims {node_shape} nodes: each count must be at least 2")
+    for array in _coordinate_arrays(zone, len(node_shape), path):
+        if array.shape != node_shape[::-1]:
+            raise FormatError(
+                f"{path}: zone '{_name(zone)}' claims {node_shape} nodes but a coordinate array holds {array.shape[::-1]}"
+            )
+        claimed = int(np.prod(node_shape, dtype=np.int64)) * array.dtype.itemsize
+        if array.id.get_create_plist().get_nfilters() == 0 and array.id.get_storage_size() < claimed:
+            raise FormatError(
+                f"{path}: zone '{_name(zone)}' claims {node_shape} nodes ({claimed / 1e9:.3g} GB of coordinates) "
+                f"but the file stores {array.id.get_storage_size() / 1e9:.3g} GB of them: truncated or not a mesh"
+            )
+    return node_shape
 
 
 def _coordinate_arrays(zone, dim: int, path) -> list:

@@ -38,10 +38,11 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.atomic import atomic_path
-from meshgen.errors import FormatError
+from meshgen.errors import FormatError, excerpt
 from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
+from meshgen.inputs import InputError, read_input_bytes
 from meshgen.patches import Patch, flow_role
 from meshgen.publish import publishing, remove_stale_temporaries
 
@@ -54,7 +55,9 @@ __all__ = [
     "LABEL_LIMIT",
     "RECORD_NAME",
     "WORD",
+    "TOPOLOGY_BLOCK",
     "case_folder",
+    "check_topology",
     "check_output",
     "check_patch_name",
     "extrude",
@@ -363,7 +366,7 @@ def read_list(path: Path, dtype: str) -> np.ndarray:
     """The list (ASCII or binary) of an OpenFOAM polyMesh file, ``dtype`` "points" (N, 3) float64,
     "faces" (N, 4) int64 (quadrilaterals only; a faceCompactList is expanded) or "labels" (N,)
     int64."""
-    data = path.read_bytes()
+    data = _input_bytes(path)
     header_end = data.find(b"}", data.find(b"FoamFile"))
     if header_end < 0:
         raise FormatError(f"{path}: no FoamFile header")
@@ -409,9 +412,13 @@ def _record(folder: Path) -> dict:
     if not path.is_file():
         raise FormatError(f"{folder}: no {RECORD_NAME}: meshgen reads the OpenFOAM cases it wrote (their structured grid)")
     try:
-        return json.loads(path.read_text())
+        record = json.loads(_input_bytes(path, limit=16 * 2**20))
     except ValueError as exc:
-        raise FormatError(f"{path}: {exc}") from None
+        raise FormatError(f"{path}: {excerpt(exc)}") from None
+    shape = record.get("node_shape") if isinstance(record, dict) else None
+    if not (isinstance(shape, list) and len(shape) in (2, 3) and all(isinstance(n, int) and n >= 2 for n in shape)):
+        raise FormatError(f"{path}: no node_shape of 2 or 3 counts of at least 2: not a case meshgen wrote")
+    return record
 
 
 def read(path):
@@ -428,6 +435,7 @@ def read(path):
     expected = int(np.prod(node_shape)) * (2 if extruded else 1)
     if len(points) != expected:
         raise FormatError(f"{folder}: {len(points)} points where {RECORD_NAME} says {expected}")
+    check_topology(folder, node_shape + (2,) if extruded else node_shape)
     if extruded:
         points = np.column_stack([points[0::2, :2], np.zeros(len(points) // 2)])  # the front, z = 0
     cell_type = "quad" if extruded else "hexahedron"
@@ -437,9 +445,77 @@ def read(path):
     return meshio.Mesh(points, [(cell_type, cell_connectivity(node_shape))], field_data=field_data)
 
 
+def _input_bytes(path: Path, limit: int = 2**40) -> bytes:
+    """The bytes of a case file (a regular file, at most ``limit`` bytes: ``meshgen.inputs``)."""
+    try:
+        return read_input_bytes(path, "case file", limit)
+    except InputError as exc:
+        raise FormatError(str(exc)) from None
+
+
+TOPOLOGY_BLOCK = 2**20  # faces checked at a time
+
+
+def check_topology(folder: Path, shape3: tuple) -> None:
+    """FormatError unless ``faces``, ``owner`` and ``neighbour`` are those of the structured grid
+    of nodes ``shape3`` (i, j, k) that the reader rebuilds from ``points``: every internal face the
+    4 nodes shared by its owner and its neighbour (owner < neighbour), every boundary face 4 nodes
+    of its owner on one boundary plane, each cell pair and each boundary cell face once. The
+    readers verify what they do not compute; checkMesh checks the geometry."""
+    faces = read_list(folder / "faces", "faces")
+    owner = read_list(folder / "owner", "labels")
+    neighbour = read_list(folder / "neighbour", "labels")
+    nodes = np.array(shape3)
+    cells = nodes - 1
+    internal = int(sum(np.prod(cells) // cells[a] * (cells[a] - 1) for a in range(3)))
+    boundary = int(sum(2 * np.prod(cells) // cells[a] for a in range(3)))
+    if len(neighbour) != internal or len(faces) != internal + boundary or len(owner) != len(faces):
+        raise FormatError(
+            f"{folder}: {len(faces)} faces, {len(owner)} owners and {len(neighbour)} neighbours where the "
+            f"{' x '.join(map(str, cells))} grid has {internal + boundary} faces, {internal} of them internal"
+        )
+    if faces.min() < 0 or faces.max() >= np.prod(nodes) or owner.min() < 0 or owner.max() >= np.prod(cells):
+        raise FormatError(f"{folder}: face or owner labels outside the grid")
+    if len(neighbour) and (neighbour.min() < 0 or neighbour.max() >= np.prod(cells)):
+        raise FormatError(f"{folder}: neighbour labels outside the grid")
+    for start in range(0, len(faces), TOPOLOGY_BLOCK):
+        stop = min(len(faces), start + TOPOLOGY_BLOCK)
+        node_ijk = np.stack(np.unravel_index(faces[start:stop], shape3), axis=-1)  # (F, 4, 3)
+        owner_ijk = np.stack(np.unravel_index(owner[start:stop], tuple(cells)), axis=-1)[:, None]
+        offset = node_ijk - owner_ijk
+        good = np.all((offset == 0) | (offset == 1), axis=(1, 2))
+        ordered = np.sort(faces[start:stop], axis=1)
+        good &= np.all(np.diff(ordered, axis=1) > 0, axis=1)  # four distinct nodes
+        inside = min(stop, internal) - start
+        if inside > 0:  # the internal ones: in the neighbour too, which comes after the owner
+            mine = slice(0, inside)
+            other = np.stack(np.unravel_index(neighbour[start : start + inside], tuple(cells)), axis=-1)[:, None]
+            shared = node_ijk[mine] - other
+            good[mine] &= np.all((shared == 0) | (shared == 1), axis=(1, 2))
+            good[mine] &= owner[start : start + inside] < neighbour[start : start + inside]
+        if stop > internal:  # the boundary ones: on one plane i, j or k = 0 or last
+            rest = slice(max(0, internal - start), stop - start)
+            ijk = node_ijk[rest]
+            on_plane = np.zeros(len(ijk), dtype=bool)
+            for axis in range(3):
+                column = ijk[:, :, axis]
+                on_plane |= np.all(column == 0, axis=1) | np.all(column == shape3[axis] - 1, axis=1)
+            good[rest] &= on_plane
+        if not good.all():
+            face = start + int(np.argmin(good))
+            kind = "internal" if face < internal else "boundary"
+            raise FormatError(
+                f"{folder}: {kind} face {face} (nodes {faces[face].tolist()}, owner {owner[face]}) is not a face of its "
+                "cells in the structured grid: faces, owner or neighbour are corrupt"
+            )
+    pairs = owner[:internal] * np.prod(cells) + neighbour
+    if len(np.unique(pairs)) != internal or len(np.unique(np.sort(faces[internal:], axis=1), axis=0)) != boundary:
+        raise FormatError(f"{folder}: a face is listed twice: faces, owner or neighbour are corrupt")
+
+
 def read_boundary(folder: Path) -> list[tuple[str, str, int, int]]:
     """(name, type, nFaces, startFace) of each entry of ``boundary``."""
-    text = (folder / "boundary").read_text()
+    text = _input_bytes(folder / "boundary").decode("utf-8", "replace")
     text = text[text.find("}", text.find("FoamFile")) + 1 :]
     entries = []
     for name, body in re.findall(r"([^\s{}()]+)\s*\{([^}]*)\}", text):

@@ -30,6 +30,7 @@ import torch
 
 from meshgen.atomic import atomic_path
 from meshgen.errors import MeshgenError
+from meshgen.inputs import InputError, check_input_file
 from meshgen.publish import reason
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
@@ -67,8 +68,12 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     meshgen (a higher ``format_version``).
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise CheckpointError(f"checkpoint {path} does not exist")
+    try:
+        check_input_file(path, "checkpoint")  # a FIFO or a device is never handed to torch
+    except InputError as exc:
+        raise CheckpointError(str(exc)) from None
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
@@ -91,7 +96,23 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
             f"checkpoint {path} holds a {model.get('dim')}D map but records the {geometry['dim']}D geometry "
             f"'{geometry['name']}': not a consistent meshgen checkpoint"
         )
+    _check_values(checkpoint, path)
     return checkpoint
+
+
+def _check_values(checkpoint: dict, path: Path) -> None:
+    """CheckpointError for weights that are not finite numbers, or a training state that is not
+    one (a stage, non-negative step counts): a damaged file fails here, before anything is written."""
+    state = checkpoint["model"].get("state_dict", {})
+    tensors = list(state.values()) if isinstance(state, dict) else []
+    if not all(isinstance(t, torch.Tensor) and bool(torch.isfinite(t).all()) for t in tensors):
+        raise CheckpointError(f"checkpoint {path}: its network holds non-finite weights (NaN or infinity): the file is damaged")
+    if "stage" in checkpoint:
+        steps = [checkpoint.get(key) for key in ("step", "stage_step")]
+        if checkpoint["stage"] not in ("pretrain", "adam", "lbfgs", "done") or not all(
+            isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in steps
+        ):
+            raise CheckpointError(f"checkpoint {path}: its training state (stage, step) is damaged")
 
 
 def _load_failure(path: Path, exc: Exception) -> str:

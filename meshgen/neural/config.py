@@ -10,12 +10,14 @@ repeats a run.
 from __future__ import annotations
 
 import dataclasses
+import math
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from meshgen.errors import MeshgenError, did_you_mean, unknown_name
+from meshgen.errors import MeshgenError, did_you_mean, excerpt, unknown_name
 from meshgen.geometry import builtin_dir
+from meshgen.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = [
     "ConfigError",
@@ -142,6 +144,40 @@ class TrainConfig:
 
 CHOICES = {"method.derivatives": ("fd", "autograd"), "method.boundary_error": ("relative", "absolute")}
 
+# The range of every number of the configuration, (lowest, highest) inclusive (model.widths: of
+# each width). Every int and float key has one (tests/test_trust.py checks): an upper bound keeps
+# a mistyped value from asking for more than any machine has.
+BOUNDS = {
+    "seed": (0, 2**63 - 1),
+    "dim": (2, 3),
+    "model.widths": (1, 4096),
+    "method.point_weights": (0.0, 1e6),
+    "method.pde_weight": (0.0, 1e6),
+    "method.boundary_weight": (0.0, 1e6),
+    "points.interior": (1, 10**7),
+    "points.boundary": (1, 10**7),
+    "points.grid_min_scale": (0.0, 1.0),
+    "points.boundary_pool": (0, 10**4),
+    "pretrain.steps": (0, 10**7),
+    "pretrain.lr": (0.0, 1e3),
+    "pretrain.points": (1, 10**7),
+    "adam.steps": (0, 10**8),
+    "adam.lr": (0.0, 1e3),
+    "adam.decay": (0.0, 1.0),
+    "adam.decay_every": (1, 10**9),
+    "adam.weights_lr": (0.0, 1e3),
+    "lbfgs.steps": (0, 10**7),
+    "lbfgs.max_iter": (1, 10**4),
+    "lbfgs.history_size": (1, 10**4),
+    "lbfgs.lr": (0.0, 1e3),
+    "checkpoint.every": (1, 10**9),
+    "guard.max_retries": (0, 1000),
+    "guard.lr_factor": (0.0, 1.0),
+    "test.interior": (1, 10**7),
+    "test.boundary": (1, 10**7),
+}
+MAX_LAYERS = 64  # hidden layers of model.widths
+
 
 # ---------------------------------------------------------------------------------------------
 # keys and types
@@ -192,6 +228,8 @@ def _coerce(key: str, kind, value):
                 pass
         ok = isinstance(value, (int, float)) and not isinstance(value, bool)
         value = float(value) if ok else value
+        if ok and not math.isfinite(value):  # .inf and .nan are YAML numbers, not usable ones
+            raise ConfigError(f"configuration key '{key}' must be a finite number, got {value!r}")
     elif kind is str:
         ok = isinstance(value, str)
     elif typing.get_origin(kind) is list:
@@ -203,7 +241,7 @@ def _coerce(key: str, kind, value):
         except ConfigError:
             ok = False
     if not ok:
-        raise ConfigError(f"configuration key '{key}' must be {_type_name(kind)}, got {value!r}")
+        raise ConfigError(f"configuration key '{key}' must be {_type_name(kind)}, got {excerpt(repr(value))}")
     return value
 
 
@@ -256,9 +294,11 @@ def parse_override(text: str) -> tuple[str, typing.Any]:
     if not sep or not key:
         raise ConfigError(f"malformed --set {text!r}: expected key=value, e.g. adam.steps=2000")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
+        value = load_yaml(raw, f"--set {excerpt(text)}") if raw.strip() else ""
+    except InputError as exc:
+        raise ConfigError(str(exc)) from None
     except yaml.YAMLError:
-        raise ConfigError(f"malformed --set {text!r}: {raw!r} is not a value") from None
+        raise ConfigError(f"malformed --set {excerpt(repr(text))}: {excerpt(repr(raw))} is not a value") from None
     return key, value
 
 
@@ -278,13 +318,13 @@ def read_yaml(path: Path, what: str):
     import yaml
 
     try:
-        text = Path(path).read_text()
-    except UnicodeDecodeError:
-        raise ConfigError(f"{what} {path} is not a text file (not UTF-8): a YAML file was expected") from None
-    except OSError as exc:
-        raise ConfigError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
-    try:
-        return yaml.safe_load(text) or {}
+        text = read_input_text(path, what, MAX_YAML_BYTES)
+        return load_yaml(text, f"{what} {path}") or {}
+    except InputError as exc:
+        message = str(exc)
+        if message.endswith("(not UTF-8)"):
+            message += ": a YAML file was expected"
+        raise ConfigError(message) from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -361,7 +401,7 @@ def validate(config: TrainConfig) -> None:
             value = config
             for part in key.split("."):
                 value = getattr(value, part)
-            raise ConfigError(f"configuration key '{key}' {text}, got {value!r}")
+            raise ConfigError(f"configuration key '{key}' {text}, got {excerpt(repr(value))}")
 
     for key, choices in CHOICES.items():
         section, name = key.split(".")
@@ -395,3 +435,18 @@ def validate(config: TrainConfig) -> None:
         need(config.method.derivatives == "fd", "method.derivatives", "must be fd with model.exact_boundary")
         need(not config.method.reweighting, "method.reweighting", "must be false with model.exact_boundary (no L2)")
         need(not config.method.pcgrad, "method.pcgrad", "must be false with model.exact_boundary (no L2)")
+    _check_bounds(config)
+
+
+def _check_bounds(config: TrainConfig) -> None:
+    """ConfigError for a number outside its ``BOUNDS`` (null optional keys pass)."""
+    for key, (low, high) in BOUNDS.items():
+        value = config
+        for part in key.split("."):
+            value = getattr(value, part)
+        values = value if isinstance(value, list) else [value]
+        if key == "model.widths" and len(values) > MAX_LAYERS:
+            raise ConfigError(f"configuration key 'model.widths' has {len(values)} layers, at most {MAX_LAYERS}")
+        for number in values:
+            if number is not None and not low <= number <= high:
+                raise ConfigError(f"configuration key '{key}' must lie in [{low:g}, {high:g}], got {excerpt(repr(number))}")

@@ -37,7 +37,7 @@ import torch
 
 from meshgen.cube import face_samples
 from meshgen.errors import GeometryError, MeshgenError
-from meshgen.geometry import check_boundary, load_geometry
+from meshgen.geometry import check_boundary, load_recorded_geometry
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_points
 from meshgen.neural.model import INPUT_MAP, bubble
@@ -272,10 +272,12 @@ def member_model(model: dict, q) -> dict:
 
 
 def family_from_checkpoint(checkpoint: dict) -> Family:
-    """The Family a checkpoint was trained on (its geometry loaded by name or plugin path)."""
+    """The Family a checkpoint was trained on (its geometry loaded by name, or by a plugin path the
+    user gave: ``meshgen.trust``)."""
     entry = checkpoint["geometry"]
     ranges = {k: (float(lo), float(hi)) for k, (lo, hi) in checkpoint["family"]["ranges"].items()}
-    return Family(load_geometry(entry["spec"], dict(entry["params"]), check=False), entry["spec"], ranges)
+    base = load_recorded_geometry(entry["spec"], dict(entry["params"]), check=False, where="the checkpoint")
+    return Family(base, entry["spec"], ranges)
 
 
 def is_family(checkpoint: dict) -> bool:
@@ -324,7 +326,7 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
 
     member = FamilyMember(path, {**checkpoint, "model": model}, "checkpoint")
     entry = checkpoint["geometry"]
-    return member, load_geometry(entry["spec"], {**entry["params"], **values})
+    return member, load_recorded_geometry(entry["spec"], {**entry["params"], **values}, where=f"checkpoint {path}")
 
 
 # ---------------------------------------------------------------------------------------------

@@ -11,8 +11,11 @@ from pathlib import Path
 
 import torch
 
+from meshgen.inputs import read_input_text
+
 __all__ = [
     "HISTORY_COLUMNS",
+    "history_step",
     "DivergenceGuard",
     "TrainState",
     "format_row",
@@ -71,13 +74,22 @@ def open_history(path: Path, keep_until_step: int | None):
     it, by a run killed before its next checkpoint, belong to the lost part)."""
     rows = []
     if keep_until_step is not None and path.is_file():
-        with open(path, newline="") as handle:
-            rows = [row for row in csv.DictReader(handle) if int(row["step"]) < keep_until_step]
+        # A row cut short by a kill (or an edited file) is dropped: a history is data, read leniently.
+        text = read_input_text(path, "history").splitlines()
+        rows = [row for row in csv.DictReader(text) if history_step(row) is not None and history_step(row) < keep_until_step]
     handle = open(path, "w", newline="")
     writer = csv.DictWriter(handle, fieldnames=HISTORY_COLUMNS, extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
     return handle, writer
+
+
+def history_step(row: dict) -> int | None:
+    """The step of a history row, None for a row that is not a whole one (missing columns)."""
+    try:
+        return int(row["step"]) if None not in row.values() and None not in row else None
+    except (KeyError, TypeError, ValueError):
+        return None
 
 
 def format_row(row: dict) -> dict:

@@ -68,6 +68,14 @@ def network_layers(model: dict):
             f"the checkpoint's network uses activation {model.get('activation')!r} and input "
             f"{model.get('input')!r}; this meshgen evaluates tanh networks of 2*xi-1"
         )
+    # A file is data: weights, scale and centre that are not finite numbers would make an all-NaN mesh.
+    finite = all(bool(torch.isfinite(weight).all() and torch.isfinite(bias).all()) for weight, bias in layers)
+    try:
+        finite = finite and all(np.isfinite(np.asarray(model.get(key, 1.0), dtype=float)).all() for key in ("scale", "center"))
+    except (TypeError, ValueError):
+        finite = False
+    if not finite:
+        raise CheckpointError("the checkpoint's network holds non-finite numbers (NaN or infinity): the file is damaged")
     return layers
 
 
@@ -114,7 +122,7 @@ def evaluate_on_grid(
     if out is None:
         out = np.empty((count, dim))
     if inference_device(device) == "cuda":
-        return _evaluate_on_gpu(layers, axes, count, out)
+        return _finite_output(_evaluate_on_gpu(layers, axes, count, out))
     widths = [bias.shape[0] for _, bias in layers]
     local = threading.local()
 
@@ -141,6 +149,14 @@ def evaluate_on_grid(
                 pass
     finally:
         torch.set_num_threads(threads)
+    return _finite_output(out)
+
+
+def _finite_output(out: np.ndarray) -> np.ndarray:
+    """``out`` when every value the network gave is finite, else MeshgenError (never a NaN mesh)."""
+    bad = out.size - int(np.count_nonzero(np.isfinite(out)))
+    if bad:
+        raise MeshgenError(f"the network's output is non-finite (NaN or infinity) at {bad} of {out.size} values: no mesh written")
     return out
 
 

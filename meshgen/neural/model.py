@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from meshgen.cube import face_samples
-from meshgen.geometry import load_geometry
+from meshgen.geometry import load_recorded_geometry
 from meshgen.layout import trained_layout, with_layout
 from meshgen.neural.checkpoint import load_checkpoint
 
@@ -112,4 +112,4 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
 def geometry_from_checkpoint(checkpoint: dict):
     """The geometry a checkpoint was trained on, with its parameters (by name or plugin path)."""
     entry = checkpoint["geometry"]
-    return load_geometry(entry["spec"], dict(entry["params"]))
+    return load_recorded_geometry(entry["spec"], dict(entry["params"]), where="the checkpoint")

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
-from meshgen.geometry import load_geometry, looks_like_path, parse_params
+from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
+from meshgen.limits import check_training_memory
 from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
@@ -129,7 +130,11 @@ def prepare_run(
         validate(config)
         trained_on = checkpoint["geometry"]
         spec = trained_on["spec"]
-        geometry_object = load_geometry(geometry or spec, {**trained_on["params"], **parse_params(params)})
+        merged = {**trained_on["params"], **parse_params(params)}
+        if geometry:
+            geometry_object = load_geometry(geometry, merged)
+        else:
+            geometry_object = load_recorded_geometry(spec, merged, where=f"checkpoint {resume_path}")
         if geometry_object.name != trained_on["name"] or geometry_object.values != dict(trained_on["params"]):
             raise CheckpointError(
                 f"checkpoint {resume_path} was trained on {trained_on['name']} {trained_on['params']}, "
@@ -158,6 +163,7 @@ def prepare_run(
             f"preset '{preset or 'default'}' is made for {config.dim}D geometries; "
             f"'{geometry_object.name}' is {geometry_object.dim}D"
         )
+    check_training_size(config, geometry_object.dim)
     from meshgen.neural.inference import inference_device
 
     device = inference_device(device)
@@ -196,6 +202,19 @@ def _refuse_family_keys(config, preset, overrides) -> None:
     changed = [key for key in chosen if key not in given and chosen[key] != preset_only.get(key)]
     check_family_keys(given)
     check_family_keys(changed, "config_file")
+
+
+def check_training_size(config, dim: int) -> None:
+    """MeshgenError, before the run folder exists, when the network and the points of one step
+    would not fit in memory (``meshgen.limits.training_bytes``): the finite-difference residual
+    evaluates the network at each point and its 2 dim neighbours."""
+    points = config.points
+    per_step = max(
+        points.interior * (2 * dim + 1) + points.boundary,
+        config.pretrain.points * 2,
+        config.test.interior * (2 * dim + 1) + config.test.boundary,
+    )
+    check_training_memory(config.model.widths, dim, per_step, config.lbfgs.history_size)
 
 
 def _family(config, geometry, spec: str, params, vary):

@@ -25,7 +25,7 @@ from meshgen.neural.config import to_dict, to_yaml
 from meshgen.neural.history import DivergenceGuard, TrainState, format_row, open_history, read_rows, state_to_checkpoint
 from meshgen.neural.steps import Training
 
-__all__ = ["CONFIG_HEADER", "CheckpointWriter", "Stage", "TrainResult", "TrainingDiverged", "run_stages"]
+__all__ = ["CONFIG_HEADER", "CheckpointWriter", "Stage", "TrainResult", "TrainingDiverged", "check_resumable", "run_stages"]
 
 CONFIG_HEADER = "# meshgen train: the resolved configuration of this run (repeat it with --config FILE)\n"
 
@@ -94,6 +94,23 @@ class CheckpointWriter:
         return checkpoint
 
 
+def check_resumable(stage_table, training: Training, resume: dict) -> None:
+    """CheckpointError unless the optimiser and scheduler states of ``resume`` load into its stage's
+    own (a damaged or stitched checkpoint fails here, before the run folder is written)."""
+    for stage in stage_table:
+        if stage.name != resume["stage"] or not resume.get("optimizer"):
+            continue
+        optimizer, scheduler = stage.optimizer(training)
+        try:
+            optimizer.load_state_dict(resume["optimizer"])
+            if scheduler is not None:
+                scheduler.load_state_dict(resume["scheduler"])
+        except (KeyError, TypeError, ValueError, RuntimeError, IndexError) as exc:
+            raise checkpoints.CheckpointError(
+                f"the checkpoint's optimiser state does not fit its stage '{stage.name}' ({type(exc).__name__}): the file is damaged"
+            ) from None
+
+
 def run_stages(
     stage_table, training: Training, state: TrainState, saver: CheckpointWriter, run_dir, *, resume=None, reporter=None, stop=None
 ):
@@ -107,6 +124,8 @@ def run_stages(
     config, run_dir, stop = training.config, Path(run_dir), stop or (lambda: False)
     say = reporter.message if reporter is not None else (lambda text: None)
     names = [stage.name for stage in stage_table]
+    if resume is not None:
+        check_resumable(stage_table, training, resume)  # before config.yaml and history.csv are touched
     (run_dir / "config.yaml").write_text(CONFIG_HEADER + to_yaml(config))
     history_file, history = open_history(run_dir / "history.csv", state.step if resume is not None else None)
     threads = torch.get_num_threads()

@@ -11,11 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.atomic import atomic_path
-from meshgen.errors import FormatError, GeometryError, MeshgenError
+from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
-from meshgen.geometry import load_geometry
+from meshgen.geometry import load_geometry, load_recorded_geometry
 from meshgen.grid import cell_connectivity
+from meshgen.inputs import read_input_text
 from meshgen.patches import geometry_patches
 from meshgen.publish import publishing
 from meshgen.quality.chunked import chunked_report
@@ -23,6 +24,7 @@ from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.report import assess, build_report
 from meshgen.quality.structured import check_node_array
 from meshgen.resources import needs_chunking
+from meshgen.trust import UntrustedGeometry
 
 __all__ = [
     "EVALUATE_BYTES_PER_NODE",
@@ -129,8 +131,8 @@ def recorded_metadata(path, mesh) -> dict:
     recorded = {}
     if sidecar.is_file():
         try:
-            recorded = json.loads(sidecar.read_text())
-        except (OSError, ValueError):
+            recorded = json.loads(read_input_text(sidecar, "sidecar", MAX_SIDECAR_BYTES))
+        except (OSError, ValueError, MeshgenError, RecursionError):
             recorded = {}
         recorded = recorded if isinstance(recorded, dict) else {}
     if metadata:
@@ -140,6 +142,7 @@ def recorded_metadata(path, mesh) -> dict:
     return {**recorded, "source": "sidecar"} if recorded else {}
 
 
+MAX_SIDECAR_BYTES = 16 * 2**20  # a sidecar is a report of a few kB: a larger file is not one
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
@@ -229,16 +232,34 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
         geometry = geometry.with_params(**params)
     elif geometry is None and metadata.get("geometry"):
         source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
+        recorded = metadata["geometry"]
         try:
-            geometry = load_geometry(str(metadata["geometry"]), {**metadata.get("params", {}), **(params or {})})
+            values = {**_recorded_params(metadata), **(params or {})}
+            geometry = load_recorded_geometry(recorded, values, where=source.removeprefix("recorded in ").replace("the ", "", 1))
+        except UntrustedGeometry:
+            notes.append(
+                f"recorded geometry is the plugin file {excerpt(recorded)}, which a file cannot make meshgen run: "
+                "no boundary deviation (pass -g PATH to use it)"
+            )
+            geometry = None
         except GeometryError as exc:
             notes.append(
-                f"recorded geometry '{metadata['geometry']}' is not available ({exc}); pass --geometry for boundary deviation"
+                f"recorded geometry {excerpt(repr(recorded))} is not available ({exc}); pass --geometry for boundary deviation"
             )
             geometry = None
     elif params:
         raise MeshgenError(f"--param needs --geometry: {path} records no geometry")
     return geometry, source, notes
+
+
+def _recorded_params(metadata) -> dict:
+    """The recorded parameters of a geometry: a mapping of names to numbers, else GeometryError."""
+    params = metadata.get("params", {})
+    if not isinstance(params, dict) or not all(
+        isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) for k, v in params.items()
+    ):
+        raise GeometryError("its recorded parameters are not a mapping of names to numbers")
+    return params
 
 
 def _finish_file_report(path, report, source, notes, metadata, structured) -> dict:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.errors import MeshgenError
+from meshgen.limits import MAX_COORDINATE
 from meshgen.quality.kernels import (
     BLOCK_CELLS,
     DEGENERATE_TOLERANCE,
@@ -41,6 +42,9 @@ def degenerate_tolerance(points_or_components) -> tuple[float, int]:
     nonfinite = int(finite.size - np.count_nonzero(finite))
     if not finite.any():
         return 0.0, nonfinite
+    largest = max(float(np.abs(c[finite]).max()) for c in components)
+    if largest > MAX_COORDINATE:
+        raise MeshgenError(f"coordinates reach {largest:.3g}, beyond {MAX_COORDINATE:g}: lengths and volumes would overflow")
     extent = np.sqrt(sum(float(np.ptp(c[finite])) ** 2 for c in components))
     return DEGENERATE_TOLERANCE * extent, nonfinite
 
