@@ -198,6 +198,8 @@ def _from_module(module, source: str) -> Geometry:
     defaults = {k: float(v) for k, v in params.items()}
     length_map = getattr(module, "characteristic_length", None)
     patches = _declared_patches(getattr(module, "patches", {}), int(dim), source)
+    if hasattr(module, "blocks"):  # a block set (meshgen.blocks): its boundary() takes a block name first
+        boundary_map = _multiblock_boundary(name)
     return Geometry(
         name=name,
         dim=int(dim),
@@ -209,6 +211,15 @@ def _from_module(module, source: str) -> Geometry:
         source=source,
         patches=patches,
     )
+
+
+def _multiblock_boundary(name: str) -> Callable:
+    """The boundary map of a multi-block plugin seen as one block: an error saying where to go."""
+
+    def boundary(points, **values):
+        raise GeometryError(f"geometry '{name}' is made of several blocks: mesh it with 'meshgen mesh' or meshgen.blocks")
+
+    return boundary
 
 
 def _declared_patches(declared, dim: int, source: str) -> dict:
@@ -257,31 +268,33 @@ def _looks_like_path(spec: str) -> bool:
     return spec.endswith(".py") or "/" in spec or "\\" in spec
 
 
-def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
-    """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
-    bind ``params`` over its defaults and, with ``check``, verify its boundary map
-    (shape, finiteness, continuity across the cube's edges)."""
+def plugin_module(spec: str) -> tuple[ModuleType, str]:
+    """The plugin module of a geometry name (built-in or entry point) or ``.py`` path, imported,
+    with a description of where it came from (its file, or the entry point)."""
     if _looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
-        geometry = _from_module(_import_file(path), str(path))
-    else:
-        builtins = _builtin_files()
-        if spec in builtins:
-            geometry = _from_module(_import_file(builtins[spec]), str(builtins[spec]))
-        else:
-            eps = _entry_points()
-            if spec not in eps:
-                names = available_names()
-                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
-            try:
-                module = eps[spec].load()
-            except (Exception, SystemExit) as exc:
-                raise GeometryError(
-                    f"geometry plugin '{spec}' ({eps[spec].value}) failed to load: {type(exc).__name__}: {exc}"
-                ) from exc
-            geometry = _from_module(module, f"entry point {eps[spec].value}")
+        return _import_file(path), str(path)
+    builtins = _builtin_files()
+    if spec in builtins:
+        return _import_file(builtins[spec]), str(builtins[spec])
+    eps = _entry_points()
+    if spec not in eps:
+        names = available_names()
+        raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
+    try:
+        module = eps[spec].load()
+    except (Exception, SystemExit) as exc:
+        raise GeometryError(f"geometry plugin '{spec}' ({eps[spec].value}) failed to load: {type(exc).__name__}: {exc}") from exc
+    return module, f"entry point {eps[spec].value}"
+
+
+def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
+    """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
+    bind ``params`` over its defaults and, with ``check``, verify its boundary map
+    (shape, finiteness, continuity across the cube's edges)."""
+    geometry = _from_module(*plugin_module(spec))
     geometry = bind(geometry, params)
     if check:
         check_boundary(geometry)

@@ -1,0 +1,232 @@
+"""Elliptic (Winslow) meshes of block sets: the interface nodes are solved as interior nodes of the
+whole mesh (design notes §11, docs/design-blocks.md), starting from the multi-block TFI.
+
+Method: Schwarz sweeps over the interfaces. For each interface, its two blocks are glued along it
+into one structured block (the second block's node array turned into the first one's index frame
+by the interface's Transform), whose interior, interface nodes included, ``meshgen.elliptic``'s
+multigrid Winslow solver solves with the glued block's boundary fixed. Every block takes part in
+the solves of all its interfaces, so each sweep passes information across the whole set; a few
+sweeps converge. The glued block's parametric coordinate across the interface runs through the
+first block's nodes, then the second's, each block's part scaled by the block's mean length along
+that axis, so that a cell of either block has the parametric size it has physically.
+
+Nodes that no glued block holds inside, because they lie where three or more blocks meet (the
+corners of an O-grid's core, where the angles of straight grid lines would be 90, 135 and 135
+degrees), move to the mean of their neighbours along grid lines after each sweep (Laplace), which
+rounds such a corner as the Winslow solution does away from it.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.blocks import BlockSet, global_numbering, merged_mesh, tfi_blocks
+from meshgen.elliptic import DEFAULT_TOL, AndersonMixing, hierarchy, v_cycle
+from meshgen.winslow import component_array, node_array, stencils, winslow_operator
+
+__all__ = ["elliptic_blocks", "glue", "junction_nodes"]
+
+MAX_SWEEPS = 200  # Schwarz sweeps over all interfaces
+INNER_CYCLES = 1  # multigrid V-cycles per glued block and sweep
+ANDERSON_DEPTH = 4  # sweeps remembered by the Anderson mixing of the sweeps
+RELAX_JUNCTIONS = True
+
+
+def _turned(block_set: BlockSet, interface, X: np.ndarray) -> tuple[np.ndarray, list]:
+    """Block b's array ``X`` (or any array with b's node axes first) in block a's index frame:
+    (array, per a-axis (b axis, sign))."""
+    T = interface.transform
+    axes = [abs(t) - 1 for t in T]
+    turned = np.transpose(X, axes + list(range(block_set.dim, X.ndim)))
+    for axis, t in enumerate(T):
+        if t < 0:
+            turned = np.flip(turned, axis=axis)
+    return turned, [(abs(t) - 1, int(np.sign(t))) for t in T]
+
+
+def _mean_length(X: np.ndarray, axis: int) -> float:
+    steps = np.linalg.norm(np.diff(X, axis=axis), axis=-1)
+    return float(np.mean(np.sum(steps, axis=axis)))
+
+
+def glue(block_set: BlockSet, Xs, interface) -> tuple[np.ndarray, list, tuple, tuple]:
+    """The two blocks of ``interface`` as one structured block in block a's index frame:
+    (node array, parametric coordinates per axis, index of block a's part, index of block b's
+    part in the glued array); block b's part is the turned array of ``_turned``."""
+    a, b = interface.a, interface.b
+    face = interface.face_a
+    A = Xs[a]
+    B, mapping = _turned(block_set, interface, Xs[b])
+    normal = face.axis
+    coords_a = block_set.coords[a][normal]
+    b_axis, b_sign = mapping[normal]
+    coords_b = block_set.coords[b][b_axis]
+    if b_sign < 0:
+        coords_b = 1.0 - coords_b[::-1]
+    length_a, length_b = _mean_length(A, normal), _mean_length(B, normal)
+    n_a, n_b = A.shape[normal], B.shape[normal]
+    if face.side == 1:
+        glued = np.concatenate([A, np.take(B, range(1, n_b), axis=normal)], axis=normal)
+        along = np.concatenate([length_a * coords_a, length_a + length_b * coords_b[1:]])
+        part_a = tuple(slice(0, n_a) if d == normal else slice(None) for d in range(block_set.dim))
+        part_b = tuple(slice(n_a - 1, None) if d == normal else slice(None) for d in range(block_set.dim))
+    else:
+        glued = np.concatenate([np.take(B, range(0, n_b - 1), axis=normal), A], axis=normal)
+        along = np.concatenate([length_b * coords_b[:-1], length_b + length_a * coords_a])
+        part_b = tuple(slice(0, n_b) if d == normal else slice(None) for d in range(block_set.dim))
+        part_a = tuple(slice(n_b - 1, None) if d == normal else slice(None) for d in range(block_set.dim))
+    coords = [np.asarray(t, dtype=float) for t in block_set.coords[a]]
+    coords[normal] = (along - along[0]) / (along[-1] - along[0])
+    return glued, coords, part_a, part_b
+
+
+def _scatter(block_set: BlockSet, Xs, interface, glued, part_a, part_b) -> None:
+    """Write the glued array back into both blocks (b's part turned back to b's frame)."""
+    Xs[interface.a][...] = glued[part_a]
+    view, _ = _turned(block_set, interface, Xs[interface.b])  # a view: writing it writes Xs[b]
+    view[...] = glued[part_b]
+
+
+def junction_nodes(block_set: BlockSet) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """Global numbers of the nodes that no glued block holds inside and that are not on a patch
+    (where three or more blocks meet), the global numbering and the node count."""
+    numbering, count = global_numbering(block_set)
+    held = np.zeros(count, dtype=bool)
+    on_patch = np.zeros(count, dtype=bool)
+    for (block, face_name), _patch in block_set.patches.items():
+        on_patch[numbering[block][cube.face_named(face_name, block_set.dim).node_index]] = True
+    interior = (slice(1, -1),) * block_set.dim
+    for interface in block_set.interfaces:
+        ids_a = numbering[interface.a]
+        ids_b, _ = _turned(block_set, interface, numbering[interface.b])
+        normal = interface.face_a.axis
+        if interface.face_a.side == 1:
+            glued_ids = np.concatenate([ids_a, np.take(ids_b, range(1, ids_b.shape[normal]), axis=normal)], axis=normal)
+        else:
+            glued_ids = np.concatenate([np.take(ids_b, range(0, ids_b.shape[normal] - 1), axis=normal), ids_a], axis=normal)
+        held[glued_ids[interior]] = True
+    for ids in numbering:  # a block's own interior (a block with no interface)
+        held[ids[interior]] = True
+    return np.flatnonzero(~held & ~on_patch), numbering, count
+
+
+def _relax_junctions(block_set: BlockSet, Xs, junctions, numbering, stencil) -> None:
+    """Move each junction node to the mean, over its cells, of the position that would make each
+    cell a parallelepiped (parallelogram) given the cell's other corners (in every block copy)."""
+    if len(junctions) == 0:
+        return
+    count = max(int(ids.max()) for ids in numbering) + 1
+    values = _gather(Xs, numbering, count)
+    node, others, signs = stencil
+    predicted = np.einsum("pc,pcd->pd", signs, values[others])
+    total = np.zeros((count, block_set.dim))
+    hits = np.zeros(count)
+    np.add.at(total, node, predicted)
+    np.add.at(hits, node, 1.0)
+    values[junctions] = total[junctions] / hits[junctions, None]
+    is_junction = np.zeros(count, dtype=bool)
+    is_junction[junctions] = True
+    for X, ids in zip(Xs, numbering):
+        mask = is_junction[ids]
+        X[mask] = values[ids[mask]]
+
+
+def _gather(Xs, numbering, count) -> np.ndarray:
+    """The unique nodes (count, dim) of the blocks' arrays."""
+    values = np.empty((count, Xs[0].shape[-1]))
+    for X, ids in zip(Xs, numbering):
+        values[ids.reshape(-1)] = X.reshape(-1, X.shape[-1])
+    return values
+
+
+def _junction_stencil(block_set: BlockSet, Xs, junctions):
+    """For every (cell, corner) at a junction node: (node, the cell's other corners, their signs in
+    the parallelepiped completion x0 = sum over other corners v of (-1)^(|v| + 1) x_v)."""
+    from meshgen.grid import HEX_CORNERS, QUAD_CORNERS
+
+    _, cells, _ = merged_mesh(block_set, Xs)
+    offsets = HEX_CORNERS if block_set.dim == 3 else QUAD_CORNERS
+    is_junction = np.zeros(cells.max() + 1, dtype=bool)
+    is_junction[junctions] = True
+    nodes, others, signs = [], [], []
+    for corner, offset in enumerate(offsets):
+        at = np.flatnonzero(is_junction[cells[:, corner]])
+        if len(at) == 0:
+            continue
+        relative = np.abs(offsets - offset)  # each other corner's steps from this one
+        rest = [c for c in range(len(offsets)) if c != corner]
+        nodes.append(cells[at, corner])
+        others.append(cells[at][:, rest])
+        signs.append(np.broadcast_to([(-1.0) ** (relative[c].sum() + 1) for c in rest], (len(at), len(rest))))
+    if not nodes:
+        return np.zeros(0, dtype=int), np.zeros((0, len(offsets) - 1), dtype=int), np.zeros((0, len(offsets) - 1))
+    return np.concatenate(nodes), np.concatenate(others), np.concatenate(signs)
+
+
+def elliptic_blocks(block_set: BlockSet, tol: float | None = None, max_iter: int | None = None, progress=None):
+    """Multi-block Winslow mesh of ``block_set``: (list of node arrays, one per block, interface
+    nodes identical in every block; info dict as ``meshgen.elliptic.solve_winslow``'s, with
+    ``sweeps``). ``tol``: stop when a sweep moves no node by more than ``tol`` times the
+    characteristic length; ``max_iter``: most sweeps."""
+    tol = DEFAULT_TOL if tol is None else tol
+    max_sweeps = MAX_SWEEPS if max_iter is None else max_iter
+    start = time.perf_counter()
+    Xs = tfi_blocks(block_set)
+    if min(min(shape) for shape in block_set.node_shapes) < 3:
+        return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
+    junctions, numbering, count = junction_nodes(block_set)
+    stencil = _junction_stencil(block_set, Xs, junctions)
+    length = block_set.length
+    levels = []  # per interface: the multigrid hierarchy of its glued block (coordinates do not change)
+    for interface in block_set.interfaces:
+        glued, coords, _, _ = glue(block_set, Xs, interface)
+        _, axial = winslow_operator(component_array(glued), stencils(coords))
+        levels.append(hierarchy(coords, [np.median(c) for c in axial]))
+    mixing = AndersonMixing(ANDERSON_DEPTH)
+    update, sweeps, first = np.inf, 0, None
+    state = _gather(Xs, numbering, count)
+    while sweeps < max_sweeps:
+        before = state
+        for interface, hierarchy_of in zip(block_set.interfaces, levels):
+            glued, _, part_a, part_b = glue(block_set, Xs, interface)
+            R = component_array(glued)
+            for _ in range(INNER_CYCLES):
+                v_cycle(hierarchy_of, 0, R, None)
+            _scatter(block_set, Xs, interface, node_array(R), part_a, part_b)
+        if RELAX_JUNCTIONS:
+            _relax_junctions(block_set, Xs, junctions, numbering, stencil)
+        sweeps += 1
+        output = _gather(Xs, numbering, count)
+        previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1))) / length
+        first = first or update
+        if progress is not None:
+            done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
+            progress(float(np.clip(done, 0.0, 1.0)), cycle=sweeps, update=update)
+        if update < tol or not np.isfinite(update):
+            state = output
+            break
+        if update > previous:
+            mixing.restart()
+        state = mixing.next_iterate(before, output)
+        for X, ids in zip(Xs, numbering):
+            X[...] = state[ids]
+    info = {
+        "solver": "Schwarz sweeps over the interfaces, each a glued two-block multigrid Winslow solve; Laplace at block junctions",
+        "sweeps": sweeps,
+        "iterations": sweeps,
+        "final_update": float(update),
+        "final_residual": float("nan"),
+        "tol": float(tol),
+        "converged": bool(update < tol),
+        "seconds": time.perf_counter() - start,
+        "junction_nodes": int(len(junctions)),
+    }
+    if not info["converged"]:
+        info["warnings"] = [
+            f"multi-block elliptic solver did not converge: after {sweeps} sweep(s) the largest node update is "
+            f"{update:.3g} of the characteristic length (tolerance {tol:g}); raise --max-iter or --tol"
+        ]
+    return Xs, info
