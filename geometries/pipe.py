@@ -19,7 +19,7 @@ params = {"radius": 0.5, "length": 4.0}
 dims_meaning = "N M A: cells around a quarter of the circumference (and across the core), across the wall layer, along the axis"
 blocks = ("core", "east", "north", "west", "south")
 RING = blocks[1:]
-CORE = 0.55  # half-width of the core square, relative to the radius
+CORE = 0.45  # half-width of the core square, relative to the radius
 # The core's sides bulge outwards (parabolas) so that they leave its corners turned by BULGE from
 # the square's: the core's corner angle is then 90 + 2 BULGE degrees and the two wall blocks' angles
 # there 135 - BULGE each, 120 degrees all three.
