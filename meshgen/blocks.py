@@ -36,10 +36,12 @@ __all__ = [
     "Interface",
     "block_patches",
     "check_interfaces",
+    "connectivity_records",
     "describe",
     "face_index",
     "global_numbering",
     "interface_gaps",
+    "inverse_transform",
     "is_multiblock",
     "load_block_set",
     "merged_mesh",
@@ -346,6 +348,57 @@ def merged_mesh(block_set: BlockSet, Xs) -> tuple[np.ndarray, np.ndarray, np.nda
         cells.append(ids.reshape(-1)[local])
         owner.append(np.full(len(local), index))
     return points, np.concatenate(cells), np.concatenate(owner)
+
+
+def _face_range(shape, face: cube.Face) -> np.ndarray:
+    """The 1-based vertex range (2, dim) of a block face: first corner, last corner."""
+    first, last = [1] * len(shape), list(shape)
+    first[face.axis] = last[face.axis] = shape[face.axis] if face.side else 1
+    return np.array([first, last])
+
+
+def _mapped(index, transform, begin_a, begin_b) -> np.ndarray:
+    """CGNS: Index_b = T (Index_a - Begin_a) + Begin_b, T's column i the unit vector of axis
+    |T[i]| - 1 with T[i]'s sign."""
+    result = np.array(begin_b, dtype=int)
+    for axis, t in enumerate(transform):
+        result[abs(t) - 1] += int(np.sign(t)) * (index[axis] - begin_a[axis])
+    return result
+
+
+def inverse_transform(transform) -> tuple[int, ...]:
+    inverse = [0] * len(transform)
+    for axis, t in enumerate(transform):
+        inverse[abs(t) - 1] = int(np.sign(t)) * (axis + 1)
+    return tuple(inverse)
+
+
+def connectivity_records(block_set: BlockSet) -> list[list[tuple]]:
+    """Per block, its 1-to-1 connectivity records as CGNS stores them, every interface from both
+    sides: (record name, donor block name, PointRange (2, dim), PointRangeDonor (2, dim),
+    Transform), ranges 1-based; PointRange runs from the face's first to its last corner and
+    PointRangeDonor gives the donor's vertices of those two corners."""
+    shapes = block_set.node_shapes
+    records = [[] for _ in block_set.names]
+    for interface in block_set.interfaces:
+        sides = (
+            (interface.a, interface.face_a, interface.b, interface.face_b, interface.transform),
+            (interface.b, interface.face_b, interface.a, interface.face_a, inverse_transform(interface.transform)),
+        )
+        for block, face, donor, donor_face, transform in sides:
+            point_range = _face_range(shapes[block], face)
+            # The donor's vertex of this face's first corner: the donor face's corner it maps to.
+            begin_donor = np.empty(block_set.dim, dtype=int)
+            for axis, t in enumerate(transform):
+                target = abs(t) - 1
+                if axis == face.axis:
+                    begin_donor[target] = shapes[donor][target] if donor_face.side else 1
+                else:
+                    begin_donor[target] = 1 if t > 0 else shapes[donor][target]
+            donor_range = np.array([begin_donor, _mapped(point_range[1], transform, point_range[0], begin_donor)])
+            name = f"{face.name}_{block_set.names[donor]}"[:32]
+            records[block].append((name, block_set.names[donor], point_range, donor_range, tuple(transform)))
+    return records
 
 
 def block_patches(block_set: BlockSet) -> list[list[Patch]]:
