@@ -10,7 +10,10 @@ sweeps converge. The glued block's parametric coordinate across the interface ru
 first block's nodes, then the second's, each block's part scaled by the block's mean length along
 that axis, so that a cell of either block has the parametric size it has physically.
 
-Nodes that no glued block holds inside, because they lie where three or more blocks meet (the
+Boundary nodes on a flat patch (and on no other patch) slide in its plane after each sweep, to the
+projection of their neighbour one layer inside: grid lines meet flat inlets, outlets and straight
+walls at right angles, and a straight extrusion (the pipe) is meshed as the extrusion of its
+section's mesh. Nodes that no glued block holds inside, because they lie where three or more blocks meet (the
 corners of an O-grid's core, where the angles of straight grid lines would be 90, 135 and 135
 degrees), move to the mean of their neighbours along grid lines after each sweep (Laplace), which
 rounds such a corner as the Winslow solution does away from it.
@@ -134,6 +137,57 @@ def _relax_junctions(block_set: BlockSet, Xs, junctions, numbering, stencil) -> 
         X[mask] = values[ids[mask]]
 
 
+def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float = 1e-12):
+    """The boundary nodes that slide: those on one flat patch face only (all its nodes within
+    ``tolerance`` times the characteristic length of a plane) and on no other patch face.
+    Returns (node numbers (K,), their inner neighbours (P,) with the node each belongs to (P,), the
+    planes' points and unit normals per node (K, dim) each)."""
+    faces_of = np.zeros(count, dtype=int)
+    flat = []
+    for (block, face_name), _patch in block_set.patches.items():
+        face = cube.face_named(face_name, block_set.dim)
+        ids = numbering[block][face.node_index]
+        faces_of[np.unique(ids)] += 1
+        points = Xs[block][face.node_index].reshape(-1, block_set.dim)
+        centre = points.mean(axis=0)
+        _, singular, vt = np.linalg.svd(points - centre, full_matrices=False)
+        if singular[-1] <= tolerance * block_set.length * np.sqrt(len(points)):
+            inner_index = list(face.node_index)
+            inner_index[face.axis] = -2 if face.side else 1
+            flat.append((ids.reshape(-1), numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
+    nodes, inner, owner_point, owner_normal = [], [], [], []
+    for ids, inside, centre, normal in flat:
+        keep = faces_of[ids] == 1
+        nodes.append(ids[keep])
+        inner.append(inside[keep])
+        owner_point.append(np.broadcast_to(centre, (keep.sum(), block_set.dim)))
+        owner_normal.append(np.broadcast_to(normal, (keep.sum(), block_set.dim)))
+    if not nodes:
+        return None
+    return np.concatenate(nodes), np.concatenate(inner), np.concatenate(owner_point), np.concatenate(owner_normal)
+
+
+def _slide(block_set: BlockSet, Xs, numbering, count, sliding) -> None:
+    """Each sliding node to the mean of its inner neighbours projected onto its plane: grid lines
+    meet the flat patch at right angles (a Neumann condition)."""
+    if sliding is None:
+        return
+    nodes, inner, centre, normal = sliding
+    values = _gather(Xs, numbering, count)
+    projected = values[inner] - np.einsum("pd,pd->p", values[inner] - centre, normal)[:, None] * normal
+    total = np.zeros((count, block_set.dim))
+    hits = np.zeros(count)
+    np.add.at(total, nodes, projected)
+    np.add.at(hits, nodes, 1.0)
+    moved = np.flatnonzero(hits)
+    values[moved] = total[moved] / hits[moved, None]
+    is_moved = np.zeros(count, dtype=bool)
+    is_moved[moved] = True
+    for X, ids in zip(Xs, numbering):
+        mask = is_moved[ids]
+        X[mask] = values[ids[mask]]
+
+
 def _gather(Xs, numbering, count) -> np.ndarray:
     """The unique nodes (count, dim) of the blocks' arrays."""
     values = np.empty((count, Xs[0].shape[-1]))
@@ -166,11 +220,16 @@ def _junction_stencil(block_set: BlockSet, Xs, junctions):
     return np.concatenate(nodes), np.concatenate(others), np.concatenate(signs)
 
 
-def elliptic_blocks(block_set: BlockSet, tol: float | None = None, max_iter: int | None = None, progress=None):
+def elliptic_blocks(
+    block_set: BlockSet, tol: float | None = None, max_iter: int | None = None, progress=None, slide: bool | None = None
+):
     """Multi-block Winslow mesh of ``block_set``: (list of node arrays, one per block, interface
     nodes identical in every block; info dict as ``meshgen.elliptic.solve_winslow``'s, with
     ``sweeps``). ``tol``: stop when a sweep moves no node by more than ``tol`` times the
-    characteristic length; ``max_iter``: most sweeps."""
+    characteristic length; ``max_iter``: most sweeps; ``slide``: nodes on flat patches (a pipe's
+    inlet, a channel's straight walls) slide in their plane so that grid lines meet it at right
+    angles (``planar_sliding``), else every boundary node stays where the TFI put it; default: on
+    in 2D, off in 3D."""
     tol = DEFAULT_TOL if tol is None else tol
     max_sweeps = MAX_SWEEPS if max_iter is None else max_iter
     start = time.perf_counter()
@@ -185,6 +244,9 @@ def elliptic_blocks(block_set: BlockSet, tol: float | None = None, max_iter: int
         glued, coords, _, _ = glue(block_set, Xs, interface)
         _, axial = winslow_operator(component_array(glued), stencils(coords))
         levels.append(hierarchy(coords, [np.median(c) for c in axial]))
+    if slide is None:  # sliding on the flat faces of 3D block sets still inverts cells (the pipe's inlet)
+        slide = block_set.dim == 2
+    sliding = planar_sliding(block_set, Xs, numbering, count) if slide else None
     mixing = AndersonMixing(ANDERSON_DEPTH)
     update, sweeps, first = np.inf, 0, None
     state = _gather(Xs, numbering, count)
@@ -198,6 +260,7 @@ def elliptic_blocks(block_set: BlockSet, tol: float | None = None, max_iter: int
             _scatter(block_set, Xs, interface, node_array(R), part_a, part_b)
         if RELAX_JUNCTIONS:
             _relax_junctions(block_set, Xs, junctions, numbering, stencil)
+        _slide(block_set, Xs, numbering, count, sliding)
         sweeps += 1
         output = _gather(Xs, numbering, count)
         previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1))) / length

@@ -312,7 +312,9 @@ def test_cgns_zone_bc_passes_cgnscheck_and_reads_back(tmp_path, name, dims):
                 plane = node_shape[face.axis] if face.side else 1
                 assert first[face.axis] == last[face.axis] == plane
                 assert [last[d] - first[d] + 1 for d in face.tangent_axes] == [node_shape[d] for d in face.tangent_axes]
-                kind = bc[" data"][()].tobytes().decode()
+                # FamilySpecified (what VTK's reader loads), the physical type in the family's FamilyBC.
+                assert bc[" data"][()].tobytes().decode() == "FamilySpecified"
+                kind = root[f"Base/{patch.name}/FamilyBC/ data"][()].tobytes().decode()
                 assert kind == {"wall": "BCWall", "symmetry": "BCSymmetryPlane"}.get(
                     patch.type, {"inlet": "BCInflow", "outlet": "BCOutflow"}.get(patch.name)
                 )

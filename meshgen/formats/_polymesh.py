@@ -119,10 +119,15 @@ def write_poly_mesh(case, points3, cells, patches, control_files: dict) -> None:
         _write(temporary / "faces", "faceList", "faces", faces, "4({} {} {} {})")
         _write(temporary / "owner", "labelList", "owner", owner, "{}", note)
         _write(temporary / "neighbour", "labelList", "neighbour", neighbour, "{}", note)
-        lines = [BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"), f"{len(entries)}\n(\n"]
+        lines = [
+            BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"),
+            f"{len(entries)}\n(\n",
+        ]
         for name, kind, count, first in entries:
             group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
-            lines.append(f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n")
+            lines.append(
+                f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
+            )
         lines.append(")\n")
         (temporary / "boundary").write_text("".join(lines))
         target = constant / "polyMesh"
