@@ -138,16 +138,16 @@ def _relax_junctions(block_set: BlockSet, Xs, junctions, numbering, stencil) -> 
 
 
 def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float = 1e-12):
-    """The boundary nodes that slide: those on one flat patch face only (all its nodes within
-    ``tolerance`` times the characteristic length of a plane) and on no other patch face.
+    """The boundary nodes that slide: those on a flat patch face (all its nodes within
+    ``tolerance`` times the characteristic length of a plane) and on no other patch.
     Returns (node numbers (K,), their inner neighbours (P,) with the node each belongs to (P,), the
     planes' points and unit normals per node (K, dim) each)."""
-    faces_of = np.zeros(count, dtype=int)
+    on_patch: dict[str, np.ndarray] = {}
     flat = []
-    for (block, face_name), _patch in block_set.patches.items():
+    for (block, face_name), (patch, _kind) in block_set.patches.items():
         face = cube.face_named(face_name, block_set.dim)
         ids = numbering[block][face.node_index]
-        faces_of[np.unique(ids)] += 1
+        on_patch.setdefault(patch, np.zeros(count, dtype=bool))[ids] = True
         points = Xs[block][face.node_index].reshape(-1, block_set.dim)
         centre = points.mean(axis=0)
         _, singular, vt = np.linalg.svd(points - centre, full_matrices=False)
@@ -155,6 +155,7 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
             inner_index = list(face.node_index)
             inner_index[face.axis] = -2 if face.side else 1
             flat.append((ids.reshape(-1), numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
+    faces_of = sum(mask.astype(int) for mask in on_patch.values())  # patches each node is on
     nodes, inner, owner_point, owner_normal = [], [], [], []
     for ids, inside, centre, normal in flat:
         keep = faces_of[ids] == 1
@@ -196,28 +197,42 @@ def _gather(Xs, numbering, count) -> np.ndarray:
     return values
 
 
-def _junction_stencil(block_set: BlockSet, Xs, junctions):
-    """For every (cell, corner) at a junction node: (node, the cell's other corners, their signs in
-    the parallelepiped completion x0 = sum over other corners v of (-1)^(|v| + 1) x_v)."""
-    from meshgen.grid import HEX_CORNERS, QUAD_CORNERS
-
-    _, cells, _ = merged_mesh(block_set, Xs)
-    offsets = HEX_CORNERS if block_set.dim == 3 else QUAD_CORNERS
-    is_junction = np.zeros(cells.max() + 1, dtype=bool)
+def _junction_stencil(block_set: BlockSet, numbering, junctions):
+    """For every grid quadrilateral at a junction node: (node, the quad's other corners (a, b, and
+    the one opposite), signs (1, 1, -1)): the parallelogram completion x = x_a + x_b - x_ab. In 3D
+    the quads are those across the block edge the node lies on (in the layer of the node), so the
+    rule acts in the section across the edge and keeps each node in its layer."""
+    count = max(int(ids.max()) for ids in numbering) + 1
+    is_junction = np.zeros(count, dtype=bool)
     is_junction[junctions] = True
-    nodes, others, signs = [], [], []
-    for corner, offset in enumerate(offsets):
-        at = np.flatnonzero(is_junction[cells[:, corner]])
-        if len(at) == 0:
+    nodes, others = [], []
+    dim = block_set.dim
+    for ids in numbering:
+        local = np.argwhere(is_junction[ids])
+        if len(local) == 0:
             continue
-        relative = np.abs(offsets - offset)  # each other corner's steps from this one
-        rest = [c for c in range(len(offsets)) if c != corner]
-        nodes.append(cells[at, corner])
-        others.append(cells[at][:, rest])
-        signs.append(np.broadcast_to([(-1.0) ** (relative[c].sum() + 1) for c in rest], (len(at), len(rest))))
-    if not nodes:
-        return np.zeros(0, dtype=int), np.zeros((0, len(offsets) - 1), dtype=int), np.zeros((0, len(offsets) - 1))
-    return np.concatenate(nodes), np.concatenate(others), np.concatenate(signs)
+        shape = np.array(ids.shape)
+        at_end = (local == 0) | (local == shape - 1)
+        for index, ends in zip(local, at_end):
+            free = [axis for axis in range(dim) if not ends[axis]]
+            if dim == 3 and len(free) == 1:
+                plane = [axis for axis in range(dim) if axis != free[0]]
+            elif dim == 2:
+                plane = [0, 1]
+            else:
+                continue  # a block corner in 3D, or inside a face: not a junction of this block
+            for step_a in (-1, 1):
+                for step_b in (-1, 1):
+                    a, b = index.copy(), index.copy()
+                    a[plane[0]] += step_a
+                    b[plane[1]] += step_b
+                    ab = a.copy()
+                    ab[plane[1]] += step_b
+                    if np.all((ab >= 0) & (ab < shape)):
+                        nodes.append(ids[tuple(index)])
+                        others.append([ids[tuple(a)], ids[tuple(b)], ids[tuple(ab)]])
+    signs = np.broadcast_to([1.0, 1.0, -1.0], (len(nodes), 3))
+    return np.array(nodes, dtype=int), np.array(others, dtype=int).reshape(-1, 3), signs
 
 
 def elliptic_blocks(
@@ -237,15 +252,15 @@ def elliptic_blocks(
     if min(min(shape) for shape in block_set.node_shapes) < 3:
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     junctions, numbering, count = junction_nodes(block_set)
-    stencil = _junction_stencil(block_set, Xs, junctions)
+    stencil = _junction_stencil(block_set, numbering, junctions)
     length = block_set.length
     levels = []  # per interface: the multigrid hierarchy of its glued block (coordinates do not change)
     for interface in block_set.interfaces:
         glued, coords, _, _ = glue(block_set, Xs, interface)
         _, axial = winslow_operator(component_array(glued), stencils(coords))
         levels.append(hierarchy(coords, [np.median(c) for c in axial]))
-    if slide is None:  # sliding on the flat faces of 3D block sets still inverts cells (the pipe's inlet)
-        slide = block_set.dim == 2
+    if slide is None:
+        slide = True
     sliding = planar_sliding(block_set, Xs, numbering, count) if slide else None
     mixing = AndersonMixing(ANDERSON_DEPTH)
     update, sweeps, first = np.inf, 0, None

@@ -141,11 +141,15 @@ def test_single_block_formats_refuse_blocks(tmp_path, pipe):
 
 
 @needs_openfoam
-def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path):
-    """The TFI pipe is an extrusion of its section: the finite-volume potential flow from a uniform
-    inlet is uniform to solver accuracy."""
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
+    """The pipe's mesh is an extrusion of its section (the elliptic one too: its inlet and outlet
+    nodes slide in their planes): the finite-volume potential flow from a uniform inlet is uniform
+    to solver accuracy."""
+    from meshgen.elliptic_blocks import elliptic_blocks
+
     block_set = load_block_set("pipe", {"length": 1.0}, (6, 3, 4))
-    Xs = tfi_blocks(block_set)
+    Xs = tfi_blocks(block_set) if method == "tfi" else elliptic_blocks(block_set)[0]
     case = write_blocks(tmp_path / "pipe", block_set, Xs, format_name="openfoam")
     report = check_mesh(case)
     assert report["ok"], report["log"][-2000:]
