@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from meshgen import cube
-from meshgen.blocks import BlockSet, global_numbering, merged_mesh, tfi_blocks
+from meshgen.blocks import BlockSet, global_numbering, tfi_blocks
 from meshgen.elliptic import DEFAULT_TOL, AndersonMixing, hierarchy, v_cycle
 from meshgen.winslow import component_array, node_array, stencils, winslow_operator
 
@@ -34,7 +34,7 @@ __all__ = ["elliptic_blocks", "glue", "junction_nodes"]
 
 MAX_SWEEPS = 200  # Schwarz sweeps over all interfaces
 INNER_CYCLES = 1  # multigrid V-cycles per glued block and sweep
-ANDERSON_DEPTH = 4  # sweeps remembered by the Anderson mixing of the sweeps
+ANDERSON_DEPTH = 10  # sweeps remembered by the Anderson mixing of the sweeps
 RELAX_JUNCTIONS = True
 
 

@@ -17,13 +17,14 @@ def geometries(ctx, as_json):
     boundary patches (name, type: cube faces)."""
     if ctx.invoked_subcommand is not None:
         return
+    from meshgen.blocks import describe as describe_blocks
     from meshgen.errors import GeometryError
     from meshgen.geometry import available_names, load_geometry
 
     described = []
     for name in available_names():
         try:
-            described.append(load_geometry(name, check=False).describe())
+            described.append(describe_blocks(name) or load_geometry(name, check=False).describe())
         except GeometryError as exc:  # one broken installed plugin must not hide the others
             click.echo(f"Warning: {' '.join(str(exc).split())}", err=True)
     if as_json:
@@ -38,7 +39,8 @@ def geometries(ctx, as_json):
     for item in described:
         params = ", ".join(f"{k}={v:g}" for k, v in item["params"].items()) or "-"
         patches = "\n".join(f"{p['name']} ({p['type']}: {' '.join(p['faces'])})" for p in item["patches"])
-        table.add_row(item["name"], f"{item['dim']}D", item["description"], params, patches)
+        description = item["description"] + (f"\n{len(item['blocks'])} blocks; --dims {item['dims']}" if "blocks" in item else "")
+        table.add_row(item["name"], f"{item['dim']}D", description, params, patches)
     Console().print(table)
 
 

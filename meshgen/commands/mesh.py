@@ -153,6 +153,7 @@ def mesh(
     import sys
     import time
 
+    from meshgen.blocks import is_multiblock
     from meshgen.chunked import CHUNKED_METHODS, check_free_space, needs_chunking
     from meshgen.clustering import node_coordinates
     from meshgen.commands._progress import progress_display
@@ -164,6 +165,17 @@ def mesh(
     from meshgen.quality import write_mesh_with_quality
     from meshgen.scheduler import connect, scheduler_address
 
+    if checkpoint is None and is_multiblock(geometry):  # a block set: meshgen.commands._blocks does the run
+        from meshgen.commands._blocks import mesh_block_geometry
+
+        unsupported = {"--patch": patch_items, "--ascii": ascii_files, "--correct": correct, "--device": device}
+        unsupported.update({"--cluster": clusters, "--boundary-layout": boundary_layout, "--orthogonal": orthogonal})
+        unsupported.update({"--chunked": chunked, "--scheduler": scheduler})
+        mesh_block_geometry(
+            method, geometry, params, dims, output, format_name,
+            tol=tol, max_iter=max_iter, quality=quality, quiet=quiet, unsupported=unsupported,
+        )  # fmt: skip
+        return
     output_format = format_for(output, format_name)
     output = check_output_path(output, output_format.name, len(dims))
     if patch_items and not output_format.patches:
