@@ -212,27 +212,27 @@ def _junction_stencil(block_set: BlockSet, numbering, junctions):
         if len(local) == 0:
             continue
         shape = np.array(ids.shape)
-        at_end = (local == 0) | (local == shape - 1)
-        for index, ends in zip(local, at_end):
-            free = [axis for axis in range(dim) if not ends[axis]]
-            if dim == 3 and len(free) == 1:
-                plane = [axis for axis in range(dim) if axis != free[0]]
-            elif dim == 2:
-                plane = [0, 1]
-            else:
-                continue  # a block corner in 3D, or inside a face: not a junction of this block
+        free = ~((local == 0) | (local == shape - 1))  # axes along which the node is inside the block
+        for edge_axis in range(dim) if dim == 3 else [None]:
+            if edge_axis is None:
+                rows, plane = np.arange(len(local)), [0, 1]
+            else:  # on a block edge along edge_axis: the quads across the edge, in the node's layer
+                rows = np.flatnonzero(free[:, edge_axis] & (free.sum(axis=1) == 1))
+                plane = [axis for axis in range(dim) if axis != edge_axis]
             for step_a in (-1, 1):
                 for step_b in (-1, 1):
-                    a, b = index.copy(), index.copy()
-                    a[plane[0]] += step_a
-                    b[plane[1]] += step_b
+                    a, b = local[rows].copy(), local[rows].copy()
+                    a[:, plane[0]] += step_a
+                    b[:, plane[1]] += step_b
                     ab = a.copy()
-                    ab[plane[1]] += step_b
-                    if np.all((ab >= 0) & (ab < shape)):
-                        nodes.append(ids[tuple(index)])
-                        others.append([ids[tuple(a)], ids[tuple(b)], ids[tuple(ab)]])
+                    ab[:, plane[1]] += step_b
+                    inside = np.all((ab >= 0) & (ab < shape), axis=1)
+                    nodes.append(ids[tuple(local[rows][inside].T)])
+                    others.append(np.stack([ids[tuple(c[inside].T)] for c in (a, b, ab)], axis=1))
+    nodes = np.concatenate(nodes) if nodes else np.zeros(0, dtype=int)
+    others = np.concatenate(others) if others else np.zeros((0, 3), dtype=int)
     signs = np.broadcast_to([1.0, 1.0, -1.0], (len(nodes), 3))
-    return np.array(nodes, dtype=int), np.array(others, dtype=int).reshape(-1, 3), signs
+    return nodes, others, signs
 
 
 def elliptic_blocks(

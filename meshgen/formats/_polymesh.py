@@ -76,28 +76,29 @@ def poly_mesh(points, cells, patches):
     sequence = np.lexsort((neighbour, internal_owner))
     internal_faces, internal_owner, neighbour = internal_faces[sequence], internal_owner[sequence], neighbour[sequence]
 
-    boundary_unique = np.flatnonzero(~internal)
-    boundary_keys = np.sort(keys[first[boundary_unique]], axis=1)
-    lookup = {tuple(key): index for index, key in zip(first[boundary_unique], boundary_keys)}
+    boundary_rows = first[~internal]  # a row of ``faces`` for each boundary face
+    patch_keys = [np.sort(np.asarray(faces_of_patch), axis=1) for _, _, faces_of_patch in patches]
+    together = np.concatenate([keys[boundary_rows], *patch_keys])
+    _, which = np.unique(together, axis=0, return_inverse=True)
+    which = which.reshape(-1)
+    row_of = np.full(which.max() + 1, -1)
+    row_of[which[: len(boundary_rows)]] = boundary_rows
     taken = np.zeros(len(keys), dtype=bool)
     all_faces, all_owner, entries = [internal_faces], [internal_owner], []
-    start = len(internal_faces)
-    for name, kind, patch_faces in patches:
-        rows = []
-        for key in np.sort(np.asarray(patch_faces), axis=1):
-            row = lookup.get(tuple(key))
-            if row is None:
-                raise FormatError(f"patch '{name}' has a face that is not on the mesh's boundary")
-            rows.append(row)
-        rows = np.array(rows, dtype=int)
+    start, offset = len(internal_faces), len(boundary_rows)
+    for (name, kind, _), patch in zip(patches, patch_keys):
+        rows = row_of[which[offset : offset + len(patch)]]
+        offset += len(patch)
+        if np.any(rows < 0):
+            raise FormatError(f"patch '{name}' has a face that is not on the mesh's boundary")
         taken[rows] = True
         all_faces.append(faces[rows])
         all_owner.append(owner[rows])
         entries.append((name, kind, len(rows), start))
         start += len(rows)
-    left = [row for row in first[boundary_unique] if not taken[row]]
+    left = np.count_nonzero(~taken[boundary_rows])
     if left:
-        raise FormatError(f"{len(left)} boundary face(s) are in no patch")
+        raise FormatError(f"{left} boundary face(s) are in no patch")
     return np.concatenate(all_faces), np.concatenate(all_owner), neighbour, entries
 
 
