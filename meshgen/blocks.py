@@ -401,15 +401,23 @@ def connectivity_records(block_set: BlockSet) -> list[list[tuple]]:
     return records
 
 
-def block_patches(block_set: BlockSet) -> list[list[Patch]]:
-    """Per block, its patches (``meshgen.patches.Patch``, faces of that block only)."""
+def block_patches(block_set: BlockSet, interfaces: bool = False) -> list[list[Patch]]:
+    """Per block, its patches (``meshgen.patches.Patch``, faces of that block only); with
+    ``interfaces``, each interface face too, as a ``patch`` named ``to_<neighbour block>`` (for
+    formats whose patches must cover every face of a block)."""
+    neighbours = {}
+    if interfaces:
+        for i in block_set.interfaces:
+            neighbours[i.a, i.face_a.name] = (f"to_{block_set.names[i.b]}", "patch")
+            neighbours[i.b, i.face_b.name] = (f"to_{block_set.names[i.a]}", "patch")
     result = []
     for block in range(len(block_set.names)):
         faces_of: dict[str, list[str]] = {}
         type_of = {}
         for face in cube.faces(block_set.dim):
-            if (block, face.name) in block_set.patches:
-                name, kind = block_set.patches[block, face.name]
+            entry = block_set.patches.get((block, face.name)) or neighbours.get((block, face.name))
+            if entry is not None:
+                name, kind = entry
                 faces_of.setdefault(name, []).append(face.name)
                 type_of[name] = kind
         result.append([Patch(name, type_of[name], tuple(faces)) for name, faces in faces_of.items()])

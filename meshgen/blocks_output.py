@@ -23,6 +23,10 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
     """The path to write, checked before any work (FormatError for a format that takes no block set)."""
     from meshgen.formats import check_output_path, format_for
 
+    if format_name is None and Path(path).suffix.lower() == ".vtm":  # a .vts per block and the .vtm listing them
+        from meshgen.atomic import check_output_file
+
+        return check_output_file(path, "mesh.vtm")
     fmt = format_for(path, format_name)
     if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS):
         raise FormatError(
@@ -67,10 +71,14 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
     from meshgen.atomic import atomic_write
     from meshgen.formats import format_for, metadata_json
 
-    fmt = format_for(path, format_name)
     path = check_block_output(path, format_name, block_set)
     metadata = dict(metadata or {})
     metadata_json(metadata)
+    if format_name is None and path.suffix.lower() == ".vtm":
+        from meshgen.formats._vtm import write_blocks_vtm
+
+        return write_blocks_vtm(path, list(zip(block_set.names, Xs, block_patches(block_set, interfaces=True))), metadata)
+    fmt = format_for(path, format_name)
     if fmt.name == "cgns":
         from meshgen.formats._cgns import write_zones
 

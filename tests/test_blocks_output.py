@@ -173,3 +173,21 @@ def test_openfoam_dfg_is_extruded_and_valid(tmp_path, dfg):
     assert report["cells"] == block_set.cells
     assert set(report["patches"]) == {"inlet", "outlet", "walls", "cylinder", "frontAndBack"}
     assert report["patches"]["frontAndBack"] == 2 * block_set.cells
+
+
+def test_vtm_lists_a_vts_per_block(tmp_path, pipe):
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    block_set, Xs = pipe
+    path = write_blocks(tmp_path / "pipe.vtm", block_set, Xs)
+    reader = vtk.vtkXMLMultiBlockDataReader()
+    reader.SetFileName(str(path))
+    reader.Update()
+    output = reader.GetOutput()
+    names = [output.GetMetaData(i).Get(vtk.vtkCompositeDataSet.NAME()) for i in range(output.GetNumberOfBlocks())]
+    assert names == list(block_set.names)
+    for index, X in enumerate(Xs):
+        points = vtk_to_numpy(output.GetBlock(index).GetPoints().GetData())
+        # VTK's structured points run i fastest: the node array transposed.
+        np.testing.assert_array_equal(points, np.transpose(X, (2, 1, 0, 3)).reshape(-1, 3))
