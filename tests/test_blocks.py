@@ -3,7 +3,7 @@ channel with a cylinder; bad block sets rejected with one line."""
 
 import numpy as np
 import pytest
-from blocks_helpers import size_ratios
+from blocks_helpers import cell_measures, size_ratios
 
 from meshgen.blocks import global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
 from meshgen.elliptic_blocks import elliptic_blocks
@@ -63,6 +63,19 @@ def test_dfg_cylinder(method):
     assert abs(shoelace - area) < 2e-3 * area
     across, _ = size_ratios(block_set, Xs)
     assert across <= 1.3
+
+
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_dfg_cylinder_3d(method):
+    block_set = load_block_set("dfg-cylinder-3d", None, (4, 3, 3))
+    Xs = tfi_blocks(block_set) if method == "tfi" else elliptic_blocks(block_set)[0]
+    assert all(gap == 0.0 for gap in interface_gaps(block_set, Xs))
+    points, cells, _ = merged_mesh(block_set, Xs)
+    assert quality_report((points, cells))["inverted"]["count"] == 0
+    # The volume meshed is the channel minus the cylinder (closed form), to the polygon's error.
+    volume = (2.2 * 0.41 - np.pi * 0.05**2) * 0.41
+    measured = sum(float(cell_measures(X).sum()) for X in Xs)
+    assert abs(measured - volume) < 1e-2 * volume
 
 
 def test_single_block_plugin_unchanged():

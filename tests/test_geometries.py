@@ -18,9 +18,9 @@ from meshgen.errors import GeometryError
 from meshgen.geometry import ENTRY_POINT_GROUP, _builtin_files, available_names, load_geometry
 from meshgen.tfi import parametric_grid, tfi
 
-BLOCK_SETS = ["dfg-cylinder", "pipe"]  # multi-block plugins: tests/test_blocks.py
+BLOCK_SETS = ["dfg-cylinder", "dfg-cylinder-3d", "pipe"]  # multi-block plugins: tests/test_blocks.py
 NAMES = [name for name in available_names() if name not in BLOCK_SETS]
-BUILTINS = ["bump", "canal", "dfg-cylinder", "flower", "pipe", "semicylinder", "semidisk", "topcurve"]
+BUILTINS = ["bump", "canal", "dfg-cylinder", "dfg-cylinder-3d", "flower", "pipe", "semicylinder", "semidisk", "topcurve"]
 
 
 def size_of(X):
