@@ -4,19 +4,24 @@ whole mesh (design notes §11, docs/design-blocks.md), starting from the multi-b
 Method: Schwarz sweeps over the interfaces. For each interface, its two blocks are glued along it
 into one structured block (the second block's node array turned into the first one's index frame
 by the interface's Transform), whose interior, interface nodes included, ``meshgen.elliptic``'s
-multigrid Winslow solver solves with the glued block's boundary fixed. Every block takes part in
-the solves of all its interfaces, so each sweep passes information across the whole set; a few
-sweeps converge. The glued block's parametric coordinate across the interface runs through the
-first block's nodes, then the second's, each block's part scaled by the block's mean length along
-that axis, so that a cell of either block has the parametric size it has physically.
+multigrid Winslow cycles relax with the glued block's boundary fixed (the hierarchy of each glued
+block is built once). Every block takes part in the solves of all its interfaces, so each sweep
+passes information across the whole set. The glued block's parametric coordinate across the
+interface runs through the first block's nodes, then the second's, each block's part scaled by
+the block's mean length along that axis, so that a cell of either block has the parametric size
+it has physically. Anderson mixing of the sweeps (``meshgen.elliptic.AndersonMixing``).
 
-Boundary nodes on a flat patch (and on no other patch) slide in its plane after each sweep, to the
-projection of their neighbour one layer inside: grid lines meet flat inlets, outlets and straight
-walls at right angles, and a straight extrusion (the pipe) is meshed as the extrusion of its
-section's mesh. Nodes that no glued block holds inside, because they lie where three or more blocks meet (the
-corners of an O-grid's core, where the angles of straight grid lines would be 90, 135 and 135
-degrees), move to the mean of their neighbours along grid lines after each sweep (Laplace), which
-rounds such a corner as the Winslow solution does away from it.
+After each sweep, two kinds of nodes that no glued block holds inside move by their own rules:
+
+- junctions, where three or more blocks meet (an O-grid core's corners: straight grid lines would
+  give 90, 135 and 135 degrees there): the mean over the grid quadrilaterals at the node of the
+  parallelogram completion x_a + x_b - x_ab (in 3D the quads across the block edge the node is
+  on), whose fixed point makes the cells around it as parallelogram-like as their neighbours allow;
+- nodes on a flat patch (and on no other patch) slide in its plane to the projection of their
+  neighbour one layer inside: grid lines meet flat inlets, outlets and straight walls at right
+  angles, and a straight extrusion (the pipe) is meshed as the extrusion of its section's mesh.
+
+Nodes on curved patches and on two patches stay where the TFI put them.
 """
 
 from __future__ import annotations
