@@ -14,7 +14,7 @@ from meshgen import cube
 from meshgen.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
 from meshgen.errors import FormatError
 
-__all__ = ["MERGED_FORMATS", "check_block_output", "patch_faces", "write_blocks"]
+__all__ = ["MERGED_FORMATS", "check_block_output", "patch_faces", "write_blocks", "zone_reports"]
 
 MERGED_FORMATS = ("vtu", "vtk", "xdmf")  # one merged unstructured mesh, written by meshio
 
@@ -117,3 +117,14 @@ def _write_openfoam(case, block_set: BlockSet, Xs) -> None:
         patches.append((EXTRUDED_PATCH, "empty", front_back))
     control = {"controlDict": CONTROL_DICT, "fvSchemes": FV_SCHEMES, "fvSolution": FV_SOLUTION}
     write_poly_mesh(case, points, cells, patches, control)
+
+
+def zone_reports(path) -> list[dict]:
+    """The quality report of each zone of a multi-zone .cgns file (one block each), ``file`` named
+    ``<path>:<zone>``; [] for any other file."""
+    from meshgen.formats._cgns import read_zones, zone_count
+    from meshgen.quality import quality_report
+
+    if Path(path).suffix.lower() != ".cgns" or zone_count(path) < 2:
+        return []
+    return [{"file": f"{path}:{zone['name']}", "structured": True, **quality_report(zone["X"])} for zone in read_zones(path)]

@@ -42,3 +42,13 @@ def test_bad_block_requests_are_one_line(run_cli, tmp_path, args, words):
     assert words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not list(tmp_path.glob("x.*"))
+
+
+def test_evaluate_per_block(run_cli, tmp_path):
+    assert run_cli("mesh", "-g", "pipe", "--dims", "4", "2", "3", "--method", "tfi", "-o", "p.cgns", "-q").returncode == 0
+    result = run_cli("evaluate", "p.cgns", "--per-block", "--json", "-")
+    assert result.returncode == 0, result.stderr
+    reports = json.loads(result.stdout)
+    assert [r["file"] for r in reports] == ["p.cgns"] + [f"p.cgns:{b}" for b in ("core", "east", "north", "west", "south")]
+    assert reports[0]["cells"] == sum(r["cells"] for r in reports[1:]) == 4 * 4 * 3 + 4 * 2 * 4 * 3
+    assert reports[1]["cells"] == 4 * 4 * 3
