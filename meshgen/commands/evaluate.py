@@ -124,9 +124,7 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     help="Run the blocks on this dask.distributed scheduler (implies --chunked; the workers must see the files) "
     "[default: $DASK_SCHEDULER_ADDRESS, else Dask's local threads].",
 )
-@click.option(
-    "--per-block", is_flag=True, help="Multi-zone .cgns files (block sets): also report each zone (block) on its own."
-)
+@click.option("--per-block", is_flag=True, help="Multi-zone .cgns files (block sets): also report each zone (block) on its own.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
 def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, per_block, quiet):
     """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's
