@@ -3,9 +3,10 @@
 
     python benchmarks/bench_blocks.py [--quick] [--json FILE] [--only pipe|dfg]
 
-``pipe``: elliptic (and TFI) meshes at N = 8, 16, 32 (--quick: 8, 16) cells around a quarter of
-the circumference, M = N / 2 across the wall layer, 4 along the axis: sweeps, seconds, inverted
-cells, worst min and max angle, the largest cell-size ratio across an interface and inside a block.
+``pipe``: elliptic (and TFI) meshes at N = 8, 16, 32, 50 (--quick: 8, 16) cells around a quarter of
+the circumference (50: 200 around), M = N / 2 across the wall layer, 4 along the axis, and the
+issue's 40 around by 80 along (10 5 80): sweeps, seconds, inverted cells, worst min and max angle,
+the largest cell-size ratio across an interface and inside a block.
 Targets: 0 inverted, worst min angle >= 40 deg and worst max angle <= 140 deg at every resolution
 (the single-block semicylinder's degrade with refinement), ratio across interfaces <= 1.3.
 
@@ -37,12 +38,11 @@ from meshgen.quality import quality_report  # noqa: E402
 DFG_TARGETS = {10_000: {"drag": 0.001, "lift": 0.03, "dp": 0.005}, 40_000: {"drag": 0.0005, "lift": 0.01, "dp": 0.002}}
 
 
-def pipe_rows(sizes) -> list[dict]:
+def pipe_rows(all_dims) -> list[dict]:
     from blocks_helpers import size_ratios
 
     rows = []
-    for n in sizes:
-        dims = (n, n // 2, 4)
+    for dims in all_dims:
         block_set = load_block_set("pipe", None, dims)
         for method in ("tfi", "elliptic"):
             start = time.perf_counter()
@@ -106,7 +106,8 @@ def main() -> None:
     args = parser.parse_args()
     result = {"load_average": os.getloadavg()}
     if args.only in (None, "pipe"):
-        result["pipe"] = pipe_rows((8, 16) if args.quick else (8, 16, 32))
+        sizes = [(n, n // 2, 4) for n in ((8, 16) if args.quick else (8, 16, 32, 50))]
+        result["pipe"] = pipe_rows(sizes + ([] if args.quick else [(10, 5, 80)]))
     if args.only in (None, "dfg"):
         result["dfg"] = dfg_rows([(28, 20)] if args.quick else [(28, 20), (56, 40)])
     if args.json is not None:
