@@ -30,6 +30,7 @@ from __future__ import annotations
 import importlib.util
 import itertools
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
@@ -53,6 +54,7 @@ __all__ = [
     "load_geometry",
     "load_recorded_geometry",
     "looks_like_path",
+    "plugin_module",
     "parse_params",
 ]
 
@@ -126,6 +128,8 @@ def _from_module(module, source: str) -> Geometry:
     defaults = {k: float(v) for k, v in params.items()}
     length_map = getattr(module, "characteristic_length", None)
     patches = _declared_patches(getattr(module, "patches", {}), int(dim), source)
+    if hasattr(module, "blocks"):  # a block set (meshgen.blocks): its boundary() takes a block name first
+        boundary_map = _multiblock_boundary(name)
     return Geometry(
         name=name,
         dim=int(dim),
@@ -137,6 +141,15 @@ def _from_module(module, source: str) -> Geometry:
         source=source,
         patches=patches,
     )
+
+
+def _multiblock_boundary(name: str) -> Callable:
+    """The boundary map of a multi-block plugin seen as one block: an error saying where to go."""
+
+    def boundary(points, **values):
+        raise GeometryError(f"geometry '{name}' is made of several blocks: mesh it with 'meshgen mesh' or meshgen.blocks")
+
+    return boundary
 
 
 def _declared_patches(declared, dim: int, source: str) -> dict:
@@ -159,33 +172,36 @@ def looks_like_path(spec: str) -> bool:
     return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec)
 
 
+def plugin_module(spec: str) -> tuple[ModuleType, str]:
+    """The plugin module of a geometry name (built-in or entry point) or ``.py`` path, imported,
+    with a description of where it came from (its file, or the entry point)."""
+    if looks_like_path(spec):
+        path = Path(spec)
+        if not path.is_file():
+            raise GeometryError(f"geometry file {spec} does not exist")
+        module = _import_file(path)
+        note_given_plugin(path)  # named by the user: a file recording this path may load it too
+        return module, str(path)
+    builtins = _builtin_files()
+    if spec in builtins:
+        return _import_file(builtins[spec]), str(builtins[spec])
+    eps = _entry_points()
+    if spec not in eps:
+        names = available_names()
+        raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
+    module = call_plugin(
+        f"'{spec}'", "import", eps[spec].load, failed=f"geometry plugin '{spec}' ({eps[spec].value}) failed to load:"
+    )
+    return module, f"entry point {eps[spec].value}"
+
+
 def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
     (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
     OBJ, PLY, or a YAML geometry file: ``meshgen.shapes.loader``) gives a geometry without
     parameters."""
-    if is_shape_file(spec):
-        geometry = load_shape(spec)
-    elif looks_like_path(spec):
-        path = Path(spec)
-        if not path.is_file():
-            raise GeometryError(f"geometry file {spec} does not exist")
-        geometry = _from_module(_import_file(path), str(path))
-        note_given_plugin(path)  # named by the user: a file recording this path may load it too
-    else:
-        builtins = _builtin_files()
-        if spec in builtins:
-            geometry = _from_module(_import_file(builtins[spec]), str(builtins[spec]))
-        else:
-            eps = _entry_points()
-            if spec not in eps:
-                names = available_names()
-                raise GeometryError(f"unknown geometry '{spec}' (available: {', '.join(names)}){did_you_mean(spec, names)}")
-            module = call_plugin(
-                f"'{spec}'", "import", eps[spec].load, failed=f"geometry plugin '{spec}' ({eps[spec].value}) failed to load:"
-            )
-            geometry = _from_module(module, f"entry point {eps[spec].value}")
+    geometry = load_shape(spec) if is_shape_file(spec) else _from_module(*plugin_module(spec))
     geometry = bind(geometry, params)
     if check:
         check_boundary(geometry)

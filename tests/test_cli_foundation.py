@@ -252,8 +252,10 @@ def test_geometries_json_matches_the_plugins():
     assert result.exit_code == 0, result.output
     listed = json.loads(result.stdout)
     assert [item["name"] for item in listed] == available_names()
-    for item in listed:
-        assert list(item) == ["name", "dim", "description", "params", "patches"]
+    for item in listed:  # block sets (meshgen.blocks) also say their blocks and what --dims counts
+        assert list(item) == ["name", "dim", "description", "params", "patches"] + (
+            ["blocks", "dims"] if "blocks" in item else []
+        )
     by_name = {item["name"]: item for item in listed}
     for stem, path in _builtin_files().items():  # read the plugin files directly, not through meshgen.geometry
         spec = importlib.util.spec_from_file_location(f"_listing_check_{stem}", path)

@@ -93,6 +93,8 @@ def test_geometries_json_lists_the_patches(run_cli):
     assert {p["name"] for p in listed["semicylinder"]} == {"inlet", "outlet", "wall", "symmetry"}
     for name, patches in listed.items():  # every face in exactly one patch
         faces = [face for p in patches for face in p["faces"]]
+        if any("." in face for face in faces):  # a block set: block.face, interfaces left out
+            continue
         assert sorted(faces) == sorted(cube.face_names(len(faces) // 2)), name
 
 
@@ -312,7 +314,9 @@ def test_cgns_zone_bc_passes_cgnscheck_and_reads_back(tmp_path, name, dims):
                 plane = node_shape[face.axis] if face.side else 1
                 assert first[face.axis] == last[face.axis] == plane
                 assert [last[d] - first[d] + 1 for d in face.tangent_axes] == [node_shape[d] for d in face.tangent_axes]
-                kind = bc[" data"][()].tobytes().decode()
+                # FamilySpecified (what VTK's reader loads), the physical type in the family's FamilyBC.
+                assert bc[" data"][()].tobytes().decode() == "FamilySpecified"
+                kind = root[f"Base/{patch.name}/FamilyBC/ data"][()].tobytes().decode()
                 assert kind == {"wall": "BCWall", "symmetry": "BCSymmetryPlane"}.get(
                     patch.type, {"inlet": "BCInflow", "outlet": "BCOutflow"}.get(patch.name)
                 )

@@ -15,6 +15,7 @@ from meshgen.commands._options import geometry_options
 from meshgen.gates import GateError, check_gates, parse_gate
 from meshgen.geometry import load_geometry, parse_params
 from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_json
+from meshgen.quality.files import zone_reports
 from meshgen.scheduler import connect, scheduler_address
 from meshgen.tables import METRIC_LABELS, markdown_table, print_table
 from meshgen.tables import number as _number
@@ -157,8 +158,9 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     help="Run the blocks on this dask.distributed scheduler (implies --chunked; the workers must see the files) "
     "[default: $DASK_SCHEDULER_ADDRESS, else Dask's local threads].",
 )
+@click.option("--per-block", is_flag=True, help="Multi-zone .cgns files (block sets): also report each zone (block) on its own.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
-def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, quiet):
+def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, per_block, quiet):
     """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's
     .vts, .cgns, .xyz, or an OpenFOAM case folder meshgen wrote).
 
@@ -185,6 +187,8 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     finally:
         if client is not None:
             client.close()
+    if per_block:  # each block of a block set after the whole mesh (meshgen.quality.files.zone_reports)
+        reports = [entry for path, report in zip(meshes, reports) for entry in (report, *zone_reports(path))]
 
     gate_results = []
     try:

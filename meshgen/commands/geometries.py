@@ -8,6 +8,7 @@ import json
 import click
 
 from meshgen.atomic import check_output_file
+from meshgen.blocks import describe as describe_blocks
 from meshgen.commands._options import load_selected_geometry
 from meshgen.errors import GeometryError
 from meshgen.geometry import available_names, load_geometry
@@ -30,7 +31,7 @@ def geometries(ctx, as_json):
     described = []
     for name in available_names():
         try:
-            described.append(load_geometry(name, check=False).describe())
+            described.append(describe_blocks(name) or load_geometry(name, check=False).describe())
         except GeometryError as exc:  # one broken installed plugin must not hide the others
             click.echo(f"Warning: {' '.join(str(exc).split())}", err=True)
     if as_json:
@@ -45,7 +46,8 @@ def geometries(ctx, as_json):
     for item in described:
         params = ", ".join(f"{k}={v:g}" for k, v in item["params"].items()) or "-"
         patches = "\n".join(f"{p['name']} ({p['type']}: {' '.join(p['faces'])})" for p in item["patches"])
-        table.add_row(item["name"], f"{item['dim']}D", item["description"], params, patches)
+        description = item["description"] + (f"\n{len(item['blocks'])} blocks; --dims {item['dims']}" if "blocks" in item else "")
+        table.add_row(item["name"], f"{item['dim']}D", description, params, patches)
     console = Console()
     console.print(table)
 

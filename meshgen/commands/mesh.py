@@ -6,6 +6,8 @@ import sys
 
 import click
 
+from meshgen.blocks import is_multiblock
+from meshgen.commands._blocks import mesh_block_geometry
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 from meshgen.commands._progress import progress_display
 from meshgen.commands._text import echo
@@ -172,6 +174,15 @@ def mesh(
     from the written file, and no per-cell quality arrays are attached (see README).
     """
     _check_method(method)  # an unknown name fails before anything is loaded
+    if checkpoint is None and is_multiblock(geometry):  # a block set: meshgen.commands._blocks does the run
+        unsupported = {"--patch": patch_items, "--ascii": ascii_files, "--correct": correct, "--device": device}
+        unsupported.update({"--cluster": clusters, "--boundary-layout": boundary_layout, "--orthogonal": orthogonal})
+        unsupported.update({"--chunked": chunked, "--scheduler": scheduler, "--polish/--no-polish": polish is not None})
+        mesh_block_geometry(
+            method, geometry, params, dims, output, format_name,
+            tol=tol, max_iter=max_iter, quality=quality, quiet=quiet, unsupported=unsupported,
+        )  # fmt: skip
+        return
     context = click.get_current_context()
     geometry_given = context.get_parameter_source("geometry") != click.core.ParameterSource.DEFAULT
     request = MeshRequest(

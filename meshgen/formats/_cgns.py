@@ -16,7 +16,7 @@ The tree (SIDS names and labels; data type and CGNS array shape after the colon)
           GridLocation      GridLocation_t         C1: "CellCenter"
           <name>            DataArray_t            R8 (ni-1, nj-1[, nk-1])
         ZoneBC              ZoneBC_t               (only with patches)
-          <patch>[_<face>]  BC_t                   C1: BCWall, BCInflow, ... (BC_TYPES)
+          <patch>[_<face>]  BC_t                   C1: "FamilySpecified" (the type is the Family's)
             PointRange      IndexRange_t           I4 (IndexDimension, 2): first and last vertex (1-based)
             FamilyName      FamilyName_t           C1: the patch name
       <patch>               Family_t               one per patch
@@ -26,7 +26,11 @@ The tree (SIDS names and labels; data type and CGNS array shape after the colon)
 A patch covers one or more faces of the structured block; PointRange describes one rectangle, so
 there is one BC_t per face, named after the patch (``<patch>_<face>`` when the patch has several
 faces), and the BC_ts of one patch share its Family: the family is the patch, as ParaView's and
-other CGNS readers group boundaries.
+other CGNS readers group boundaries. Each BC_t is of type FamilySpecified and names its family;
+the physical type (BCWall, BCInflow ...) is the family's FamilyBC: VTK's (ParaView's) CGNS reader
+loads only BC_ts of type FamilySpecified, BCDirichlet or BCNeumann, and shows each as a block named
+after its family. A multi-block mesh (``write_zones``) has one zone per block, the same families,
+and a ZoneGridConnectivity of GridConnectivity1to1 records per zone.
 
 A 3D mesh has IndexDimension = CellDimension = PhysicalDimension = 3, a 2D mesh 2 (x and y only).
 meshgen's coordinates are in the geometry's own, unstated unit: hence the data class
@@ -170,12 +174,13 @@ def write_zone_bc(base, zone, node_shape, patches) -> None:
             last = list(node_shape)
             first[face.axis] = last[face.axis] = node_shape[face.axis] if face.side else 1
             name = patch.name if len(patch.faces) == 1 else f"{patch.name}_{face_name}"
-            bc = _node(zone_bc, name, "BC_t", _chars(kind))
+            bc = _node(zone_bc, name, "BC_t", _chars("FamilySpecified"))
             _node(bc, "PointRange", "IndexRange_t", np.array([first, last], dtype="<i4"))
             _node(bc, "FamilyName", "FamilyName_t", _chars(patch.name))
-        family = _node(base, patch.name, "Family_t")
-        _node(family, "FamilyBC", "FamilyBC_t", _chars(kind))
-        _node(family, "PatchType", "Descriptor_t", _chars(patch.type))
+        if patch.name not in base:  # one Family per patch, however many zones share it
+            family = _node(base, patch.name, "Family_t")
+            _node(family, "FamilyBC", "FamilyBC_t", _chars(kind))
+            _node(family, "PatchType", "Descriptor_t", _chars(patch.type))
 
 
 def check_patch_name(name: str) -> None:
@@ -244,6 +249,8 @@ def read(path):
     import h5py
     import meshio
 
+    if zone_count(path) > 1:
+        return read_merged(path)
     with h5py.File(path, "r") as root:
         base, zone, node_shape = _structured_zone(root, path)
         cell_shape = tuple(n - 1 for n in node_shape)
@@ -468,3 +475,109 @@ def _coordinate_arrays(zone, dim: int, path) -> list:
     if missing:
         raise FormatError(f"{path}: no {', '.join(missing)} in {grid.name} (only Cartesian coordinates are read)")
     return [grid[name][" data"] for name in names]
+
+
+# --- several zones (block sets) ---------------------------------------------------------------
+
+
+def write_zones(path, zones, metadata, connections) -> None:
+    """Write one structured zone per block: ``zones`` a list of (zone name, node array X, patches
+    of that zone), ``connections`` per zone a list of (record name, donor zone name, PointRange,
+    PointRangeDonor, Transform), ranges as (2, IndexDimension) 1-based vertex indices: each
+    becomes a GridConnectivity1to1 in the zone's ZoneGridConnectivity."""
+    import h5py
+
+    dim = zones[0][1].shape[-1]
+    with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
+        _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
+        _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
+        _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
+        _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
+        base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
+        _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
+        if metadata:
+            _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
+        for (name, X, patches), records in zip(zones, connections):
+            _check_name(name, "zone")
+            node_shape = X.shape[:-1]
+            sizes = np.array([node_shape, [n - 1 for n in node_shape], [0] * dim], dtype="<i4")
+            zone = _node(base, name, "Zone_t", sizes)
+            _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
+            coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+            for axis in range(dim):
+                coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", _fortran(X[..., axis]))
+                _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
+            if patches:
+                write_zone_bc(base, zone, node_shape, patches)
+            if records:
+                connectivity = _node(zone, "ZoneGridConnectivity", "ZoneGridConnectivity_t")
+                for record, donor, point_range, donor_range, transform in records:
+                    link = _node(connectivity, record, "GridConnectivity1to1_t", _chars(donor))
+                    _node(link, "Transform", '"int[IndexDimension]"', np.asarray(transform, dtype="<i4"))
+                    _node(link, "PointRange", "IndexRange_t", np.asarray(point_range, dtype="<i4"))
+                    _node(link, "PointRangeDonor", "IndexRange_t", np.asarray(donor_range, dtype="<i4"))
+
+
+def read_zones(path) -> list[dict]:
+    """Every structured zone of the first base: {"name", "X" (C-order node array), "connections":
+    [{"name", "donor", "range", "donor_range", "transform"}] (ranges 1-based, (2, dim))}."""
+    import h5py
+
+    zones = []
+    with h5py.File(path, "r") as root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        for zone in _children_with_label(base, "Zone_t"):
+            node_shape = tuple(int(n) for n in _data(zone)[0])
+            X = np.stack([_c_order(a[()], node_shape, path) for a in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
+            connections = []
+            for connectivity in _children_with_label(zone, "ZoneGridConnectivity_t"):
+                for link in _children_with_label(connectivity, "GridConnectivity1to1_t"):
+                    connections.append(
+                        {
+                            "name": _name(link),
+                            "donor": _text(link),
+                            "range": np.asarray(_data(link["PointRange"]), dtype=int),
+                            "donor_range": np.asarray(_data(link["PointRangeDonor"]), dtype=int),
+                            "transform": tuple(int(t) for t in _data(link["Transform"])),
+                        }
+                    )
+            zones.append({"name": _name(zone), "X": X, "connections": connections})
+    return zones
+
+
+def zone_count(path) -> int:
+    """How many zones the first base holds."""
+    import h5py
+
+    with h5py.File(path, "r") as root:
+        return len(_children_with_label(_child_with_label(root, "CGNSBase_t", path), "Zone_t"))
+
+
+def read_merged(path):
+    """All zones of a multi-zone file as one ``meshio.Mesh``: nodes that coincide exactly (the
+    interfaces of a block set) merged, hexahedra (quads) zone after zone, cell data ``block``
+    (the zone's number), meshgen's metadata in field data."""
+    import h5py
+    import meshio
+
+    zones = read_zones(path)
+    dim = zones[0]["X"].shape[-1]
+    points = np.concatenate([zone["X"].reshape(-1, dim) for zone in zones])
+    unique, inverse = np.unique(points, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    cells, owner, offset = [], [], 0
+    for number, zone in enumerate(zones):
+        local = cell_connectivity(zone["X"].shape[:-1])
+        cells.append(inverse[offset + local])
+        owner.append(np.full(len(local), float(number)))
+        offset += zone["X"][..., 0].size
+    field_data = {}
+    with h5py.File(path, "r") as root:
+        base = _child_with_label(root, "CGNSBase_t", path)
+        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
+            field_data[METADATA_KEY] = np.asarray(_data(base[METADATA_KEY])).view(np.uint8)
+    padded = np.hstack([unique, np.zeros((len(unique), 3 - dim))]) if dim < 3 else unique
+    cell_type = "hexahedron" if dim == 3 else "quad"
+    return meshio.Mesh(
+        padded, [(cell_type, np.concatenate(cells))], cell_data={"block": [np.concatenate(owner)]}, field_data=field_data
+    )

@@ -14,6 +14,7 @@ from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
+from meshgen.formats.multiblock import read_zones, zone_count
 from meshgen.geometry import load_geometry, load_recorded_geometry
 from meshgen.grid import cell_connectivity
 from meshgen.inputs import read_input_text
@@ -21,12 +22,13 @@ from meshgen.patches import geometry_patches
 from meshgen.publish import publishing
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.faces import cells_for_quality
-from meshgen.quality.report import assess, build_report
+from meshgen.quality.report import assess, build_report, quality_report
 from meshgen.quality.structured import check_node_array
 from meshgen.resources import needs_chunking
 from meshgen.trust import UntrustedGeometry
 
 __all__ = [
+    "zone_reports",
     "EVALUATE_BYTES_PER_NODE",
     "as_node_array",
     "evaluate_file",
@@ -271,3 +273,11 @@ def _finish_file_report(path, report, source, notes, metadata, structured) -> di
         if key in metadata:
             report.setdefault("recorded", {})[key] = metadata[key]
     return {"file": str(path), "structured": structured, **report}
+
+
+def zone_reports(path) -> list[dict]:
+    """The quality report of each zone of a multi-zone .cgns file (one block each), ``file`` named
+    ``<path>:<zone>``; [] for any other file."""
+    if Path(path).suffix.lower() != ".cgns" or zone_count(path) < 2:
+        return []
+    return [{"file": f"{path}:{zone['name']}", "structured": True, **quality_report(zone["X"])} for zone in read_zones(path)]

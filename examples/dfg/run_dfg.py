@@ -1,0 +1,199 @@
+"""The DFG 2D-1 benchmark (Schaefer and Turek, 1996) on a meshgen multi-block mesh, solved with
+OpenFOAM's simpleFoam: steady laminar flow past a cylinder at Re = 20.
+
+    python examples/dfg/run_dfg.py --dims 16 12            # mesh, solve, print drag, lift, dp
+    python examples/dfg/run_dfg.py --dims 16 12 --json out.json
+
+Channel [0, 2.2] x [0, 0.41], cylinder D = 0.1 at (0.2, 0.2); inflow U(y) = 4 Um y (H - y) / H^2 with
+Um = 0.3, nu = 1e-3 (mean velocity 0.2, Re = 20). The 2D mesh (``meshgen mesh -g dfg-cylinder
+--format openfoam``) is one cell deep with ``empty`` front and back. Set-up: laminar, SIMPLEC,
+second-order convection (linearUpwind), forceCoeffs on the cylinder with magUInf = 0.2, lRef = D
+and Aref = D x depth (c = 2 F / (rho 0.2^2 D) per unit depth), patchProbes of p at the cylinder's
+front (0.15, 0.2) and back (0.25, 0.2). Reference: c_D = 5.57953523384, c_L = 0.010618948146,
+dp = 0.11752016697 (design notes §11).
+
+Needs OpenFOAM (v1912 or later, the ESI syntax) on PATH or in /usr/share/openfoam.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REFERENCE = {"drag": 5.57953523384, "lift": 0.010618948146, "dp": 0.11752016697}
+HEIGHT, U_MAX, NU, D = 0.41, 0.3, 1e-3, 0.1
+HEADER = "FoamFile {{ version 2.0; format ascii; class {cls}; object {name}; }}\n"
+BASHRC = ("/usr/share/openfoam/etc/bashrc", "/usr/lib/openfoam/openfoam/etc/bashrc")
+
+
+def foam_environment() -> dict:
+    bashrc = next((path for path in BASHRC if Path(path).is_file()), None)
+    if bashrc is None:
+        return dict(os.environ)
+    result = subprocess.run(["bash", "-c", f"source {bashrc} >/dev/null 2>&1; env -0"], capture_output=True, check=True)
+    pairs = (item.split(b"=", 1) for item in result.stdout.split(b"\0") if b"=" in item)
+    return {key.decode(): value.decode() for key, value in pairs}
+
+
+def write(path: Path, cls: str, body: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(HEADER.format(cls=cls, name=path.name) + body)
+
+
+def poly_mesh(case: Path):
+    """(points (N, 3), faces (F, 4), boundary {name: (nFaces, startFace)}) of an ASCII polyMesh."""
+    folder = case / "constant" / "polyMesh"
+
+    def body(name):
+        text = (folder / name).read_text()
+        text = text[text.index("}", text.index("FoamFile")) + 1 :]
+        return text[text.index("(") + 1 : text.rindex(")")]
+
+    points = np.array(body("points").replace("(", " ").replace(")", " ").split(), dtype=float).reshape(-1, 3)
+    faces = np.array(re.sub(r"\d+\(", " ", body("faces")).replace(")", " ").split(), dtype=int).reshape(-1, 4)
+    text = (folder / "boundary").read_text()
+    boundary = {
+        name: (int(re.search(r"nFaces\s+(\d+)", entry)[1]), int(re.search(r"startFace\s+(\d+)", entry)[1]))
+        for name, entry in re.findall(r"(\w+)\s*\{([^}]*)\}", text[text.index("}", text.index("FoamFile")) + 1 :])
+    }
+    return points, faces, boundary
+
+
+def set_up(case: Path) -> dict:
+    """0/, constant/ and system/ for simpleFoam; returns the mesh's depth and cell count."""
+    points, faces, boundary = poly_mesh(case)
+    depth = float(points[:, 2].max() - points[:, 2].min())
+    count, start = boundary["inlet"]
+    y = points[faces[start : start + count]].mean(axis=1)[:, 1]
+    inflow = 4.0 * U_MAX * y * (HEIGHT - y) / HEIGHT**2
+    profile = "nonuniform List<vector> {} (\n{}\n)".format(count, "\n".join(f"({u:.17g} 0 0)" for u in inflow))
+    write(
+        case / "0" / "U",
+        "volVectorField",
+        "dimensions [0 1 -1 0 0 0 0];\ninternalField uniform (0 0 0);\nboundaryField\n{\n"
+        f"    inlet {{ type fixedValue; value {profile}; }}\n"
+        "    outlet { type zeroGradient; }\n    walls { type noSlip; }\n    cylinder { type noSlip; }\n"
+        "    frontAndBack { type empty; }\n}\n",
+    )
+    write(
+        case / "0" / "p",
+        "volScalarField",
+        "dimensions [0 2 -2 0 0 0 0];\ninternalField uniform 0;\nboundaryField\n{\n"
+        "    inlet { type zeroGradient; }\n    outlet { type fixedValue; value uniform 0; }\n"
+        "    walls { type zeroGradient; }\n    cylinder { type zeroGradient; }\n    frontAndBack { type empty; }\n}\n",
+    )
+    write(case / "constant" / "transportProperties", "dictionary", f"transportModel Newtonian;\nnu {NU};\n")
+    write(case / "constant" / "turbulenceProperties", "dictionary", "simulationType laminar;\n")
+    z = 0.5 * depth
+    write(
+        case / "system" / "controlDict",
+        "dictionary",
+        "application simpleFoam;\nstartFrom startTime;\nstartTime 0;\nstopAt endTime;\nendTime 5000;\ndeltaT 1;\n"
+        "writeControl timeStep;\nwriteInterval 5000;\nwriteFormat ascii;\nwritePrecision 12;\nrunTimeModifiable false;\n"
+        "functions\n{\n"
+        '    coefficients { type forceCoeffs; libs ("libforces.so"); writeControl timeStep; writeInterval 1;\n'
+        "        patches (cylinder); rho rhoInf; rhoInf 1; liftDir (0 1 0); dragDir (1 0 0); CofR (0.2 0.2 0);\n"
+        f"        pitchAxis (0 0 1); magUInf 0.2; lRef {D}; Aref {D * depth:.17g}; }}\n"
+        '    pressure { type patchProbes; libs ("libsampling.so"); writeControl timeStep; writeInterval 1;\n'
+        f"        patches (cylinder); fields (p); probeLocations ((0.15 0.2 {z:.17g}) (0.25 0.2 {z:.17g})); }}\n"
+        "}\n",
+    )
+    write(
+        case / "system" / "fvSchemes",
+        "dictionary",
+        "ddtSchemes { default steadyState; }\ngradSchemes { default Gauss linear; }\n"
+        "divSchemes { default none; div(phi,U) bounded Gauss linearUpwind grad(U);\n"
+        "    div((nuEff*dev2(T(grad(U))))) Gauss linear; }\n"
+        "laplacianSchemes { default Gauss linear corrected; }\ninterpolationSchemes { default linear; }\n"
+        "snGradSchemes { default corrected; }\n",
+    )
+    write(
+        case / "system" / "fvSolution",
+        "dictionary",
+        "solvers\n{\n    p { solver GAMG; smoother GaussSeidel; tolerance 1e-12; relTol 0.01; }\n"
+        "    U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-12; relTol 0.1; }\n}\n"
+        "SIMPLE { consistent yes; nNonOrthogonalCorrectors 1; residualControl { p 1e-9; U 1e-10; } }\n"
+        'relaxationFactors { equations { U 0.9; ".*" 0.9; } }\n',
+    )
+    return {"depth": depth}
+
+
+def last_row(path: Path, columns: list[str]) -> dict:
+    """The last row of an OpenFOAM function-object .dat file, by the names of its header."""
+    lines = path.read_text().splitlines()
+    header = [line for line in lines if line.startswith("#")][-1].lstrip("#").split()
+    values = [line for line in lines if line.strip() and not line.startswith("#")][-1].split()
+    return {name: float(values[header.index(name)]) for name in columns}
+
+
+def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bool = False) -> dict:
+    """Mesh, set up, solve; returns cells, seconds (mesh, solver), drag, lift, dp and their errors."""
+    env = foam_environment()
+    if shutil.which("simpleFoam", path=env.get("PATH")) is None:
+        raise SystemExit("simpleFoam not found: install OpenFOAM (Debian: apt install openfoam)")
+    shutil.rmtree(case, ignore_errors=True)
+    start = time.perf_counter()
+    meshed = subprocess.run(
+        [sys.executable, "-m", "meshgen", "mesh", "-g", "dfg-cylinder", "--dims", *map(str, dims), "--method", method,
+         "--format", "openfoam", "-o", str(case), "--no-quality", "-q"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    if meshed.returncode != 0:
+        raise SystemExit(meshed.stderr)
+    mesh_seconds = time.perf_counter() - start
+    set_up(case)
+    start = time.perf_counter()
+    solved = subprocess.run(["simpleFoam", "-case", str(case)], env=env, capture_output=True, text=True)
+    solver_seconds = time.perf_counter() - start
+    if solved.returncode != 0:
+        raise SystemExit(solved.stdout[-3000:] + solved.stderr[-3000:])
+    iterations = len(re.findall(r"^Time = ", solved.stdout, re.M))
+    coefficients = next((case / "postProcessing" / "coefficients").glob("*/coefficient*.dat"))
+    forces = last_row(coefficients, ["Cd", "Cl"])
+    p_file = next((case / "postProcessing" / "pressure").glob("*/p"))
+    front, back = [float(v) for v in p_file.read_text().strip().splitlines()[-1].split()[1:3]]
+    cells = int(re.search(r"nCells:\s*(\d+)", (case / "constant" / "polyMesh" / "owner").read_text())[1])
+    result = {
+        "dims": list(dims),
+        "method": method,
+        "cells": cells,
+        "iterations": iterations,
+        "mesh_seconds": mesh_seconds,
+        "solver_seconds": solver_seconds,
+        "drag": forces["Cd"],
+        "lift": forces["Cl"],
+        "dp": front - back,
+    }
+    for key in ("drag", "lift", "dp"):
+        result[f"{key}_error"] = result[key] / REFERENCE[key] - 1.0
+    if not quiet:
+        print(f"DFG 2D-1 on dfg-cylinder --dims {' '.join(map(str, dims))} ({method}): {cells} cells, "
+              f"mesh {mesh_seconds:.1f} s, simpleFoam {iterations} iterations in {solver_seconds:.1f} s")  # fmt: skip
+        for key, label in (("drag", "drag c_D"), ("lift", "lift c_L"), ("dp", "dp")):
+            print(f"  {label:9s} {result[key]:.6g}   reference {REFERENCE[key]:.6g}   error {100 * result[key + '_error']:+.3f}%")
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dims", nargs=2, type=int, default=[16, 12], metavar=("N", "M"))
+    parser.add_argument("--method", default="elliptic", choices=["tfi", "elliptic"])
+    parser.add_argument("--case", default="dfg-case", type=Path)
+    parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    args = parser.parse_args()
+    result = run(args.dims, args.method, args.case)
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+"""Writing block-set meshes (a ``BlockSet`` and its node arrays, one per block): ``.cgns`` one
+structured zone per block with 1-to-1 connectivity, an OpenFOAM case with the interfaces as
+internal faces, and one merged unstructured mesh for the formats meshio writes (``.vtu``, ``.vtk``,
+``.xdmf``); and their quality report and whole-mesh ``meshgen mesh`` run.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.atomic import atomic_write, check_output_file
+from meshgen.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
+from meshgen.errors import FormatError
+from meshgen.formats import check_output_path, format_for
+from meshgen.formats._cgns import read_zones, write_zones, zone_count
+from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, FV_SOLUTION
+from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
+from meshgen.formats._vtm import write_blocks_vtm
+from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.grid import cell_connectivity
+
+__all__ = ["MERGED_FORMATS", "check_block_output", "patch_faces", "read_zones", "write_blocks", "zone_count"]
+
+MERGED_FORMATS = ("vtu", "vtk", "xdmf")  # one merged unstructured mesh, written by meshio
+
+
+def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Path:
+    """The path to write, checked before any work (FormatError for a format that takes no block set)."""
+
+    if format_name is None and Path(path).suffix.lower() == ".vtm":  # a .vts per block and the .vtm listing them
+        return check_output_file(path, "mesh.vtm")
+    fmt = format_for(path, format_name)
+    if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS):
+        raise FormatError(
+            f"{fmt.name} does not take multi-block meshes ('{block_set.name}' has {len(block_set.names)} blocks); "
+            f"write .cgns (a zone per block), --format openfoam or .{', .'.join(MERGED_FORMATS)} (one merged mesh)"
+        )
+    path = check_output_path(path, fmt.name, block_set.dim)
+    if fmt.name in ("cgns", "openfoam"):
+        from importlib import import_module
+
+        module = import_module(fmt.module)
+        for patches in block_patches(block_set):
+            for patch in patches:
+                module.check_patch_name(patch.name)
+    return path
+
+
+def patch_faces(block_set: BlockSet) -> list[tuple[str, str, np.ndarray]]:
+    """The merged mesh's boundary patches: (name, type, elements) with elements the global node
+    numbers of each boundary face, (F, 4) quads in 3D, (E, 2) edges in 2D (any orientation)."""
+
+    numbering, _ = global_numbering(block_set)
+    found: dict[str, list] = {}
+    kinds = {}
+    for (block, face_name), (name, kind) in block_set.patches.items():
+        face = cube.face_named(face_name, block_set.dim)
+        ids = numbering[block][face.node_index]
+        local = cell_connectivity(ids.shape)  # the face's own cells: quads (3D) or segments (2D)
+        if block_set.dim == 3:
+            elements = ids.reshape(-1)[local]
+        else:
+            elements = np.stack([ids[:-1], ids[1:]], axis=1)
+        found.setdefault(name, []).append(elements)
+        kinds[name] = kind
+    return [(name, kinds[name], np.concatenate(parts)) for name, parts in found.items()]
+
+
+def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, format_name: str | None = None) -> Path:
+    """Write the block meshes ``Xs`` to ``path`` (format from the extension, or ``format_name``),
+    atomically. Returns the path written (an OpenFOAM case: its folder)."""
+
+    path = check_block_output(path, format_name, block_set)
+    metadata = dict(metadata or {})
+    metadata_json(metadata)
+    if format_name is None and path.suffix.lower() == ".vtm":
+        return write_blocks_vtm(path, list(zip(block_set.names, Xs, block_patches(block_set, interfaces=True))), metadata)
+    fmt = format_for(path, format_name)
+    if fmt.name == "cgns":
+        zones = [(name, X, patches) for name, X, patches in zip(block_set.names, Xs, block_patches(block_set))]
+        with atomic_write(path, FormatError) as temporary:
+            write_zones(temporary, zones, metadata, connectivity_records(block_set))
+        return path
+    if fmt.name == "openfoam":
+        _write_openfoam(path, block_set, Xs)
+        return path
+    import meshio
+
+    points, cells, owner = merged_mesh(block_set, Xs)
+    padded = np.hstack([points, np.zeros((len(points), 3 - block_set.dim))]) if block_set.dim == 2 else points
+    cell_type = "hexahedron" if block_set.dim == 3 else "quad"
+
+    field_data = {METADATA_KEY: np.frombuffer(metadata_json(metadata).encode(), dtype=np.uint8).copy()} if metadata else {}
+    mesh = meshio.Mesh(padded, [(cell_type, cells)], cell_data={"block": [owner.astype(float)]}, field_data=field_data)
+    with atomic_write(path, FormatError) as temporary:
+        meshio.write(temporary, mesh, file_format=fmt.name if fmt.name != "vtk" else "vtk")
+    return path
+
+
+def _write_openfoam(case, block_set: BlockSet, Xs) -> None:
+
+    points, cells, _ = merged_mesh(block_set, Xs)
+    patches = patch_faces(block_set)
+    if block_set.dim == 2:
+        if any(name == EXTRUDED_PATCH for name, _, _ in patches):
+            raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
+        points, cells, walls, front_back, _ = extrude_quads(points, cells, [faces for _, _, faces in patches])
+        patches = [(name, kind, faces) for (name, kind, _), faces in zip(patches, walls)]
+        patches.append((EXTRUDED_PATCH, "empty", front_back))
+    control = {"controlDict": CONTROL_DICT, "fvSchemes": FV_SCHEMES, "fvSolution": FV_SOLUTION}
+    write_poly_mesh(case, points, cells, patches, control)
