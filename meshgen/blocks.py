@@ -30,6 +30,7 @@ from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import Geometry, bind, load_geometry, plugin_module
 from meshgen.grid import cell_connectivity
 from meshgen.patches import PATCH_TYPES, Patch, check_patch_name
+from meshgen.shapes.loader import is_shape_file
 from meshgen.tfi import tfi
 
 __all__ = [
@@ -95,7 +96,9 @@ class BlockSet:
 
 
 def is_multiblock(spec: str) -> bool:
-    """Whether the geometry ``spec`` (name or plugin path) declares blocks."""
+    """Whether the geometry ``spec`` (name or plugin path) declares blocks (a shape file never does)."""
+    if not isinstance(spec, str) or is_shape_file(spec):
+        return False
     module, _ = plugin_module(spec)
     return hasattr(module, "blocks")
 
