@@ -27,6 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from meshgen.blocks import is_multiblock  # noqa: E402
 from meshgen.elliptic import elliptic  # noqa: E402
 from meshgen.geometry import list_geometries, load_geometry  # noqa: E402
 from meshgen.layout import layout_of, smoothed  # noqa: E402
@@ -100,7 +101,7 @@ def measure(name: str, cells: int) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    names = [g.name for g in list_geometries() if g.dim == 3]
+    names = [g.name for g in list_geometries() if g.dim == 3 and not is_multiblock(g.name)]  # one block each
     results = []
     for cells in (30,) if quick else (30, 100):
         for name in names:
