@@ -81,13 +81,9 @@ def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientati
     owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
     summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
     if all(s.stop > s.start for s in owned_cells):
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            metrics, degenerate, _ = _structured(nodes, tolerance=tolerance, orientation=orientation)
-        cell_shape = tuple(n - 1 for n in nodes.shape[:-1])
         mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
-        degenerate = degenerate.reshape(cell_shape)[mine].reshape(-1)
-        values = {name: metrics[name].reshape(cell_shape)[mine].reshape(-1) for name in METRICS}
-        del metrics
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            values, degenerate, _ = _structured(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
         shaped = ~degenerate
         summary["cells"] = int(degenerate.size)
         summary["degenerate"] = int(np.count_nonzero(degenerate))
