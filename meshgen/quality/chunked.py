@@ -38,7 +38,7 @@ def _reader(source):
         from meshgen.formats._cgns import read_node_block, zone_header
 
         node_shape, _ = zone_header(source)
-        read = dask.delayed(read_node_block, pure=True)
+        read = dask.delayed(read_node_block, pure=False)
         return node_shape, len(node_shape), lambda block: read(str(source), block)
     shape = tuple(source.shape)
     return shape[:-1], shape[-1], lambda block: source[block + (slice(None),)]
@@ -51,12 +51,13 @@ def _grown(block, node_shape, before: int, after: int):
 def _extent_of_block(nodes, block, read_block, node_shape):
     """Pass 1 of one block: per component (min, max) of the finite owned nodes, non-finite owned
     nodes, and in 2D the signed area (diagonal cross products) of the owned cells."""
+    from meshgen.quality.compiled import finite_extent
+
     dim = nodes.shape[-1]
     owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
     mine = nodes[owned]
-    finite = np.isfinite(mine).all(axis=-1)
-    low = [float(np.min(mine[..., c][finite])) if finite.any() else np.inf for c in range(dim)]
-    high = [float(np.max(mine[..., c][finite])) if finite.any() else -np.inf for c in range(dim)]
+    block_low, block_high, nonfinite = finite_extent(np.ascontiguousarray(mine).reshape(-1, dim))
+    low, high = [float(v) for v in block_low], [float(v) for v in block_high]
     area = 0.0
     if dim == 2:
         cells = tuple(slice(o.start, min(o.stop, n - 1 - r.start)) for o, r, n in zip(owned, read_block, node_shape))
@@ -69,7 +70,7 @@ def _extent_of_block(nodes, block, read_block, node_shape):
         d1 = (shifted(x, 1, 1) - shifted(x, 0, 0), shifted(y, 1, 1) - shifted(y, 0, 0))
         d2 = (shifted(x, 0, 1) - shifted(x, 1, 0), shifted(y, 0, 1) - shifted(y, 1, 0))
         area = float(np.nansum(d1[0] * d2[1] - d1[1] * d2[0]))
-    return low, high, int(finite.size - np.count_nonzero(finite)), area
+    return low, high, int(nonfinite), area
 
 
 def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientation):
@@ -89,7 +90,7 @@ def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientati
         summary["degenerate"] = int(np.count_nonzero(degenerate))
         summary["inverted"] = int(np.count_nonzero(degenerate | ~(values["scaled_jacobian"] > 0.0)))
         for name in METRICS:
-            kept = values[name][shaped]
+            kept = values[name][shaped] if summary["degenerate"] else values[name]
             if kept.size:
                 summary["metrics"][name] = {
                     "count": int(kept.size),
@@ -157,7 +158,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     extent_tasks = []
     for block in blocks:
         read_block = _grown(block, node_shape, 0, 1)
-        extent_tasks.append(dask.delayed(_extent_of_block, pure=True)(read(read_block), block, read_block, node_shape))
+        extent_tasks.append(dask.delayed(_extent_of_block, pure=False)(read(read_block), block, read_block, node_shape))
     low, high = [np.inf] * dim, [-np.inf] * dim
     nonfinite, area = 0, 0.0
     for _, (block_low, block_high, block_nonfinite, block_area) in compute_in_order_of_completion(extent_tasks, client):
@@ -177,7 +178,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     for block in blocks:
         read_block = _grown(block, node_shape, 1, 2)
         quality_tasks.append(
-            dask.delayed(_quality_of_block, pure=True)(read(read_block), block, read_block, node_shape, tolerance, orientation)
+            dask.delayed(_quality_of_block, pure=False)(read(read_block), block, read_block, node_shape, tolerance, orientation)
         )
     counts = {"cells": 0, "inverted": 0, "degenerate": 0}
     merged = {name: None for name in METRICS}
