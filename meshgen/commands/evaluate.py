@@ -7,6 +7,8 @@ evaluated.
 from __future__ import annotations
 
 import json
+import sys
+from pathlib import Path
 
 import click
 
@@ -124,8 +126,15 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     help="Run the blocks on this dask.distributed scheduler (implies --chunked; the workers must see the files) "
     "[default: $DASK_SCHEDULER_ADDRESS, else Dask's local threads].",
 )
+@click.option(
+    "--block-nodes",
+    type=click.IntRange(min=1024),
+    default=None,
+    metavar="N",
+    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 2097152].",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
-def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, quiet):
+def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, block_nodes, quiet):
     """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's
     .vts, .cgns, .xyz, or an OpenFOAM case folder meshgen wrote).
 
@@ -134,6 +143,7 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     the geometry is known: files written by meshgen record it; for others pass --geometry.
     """
     from meshgen.atomic import check_output_file
+    from meshgen.commands._progress import progress_display
     from meshgen.gates import GateError, check_gates
     from meshgen.geometry import load_geometry, parse_params
     from meshgen.quality import evaluate_file, write_json
@@ -151,10 +161,25 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     client = connect(address)  # an unreachable scheduler fails fast, before any file is read
     try:
-        reports = [
-            evaluate_file(path, chosen, None if chosen else parsed_params, chunked=True if client else chunked, client=client)
-            for path in meshes
-        ]
+        reports = []
+        for path in meshes:
+            with progress_display(f"evaluate {Path(path).name}", not quiet and sys.stdout.isatty()) as bar:
+
+                def progress(done, total, phase, bar=bar):
+                    if bar is not None:
+                        bar(done / total, blocks=f"{done}/{total}")
+
+                reports.append(
+                    evaluate_file(
+                        path,
+                        chosen,
+                        None if chosen else parsed_params,
+                        chunked=True if client else chunked,
+                        client=client,
+                        progress=progress,
+                        block_nodes=block_nodes,
+                    )
+                )
     finally:
         if client is not None:
             client.close()

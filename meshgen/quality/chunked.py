@@ -26,8 +26,21 @@ from meshgen.errors import MeshgenError
 from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 
-# Block size of evaluation in nodes: the kernels hold about 60 float64 temporaries per cell of a block.
+# Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
+# sketch's temporaries take about EVALUATE_BYTES_PER_BLOCK_NODE bytes per node.
 EVALUATE_BLOCK_NODES = 1 << 21
+EVALUATE_BYTES_PER_BLOCK_NODE = 160
+MIN_BLOCK_NODES = 1 << 16
+
+
+def evaluate_block_nodes() -> int:
+    """Nodes per block for the available memory: the blocks in flight (two per worker thread) take
+    at most a quarter of it, and a block has at most ``EVALUATE_BLOCK_NODES`` nodes."""
+    from meshgen.chunked import available_memory
+
+    in_flight = 2 * (os.cpu_count() or 1)
+    fitting = available_memory() // (4 * in_flight * EVALUATE_BYTES_PER_BLOCK_NODE)
+    return int(max(MIN_BLOCK_NODES, min(EVALUATE_BLOCK_NODES, fitting)))
 
 
 def _reader(source):
@@ -128,14 +141,14 @@ def _merge_metric(a: dict | None, b: dict) -> dict:
     }
 
 
-def chunked_report(source, geometry=None, client=None, progress=None, block_nodes: int = EVALUATE_BLOCK_NODES) -> dict:
+def chunked_report(source, geometry=None, client=None, progress=None, block_nodes: int | None = None) -> dict:
     """The quality report (``meshgen.quality.quality_report``'s schema) of ``source``: a CGNS file
     path, or a node array (NumPy or dask) of shape (n1+1, n2+1[, n3+1], dim), computed block by
     block on Dask's threaded scheduler, or on the cluster of ``client`` (a ``distributed.Client``;
     a file must then be readable by the workers under the same path).
 
     ``progress(done, total, phase)`` hears about every block. Adds ``"percentiles"``: how p01 and
-    p99 were computed.
+    p99 were computed. ``block_nodes``: nodes per block (default ``evaluate_block_nodes()``).
     """
     import itertools
 
@@ -150,7 +163,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
         raise MeshgenError(
             f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}"
         )
-    per_axis = block_slices(node_shape, block_nodes)
+    per_axis = block_slices(node_shape, block_nodes or evaluate_block_nodes())
     blocks = [tuple(p) for p in itertools.product(*per_axis)]
     total = 2 * len(blocks)
     done = 0

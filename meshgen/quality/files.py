@@ -116,7 +116,16 @@ def recorded_metadata(path, mesh) -> dict:
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
-def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None) -> dict:
+def evaluate_file(
+    path,
+    geometry=None,
+    params: dict | None = None,
+    mesh=None,
+    chunked: bool | None = None,
+    client=None,
+    progress=None,
+    block_nodes: int | None = None,
+) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
 
@@ -128,6 +137,8 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
     or None for automatically when the file is CGNS and the in-memory path would need more than
     half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
+    ``progress(done, total, phase)`` hears about every block of the chunked path; ``block_nodes``:
+    its nodes per block (default ``meshgen.quality.chunked.evaluate_block_nodes()``).
     """
     from meshgen.formats import read_mesh
 
@@ -143,7 +154,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
         node_shape, _ = zone_header(path)
         chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
     if chunked:
-        return _evaluate_file_in_blocks(path, geometry, params, client)
+        return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
     if mesh is None:
         mesh = read_mesh(path)
     try:
@@ -175,7 +186,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
-def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
+def _evaluate_file_in_blocks(path, geometry, params, client, progress=None, block_nodes=None) -> dict:
     """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
     from meshgen.formats._cgns import zone_header
     from meshgen.quality.chunked import chunked_report
@@ -192,7 +203,7 @@ def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
         )
         geometry = None
     try:
-        report = chunked_report(path, geometry, client=client)
+        report = chunked_report(path, geometry, client=client, progress=progress, block_nodes=block_nodes)
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     return _finish_file_report(path, report, source, notes, metadata, True)
