@@ -17,9 +17,16 @@ first call in a fresh installation compiles for some seconds, later processes lo
 from __future__ import annotations
 
 import math
+import os
 
+import numba
 import numpy as np
 from numba import njit, prange
+
+# Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
+# on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.
+if "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "threadsafe"
 
 __all__ = ["finite_extent", "structured_hex", "structured_quad", "unstructured_hex", "unstructured_quad"]
 
