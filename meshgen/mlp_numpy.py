@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
 import os
 import pickle
 import re
+import threading
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 
@@ -52,6 +54,7 @@ def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
     return layers
 
 
+@functools.lru_cache(maxsize=1)
 def _openblas_thread_functions():
     """(get, set) of the number of threads of the OpenBLAS that NumPy loaded, or None where there
     is none to be found (another BLAS, no /proc): then the products run as the BLAS decides."""
@@ -73,19 +76,31 @@ def _openblas_thread_functions():
     return None
 
 
+_BLAS_LOCK = threading.Lock()
+_BLAS_USERS = [0, None]  # forward passes running now, the thread count to restore after the last
+
+
 @contextlib.contextmanager
 def _one_blas_thread():
+    """OpenBLAS on one thread while any forward pass runs (passes may run at once on Dask's
+    threads: the first sets it, the last restores it)."""
     functions = _openblas_thread_functions()
     if functions is None:
         yield
         return
     get, set_ = functions
-    threads = get()
-    set_(1)
+    with _BLAS_LOCK:
+        if _BLAS_USERS[0] == 0:
+            _BLAS_USERS[1] = get()
+            set_(1)
+        _BLAS_USERS[0] += 1
     try:
         yield
     finally:
-        set_(threads)
+        with _BLAS_LOCK:
+            _BLAS_USERS[0] -= 1
+            if _BLAS_USERS[0] == 0:
+                set_(_BLAS_USERS[1])
 
 
 def _grid_inputs(axes, start: int, stop: int) -> np.ndarray:

@@ -92,3 +92,22 @@ def test_foreign_pickles_and_other_files_are_refused(tmp_path):
     text.write_text("not a checkpoint")
     with pytest.raises(MeshgenError, match="could not read checkpoint"):
         read_checkpoint(text)
+
+
+def test_blas_threads_are_restored_after_concurrent_passes():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from meshgen.mlp_numpy import _openblas_thread_functions
+
+    functions = _openblas_thread_functions()
+    if functions is None:
+        pytest.skip("NumPy's BLAS is not an OpenBLAS whose thread count can be read")
+    get, _ = functions
+    before = get()
+    _, model = random_model(3, [32, 32], seed=4)
+    coords = [np.linspace(0.0, 1.0, 30)] * 3
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        results = list(pool.map(lambda _: forward_on_grid(model, coords, chunk=512, workers=2), range(6)))
+    assert get() == before
+    for result in results[1:]:
+        np.testing.assert_array_equal(result, results[0])
