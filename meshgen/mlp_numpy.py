@@ -33,7 +33,7 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 
-__all__ = ["CHUNK_NODES", "forward_on_grid", "network_arrays", "read_checkpoint"]
+__all__ = ["CHUNK_NODES", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
 
 CHUNK_NODES = 8192
 
@@ -55,7 +55,7 @@ def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
 
 
 @functools.lru_cache(maxsize=1)
-def _openblas_thread_functions():
+def openblas_thread_functions():
     """(get, set) of the number of threads of the OpenBLAS that NumPy loaded, or None where there
     is none to be found (another BLAS, no /proc): then the products run as the BLAS decides."""
     try:
@@ -84,7 +84,7 @@ _BLAS_USERS = [0, None]  # forward passes running now, the thread count to resto
 def _one_blas_thread():
     """OpenBLAS on one thread while any forward pass runs (passes may run at once on Dask's
     threads: the first sets it, the last restores it)."""
-    functions = _openblas_thread_functions()
+    functions = openblas_thread_functions()
     if functions is None:
         yield
         return

@@ -97,9 +97,9 @@ def test_foreign_pickles_and_other_files_are_refused(tmp_path):
 def test_blas_threads_are_restored_after_concurrent_passes():
     from concurrent.futures import ThreadPoolExecutor
 
-    from meshgen.mlp_numpy import _openblas_thread_functions
+    from meshgen.mlp_numpy import openblas_thread_functions
 
-    functions = _openblas_thread_functions()
+    functions = openblas_thread_functions()
     if functions is None:
         pytest.skip("NumPy's BLAS is not an OpenBLAS whose thread count can be read")
     get, _ = functions
