@@ -131,7 +131,7 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     type=click.IntRange(min=1024),
     default=None,
     metavar="N",
-    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 2097152].",
+    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 1048576].",
 )
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
 def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, block_nodes, quiet):

@@ -29,7 +29,7 @@ from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 
 # Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
 # sketch's temporaries take about EVALUATE_BYTES_PER_BLOCK_NODE bytes per node.
-EVALUATE_BLOCK_NODES = 1 << 21
+EVALUATE_BLOCK_NODES = 1 << 20
 EVALUATE_BYTES_PER_BLOCK_NODE = 160
 MIN_BLOCK_NODES = 1 << 16
 
