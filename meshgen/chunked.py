@@ -13,8 +13,9 @@ A TFI or neural mesh is a map evaluated node by node, so it can be computed bloc
 
 Blocks are slabs along the last index axis (k in 3D), which are contiguous hyperslabs of a CGNS
 coordinate array (stored k slowest); a plane too large for one block is split along the first axis
-as well (``meshgen.grid.block_slices``). ``BLOCK_NODES`` nodes per block keep a block's coordinates near 100 MB, so the peak
-memory is a few blocks per worker thread, whatever the mesh size.
+as well. Blocks of at most ``BLOCK_NODES`` nodes (fewer where memory is short:
+``mesh_block_nodes``) keep a block's coordinates near 25 MB, so the peak memory is a few blocks
+per worker thread, whatever the mesh size.
 
 ``meshgen mesh`` takes this path (``meshgen.resources.needs_chunking``) when the in-memory path's
 estimated peak (``IN_MEMORY_BYTES_PER_NODE``) exceeds half of the memory available now, with ``--chunked``, or with
@@ -40,12 +41,13 @@ from meshgen.patches import geometry_patches
 from meshgen.publish import publishing, reason
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
-from meshgen.resources import check_free_space
+from meshgen.resources import available_memory, check_free_space
 from meshgen.scheduler import compute_in_order_of_completion
 from meshgen.tfi import add_face_terms, face_terms, face_values
 
 __all__ = [
     "CHUNKED_METHODS",
+    "mesh_block_nodes",
     "network_map_block",
     "neural_array",
     "single_threaded_torch",
@@ -53,16 +55,27 @@ __all__ = [
     "write_chunked_mesh",
 ]
 
+MIN_BLOCK_NODES = 1 << 14
+MESH_BYTES_PER_BLOCK_NODE = 200  # measured order: a neural block's map, TFI, correction and result
 CHUNKED_METHODS = ("tfi", "neural")
 
 
-def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int):
+def mesh_block_nodes() -> int:
+    """Nodes per block of a mesh computed in blocks, for the memory available now: the blocks in
+    flight (two per worker thread, as ``meshgen.scheduler`` computes them) take at most a quarter
+    of it; at most ``BLOCK_NODES`` (larger blocks gain no speed and cost memory)."""
+    in_flight = 2 * (os.cpu_count() or 1)
+    fitting = available_memory() // (4 * in_flight * MESH_BYTES_PER_BLOCK_NODE)
+    return int(max(MIN_BLOCK_NODES, min(BLOCK_NODES, fitting)))
+
+
+def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int | None):
     """A dask array of shape node_shape + (dim,) whose block at slices ``b`` is
     ``block_function(shared, b)``; ``shared`` goes into the graph once."""
     import dask
     import dask.array as da
 
-    per_axis = block_slices(node_shape, block_nodes)
+    per_axis = block_slices(node_shape, block_nodes or mesh_block_nodes())
     shared = dask.delayed(shared, pure=True, traverse=False)
     function = dask.delayed(block_function, pure=True)
     grid = np.empty([len(s) for s in per_axis], dtype=object)
@@ -82,9 +95,10 @@ def _tfi_block(shared, block):
     return add_face_terms(terms, coords, block=block)
 
 
-def tfi_array(geometry, coords, block_nodes: int = BLOCK_NODES):
+def tfi_array(geometry, coords, block_nodes: int | None = None):
     """The TFI mesh of ``geometry`` on the tensor grid of ``coords`` (1D arrays from 0 to 1) as a
-    dask array (n1+1, n2+1[, n3+1], dim), blocks of about ``block_nodes`` nodes."""
+    dask array (n1+1, n2+1[, n3+1], dim), blocks of about ``block_nodes`` nodes (default
+    ``mesh_block_nodes()``)."""
     coords = [np.asarray(c, dtype=float) for c in coords]
     terms = face_terms(face_values(geometry.boundary, coords), coords)
     shape = tuple(len(c) for c in coords)
@@ -127,7 +141,7 @@ def _neural_block(shared, block):
     return X
 
 
-def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int = BLOCK_NODES):
+def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int | None = None):
     """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
     a dask array, and what the boundary correction did (JSON-ready).
 

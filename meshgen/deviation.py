@@ -291,19 +291,29 @@ def boundary_deviation(points, geometry, parametric_guess=None) -> dict:
     points = np.asarray(points, dtype=float)
     if points.ndim == geometry.dim + 1 and parametric_guess is None:
         points, parametric_guess = grid_boundary_nodes(points)
-    length = float(geometry.characteristic_length)
     distance = distance_to_boundary(points, geometry, parametric_guess)
     nonfinite = int(np.count_nonzero(np.isnan(distance)))
-    undefined = nonfinite > 0 or len(distance) == 0
-    largest = None if undefined else float(distance.max())
-    mean = None if undefined else float(distance.mean())
+    finite = distance[~np.isnan(distance)]
+    return deviation_figures(
+        len(distance), float(finite.sum()), float(finite.max()) if len(finite) else None, nonfinite, geometry
+    )
+
+
+def deviation_figures(nodes: int, total: float, largest, nonfinite: int, geometry) -> dict:
+    """The ``boundary_deviation`` dict from the number of boundary ``nodes``, the ``total`` and
+    ``largest`` distance of the finite ones and the count of ``nonfinite`` ones: a caller that
+    measures the nodes in parts (``meshgen.quality.chunked``) adds these up and calls this once."""
+    length = float(geometry.characteristic_length)
+    undefined = nonfinite > 0 or nodes == 0
+    largest = None if undefined else float(largest)
+    mean = None if undefined else total / nodes
     return {
         "max": largest,
         "mean": mean,
         "max_rel": None if undefined else largest / length,
         "mean_rel": None if undefined else mean / length,
         "characteristic_length": length,
-        "nodes": int(len(distance)),
+        "nodes": int(nodes),
         "nonfinite_nodes": nonfinite,
         "geometry": geometry.name,
         "params": dict(geometry.values),

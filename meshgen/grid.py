@@ -7,7 +7,7 @@ import numpy as np
 
 __all__ = ["BLOCK_NODES", "HEX_CORNERS", "QUAD_CORNERS", "block_slices", "cell_connectivity", "flat_points"]
 
-BLOCK_NODES = 1 << 22  # about 4.2e6 nodes, 100 MB of float64 coordinates per block
+BLOCK_NODES = 1 << 20  # at most: about 1e6 nodes, 25 MB of float64 coordinates per block
 
 # Corner offsets (di, dj[, dk]) in VTK order: hexahedron (VTK_HEXAHEDRON) and quad (VTK_QUAD).
 HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])

@@ -91,18 +91,21 @@ def transfinite_on_grid(boundary, coords, out: np.ndarray | None = None) -> np.n
     return add_face_terms(face_terms(face_values(boundary, coords), coords), coords, out)
 
 
+FACE_VALUE_POINTS = 1 << 18
+
+
 def face_values(boundary, coords) -> list[np.ndarray]:
-    """``boundary`` ((N, d) -> (N, d)) at the face nodes of the tensor grid of ``coords``, in one
-    call: per face, in :func:`boundary_faces` order, an array (face nodes..., d)."""
+    """``boundary`` ((N, d) -> (N, d), point by point) at the face nodes of the tensor grid of
+    ``coords``: per face, in :func:`boundary_faces` order, an array (face nodes..., d). The points
+    go through in calls of at most ``FACE_VALUE_POINTS``: a boundary map's temporaries are some
+    times its output, which at 1000^3 nodes (6e6 face nodes) would be gigabytes in one call."""
     coords = [np.asarray(c, dtype=float) for c in coords]
-    faces = boundary_faces(coords)
-    images = boundary(np.concatenate([points for _, points in faces]))
-    values, start = [], 0
+    values = []
     shape = tuple(len(c) for c in coords)
-    for face, (_index, points) in zip(cube.faces(len(coords)), faces):
+    for face, (_index, points) in zip(cube.faces(len(coords)), boundary_faces(coords)):
         face_shape = tuple(n for d, n in enumerate(shape) if d != face.axis)
-        values.append(images[start : start + len(points)].reshape(*face_shape, -1))
-        start += len(points)
+        parts = [boundary(points[start : start + FACE_VALUE_POINTS]) for start in range(0, len(points), FACE_VALUE_POINTS)]
+        values.append(np.concatenate(parts).reshape(*face_shape, -1))
     return values
 
 

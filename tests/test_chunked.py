@@ -187,14 +187,22 @@ def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
     assert runner.invoke(cli, ["mesh", "-m", "tfi", "--dims", "12", "10", "9", "--chunked", "-q", "-o", path]).exit_code == 0
     sidecar = json.loads(open(path + ".quality.json").read())
     reports = {}
-    for mode in ("--chunked", "--in-memory"):
-        result = runner.invoke(cli, ["evaluate", path, mode, "--json", "-"])
+    modes = {
+        "--chunked": ["--chunked"],
+        "--in-memory": ["--in-memory"],
+        "--block-nodes=1024": ["--chunked", "--block-nodes=1024"],
+    }
+    for mode, options in modes.items():  # the last: 2 blocks of 7 k planes
+        result = runner.invoke(cli, ["evaluate", path, *options, "--json", "-"])
         assert result.exit_code == 0, result.output
         reports[mode] = json.loads(result.output)
     from meshgen.quality import cell_metrics
 
     X = read_whole(path)
     assert_reports_agree(reports["--in-memory"], reports["--chunked"], cell_metrics(X))
+    assert_reports_agree(reports["--in-memory"], reports["--block-nodes=1024"], cell_metrics(X))
+    too_small = runner.invoke(cli, ["evaluate", path, "--chunked", "--block-nodes", "10"])
+    assert too_small.exit_code == 2 and "--block-nodes" in too_small.output
     assert sidecar["metrics"] == reports["--chunked"]["metrics"]  # mesh's report: the block-wise evaluate of its file
 
 

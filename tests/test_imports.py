@@ -59,6 +59,7 @@ LAYERS = [
         "meshgen.atomic",
         "meshgen.cube",
         "meshgen.grid",
+        "meshgen.mlp_numpy",
         "meshgen.resources",
         "meshgen.scheduler",
         "meshgen.limits",
@@ -82,6 +83,7 @@ LAYERS = [
     ["meshgen.layout", "meshgen.elliptic", "meshgen.polish", "meshgen.elliptic_blocks", "meshgen.deviation"],
     [
         "meshgen.quality.kernels",
+        "meshgen.quality.compiled",
         "meshgen.quality.structured",
         "meshgen.quality.faces",
         "meshgen.quality.faces_openfoam",

@@ -7,11 +7,14 @@ evaluated.
 from __future__ import annotations
 
 import json
+import sys
+from pathlib import Path
 
 import click
 
 from meshgen.atomic import atomic_write, check_output_file
 from meshgen.commands._options import geometry_options
+from meshgen.commands._progress import progress_display
 from meshgen.gates import GateError, check_gates, parse_gate
 from meshgen.geometry import load_geometry, parse_params
 from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_json
@@ -159,8 +162,15 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     "[default: $DASK_SCHEDULER_ADDRESS, else Dask's local threads].",
 )
 @click.option("--per-block", is_flag=True, help="Multi-zone .cgns files (block sets): also report each zone (block) on its own.")
+@click.option(
+    "--block-nodes",
+    type=click.IntRange(min=1024),
+    default=None,
+    metavar="N",
+    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 1048576].",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
-def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, per_block, quiet):
+def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, per_block, block_nodes, quiet):
     """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's
     .vts, .cgns, .xyz, or an OpenFOAM case folder meshgen wrote).
 
@@ -180,10 +190,8 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     client = connect(address)  # an unreachable scheduler fails fast, before any file is read
     try:
-        reports = [
-            evaluate_file(path, chosen, None if chosen else parsed_params, chunked=True if client else chunked, client=client)
-            for path in meshes
-        ]
+        options = {"chunked": True if client else chunked, "client": client, "block_nodes": block_nodes}
+        reports = [_evaluate_one(path, chosen, None if chosen else parsed_params, quiet, options) for path in meshes]
     finally:
         if client is not None:
             client.close()
@@ -234,3 +242,14 @@ def _print_table(reports) -> None:
     for number, (header, rows) in enumerate(tables(reports)):
         title = "mesh quality" + (f": {reports[0]['file']}" if len(reports) == 1 else "") if number == 0 else None
         print_table(header, rows, title=title)
+
+
+def _evaluate_one(path, geometry, params, quiet: bool, options: dict) -> dict:
+    """The report of one mesh file, with a progress bar over its blocks at a terminal."""
+    with progress_display(f"evaluate {Path(path).name}", not quiet and sys.stdout.isatty()) as bar:
+
+        def progress(done, total, phase):
+            if bar is not None:
+                bar(done / total, blocks=f"{done}/{total}")
+
+        return evaluate_file(path, geometry, params, progress=progress, **options)

@@ -12,17 +12,18 @@ of ``meshgen.grid.block_slices``. Two passes over the blocks:
    sketch (``meshgen.quality.sketch``) of each metric, and its share of the boundary nodes.
 
 Merging is exact for the counts, min and max, exact up to the order of floating-point addition for
-the means, and within the sketch's relative accuracy (1e-4) for the percentiles p01 and p99. Memory
-is a few blocks per worker plus the boundary nodes (O(n^2) in 3D) for the boundary deviation.
+the means, and within the sketch's relative accuracy (1e-4) for the percentiles p01 and p99. The
+boundary deviation is measured on each block's boundary nodes as its summary arrives (the mean of
+the distances up to the order of addition). Memory is a few blocks per worker.
 """
 
 from __future__ import annotations
 
-import itertools
 import os
 
 import numpy as np
 
+from meshgen.deviation import deviation_figures, distance_to_boundary
 from meshgen.errors import MeshgenError
 from meshgen.formats import read_header, read_node_block
 from meshgen.grid import block_slices
@@ -30,12 +31,24 @@ from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 from meshgen.quality.report import assemble_report
 from meshgen.quality.structured import structured_metrics
+from meshgen.resources import available_memory
 from meshgen.scheduler import compute_in_order_of_completion
 
-__all__ = ["EVALUATE_BLOCK_NODES", "chunked_report"]
+# Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
+# sketch's temporaries take about EVALUATE_BYTES_PER_BLOCK_NODE bytes per node.
+__all__ = ["EVALUATE_BLOCK_NODES", "chunked_report", "evaluate_block_nodes"]
 
-# Block size of evaluation in nodes: the kernels hold about 60 float64 temporaries per cell of a block.
-EVALUATE_BLOCK_NODES = 1 << 21
+EVALUATE_BLOCK_NODES = 1 << 20
+EVALUATE_BYTES_PER_BLOCK_NODE = 160
+MIN_BLOCK_NODES = 1 << 16
+
+
+def evaluate_block_nodes() -> int:
+    """Nodes per block for the available memory: the blocks in flight (two per worker thread) take
+    at most a quarter of it, and a block has at most ``EVALUATE_BLOCK_NODES`` nodes."""
+    in_flight = 2 * (os.cpu_count() or 1)
+    fitting = available_memory() // (4 * in_flight * EVALUATE_BYTES_PER_BLOCK_NODE)
+    return int(max(MIN_BLOCK_NODES, min(EVALUATE_BLOCK_NODES, fitting)))
 
 
 def _reader(source):
@@ -44,7 +57,7 @@ def _reader(source):
 
     if isinstance(source, (str, os.PathLike)):
         node_shape, _ = read_header(source)
-        read = dask.delayed(read_node_block, pure=True)
+        read = dask.delayed(read_node_block, pure=False)
         return node_shape, len(node_shape), lambda block: read(str(source), block)
     shape = tuple(source.shape)
     return shape[:-1], shape[-1], lambda block: source[block + (slice(None),)]
@@ -57,12 +70,13 @@ def _grown(block, node_shape, before: int, after: int):
 def _extent_of_block(nodes, block, read_block, node_shape):
     """Pass 1 of one block: per component (min, max) of the finite owned nodes, non-finite owned
     nodes, and in 2D the signed area (diagonal cross products) of the owned cells."""
+    from meshgen.quality.compiled import finite_extent
+
     dim = nodes.shape[-1]
     owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
     mine = nodes[owned]
-    finite = np.isfinite(mine).all(axis=-1)
-    low = [float(np.min(mine[..., c][finite])) if finite.any() else np.inf for c in range(dim)]
-    high = [float(np.max(mine[..., c][finite])) if finite.any() else -np.inf for c in range(dim)]
+    block_low, block_high, nonfinite = finite_extent(np.ascontiguousarray(mine).reshape(-1, dim))
+    low, high = [float(v) for v in block_low], [float(v) for v in block_high]
     area = 0.0
     if dim == 2:
         cells = tuple(slice(o.start, min(o.stop, n - 1 - r.start)) for o, r, n in zip(owned, read_block, node_shape))
@@ -75,29 +89,26 @@ def _extent_of_block(nodes, block, read_block, node_shape):
         d1 = (shifted(x, 1, 1) - shifted(x, 0, 0), shifted(y, 1, 1) - shifted(y, 0, 0))
         d2 = (shifted(x, 0, 1) - shifted(x, 1, 0), shifted(y, 0, 1) - shifted(y, 1, 0))
         area = float(np.nansum(d1[0] * d2[1] - d1[1] * d2[0]))
-    return low, high, int(finite.size - np.count_nonzero(finite)), area
+    return low, high, int(nonfinite), area
 
 
 def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientation):
     """Pass 2 of one block: the summaries of its owned cells (those whose first node is in
     ``block``) and its owned boundary nodes with their parametric positions."""
+
     dim = len(node_shape)
     owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
     summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
     if all(s.stop > s.start for s in owned_cells):
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            metrics, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation)
-        cell_shape = tuple(n - 1 for n in nodes.shape[:-1])
         mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
-        degenerate = degenerate.reshape(cell_shape)[mine].reshape(-1)
-        values = {name: metrics[name].reshape(cell_shape)[mine].reshape(-1) for name in METRICS}
-        del metrics
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            values, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
         shaped = ~degenerate
         summary["cells"] = int(degenerate.size)
         summary["degenerate"] = int(np.count_nonzero(degenerate))
         summary["inverted"] = int(np.count_nonzero(degenerate | ~(values["scaled_jacobian"] > 0.0)))
         for name in METRICS:
-            kept = values[name][shaped]
+            kept = values[name][shaped] if summary["degenerate"] else values[name]
             if kept.size:
                 summary["metrics"][name] = {
                     "count": int(kept.size),
@@ -135,15 +146,17 @@ def _merge_metric(a: dict | None, b: dict) -> dict:
     }
 
 
-def chunked_report(source, geometry=None, client=None, progress=None, block_nodes: int = EVALUATE_BLOCK_NODES) -> dict:
+def chunked_report(source, geometry=None, client=None, progress=None, block_nodes: int | None = None) -> dict:
     """The quality report (``meshgen.quality.quality_report``'s schema) of ``source``: a CGNS file
     path, or a node array (NumPy or dask) of shape (n1+1, n2+1[, n3+1], dim), computed block by
     block on Dask's threaded scheduler, or on the cluster of ``client`` (a ``distributed.Client``;
     a file must then be readable by the workers under the same path).
 
     ``progress(done, total, phase)`` hears about every block. Adds ``"percentiles"``: how p01 and
-    p99 were computed.
+    p99 were computed. ``block_nodes``: nodes per block (default ``evaluate_block_nodes()``).
     """
+    import itertools
+
     import dask
 
     node_shape, dim, read = _reader(source)
@@ -151,7 +164,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
         raise MeshgenError(
             f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}"
         )
-    per_axis = block_slices(node_shape, block_nodes)
+    per_axis = block_slices(node_shape, block_nodes or evaluate_block_nodes())
     blocks = [tuple(p) for p in itertools.product(*per_axis)]
     total = 2 * len(blocks)
     done = 0
@@ -159,7 +172,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     extent_tasks = []
     for block in blocks:
         read_block = _grown(block, node_shape, 0, 1)
-        extent_tasks.append(dask.delayed(_extent_of_block, pure=True)(read(read_block), block, read_block, node_shape))
+        extent_tasks.append(dask.delayed(_extent_of_block, pure=False)(read(read_block), block, read_block, node_shape))
     low, high = [np.inf] * dim, [-np.inf] * dim
     nonfinite, area = 0, 0.0
     for _, (block_low, block_high, block_nonfinite, block_area) in compute_in_order_of_completion(extent_tasks, client):
@@ -179,19 +192,34 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     for block in blocks:
         read_block = _grown(block, node_shape, 1, 2)
         quality_tasks.append(
-            dask.delayed(_quality_of_block, pure=True)(read(read_block), block, read_block, node_shape, tolerance, orientation)
+            dask.delayed(_quality_of_block, pure=False)(read(read_block), block, read_block, node_shape, tolerance, orientation)
         )
     counts = {"cells": 0, "inverted": 0, "degenerate": 0}
     merged = {name: None for name in METRICS}
-    boundary_points, boundary_positions = [], []
+    if geometry is not None and geometry.dim != dim:
+        raise MeshgenError(
+            f"geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D: "
+            "boundary deviation needs a geometry of the mesh's dimension"
+        )
+    # Boundary deviation block by block, as each block's summary arrives: memory stays a block's
+    # boundary, not the whole mesh's (O(n^2) nodes).
+    deviation = {"nodes": 0, "total": 0.0, "largest": None, "nonfinite": 0}
     for _, summary in compute_in_order_of_completion(quality_tasks, client):
         for key in counts:
             counts[key] += summary[key]
         for name, part in summary["metrics"].items():
             merged[name] = _merge_metric(merged[name], part)
-        points, positions = summary["boundary"]
-        boundary_points.append(points)
-        boundary_positions.append(positions)
+        points, positions = summary.pop("boundary")
+        if geometry is not None and len(points):
+            distance = distance_to_boundary(points, geometry, positions)
+            finite = distance[~np.isnan(distance)]
+            deviation["nodes"] += len(distance)
+            deviation["nonfinite"] += len(distance) - len(finite)
+            deviation["total"] += float(finite.sum())
+            if len(finite):
+                largest = float(finite.max())
+                deviation["largest"] = largest if deviation["largest"] is None else max(deviation["largest"], largest)
+        del points, positions
         done += 1
         if progress is not None:
             progress(done, total, "quality")
@@ -209,9 +237,11 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
             "p01": sketches.quantile(part["sketch"], 0.01, part["min"], part["max"]),
             "p99": sketches.quantile(part["sketch"], 0.99, part["min"], part["max"]),
         }
-    points = np.concatenate(boundary_points)
-    positions = np.concatenate(boundary_positions)
-    info = {"dim": dim, "nonfinite_nodes": nonfinite, "boundary": lambda: (points, positions)}
+    info = {"dim": dim, "nonfinite_nodes": nonfinite}
+    if geometry is not None:
+        info["boundary_deviation"] = deviation_figures(
+            deviation["nodes"], deviation["total"], deviation["largest"], deviation["nonfinite"], geometry
+        )
     report = assemble_report(summaries, counts, info, geometry)
     report["percentiles"] = (
         f"p01 and p99 from a mergeable quantile sketch (DDSketch), relative accuracy {sketches.RELATIVE_ACCURACY:g}; "

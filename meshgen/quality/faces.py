@@ -1,25 +1,14 @@
 """Unstructured hexahedra and quadrilaterals (points + connectivity): face neighbours found by
-matching the faces' node ids (``match_faces``), then the same kernels as the structured path on
-the same corner coordinates, so both agree exactly."""
+matching the faces' node ids (``match_faces``), then the same compiled cell functions as the
+structured path on the same corner coordinates, so both agree exactly."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from meshgen.errors import MeshgenError
-from meshgen.quality.kernels import (
-    BLOCK_CELLS,
-    HEX_CORNER,
-    HEX_FACE_CORNERS,
-    HEX_FACES,
-    METRICS,
-    QUAD_CORNER,
-    QUAD_FACE_CORNERS,
-    QUAD_FACES,
-    hex_kernel,
-    quad_kernel,
-)
-from meshgen.quality.structured import apply_degenerate, degenerate_tolerance, orientation_2d
+from meshgen.quality.kernels import HEX_FACE_CORNERS, HEX_FACES, METRICS, QUAD_FACE_CORNERS, QUAD_FACES
+from meshgen.quality.structured import apply_degenerate, degenerate_tolerance
 
 __all__ = ["CELL_TYPES", "cell_metrics_unstructured", "cells_for_quality", "match_faces", "unstructured_metrics"]
 
@@ -153,18 +142,13 @@ def unstructured_metrics(points, cells):
     points, cells, dim = _check_cells(points, cells)
     if len(cells) == 0:
         raise MeshgenError("no cells to evaluate")
+    from meshgen.quality import compiled
+
     used = _used(cells, len(points))
-    components = tuple(np.ascontiguousarray(points[:, c]) for c in range(dim))
-    tolerance, nonfinite = degenerate_tolerance(tuple(c[used] for c in components))
-    offsets = HEX_CORNER if dim == 3 else QUAD_CORNER
+    points = np.ascontiguousarray(points)
+    tolerance, nonfinite = degenerate_tolerance(points[used])
     faces, face_corners = (HEX_FACES, HEX_FACE_CORNERS) if dim == 3 else (QUAD_FACES, QUAD_FACE_CORNERS)
     n_cells, n_faces = len(cells), len(faces)
-
-    weight = 1.0 / len(offsets)
-    # Summed in the corner order of the structured path, so both give bitwise equal centroids.
-    centroid = tuple(sum(c[cells[:, k]] for k in offsets.values()) * weight for c in components)
-    # One trailing NaN: neighbour index -1 (no neighbour) then reads "none".
-    centroid_ext = tuple(np.append(c, np.nan) for c in centroid)
 
     # Face f of cell c is row f * n_cells + c; one column per face corner (rows of the transposed
     # connectivity: contiguous copies, not a scattered gather).
@@ -177,25 +161,17 @@ def unstructured_metrics(points, cells):
     boundary_nodes = np.flatnonzero(_used(np.concatenate([column[open_faces] for column in face_nodes]), len(points)))
     del face_nodes, partner
 
-    if dim == 2:
-        all_corners = {s: tuple(c[cells[:, k]] for c in components) for s, k in offsets.items()}
-        orientation = orientation_2d(all_corners)
-        del all_corners
-
-    metrics = {name: np.empty(n_cells) for name in METRICS}
+    cells = np.ascontiguousarray(cells)
+    out = np.empty((len(METRICS), n_cells))
     degenerate = np.empty(n_cells, dtype=bool)
-    for first in range(0, n_cells, BLOCK_CELLS):
-        block = slice(first, min(n_cells, first + BLOCK_CELLS))
-        corner = {s: tuple(c[cells[block, k]] for c in components) for s, k in offsets.items()}
-        block_centroid = tuple(c[block] for c in centroid)
-        neighbour = {face: tuple(c[neighbour_cell[f, block]] for c in centroid_ext) for f, face in enumerate(faces)}
-        if dim == 3:
-            values, short = hex_kernel(corner, block_centroid, neighbour, tolerance)
-        else:
-            values, short = quad_kernel(corner, block_centroid, neighbour, tolerance, orientation)
-        for name in METRICS:
-            metrics[name][block] = values[name]
-        degenerate[block] = short
+    if dim == 3:
+        compiled.unstructured_hex(points, cells, neighbour_cell, float(tolerance), out, degenerate)
+    else:
+        d1 = points[cells[:, 2]] - points[cells[:, 0]]
+        d2 = points[cells[:, 3]] - points[cells[:, 1]]
+        orientation = 1.0 if float(np.nansum(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])) >= 0.0 else -1.0
+        compiled.unstructured_quad(points, cells, neighbour_cell, float(tolerance), orientation, out, degenerate)
+    metrics = dict(zip(METRICS, out))
     apply_degenerate(metrics, degenerate)
     info = {"dim": dim, "nonfinite_nodes": nonfinite, "nonmanifold_faces": nonmanifold, "boundary_nodes": boundary_nodes}
     return metrics, degenerate, info

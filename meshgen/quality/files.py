@@ -148,7 +148,16 @@ MAX_SIDECAR_BYTES = 16 * 2**20  # a sidecar is a report of a few kB: a larger fi
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
-def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None) -> dict:
+def evaluate_file(
+    path,
+    geometry=None,
+    params: dict | None = None,
+    mesh=None,
+    chunked: bool | None = None,
+    client=None,
+    progress=None,
+    block_nodes: int | None = None,
+) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
 
@@ -160,6 +169,8 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
     or None for automatically when the file is CGNS and the in-memory path would need more than
     half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
+    ``progress(done, total, phase)`` hears about every block of the chunked path; ``block_nodes``:
+    its nodes per block (default ``meshgen.quality.chunked.evaluate_block_nodes()``).
     """
     path = Path(path)
     if not path.exists():
@@ -170,7 +181,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
         node_shape, _ = read_header(path)
         chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
     if chunked:
-        return _evaluate_file_in_blocks(path, geometry, params, client)
+        return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
     if mesh is None:
         mesh = read_mesh(path)
     try:
@@ -202,7 +213,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
-def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
+def _evaluate_file_in_blocks(path, geometry, params, client, progress=None, block_nodes=None) -> dict:
     """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
     if path.suffix.lower() != ".cgns":
         raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
@@ -216,7 +227,7 @@ def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
         )
         geometry = None
     try:
-        report = chunked_report(path, geometry, client=client)
+        report = chunked_report(path, geometry, client=client, progress=progress, block_nodes=block_nodes)
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     return _finish_file_report(path, report, source, notes, metadata, True)

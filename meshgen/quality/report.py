@@ -98,7 +98,8 @@ def build_report(metrics, degenerate, info, geometry) -> dict:
 def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict:
     """The report from the metric ``summaries`` ({name: {mean, min, max, p01, p99}}), ``counts``
     (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
-    ``boundary()`` -> (boundary points, parametric guesses)); shared by the whole-mesh and the
+    ``boundary()`` -> (boundary points, parametric guesses), or ``boundary_deviation`` measured
+    already); shared by the whole-mesh and the
     block-wise (``meshgen.quality.chunked``) paths."""
     dim = int(info["dim"])
     n_cells = counts["cells"]
@@ -141,8 +142,11 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
                 f"geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D: "
                 "boundary deviation needs a geometry of the mesh's dimension"
             )
-        boundary_points, guesses = info["boundary"]()
-        deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
+        if "boundary_deviation" in info:  # measured in parts (block by block)
+            deviation = info["boundary_deviation"]
+        else:
+            boundary_points, guesses = info["boundary"]()
+            deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
         report["boundary_deviation"] = deviation
         if deviation.get("nonfinite_nodes"):
             warnings.append(f"{deviation['nonfinite_nodes']} boundary nodes are not finite: boundary deviation is undefined")

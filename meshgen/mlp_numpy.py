@@ -1,0 +1,228 @@
+"""The trained network's forward pass in NumPy: a small tanh MLP is a few float32 matrix products,
+so meshing with a trained model needs no torch.
+
+``forward_on_grid(model, coords)`` is ``meshgen.neural.inference.evaluate_on_grid`` without torch:
+the same inputs u = 2 xi - 1 in float32, the same layers (x W^T + b, tanh between), float32
+throughout, the result as float64. It agrees with torch's forward to float32 round-off (the two
+libraries' products sum in different orders; tested).
+
+The grid goes through in chunks of ``CHUNK_NODES`` nodes, so a chunk's activations (8192 x 85
+float32, 2.8 MB) stay in cache from layer to layer; worker threads take chunks in turn (NumPy's
+products and ``tanh`` release the GIL), each product on one BLAS thread (OpenBLAS's own threads
+on an 8192 x 48 product cost ten times the CPU of one thread). No (N, d) array of parametric points is made: each chunk's
+inputs come from the 1D coordinates.
+
+``read_checkpoint(path)`` reads a meshgen checkpoint (torch's zip format of plain data) into
+dicts, lists, numbers and NumPy arrays without torch: a restricted unpickler that knows only
+tensors, their storages and ordered dicts, so reading never runs foreign code.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import functools
+import os
+import pickle
+import re
+import threading
+import zipfile
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from meshgen.errors import MeshgenError
+
+__all__ = ["CHUNK_NODES", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
+
+CHUNK_NODES = 8192
+
+
+def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The layers of a ``checkpoint["model"]`` description as [(W^T (in, out), b (out,)), ...],
+    float32 C-contiguous arrays (the state dict may hold NumPy arrays or CPU tensors)."""
+    dim, widths = int(model["dim"]), [int(w) for w in model["widths"]]
+    state = model["state_dict"]
+    sizes = [dim, *widths, dim]
+    layers = []
+    for index, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+        weight = np.asarray(state[f"layers.{index}.weight"], dtype=np.float32)
+        bias = np.asarray(state[f"layers.{index}.bias"], dtype=np.float32)
+        if weight.shape != (fan_out, fan_in) or bias.shape != (fan_out,):
+            raise MeshgenError(f"the network's layer {index} has shape {weight.shape}, expected {(fan_out, fan_in)}")
+        layers.append((np.ascontiguousarray(weight.T), bias))
+    return layers
+
+
+@functools.lru_cache(maxsize=1)
+def openblas_thread_functions():
+    """(get, set) of the number of threads of the OpenBLAS that NumPy loaded, or None where there
+    is none to be found (another BLAS, no /proc): then the products run as the BLAS decides."""
+    try:
+        with open("/proc/self/maps") as handle:
+            libraries = sorted(set(re.findall(r"(/\S*openblas\S*\.so\S*)", handle.read())))
+    except OSError:
+        return None
+    for path in libraries:
+        try:
+            library = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for prefix, suffix in (("scipy_openblas", "64_"), ("scipy_openblas", ""), ("openblas", "64_"), ("openblas", "")):
+            get = getattr(library, f"{prefix}_get_num_threads{suffix}", None)
+            set_ = getattr(library, f"{prefix}_set_num_threads{suffix}", None)
+            if get is not None and set_ is not None:
+                return get, set_
+    return None
+
+
+_BLAS_LOCK = threading.Lock()
+_BLAS_USERS = [0, None]  # forward passes running now, the thread count to restore after the last
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """OpenBLAS on one thread while any forward pass runs (passes may run at once on Dask's
+    threads: the first sets it, the last restores it)."""
+    functions = openblas_thread_functions()
+    if functions is None:
+        yield
+        return
+    get, set_ = functions
+    with _BLAS_LOCK:
+        if _BLAS_USERS[0] == 0:
+            _BLAS_USERS[1] = get()
+            set_(1)
+        _BLAS_USERS[0] += 1
+    try:
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS_USERS[0] -= 1
+            if _BLAS_USERS[0] == 0:
+                set_(_BLAS_USERS[1])
+
+
+def _grid_inputs(axes, start: int, stop: int) -> np.ndarray:
+    """Inputs u of the nodes start .. stop-1 of the C-order tensor grid of ``axes`` (1D float32
+    arrays of u per axis): (stop - start, d) float32."""
+    flat = np.arange(start, stop)
+    inputs = np.empty((stop - start, len(axes)), dtype=np.float32)
+    for d in range(len(axes) - 1, -1, -1):  # the last axis varies fastest
+        flat, index = np.divmod(flat, len(axes[d]))
+        inputs[:, d] = axes[d][index]
+    return inputs
+
+
+def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers: int | None = None):
+    """The network N(xi) of ``model`` (a ``checkpoint["model"]`` description) at the tensor grid of
+    the 1D parametric coordinates ``coords`` (values in [0, 1]): (n1 * n2 [* n3], d) float64, nodes
+    in C order, written into ``out`` when given. ``workers``: threads over chunks (default: the
+    CPUs this process may use)."""
+    layers = network_arrays(model)
+    dim = int(model["dim"])
+    if len(coords) != dim:
+        raise MeshgenError(f"the network maps {dim}D points: {len(coords)} coordinate axes given")
+    two, one = np.float32(2.0), np.float32(1.0)
+    axes = [two * np.asarray(c, dtype=np.float64).astype(np.float32) - one for c in coords]
+    count = int(np.prod([len(c) for c in coords]))
+    if out is None:
+        out = np.empty((count, dim))
+    widths = [bias.shape[0] for _, bias in layers]
+
+    def run(first: int) -> None:
+        # each task owns its buffers: chunks run on any worker thread
+        buffers = [np.empty((chunk, width), dtype=np.float32) for width in widths]
+        for start in range(first, min(count, first + span), chunk):
+            stop = min(count, start + chunk)
+            hidden = _grid_inputs(axes, start, stop)
+            for index, ((weight, bias), buffer) in enumerate(zip(layers, buffers)):
+                result = buffer[: stop - start]
+                np.matmul(hidden, weight, out=result)
+                result += bias
+                if index < len(layers) - 1:
+                    np.tanh(result, out=result)
+                hidden = result
+            out[start:stop] = hidden
+
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    span = chunk * max(1, -(-count // (chunk * workers * 4)))  # about four tasks per worker
+    with _one_blas_thread():
+        if workers == 1 or count <= span:
+            for first in range(0, count, span):
+                run(first)
+        else:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                list(pool.map(run, range(0, count, span)))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# checkpoints without torch
+
+_STORAGE_DTYPES = {
+    "FloatStorage": np.float32,
+    "DoubleStorage": np.float64,
+    "HalfStorage": np.float16,
+    "LongStorage": np.int64,
+    "IntStorage": np.int32,
+    "ShortStorage": np.int16,
+    "CharStorage": np.int8,
+    "ByteStorage": np.uint8,
+    "BoolStorage": np.bool_,
+}
+
+
+def _rebuild_tensor(storage, offset, size, stride, *_):
+    """A tensor as a NumPy array: ``storage`` (flat array) viewed at ``offset`` with ``size`` and
+    ``stride`` (in elements), copied so it owns its memory."""
+    if not size:
+        return storage[offset].copy()
+    strides = tuple(s * storage.itemsize for s in stride)
+    view = np.lib.stride_tricks.as_strided(storage[offset:], shape=tuple(size), strides=strides)
+    return np.array(view)
+
+
+class _Unpickler(pickle.Unpickler):
+    def __init__(self, handle, archive: zipfile.ZipFile, prefix: str, byteorder: str):
+        super().__init__(handle)
+        self._archive, self._prefix, self._byteorder = archive, prefix, byteorder
+        self._storages = {}
+
+    def find_class(self, module, name):
+        if (module, name) == ("torch._utils", "_rebuild_tensor_v2"):
+            return _rebuild_tensor
+        if module == "torch" and name in _STORAGE_DTYPES:
+            return _STORAGE_DTYPES[name]
+        if (module, name) == ("collections", "OrderedDict"):
+            return dict
+        raise pickle.UnpicklingError(f"{module}.{name} is not plain checkpoint data")
+
+    def persistent_load(self, saved_id):
+        kind, dtype, key = saved_id[0], saved_id[1], str(saved_id[2])
+        if kind != "storage" or not isinstance(dtype, type):
+            raise pickle.UnpicklingError(f"unknown persistent record {kind!r}")
+        if key not in self._storages:
+            raw = self._archive.read(f"{self._prefix}data/{key}")
+            array = np.frombuffer(raw, dtype=np.dtype(dtype).newbyteorder("<" if self._byteorder == "little" else ">"))
+            self._storages[key] = array.astype(np.dtype(dtype).newbyteorder("="), copy=False)
+        return self._storages[key]
+
+
+def read_checkpoint(path) -> dict:
+    """A checkpoint written by ``meshgen.neural.checkpoint.save_checkpoint`` as plain data, its
+    tensors as NumPy arrays, read without torch. MeshgenError for a file that is not one."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = archive.namelist()
+            pickled = next(name for name in names if name.endswith("data.pkl"))
+            prefix = pickled[: -len("data.pkl")]
+            byteorder = archive.read(prefix + "byteorder").decode().strip() if prefix + "byteorder" in names else "little"
+            with archive.open(pickled) as handle:
+                data = _Unpickler(handle, archive, prefix, byteorder).load()
+    except (OSError, zipfile.BadZipFile, StopIteration, pickle.UnpicklingError, KeyError, ValueError, EOFError) as exc:
+        raise MeshgenError(f"could not read checkpoint {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise MeshgenError(f"could not read checkpoint {path}: not a checkpoint")
+    return data

@@ -1,0 +1,113 @@
+"""The NumPy forward pass and the torch-free checkpoint reader against torch itself: the network's
+forward (``meshgen.neural.model.MLP``) and ``torch.load``."""
+
+import pickle
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from meshgen.errors import MeshgenError
+from meshgen.mlp_numpy import forward_on_grid, read_checkpoint
+
+torch = pytest.importorskip("torch")
+BUNDLED = Path(__file__).resolve().parents[1] / "meshgen" / "_models" / "semicylinder" / "checkpoint.pt"
+
+
+def random_model(dim, widths, seed):
+    from meshgen.neural.model import MLP
+
+    torch.manual_seed(seed)
+    network = MLP(dim, widths)
+    state = {k: v.detach().clone() for k, v in network.state_dict().items()}
+    return network, {"dim": dim, "widths": widths, "state_dict": state}
+
+
+@pytest.mark.parametrize("dim, widths", [(3, [85, 85, 85, 85]), (2, [16, 24])])
+@pytest.mark.parametrize("workers", [1, 2])
+def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers):
+    network, model = random_model(dim, widths, seed=dim)
+    coords = [np.sort(np.random.default_rng(d).random(n)) for d, n in zip(range(dim), (13, 11, 9)[:dim])]
+    # uneven chunks: the grid's 1287 or 143 nodes in chunks of 100
+    mine = forward_on_grid(model, coords, chunk=100, workers=workers)
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, dim)
+    with torch.no_grad():
+        expected = network(torch.from_numpy(grid).float()).double().numpy()
+    assert mine.shape == expected.shape and mine.dtype == np.float64
+    np.testing.assert_allclose(mine, expected, rtol=0, atol=2e-6 * max(1.0, np.abs(expected).max()))
+    # numpy arrays in the state dict work as well as tensors
+    plain = dict(model, state_dict={k: v.numpy() for k, v in model["state_dict"].items()})
+    np.testing.assert_array_equal(forward_on_grid(plain, coords, chunk=100, workers=workers), mine)
+
+
+def test_the_checkpoint_reads_as_torch_loads_it(tmp_path):
+    from meshgen.neural.inference import evaluate_on_grid
+
+    expected = torch.load(BUNDLED, map_location="cpu", weights_only=True)
+    read = read_checkpoint(BUNDLED)
+
+    def compare(a, b):
+        if isinstance(b, torch.Tensor):
+            assert isinstance(a, np.ndarray) and a.shape == tuple(b.shape)
+            np.testing.assert_array_equal(a, b.numpy())
+        elif isinstance(b, dict):
+            assert list(a) == list(b)
+            for key in b:
+                compare(a[key], b[key])
+        elif isinstance(b, (list, tuple)):
+            assert len(a) == len(b)
+            for x, y in zip(a, b):
+                compare(x, y)
+        else:
+            assert a == b
+
+    compare(read, expected)
+    coords = [np.linspace(0.0, 1.0, n) for n in (9, 8, 7)]
+    np.testing.assert_allclose(
+        forward_on_grid(read["model"], coords), evaluate_on_grid(expected["model"], coords), rtol=0, atol=2e-6
+    )
+    # a transposed (non-contiguous) tensor is read with its strides
+    path = tmp_path / "strided.pt"
+    weight = torch.arange(12.0).reshape(3, 4)
+    torch.save({"t": weight.t(), "slice": weight[1:, 2:]}, path)
+    read = read_checkpoint(path)
+    np.testing.assert_array_equal(read["t"], weight.t().numpy())
+    np.testing.assert_array_equal(read["slice"], weight[1:, 2:].numpy())
+
+
+def test_foreign_pickles_and_other_files_are_refused(tmp_path):
+    path = tmp_path / "evil.pt"
+    torch.save({"x": 1}, path)
+    with zipfile.ZipFile(path) as archive:
+        entries = {name: archive.read(name) for name in archive.namelist()}
+    data_name = next(name for name in entries if name.endswith("data.pkl"))
+    entries[data_name] = pickle.dumps({"x": print})  # a global that plain data never holds
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, raw in entries.items():
+            archive.writestr(name, raw)
+    with pytest.raises(MeshgenError, match="builtins.print is not plain checkpoint data"):
+        read_checkpoint(path)
+    text = tmp_path / "text.pt"
+    text.write_text("not a checkpoint")
+    with pytest.raises(MeshgenError, match="could not read checkpoint"):
+        read_checkpoint(text)
+
+
+def test_blas_threads_are_restored_after_concurrent_passes():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from meshgen.mlp_numpy import openblas_thread_functions
+
+    functions = openblas_thread_functions()
+    if functions is None:
+        pytest.skip("NumPy's BLAS is not an OpenBLAS whose thread count can be read")
+    get, _ = functions
+    before = get()
+    _, model = random_model(3, [32, 32], seed=4)
+    coords = [np.linspace(0.0, 1.0, 30)] * 3
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        results = list(pool.map(lambda _: forward_on_grid(model, coords, chunk=512, workers=2), range(6)))
+    assert get() == before
+    for result in results[1:]:
+        np.testing.assert_array_equal(result, results[0])

@@ -1,0 +1,73 @@
+"""The compiled quality kernels against the plain-NumPy reference definition
+(``tests/quality_reference.py``): random, strongly distorted (folded, inverted) and degenerate
+meshes, structured and unstructured paths, and a block of a mesh evaluated with the whole mesh's
+tolerance."""
+
+import numpy as np
+import pytest
+from quality_reference import reference_cell_metrics
+
+from meshgen.grid import cell_connectivity, flat_points
+from meshgen.quality import METRICS, cell_metrics_unstructured
+from meshgen.quality.structured import structured_metrics
+
+
+def distorted(dims, sigma, seed):
+    """A unit box of ``dims`` cells with Gaussian node noise of ``sigma`` cell widths."""
+    rng = np.random.default_rng(seed)
+    axes = [np.linspace(0.0, 1.0, n + 1) for n in dims]
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    return X + rng.normal(scale=sigma / max(dims), size=X.shape)
+
+
+def assert_agree(metrics, degenerate, reference, reference_degenerate):
+    np.testing.assert_array_equal(degenerate, reference_degenerate)
+    for name in METRICS:
+        np.testing.assert_allclose(metrics[name], reference[name], rtol=0, atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize("dims", [(7, 6, 5), (12, 9)])
+@pytest.mark.parametrize("sigma", [0.02, 0.3, 0.8])
+def test_compiled_kernels_agree_with_the_numpy_reference(dims, sigma):
+    X = distorted(dims, sigma, seed=int(sigma * 100) + len(dims))
+    metrics, degenerate, _ = structured_metrics(X)
+    reference, reference_degenerate = reference_cell_metrics(X)
+    assert_agree(metrics, degenerate, reference, reference_degenerate)
+    if sigma >= 0.3:  # folded faces and inverted cells are covered
+        assert np.any(metrics["scaled_jacobian"] <= 0) and np.any(metrics["max_angle"] > 180)
+    points, cells = flat_points(X, width=X.shape[-1]), cell_connectivity(X.shape[:-1])
+    unstructured = cell_metrics_unstructured(points, cells)
+    for name in METRICS:
+        np.testing.assert_allclose(unstructured[name], reference[name], rtol=0, atol=1e-12, err_msg=name)
+
+
+@pytest.mark.parametrize("dims", [(5, 4, 6), (8, 7)])
+def test_degenerate_inverted_and_non_finite_cells_agree(dims):
+    X = distorted(dims, 0.4, seed=5)
+    X[1, 1] = X[1, 2]  # zero-length edges
+    X[2, 0] = np.nan  # a non-finite node: its cells, and the faces towards them, have no neighbour centroid
+    X[-1, -1] = np.inf
+    X[-2, 2] = X[-3, 2] + (X[-3, 2] - X[-2, 2])  # a node mirrored through its neighbour: inverted cells
+    with np.errstate(invalid="ignore", over="ignore"):
+        metrics, degenerate, info = structured_metrics(X)
+    reference, reference_degenerate = reference_cell_metrics(X)
+    # X[2, 0] and X[-1, -1] are a line of nodes in 3D, one node in 2D
+    assert degenerate.any() and info["nonfinite_nodes"] == 2 * (X.shape[2] if len(dims) == 3 else 1)
+    assert degenerate.reshape(dims)[-1, -1].all()  # cells with an infinite corner are degenerate
+    assert_agree(metrics, degenerate, reference, reference_degenerate)
+
+
+@pytest.mark.parametrize("dims", [(9, 8, 7), (11, 10)])
+def test_a_block_of_cells_gets_its_values_in_the_whole_mesh(dims):
+    X = distorted(dims, 0.3, seed=2)
+    whole, whole_degenerate, _ = structured_metrics(X)
+    cell_shape = tuple(dims)
+    # cells 2..6 along axis 0 (the others in full) from the nodes of cells 1..7: one neighbour layer
+    X_block = X[1:9]
+    tolerance = float(np.linalg.norm(np.ptp(X.reshape(-1, X.shape[-1]), axis=0)) * 1e-12)
+    cells = (slice(1, 6),) + tuple(slice(0, n) for n in cell_shape[1:])
+    part, degenerate, _ = structured_metrics(X_block, tolerance=tolerance, orientation=1.0, cells=cells)
+    expected = {name: whole[name].reshape(cell_shape)[2:7].reshape(-1) for name in METRICS}
+    for name in METRICS:
+        np.testing.assert_array_equal(part[name], expected[name], err_msg=name)
+    np.testing.assert_array_equal(degenerate, whole_degenerate.reshape(cell_shape)[2:7].reshape(-1))
