@@ -18,7 +18,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshgen.chunked import CHUNKED_METHODS, neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
+from meshgen.chunked import CHUNKED_METHODS, neural_array, run_fraction, single_threaded_torch, tfi_array, write_chunked_mesh
 from meshgen.clustering import node_coordinates
 from meshgen.errors import MeshgenError, MeshgenWarning, ParameterError
 from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer
@@ -409,7 +409,7 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
 
             def blocks_done(done, total, phase):
                 if bar is not None:
-                    bar(done / total, phase=phase, blocks=f"{done}/{total}")
+                    bar(run_fraction(done, total, phase, request.quality), phase=phase, blocks=f"{done}/{total}")
 
             with single_threaded_torch(plan.method == "neural" and client is None):
                 mesh.quality_report, timings = write_chunked_mesh(

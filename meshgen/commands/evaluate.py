@@ -7,11 +7,13 @@ evaluated.
 from __future__ import annotations
 
 import json
+import sys
 
 import click
 
 from meshgen.atomic import atomic_write, check_output_file
 from meshgen.commands._options import geometry_options
+from meshgen.commands._progress import progress_display
 from meshgen.gates import GateError, check_gates, parse_gate
 from meshgen.geometry import load_geometry, parse_params
 from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_json
@@ -179,11 +181,22 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     if address is not None and chunked is False:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     client = connect(address)  # an unreachable scheduler fails fast, before any file is read
+    # A bar with a running clock on a terminal (a big file takes minutes); nothing when piped.
+    interactive = not quiet and json_path != "-" and sys.stdout.isatty()
     try:
-        reports = [
-            evaluate_file(path, chosen, None if chosen else parsed_params, chunked=True if client else chunked, client=client)
-            for path in meshes
-        ]
+        reports = []
+        for path in meshes:
+            with progress_display(f"evaluating {click.format_filename(path)}", interactive) as bar:
+                reports.append(
+                    evaluate_file(
+                        path,
+                        chosen,
+                        None if chosen else parsed_params,
+                        chunked=True if client else chunked,
+                        client=client,
+                        progress=bar,
+                    )
+                )
     finally:
         if client is not None:
             client.close()

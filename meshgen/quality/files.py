@@ -148,7 +148,9 @@ MAX_SIDECAR_BYTES = 16 * 2**20  # a sidecar is a report of a few kB: a larger fi
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
-def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None) -> dict:
+def evaluate_file(
+    path, geometry=None, params: dict | None = None, mesh=None, chunked: bool | None = None, client=None, progress=None
+) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
 
@@ -160,7 +162,10 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
     or None for automatically when the file is CGNS and the in-memory path would need more than
     half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
+    ``progress(done, phase=...)``: hears the fraction done (0 to 1) as each phase begins (reading,
+    metrics, report; block by block on the chunked path), so a long evaluation is never silent.
     """
+    progress = progress or (lambda done, **figures: None)
     path = Path(path)
     if not path.exists():
         raise MeshgenError(f"mesh file {path} does not exist")
@@ -170,8 +175,9 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
         node_shape, _ = read_header(path)
         chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
     if chunked:
-        return _evaluate_file_in_blocks(path, geometry, params, client)
+        return _evaluate_file_in_blocks(path, geometry, params, client, progress)
     if mesh is None:
+        progress(0.0, phase="reading")
         mesh = read_mesh(path)
     try:
         points, cells, skipped = cells_for_quality(mesh)
@@ -183,6 +189,7 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
     X = None
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
         X = as_node_array(points, cells, dims)
+    progress(0.3, phase="metrics")
     try:
         metrics, degenerate, info = assess(X if X is not None else (points, cells))
     except MeshgenError as exc:
@@ -193,16 +200,18 @@ def evaluate_file(path, geometry=None, params: dict | None = None, mesh=None, ch
             "(zero-length edges or non-finite coordinates)"
         )
     info["skipped"] = skipped
+    progress(0.8, phase="report")
     if geometry is not None and geometry.dim != info["dim"] and source != "--geometry":
         notes.append(
             f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation"
         )
         geometry = None
     report = build_report(metrics, degenerate, info, geometry)
+    progress(1.0, phase="done")
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
-def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
+def _evaluate_file_in_blocks(path, geometry, params, client, progress) -> dict:
     """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
     if path.suffix.lower() != ".cgns":
         raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
@@ -216,7 +225,9 @@ def _evaluate_file_in_blocks(path, geometry, params, client) -> dict:
         )
         geometry = None
     try:
-        report = chunked_report(path, geometry, client=client)
+        report = chunked_report(
+            path, geometry, client=client, progress=lambda done, total, phase: progress(done / total, blocks=f"{done}/{total}")
+        )
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     return _finish_file_report(path, report, source, notes, metadata, True)
