@@ -5,8 +5,17 @@ uniform U = (0, 0, speed) with speed the inlet's normal velocity."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
+import pytest
 from openfoam_helpers import needs_openfoam, read_vector_field, run_tool
+
+import meshgen.formats._foam_fields as foam_fields
+from meshgen.errors import MeshgenWarning
+from meshgen.formats import write_mesh
+from meshgen.patches import geometry_patches
+from meshgen.tfi import tfi
 
 MESH = ("mesh", "-g", "semicylinder", "--method", "tfi", "--format", "openfoam", "-q", "-o", "case", "--dims")
 
@@ -58,3 +67,36 @@ def test_deleting_a_kept_field_resets_it(run_cli, tmp_path):
     reset = run_cli(*MESH, 5, 5, 10)
     assert reset.returncode == 0 and "Warning" not in reset.stderr
     assert (case / "0" / "U").read_text() == fresh
+
+
+def solved_like_a_solver(text: str, cells: int) -> str:
+    """``text`` (meshgen's 0/U) as a solver writes it back: its own banner, the internal field a
+    value per cell, a ``value`` entry on a patch, its own spacing."""
+    body = text[text.find("FoamFile") :]
+    body = body.replace(
+        "internalField   uniform (0 0 0);", f"internalField   nonuniform List<vector>\n{cells}\n(\n" + "(0 0 1)\n" * cells + ");"
+    )
+    body = body.replace(
+        "type zeroGradient;",
+        "type            zeroGradient;\n        value           nonuniform List<vector> 4(" + "(0 0 1)" * 4 + ");",
+    )
+    return "/*---*\\\n| =========  OpenFOAM: The Open Source CFD Toolbox |\n\\*---*/\n" + body
+
+
+@pytest.mark.parametrize("tail_bytes", [None, 4096])  # a small solved field, and one read from its head and tail
+def test_a_solved_field_is_meshgens_and_is_rewritten(tmp_path, semicylinder, monkeypatch, tail_bytes):
+    if tail_bytes:
+        monkeypatch.setattr(foam_fields, "TAIL_BYTES", tail_bytes)
+    case = tmp_path / "case"
+    write_mesh(case, tfi(semicylinder, (4, 4, 8)), format="openfoam", patches=geometry_patches(semicylinder))
+    fresh = (case / "0" / "U").read_text()
+    (case / "0" / "U").write_text(solved_like_a_solver(fresh, 4 * 4 * 8 * 10))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshgenWarning)
+        write_mesh(case, tfi(semicylinder, (5, 5, 10)), format="openfoam", patches=geometry_patches(semicylinder))
+    assert (case / "0" / "U").read_text() == fresh
+    # the same solved field with a patch's set-up changed is a user's: kept, with the warning
+    (case / "0" / "U").write_text(solved_like_a_solver(fresh, 4 * 4 * 8 * 10).replace("type slip;", "type noSlip;"))
+    with pytest.warns(MeshgenWarning, match=r"kept 0/U of .*delete it"):
+        write_mesh(case, tfi(semicylinder, (4, 4, 8)), format="openfoam", patches=geometry_patches(semicylinder))
+    assert "type noSlip;" in (case / "0" / "U").read_text()

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 from pathlib import Path
 
@@ -41,6 +42,8 @@ MESHGEN_BANNER = "Written by meshgen"
 DIMENSIONS = {"U": "[0 1 -1 0 0 0 0]", "p": "[0 2 -2 0 0 0 0]"}
 INTERNAL = {"U": "(0 0 0)", "p": "0"}
 CLASS_NAMES = {"U": "volVectorField", "p": "volScalarField"}
+HEAD_BYTES = 4096  # the FoamFile header and the banner above it
+TAIL_BYTES = 64 * 2**20  # a field larger than this is parsed from its head and its last TAIL_BYTES
 
 
 def starting_fields(patches, header) -> dict[str, str]:
@@ -103,11 +106,11 @@ def fields_to_write(folder: Path, texts: dict[str, str], previous: dict) -> tupl
             write[name] = text
             continue
         try:
-            present = path.read_bytes().decode("utf-8")
-        except (OSError, UnicodeDecodeError):
+            present, digest = _read_field(path)
+        except OSError:
             kept.append(name)
             continue
-        if _is_meshgens(present, previous.get(name)):
+        if _is_meshgens(present, digest, previous.get(name)):
             write[name] = text
         else:
             kept.append(name)
@@ -134,10 +137,27 @@ def previous_fields(record_path: Path) -> dict:
     return fields if isinstance(fields, dict) else {}
 
 
-def _is_meshgens(present: str, recorded) -> bool:
+def _read_field(path: Path) -> tuple[str, str]:
+    """(the text to parse, the SHA-256 of the file or "" for a big one) of a field file. A solved
+    field of a big mesh is large (a value per cell): only its head (the banner) and its last
+    ``TAIL_BYTES`` (where the boundaryField is) are read, and it is not hashed (meshgen's own
+    fields are a few kB). Bytes decode as Latin-1, so a binary field parses too."""
+    with open(path, "rb") as file:
+        size = os.fstat(file.fileno()).st_size
+        if size <= TAIL_BYTES:
+            data = file.read()
+            return data.decode("latin-1"), hashlib.sha256(data).hexdigest()
+        head = file.read(HEAD_BYTES)
+        file.seek(size - TAIL_BYTES)
+        tail = file.read(TAIL_BYTES)
+    found = tail.rfind(b"boundaryField")
+    return (head + b"\n" + (tail[found:] if found >= 0 else b"")).decode("latin-1"), ""
+
+
+def _is_meshgens(present: str, digest: str, recorded) -> bool:
     if not isinstance(recorded, dict):
         return False
-    if _digest(present) == recorded.get("sha256"):
+    if digest and digest == recorded.get("sha256"):
         return True
     # A solver's rewrite: a banner of its own, the same boundary set-up (values aside).
     head = present[: present.find("FoamFile")] if "FoamFile" in present else present[:400]
