@@ -102,7 +102,8 @@ class _Plan:
 def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Mesh:
     """Make the mesh ``request`` asks for and, with ``request.output``, write it. Returns the Mesh
     (``notes``: the lines said about the run). ``say(line)`` hears those lines as they happen (the
-    model used, a fall-back), ``warn(text)`` the warnings (unreadable run checkpoints skipped);
+    model used, a fall-back), ``warn(text)`` the warnings (unreadable run checkpoints skipped, a re-meshed OpenFOAM case's
+    kept fields);
     ``progress(label, iterative)``: a context manager yielding a callback ``progress(done,
     **figures)`` or None (``iterative``: the method reports its progress)."""
     plan = _plan(request, say or (lambda line: None), warn)
