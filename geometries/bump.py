@@ -15,6 +15,10 @@ from meshgen.errors import GeometryError
 name = "bump"
 dim = 2
 description = "Channel length x height with a cos^2 bump (bump_height, bump_width, at x = bump_center) on its lower wall"
+axes = (
+    "along the channel (x), inlet to outlet (flow)",
+    "lower wall to upper wall (wall-normal, y)",
+)  # what each --dims number counts
 params = {"length": 3.0, "height": 1.0, "bump_height": 0.25, "bump_width": 1.0, "bump_center": 1.5}
 # In at x = 0, out at x = length, between the bumped lower wall and the flat upper wall.
 patches = {

@@ -21,6 +21,11 @@ from meshgen.tfi import transfinite
 name = "canal"
 dim = 3
 description = "Semicircular canal: a tube of tube_radius bent along a half circle of bend_radius (an arch on z = 0)"
+axes = (
+    "across the tube (along the bend radius)",
+    "across the tube (along y)",
+    "along the bend, inlet to outlet (flow)",
+)  # what each --dims number counts
 params = {"tube_radius": 0.5, "bend_radius": 2.0}
 # The flow runs along the tube: in at zeta = 0, out at zeta = 1; the tube's surface is a wall.
 patches = {

@@ -22,6 +22,7 @@ from meshgen.tfi import transfinite
 name = "flower"
 dim = 3
 description = "Prism of five-petal section r = radius (1 + amplitude cos 5t) along z, twisted by twist degrees over its length"
+axes = ("across the section", "across the section", "along the axis z, inlet to outlet (flow)")  # what each --dims number counts
 params = {"radius": 1.0, "amplitude": 0.2, "length": 2.0, "twist": 90.0}
 # The flow runs along the prism's axis; its side is a wall.
 patches = {

@@ -14,6 +14,11 @@ from meshgen.tfi import transfinite
 name = "semicylinder"
 dim = 3
 description = "Half-cylinder of radius R and length L (half-disk section x^2+y^2<=R^2, y>=0, along z)"
+axes = (
+    "across the flat face (x)",
+    "from the flat face up to the arc",
+    "along the axis z, inlet to outlet (flow)",
+)  # what each --dims number counts
 params = {"radius": 1.0, "length": 2.0}
 # The flow runs along z: in at z = 0, out at z = length; the flat face y = 0 is a symmetry plane.
 patches = {

@@ -7,6 +7,7 @@ from meshgen.errors import GeometryError
 name = "semidisk"
 dim = 2
 description = "Half-disk x^2 + y^2 <= R^2, y >= 0 (the semicylinder's cross-section)"
+axes = ("along the diameter (x)", "from the diameter up to the arc")  # what each --dims number counts
 params = {"radius": 1.0}
 # The arc is a wall; the diameter y = 0 is a symmetry plane.
 patches = {"xi0": ("wall", "wall"), "eta1": ("wall", "wall"), "xi1": ("wall", "wall"), "eta0": ("symmetry", "symmetry")}

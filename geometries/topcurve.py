@@ -15,6 +15,11 @@ from meshgen.errors import GeometryError
 name = "topcurve"
 dim = 3
 description = "Box length x width x height, its top curved to z = height + amplitude sin(pi x/length) sin(pi y/width)"
+axes = (
+    "along x, inlet to outlet (flow)",
+    "across, between the sides (spanwise, y)",
+    "floor to top (wall-normal, z)",
+)  # what each --dims number counts
 params = {"length": 2.0, "width": 1.0, "height": 1.0, "amplitude": 0.3}
 # A channel along x under a curved roof: in at x = 0, out at x = length, flat floor, symmetric sides.
 patches = {

@@ -469,6 +469,7 @@ def describe(spec: str) -> dict | None:
         "description": geometry.description,
         "params": dict(geometry.defaults),
         "patches": [{"name": n, "type": type_of[n], "faces": f} for n, f in faces_of.items()],
+        "axes": {},  # several blocks: ``dims`` says what --dims counts
         "blocks": list(module.blocks),
         "dims": getattr(module, "dims_meaning", ""),
     }

@@ -50,6 +50,7 @@ __all__ = [
     "mesh_block_nodes",
     "network_map_block",
     "neural_array",
+    "run_fraction",
     "single_threaded_torch",
     "tfi_array",
     "write_chunked_mesh",
@@ -67,6 +68,17 @@ def mesh_block_nodes() -> int:
     in_flight = 2 * (os.cpu_count() or 1)
     fitting = available_memory() // (4 * in_flight * MESH_BYTES_PER_BLOCK_NODE)
     return int(max(MIN_BLOCK_NODES, min(BLOCK_NODES, fitting)))
+
+
+def run_fraction(done: int, total: int, phase: str, evaluate: bool) -> float:
+    """The fraction of a chunked run done after ``done`` of ``total`` blocks of ``phase`` (as
+    ``write_chunked_mesh``'s progress reports them): the mesh pass is one of three passes over the
+    blocks when the quality is evaluated (its two passes count ``total`` = twice the blocks), else
+    the whole run. It only grows and reaches 1 at the very end: a progress bar that reached its end
+    after the mesh pass would stop its clock for the whole quality phase."""
+    if phase == "mesh":
+        return done / (3 * total) if evaluate else done / total
+    return (total / 2 + done) / (1.5 * total)
 
 
 def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int | None):

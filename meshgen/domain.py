@@ -16,7 +16,14 @@ from meshgen.patches import as_records, geometry_patches
 from meshgen.plugin_calls import call_plugin, plugin_array
 from meshgen.surface import boundary_surface
 
-__all__ = ["Geometry", "bind"]
+__all__ = ["AXIS_NAMES", "Geometry", "bind", "dims_line"]
+
+AXIS_NAMES = ("xi", "eta", "zeta")  # the --dims numbers' axes, in order
+
+
+def dims_line(axes: dict) -> str:
+    """``"xi: around the arc, eta: ..., zeta: ..."`` ("" for no axes)."""
+    return ", ".join(f"{axis}: {meaning}" for axis, meaning in axes.items())
 
 
 @dataclass(frozen=True)
@@ -36,6 +43,7 @@ class Geometry:
     length_map: Callable | None = field(default=None, repr=False)
     source: str = ""
     patches: dict = field(default_factory=dict)  # cube face -> (patch name, type), as declared
+    axes: tuple[str, ...] = ()  # what each --dims number counts, in the order xi, eta[, zeta] ("" each when undeclared)
 
     def boundary(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=float)
@@ -66,12 +74,18 @@ class Geometry:
         return bind(self, values)
 
     def describe(self) -> dict:
+        """``meshgen geometries`` entry: name, dim, description, params, patches, and what --dims
+        counts (``axes``: {"xi": ..., "eta": ...[, "zeta": ...]}, {} when the plugin does not say;
+        ``dims``: the same on one line)."""
+        axes = dict(zip(AXIS_NAMES, self.axes))
         return {
             "name": self.name,
             "dim": self.dim,
             "description": self.description,
             "params": dict(self.defaults),
             "patches": as_records(geometry_patches(self)),
+            "axes": axes,
+            "dims": dims_line(axes),
         }
 
     def surface(self, resolution: int = 64):

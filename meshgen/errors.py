@@ -7,6 +7,7 @@ __all__ = [
     "FormatError",
     "GeometryError",
     "MeshgenError",
+    "MeshgenWarning",
     "ParameterError",
     "did_you_mean",
     "excerpt",
@@ -19,6 +20,11 @@ EXCERPT_CHARS = 80
 
 class MeshgenError(Exception):
     """A problem with the user's input or environment, reported without a traceback."""
+
+
+class MeshgenWarning(UserWarning):
+    """Something the user should know about an output that was written (a re-meshed case kept a
+    user's field): the CLI prints it as one ``Warning:`` line."""
 
 
 class GeometryError(MeshgenError):

@@ -140,7 +140,23 @@ def _from_module(module, source: str) -> Geometry:
         length_map=length_map if callable(length_map) else None,
         source=source,
         patches=patches,
+        axes=_declared_axes(getattr(module, "axes", ()), int(dim), source),
     )
+
+
+def _declared_axes(declared, dim: int, source: str) -> tuple[str, ...]:
+    """A plugin's ``axes`` checked: what each --dims number counts, one short phrase per axis
+    (xi, eta[, zeta]), e.g. ``("around the arc", "radial", "along the axis (flow)")``."""
+    if isinstance(declared, (tuple, list)) and not declared:
+        return ()
+    if not (
+        isinstance(declared, (tuple, list)) and len(declared) == dim and all(isinstance(x, str) and x.strip() for x in declared)
+    ):
+        raise GeometryError(
+            f"geometry plugin {source}: 'axes' must be {dim} non-empty strings, what each --dims number counts (xi, eta"
+            + (", zeta)" if dim == 3 else ")")
+        )
+    return tuple(" ".join(x.split())[:80] for x in declared)
 
 
 def _multiblock_boundary(name: str) -> Callable:

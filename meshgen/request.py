@@ -14,12 +14,13 @@ from __future__ import annotations
 import contextlib
 import statistics
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshgen.chunked import CHUNKED_METHODS, neural_array, single_threaded_torch, tfi_array, write_chunked_mesh
+from meshgen.chunked import CHUNKED_METHODS, neural_array, run_fraction, single_threaded_torch, tfi_array, write_chunked_mesh
 from meshgen.clustering import node_coordinates
-from meshgen.errors import MeshgenError, ParameterError
+from meshgen.errors import MeshgenError, MeshgenWarning, ParameterError
 from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer
 from meshgen.geometry import Geometry, bind, check_boundary, load_geometry, load_recorded_geometry
 from meshgen.layout import trained_layout, with_layout
@@ -101,14 +102,16 @@ class _Plan:
 def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Mesh:
     """Make the mesh ``request`` asks for and, with ``request.output``, write it. Returns the Mesh
     (``notes``: the lines said about the run). ``say(line)`` hears those lines as they happen (the
-    model used, a fall-back), ``warn(text)`` the warnings (unreadable run checkpoints skipped);
+    model used, a fall-back), ``warn(text)`` the warnings (unreadable run checkpoints skipped, a re-meshed OpenFOAM case's
+    kept fields);
     ``progress(label, iterative)``: a context manager yielding a callback ``progress(done,
     **figures)`` or None (``iterative``: the method reports its progress)."""
     plan = _plan(request, say or (lambda line: None), warn)
     progress = progress or (lambda label, iterative: contextlib.nullcontext(None))
     if plan.chunked:
         return _mesh_in_blocks(request, plan, progress)
-    return _mesh_in_memory(request, plan, progress)
+    with _warnings_to(warn):
+        return _mesh_in_memory(request, plan, progress)
 
 
 def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cluster=(), progress=None, **options) -> Mesh:
@@ -306,6 +309,25 @@ def _check_model_dims(model, geometry, dims):
 # the two paths
 
 
+@contextlib.contextmanager
+def _warnings_to(warn):
+    """Pass the writers' ``MeshgenWarning`` lines (a re-meshed case kept a user's field) to
+    ``warn(text)``; without ``warn`` (Python) they stay Python warnings. Other warnings pass through."""
+    if warn is None:
+        yield
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MeshgenWarning)
+        try:
+            yield
+        finally:
+            for item in caught:
+                if issubclass(item.category, MeshgenWarning):
+                    warn(str(item.message))
+                else:
+                    warnings.warn_explicit(item.message, item.category, item.filename, item.lineno)
+
+
 def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
     options = {
         "tol": request.tol,
@@ -388,7 +410,7 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
 
             def blocks_done(done, total, phase):
                 if bar is not None:
-                    bar(done / total, phase=phase, blocks=f"{done}/{total}")
+                    bar(run_fraction(done, total, phase, request.quality), phase=phase, blocks=f"{done}/{total}")
 
             with single_threaded_torch(plan.method == "neural" and client is None):
                 mesh.quality_report, timings = write_chunked_mesh(

@@ -7,7 +7,8 @@ instead of at a random moment.
 KIND is ``torch-save`` (the N-th ``torch.save``: a checkpoint), ``plot3d-record`` (the N-th
 record of a Plot3D file), ``openfoam-polymesh`` (after the N-th polyMesh is written under its
 temporary name), ``publish-rename`` (after the N-th rename of a publication, its lock held), or
-``same-second`` (no stall: the clock that names run folders reads one fixed second). The stalled write puts the first half of its bytes where the real
+``same-second`` (no stall: the clock that names run folders reads one fixed second), or
+``make-mesh`` (before the N-th mesh a request computes: a compare row). The stalled write puts the first half of its bytes where the real
 write would have put them (whatever file meshgen handed it: a temporary name or the target
 itself), flushes them to disk, writes MARKER (holding that file's name) and waits: for the file
 MARKER.go, after which it writes the rest, or to be killed. Only the timing is staged: the file,
@@ -128,6 +129,21 @@ def same_second(marker: str, call: int) -> None:
     time.strftime = lambda text, *rest: "20260101-000000" if text == "%Y%m%d-%H%M%S" else real_strftime(text, *rest)
 
 
+def stall_make_mesh(marker: str, call: int) -> None:
+    import meshgen.request as request
+
+    real_make_mesh = request.make_mesh
+    calls = [0]
+
+    def make_mesh(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] == call:
+            _wait(marker, "make_mesh")
+        return real_make_mesh(*args, **kwargs)
+
+    request.make_mesh = make_mesh
+
+
 def main() -> None:
     kind, marker, call, *arguments = sys.argv[1:]
     stalls = {
@@ -136,6 +152,7 @@ def main() -> None:
         "openfoam-polymesh": stall_openfoam_poly_mesh,
         "publish-rename": stall_publish_rename,
         "same-second": same_second,
+        "make-mesh": stall_make_mesh,
     }
     stalls[kind](marker, int(call))
     from meshgen.cli import main as meshgen_main

@@ -252,9 +252,9 @@ def test_geometries_json_matches_the_plugins():
     assert result.exit_code == 0, result.output
     listed = json.loads(result.stdout)
     assert [item["name"] for item in listed] == available_names()
-    for item in listed:  # block sets (meshgen.blocks) also say their blocks and what --dims counts
-        assert list(item) == ["name", "dim", "description", "params", "patches"] + (
-            ["blocks", "dims"] if "blocks" in item else []
+    for item in listed:  # what --dims counts: per axis (axes) and on one line (dims); block sets also list their blocks
+        assert list(item) == ["name", "dim", "description", "params", "patches", "axes"] + (
+            ["blocks", "dims"] if "blocks" in item else ["dims"]
         )
     by_name = {item["name"]: item for item in listed}
     for stem, path in _builtin_files().items():  # read the plugin files directly, not through meshgen.geometry
@@ -265,6 +265,7 @@ def test_geometries_json_matches_the_plugins():
         assert item["dim"] == module.dim
         assert item["description"] == module.description
         assert item["params"] == {k: float(v) for k, v in module.params.items()}
+        assert list(item["axes"].values()) == list(getattr(module, "axes", ()))
 
 
 def test_geometries_table_lists_every_geometry():

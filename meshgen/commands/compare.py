@@ -245,6 +245,9 @@ def compare(
         say(f"wrote {len(written)} files in {out}: " + ", ".join(sorted({_short(p, out) for p in written})))
     elif comparison["mode"] == "methods" and not quiet:
         say("(--out DIR keeps the meshes, tables and pictures)")
+    if outcome.interrupted:
+        click.echo(f"Interrupted: not run: {', '.join(comparison['interrupted']['not_run'])}.", err=True)
+        return 130  # as a Ctrl-C that ends any other command
     if any("error" in row for row in comparison["rows"]):
         return 1
     return 0

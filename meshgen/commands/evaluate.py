@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 import click
 
@@ -189,9 +188,11 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     if address is not None and chunked is False:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
     client = connect(address)  # an unreachable scheduler fails fast, before any file is read
+    # A bar with a running clock on a terminal (a big file takes minutes); nothing when piped.
+    interactive = not quiet and json_path != "-" and sys.stdout.isatty()
     try:
         options = {"chunked": True if client else chunked, "client": client, "block_nodes": block_nodes}
-        reports = [_evaluate_one(path, chosen, None if chosen else parsed_params, quiet, options) for path in meshes]
+        reports = [_evaluate_one(path, chosen, None if chosen else parsed_params, interactive, options) for path in meshes]
     finally:
         if client is not None:
             client.close()
@@ -244,12 +245,7 @@ def _print_table(reports) -> None:
         print_table(header, rows, title=title)
 
 
-def _evaluate_one(path, geometry, params, quiet: bool, options: dict) -> dict:
-    """The report of one mesh file, with a progress bar over its blocks at a terminal."""
-    with progress_display(f"evaluate {Path(path).name}", not quiet and sys.stdout.isatty()) as bar:
-
-        def progress(done, total, phase):
-            if bar is not None:
-                bar(done / total, blocks=f"{done}/{total}")
-
-        return evaluate_file(path, geometry, params, progress=progress, **options)
+def _evaluate_one(path, geometry, params, interactive: bool, options: dict) -> dict:
+    """The report of one mesh file, with a progress bar and a running clock at a terminal."""
+    with progress_display(f"evaluating {click.format_filename(path)}", interactive) as bar:
+        return evaluate_file(path, geometry, params, progress=bar, **options)

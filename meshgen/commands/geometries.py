@@ -20,11 +20,13 @@ __all__ = ["geometries", "show"]
 
 
 @click.group("geometries", invoke_without_command=True)
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON list of {name, dim, description, params, patches}.")
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print a JSON list of {name, dim, description, params, patches, axes, dims}."
+)
 @click.pass_context
 def geometries(ctx, as_json):
-    """List the available geometries (built-in, installed plugins) with their parameters and
-    boundary patches (name, type: cube faces), and the shape files -g also takes: STEP/IGES/BREP
+    """List the available geometries (built-in, installed plugins) with their parameters,
+    boundary patches (name, type: cube faces) and what each --dims number counts, and the shape files -g also takes: STEP/IGES/BREP
     solids, STL/OBJ/PLY surfaces and YAML geometry files (docs: shapes-from-files)."""
     if ctx.invoked_subcommand is not None:
         return
@@ -46,7 +48,10 @@ def geometries(ctx, as_json):
     for item in described:
         params = ", ".join(f"{k}={v:g}" for k, v in item["params"].items()) or "-"
         patches = "\n".join(f"{p['name']} ({p['type']}: {' '.join(p['faces'])})" for p in item["patches"])
-        description = item["description"] + (f"\n{len(item['blocks'])} blocks; --dims {item['dims']}" if "blocks" in item else "")
+        if "blocks" in item:
+            description = f"{item['description']}\n{len(item['blocks'])} blocks; --dims {item['dims']}"
+        else:
+            description = f"{item['description']}\n--dims counts {item['dims'] or 'xi, eta, zeta (not said)'}"
         table.add_row(item["name"], f"{item['dim']}D", description, params, patches)
     console = Console()
     console.print(table)

@@ -173,6 +173,7 @@ class Picture:
 class Outcome:
     comparison: dict
     pictures: list[Picture] = field(default_factory=list)
+    interrupted: bool = False  # Ctrl-C after some methods finished: the comparison holds their rows
 
 
 def compare_methods(
@@ -201,6 +202,9 @@ def compare_methods(
     and before any method runs; None keeps nothing. ``say`` receives a line per step. A method
     that fails with a MeshgenError gets a row with its ``error``; the others still run.
     ``reporter``: how training shows its progress (see ``neural_method``).
+    Ctrl-C while a method meshes, after others finished, ends the comparison there: the Outcome
+    holds the finished rows (``interrupted``; ``comparison["interrupted"]`` names the methods not
+    run, the interrupted one first); before any row is finished it stops as usual.
     """
     budget = budget or Budget()
     checkpoints = dict(checkpoints or {})
@@ -214,8 +218,9 @@ def compare_methods(
     out_dir = prepare_out_dir(out_dir) if out_dir is not None else None
     scratch = tempfile.TemporaryDirectory(prefix="meshgen-compare-") if neural and out_dir is None else None
     rows, pictures = [], []
+    not_run = []
     try:
-        for name in methods:
+        for number, name in enumerate(methods):
             run_dir = (out_dir if out_dir is not None else Path(scratch.name if scratch else ".")) / "runs" / name
             if name in prepared:
                 say(f"{name}: {'loading ' + str(checkpoints[name]) if name in checkpoints else 'training'} ...")
@@ -229,7 +234,15 @@ def compare_methods(
                 timing_repeats=timing_repeats,
                 **{k: v for k, v in method_options.items() if k in get_method(name).options},
             )
-            row, picture = _method_row(request, prepared.get(name), run_dir, say)
+            try:
+                row, picture = _method_row(request, prepared.get(name), run_dir, say)
+            except KeyboardInterrupt:
+                if not rows:
+                    raise
+                not_run = list(methods)[number:]  # an interrupted mesh is published whole or not at all
+                finished = ", ".join(row["name"] for row in rows)
+                say(f"interrupted: the table holds what finished ({finished}); not run: {', '.join(not_run)}")
+                break
             rows.append(row)
             if picture is not None:
                 pictures.append(picture)
@@ -248,7 +261,10 @@ def compare_methods(
         "rows": rows,
         "valid_rule": VALID_RULE,
     }
-    return Outcome(comparison, pictures)
+    if not_run:
+        comparison["interrupted"] = {"not_run": not_run}
+        comparison["notes"] = [f"Interrupted (Ctrl-C) before these methods finished: {', '.join(not_run)}."]
+    return Outcome(comparison, pictures, interrupted=bool(not_run))
 
 
 def _check_comparison(geometry, dims, clusters, methods, method_options, budget, checkpoints) -> None:

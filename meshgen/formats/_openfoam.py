@@ -5,7 +5,9 @@
 and an outlet (``meshgen.patches.flow_role``: ``patch``-type patches named inlet/inflow and
 outlet/outflow), ``0/U`` and ``0/p`` for potential flow too: 1 m/s into the domain normal to the
 inlet, p = 0 on the outlet, slip walls, symmetry and empty as their types, zero gradient on any
-other patch. Existing files are never touched: re-meshing a case keeps the user's set-up.
+other patch. Re-meshing a case keeps the user's ``system/`` files; of ``0/U`` and ``0/p`` it
+rewrites meshgen's own (also after a solver has solved them) and keeps a user's edits, with one
+warning (``meshgen.formats._foam_fields``).
 
 polyMesh, as OpenFOAM's own utilities write it (label 32 bits, scalar 64 bits, little-endian):
 
@@ -32,13 +34,15 @@ from __future__ import annotations
 import json
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from meshgen import cube
 from meshgen.atomic import atomic_path
-from meshgen.errors import FormatError, excerpt
+from meshgen.errors import FormatError, MeshgenWarning, excerpt
+from meshgen.formats._foam_fields import field_record, fields_to_write, kept_warning, previous_fields, starting_fields
 from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
@@ -179,7 +183,14 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     if np.prod(node_shape) * 3 > LABEL_LIMIT:
         raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {np.prod(node_shape)} points")
     shape = [int(n) for n in X.shape[:-1]]
-    record = f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "metadata": {metadata_json(metadata)}}}'
+    fields = starting_fields(patches, _header) if _has_inlet_and_outlet(patches) else {}
+    write_fields, kept = fields_to_write(case / "0", fields, previous_fields(case / "constant" / "polyMesh" / RECORD_NAME))
+    # The record names the fields as meshgen writes them, kept ones included: a kept field is the
+    # user's, so it stays unlike the recorded text until the user deletes it.
+    record = (
+        f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "fields": {json.dumps(field_record(write_fields))}, '
+        f'"metadata": {metadata_json(metadata)}}}'
+    )
 
     # Inside the publication of write_mesh (meshgen.publish): the polyMesh, the system files and
     # the starting fields are staged and take their names together under the case's lock; a
@@ -195,9 +206,14 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
             (temporary / RECORD_NAME).write_text(record)
         for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):
             _write_if_missing(case / "system" / name, _header("dictionary", "system", name) + text)
-        if not (case / "0").exists() and _has_inlet_and_outlet(patches):
-            _write_starting_fields(case / "0", patches)
+        if write_fields:
+            publication.make_folder(case / "0")
+            for name, text in write_fields.items():
+                with atomic_path(case / "0" / name) as temporary:
+                    temporary.write_text(text)
         _write_if_missing(case / f"{case.resolve().name}.foam", "")
+    if kept:
+        warnings.warn(kept_warning(case, kept), MeshgenWarning, stacklevel=2)
 
 
 def extrude(X: np.ndarray) -> np.ndarray:
@@ -315,33 +331,6 @@ def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None
 def _has_inlet_and_outlet(patches) -> bool:
     roles = {flow_role(patch) for patch in patches}
     return {"inflow", "outflow"} <= roles
-
-
-def _write_starting_fields(folder: Path, patches) -> None:
-    """``0/U`` and ``0/p`` for potential flow from the patches' types and roles (module docstring),
-    written to a temporary folder and renamed into place."""
-    U, p = {}, {}
-    for patch in patches:
-        role = flow_role(patch)
-        if role == "inflow":
-            U[patch.name], p[patch.name] = "type surfaceNormalFixedValue; refValue uniform -1;", "type zeroGradient;"
-        elif role == "outflow":
-            U[patch.name], p[patch.name] = "type zeroGradient;", "type fixedValue; value uniform 0;"
-        elif patch.type == "wall":
-            U[patch.name], p[patch.name] = "type slip;", "type zeroGradient;"
-        elif patch.type in ("symmetry", "empty"):
-            U[patch.name] = p[patch.name] = f"type {patch.type};"
-        else:
-            U[patch.name], p[patch.name] = "type zeroGradient;", "type zeroGradient;"
-
-    def field(entries, dimensions, internal):
-        body = "".join(f"    {name}\n    {{\n        {entry}\n    }}\n" for name, entry in entries.items())
-        return f"dimensions      {dimensions};\n\ninternalField   uniform {internal};\n\nboundaryField\n{{\n{body}}}\n"
-
-    with atomic_path(folder, keep_existing=True) as temporary:
-        temporary.mkdir()
-        (temporary / "U").write_text(_header("volVectorField", "0", "U") + field(U, "[0 1 -1 0 0 0 0]", "(0 0 0)"))
-        (temporary / "p").write_text(_header("volScalarField", "0", "p") + field(p, "[0 2 -2 0 0 0 0]", "0"))
 
 
 def _write_if_missing(path: Path, text: str) -> None:

@@ -169,9 +169,12 @@ def evaluate_file(
     ``chunked``: evaluate block by block (``meshgen.quality.chunked``; CGNS files), True, False,
     or None for automatically when the file is CGNS and the in-memory path would need more than
     half of the available memory. ``client``: a ``distributed.Client`` to run the blocks on.
-    ``progress(done, total, phase)`` hears about every block of the chunked path; ``block_nodes``:
-    its nodes per block (default ``meshgen.quality.chunked.evaluate_block_nodes()``).
+    ``progress(done, phase=...)``: hears the fraction done (0 to 1) as each phase begins (reading,
+    metrics, report; block by block on the chunked path), so a long evaluation is never silent.
+    ``block_nodes``: nodes per block of the chunked path (default
+    ``meshgen.quality.chunked.evaluate_block_nodes()``).
     """
+    progress = progress or (lambda done, **figures: None)
     path = Path(path)
     if not path.exists():
         raise MeshgenError(f"mesh file {path} does not exist")
@@ -183,6 +186,7 @@ def evaluate_file(
     if chunked:
         return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
     if mesh is None:
+        progress(0.0, phase="reading")
         mesh = read_mesh(path)
     try:
         points, cells, skipped = cells_for_quality(mesh)
@@ -194,6 +198,7 @@ def evaluate_file(
     X = None
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
         X = as_node_array(points, cells, dims)
+    progress(0.3, phase="metrics")
     try:
         metrics, degenerate, info = assess(X if X is not None else (points, cells))
     except MeshgenError as exc:
@@ -204,16 +209,18 @@ def evaluate_file(
             "(zero-length edges or non-finite coordinates)"
         )
     info["skipped"] = skipped
+    progress(0.8, phase="report")
     if geometry is not None and geometry.dim != info["dim"] and source != "--geometry":
         notes.append(
             f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation"
         )
         geometry = None
     report = build_report(metrics, degenerate, info, geometry)
+    progress(1.0, phase="done")
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
-def _evaluate_file_in_blocks(path, geometry, params, client, progress=None, block_nodes=None) -> dict:
+def _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes=None) -> dict:
     """``evaluate_file`` of a CGNS file block by block (``meshgen.quality.chunked``)."""
     if path.suffix.lower() != ".cgns":
         raise MeshgenError(f"{path}: only .cgns files can be evaluated block by block (structured zones read by hyperslabs)")
@@ -227,7 +234,13 @@ def _evaluate_file_in_blocks(path, geometry, params, client, progress=None, bloc
         )
         geometry = None
     try:
-        report = chunked_report(path, geometry, client=client, progress=progress, block_nodes=block_nodes)
+        report = chunked_report(
+            path,
+            geometry,
+            client=client,
+            progress=lambda done, total, phase: progress(done / total, blocks=f"{done}/{total}"),
+            block_nodes=block_nodes,
+        )
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
     return _finish_file_report(path, report, source, notes, metadata, True)
