@@ -5,7 +5,8 @@ to write it) and ``carry_out(request) -> Mesh``, which ``meshgen mesh``, every m
 ``carry_out`` loads and checks the geometry, resolves the method (``auto``: a trained model of the
 geometry, else ``elliptic`` with a note saying so), decides between the in-memory and the chunked
 path, names the boundary patches, records the run (``meshgen.meshing.run_metadata``) and writes
-the file with its quality sidecar. Bad input raises MeshgenError (ParameterError naming the
+the file with its quality sidecar. A geometry that declares blocks goes to
+``meshgen.meshing_blocks`` (the Mesh's ``blocks`` hold one node array per block). Bad input raises MeshgenError (ParameterError naming the
 parameter) before any work is done or any file is written.
 """
 
@@ -25,6 +26,7 @@ from meshgen.geometry import Geometry, bind, check_boundary, load_geometry, load
 from meshgen.layout import trained_layout, with_layout
 from meshgen.limits import check_mesh_memory
 from meshgen.meshing import Mesh
+from meshgen.meshing_blocks import block_spec, mesh_block_set
 from meshgen.methods import get_method, make_mesh
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
@@ -104,8 +106,12 @@ def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Me
     model used, a fall-back), ``warn(text)`` the warnings (unreadable run checkpoints skipped);
     ``progress(label, iterative)``: a context manager yielding a callback ``progress(done,
     **figures)`` or None (``iterative``: the method reports its progress)."""
-    plan = _plan(request, say or (lambda line: None), warn)
+    say = say or (lambda line: None)
     progress = progress or (lambda label, iterative: contextlib.nullcontext(None))
+    spec = block_spec(request.geometry) if request.checkpoint is None else None
+    if spec is not None:  # a geometry of several blocks: meshgen.meshing_blocks
+        return mesh_block_set(request, spec, say, progress)
+    plan = _plan(request, say, warn)
     if plan.chunked:
         return _mesh_in_blocks(request, plan, progress)
     return _mesh_in_memory(request, plan, progress)

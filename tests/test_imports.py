@@ -97,6 +97,7 @@ LAYERS = [
         "meshgen.chunked",
         "meshgen.methods",
         "meshgen.meshing",
+        "meshgen.meshing_blocks",
         "meshgen.fidelity",
         "meshgen.gates",
         "meshgen.tables",

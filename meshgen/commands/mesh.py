@@ -6,8 +6,6 @@ import sys
 
 import click
 
-from meshgen.blocks import is_multiblock
-from meshgen.commands._blocks import mesh_block_geometry
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 from meshgen.commands._progress import progress_display
 from meshgen.commands._text import echo
@@ -174,15 +172,6 @@ def mesh(
     from the written file, and no per-cell quality arrays are attached (see README).
     """
     _check_method(method)  # an unknown name fails before anything is loaded
-    if checkpoint is None and is_multiblock(geometry):  # a block set: meshgen.commands._blocks does the run
-        unsupported = {"--patch": patch_items, "--ascii": ascii_files, "--correct": correct, "--device": device}
-        unsupported.update({"--cluster": clusters, "--boundary-layout": boundary_layout, "--orthogonal": orthogonal})
-        unsupported.update({"--chunked": chunked, "--scheduler": scheduler, "--polish/--no-polish": polish is not None})
-        mesh_block_geometry(
-            method, geometry, params, dims, output, format_name,
-            tol=tol, max_iter=max_iter, quality=quality, quiet=quiet, unsupported=unsupported,
-        )  # fmt: skip
-        return
     context = click.get_current_context()
     geometry_given = context.get_parameter_source("geometry") != click.core.ParameterSource.DEFAULT
     request = MeshRequest(
@@ -214,7 +203,31 @@ def mesh(
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
         progress=lambda label, iterative: progress_display(label, interactive and iterative),
     )
-    _print_result(made, format_for(made.output, format_name), quiet)
+    if made.blocks is not None:
+        _print_block_result(made, quiet)
+    else:
+        _print_result(made, format_for(made.output, format_name), quiet)
+
+
+def _print_block_result(made, quiet):
+    """What a block set's run says: blocks, cells, what --dims counted, the sweeps, the file."""
+    info = made.info
+    for line in info.get("warnings", []):
+        click.echo(f"Warning: {line}", err=True)
+    if quiet:
+        return
+    block_set = made.geometry
+    echo(
+        f"{made.method} mesh of {block_set.name}: {len(block_set.names)} blocks, {block_set.cells} cells "
+        f"(--dims {' '.join(map(str, made.dims))}: {block_set.dims_meaning}) in {made.seconds:.2f} s"
+    )
+    if "sweeps" in info:
+        echo(
+            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+        )
+    echo(f"wrote {made.output}")
+    for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
+        echo(line)
 
 
 def _print_result(made, output_format, quiet):

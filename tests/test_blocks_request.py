@@ -1,0 +1,96 @@
+"""Block sets on the one request path: ``meshgen.mesh()``, ``carry_out(MeshRequest)``, ``meshgen
+compare`` and ``Mesh.write`` / ``meshgen.write`` of a multi-block geometry, checked against closed
+forms (cell and merged node counts of the pipe's O-grid), the per-block TFI computed directly, and
+the written files read back."""
+
+import json
+
+import numpy as np
+import pytest
+
+import meshgen
+from meshgen.blocks import load_block_set, merged_mesh, tfi_blocks
+from meshgen.errors import ParameterError
+from meshgen.formats.multiblock import read_zones
+from meshgen.request import MeshRequest, carry_out
+
+N, M, A = 4, 2, 3  # pipe --dims: cells around a quarter, across the wall layer, along the axis
+
+
+def _pipe_cells(n, m, a):
+    return n * n * a + 4 * n * m * a  # the core block and four wall blocks
+
+
+def _pipe_nodes(n, m, a):
+    return ((n + 1) ** 2 + 4 * n * m) * (a + 1)  # interface nodes counted once
+
+
+def test_mesh_auto_is_elliptic_with_a_note_and_conforming_blocks():
+    made = meshgen.mesh("pipe", (N, M, A))
+    assert made.method == "elliptic" and made.X is None
+    assert any("meshing with elliptic" in line for line in made.notes)
+    assert len(made.blocks) == 5
+    points, cells, _ = merged_mesh(made.geometry, made.blocks)
+    assert len(cells) == _pipe_cells(N, M, A)
+    assert len(points) == _pipe_nodes(N, M, A)  # every interface node shared exactly
+    report = meshgen.evaluate(made)
+    assert report["cells"] == _pipe_cells(N, M, A) and report["inverted"]["count"] == 0
+    assert made.quality["min_angle"].shape == (_pipe_cells(N, M, A),)
+
+
+def test_carry_out_writes_cgns_zones_equal_to_tfi_of_each_block(tmp_path):
+    made = carry_out(MeshRequest((N, M, A), "pipe", method="tfi", output=tmp_path / "pipe.cgns"))
+    expected = tfi_blocks(load_block_set("pipe", None, (N, M, A)))
+    zones = read_zones(tmp_path / "pipe.cgns")
+    assert [z["name"] for z in zones] == ["core", "east", "north", "west", "south"]
+    for zone, X in zip(zones, expected):
+        np.testing.assert_allclose(zone["X"], X, rtol=0, atol=1e-12)
+    sidecar = json.loads((tmp_path / "pipe.cgns.quality.json").read_text())
+    assert sidecar["cells"] == made.quality_report["cells"] == _pipe_cells(N, M, A)
+    assert sidecar["block_set"] == "pipe" and sidecar["block_dims"] == [N, M, A]
+
+
+def test_mesh_write_and_api_write_of_a_block_set(tmp_path):
+    import meshio
+
+    made = meshgen.mesh("dfg-cylinder", (4, 3), "tfi")
+    report = meshgen.write(tmp_path / "dfg.vtu", made)
+    assert (
+        len(meshio.read(tmp_path / "dfg.vtu").cells[0].data)
+        == report["cells"]
+        == sum((len(x) - 1) * (len(y) - 1) for x, y in made.geometry.coords)
+    )
+    assert (tmp_path / "dfg.vtu.quality.json").is_file()
+    assert meshgen.write(tmp_path / "dfg.vtu", made, quality=False) is None
+    assert not (tmp_path / "dfg.vtu.quality.json").exists()  # no sidecar describing another mesh
+    made.write(tmp_path / "case", "openfoam")
+    assert (tmp_path / "case" / "constant" / "polyMesh" / "owner").is_file()
+
+
+@pytest.mark.parametrize(
+    "options, parameter",
+    [
+        ({"method": "neural"}, "method"),
+        ({"method": "tfi", "tol": 1e-3}, "tol"),
+        ({"boundary_layout": "fixed"}, "boundary_layout"),
+        ({"chunked": True}, "chunked"),
+    ],
+)
+def test_block_set_refuses_what_it_cannot_take(tmp_path, options, parameter):
+    with pytest.raises(ParameterError) as caught:
+        carry_out(MeshRequest((N, M, A), "pipe", output=tmp_path / "x.cgns", **options))
+    assert caught.value.parameter == parameter
+    assert not list(tmp_path.iterdir())
+
+
+def test_compare_meshes_a_block_set(run_cli, tmp_path):
+    import meshio
+
+    result = run_cli("compare", "-g", "pipe", "--methods", "tfi,elliptic", "--dims", str(N), str(M), str(A), "--out", "out")
+    assert result.returncode == 0, result.stderr
+    rows = json.loads((tmp_path / "out" / "compare.json").read_text())["rows"]
+    assert [row["name"] for row in rows] == ["tfi", "elliptic"]
+    for row in rows:
+        assert "error" not in row and row["quality"]["cells"] == _pipe_cells(N, M, A)
+        written = meshio.read(tmp_path / "out" / f"{row['name']}.vtu")
+        assert len(written.cells[0].data) == _pipe_cells(N, M, A) and len(written.points) == _pipe_nodes(N, M, A)
