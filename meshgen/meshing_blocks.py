@@ -12,6 +12,7 @@ import statistics
 import time
 from pathlib import Path
 
+from meshgen.block_grading import first_cell_heights, graded_block_set, parse_first_cell
 from meshgen.blocks import BlockSet, is_multiblock, load_block_set, tfi_blocks
 from meshgen.elliptic_blocks import elliptic_blocks
 from meshgen.errors import ParameterError
@@ -73,6 +74,10 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
             else:
                 Xs, info = elliptic_blocks(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
             timings.append(time.perf_counter() - start)
+    if request.first_cell:
+        asked = parse_first_cell(request.first_cell, block_set)
+        measured = first_cell_heights(block_set, Xs, asked)
+        info["first_cell"] = {name: {"asked": asked[name], **measured[name]} for name in asked}
     mesh = Mesh(
         None,
         block_set,
@@ -113,6 +118,8 @@ def _check(request, spec: str, say) -> tuple[str, BlockSet, Path | None, list[st
     params = dict(request.geometry.values) if isinstance(request.geometry, Geometry) else {}
     params.update(request.params or {})
     block_set = load_block_set(spec, params, request.dims)
+    if request.first_cell:
+        block_set = graded_block_set(block_set, parse_first_cell(request.first_cell, block_set))
     output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
     for line in notes:
         say(line)

@@ -52,7 +52,8 @@ class MeshRequest:
     the method's default; an option the method does not take is an error): ``tol``, ``max_iter``,
     ``orthogonal`` (faces), ``boundary_layout`` (elliptic, tfi); ``correct``, ``polish``, ``device``,
     ``checkpoint`` (a path or a loaded ``TrainedModel``) for the neural methods. ``clusters``: wall
-    clustering specs such as ``"zeta:both:1.1"``. ``output``: the file (or OpenFOAM case) to write,
+    clustering specs such as ``"zeta:both:1.1"``; ``first_cell``: first-cell heights on patches of
+    a block set (``"0.001"`` every wall patch, ``"cylinder=0.0005"``; ``meshgen.block_grading``). ``output``: the file (or OpenFOAM case) to write,
     None to keep the mesh in memory only; ``format``: its format instead of the extension's;
     ``patches``: ``FACE=NAME[:TYPE]`` overrides of the geometry's patches; ``ascii``: OpenFOAM
     ASCII. ``chunked``: True (blocks on Dask streamed into the file), False (in memory), None
@@ -74,6 +75,7 @@ class MeshRequest:
     boundary_layout: str | None = None
     orthogonal: tuple[str, ...] = ()
     clusters: tuple[str, ...] = ()
+    first_cell: tuple[str, ...] = ()
     output: str | Path | None = None
     format: str | None = None
     patches: tuple[str, ...] = ()
@@ -117,14 +119,17 @@ def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Me
     return _mesh_in_memory(request, plan, progress)
 
 
-def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cluster=(), progress=None, **options) -> Mesh:
+def mesh(
+    geometry, dims, method: str = "auto", *, params: dict | None = None, cluster=(), first_cell=(), progress=None, **options
+) -> Mesh:
     """Mesh ``geometry`` (a name, a plugin file's path, or a loaded Geometry) with ``dims`` cells
     per axis (two numbers for a 2D geometry, three for 3D) by ``method``, as ``meshgen mesh``
     does: ``auto`` (the default) meshes with the model of ``model=`` (a checkpoint path), else the
     newest ./runs/*/checkpoint.pt trained on the geometry, else the model bundled for it, else with
     ``elliptic`` (the returned Mesh's ``notes`` say so); or ``tfi``, ``elliptic``, ``neural``
     (``meshgen.methods``). ``params``: geometry parameters over its defaults; ``cluster``: wall
-    clustering specs such as ``"zeta:both:1.1"``; ``progress``: a callback ``progress(done,
+    clustering specs such as ``"zeta:both:1.1"``; ``first_cell``: first-cell heights on a block set's
+    patches (``"0.001"``: every wall patch; ``"cylinder=0.0005"``); ``progress``: a callback ``progress(done,
     **figures)`` for methods that report it; ``options``: the method's own (``tol``,
     ``max_iter``, ``orthogonal``, ``boundary_layout``; ``model``, ``correct``, ``polish``, ``device`` for the
     neural map). Nothing is written (``Mesh.write``). Raises MeshgenError (ParameterError naming
@@ -138,7 +143,18 @@ def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cl
         raise ParameterError(sorted(options)[0], f"{{name}} is no option of mesh() (options: {known})")
     if isinstance(fields.get("orthogonal"), str):
         fields["orthogonal"] = (fields["orthogonal"],)
-    request = MeshRequest(tuple(dims), geometry, params, method, clusters=tuple(cluster), quality=False, **fields)
+    if isinstance(first_cell, (str, int, float)):
+        first_cell = (str(first_cell),)
+    request = MeshRequest(
+        tuple(dims),
+        geometry,
+        params,
+        method,
+        clusters=tuple(cluster),
+        first_cell=tuple(map(str, first_cell)),
+        quality=False,
+        **fields,
+    )
 
     @contextlib.contextmanager
     def callback(label, iterative):
@@ -183,6 +199,11 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
             )
         if request.ascii and not output_format.folder:
             raise ParameterError("ascii", f"{{name}} applies to the openfoam format, not to {output_format.name}")
+    if request.first_cell:
+        raise ParameterError(
+            "first_cell",
+            "{name} grades the patches of multi-block geometries; one block: --cluster AXIS:SIDE:h=HEIGHT (parametric)",
+        )
     patch_overrides = parse_patch_options(request.patches, len(dims))
     coords = node_coordinates(dims, tuple(request.clusters))  # a malformed cluster fails here
     address = scheduler_address(request.scheduler) if output is not None else None

@@ -94,3 +94,65 @@ def test_compare_meshes_a_block_set(run_cli, tmp_path):
         assert "error" not in row and row["quality"]["cells"] == _pipe_cells(N, M, A)
         written = meshio.read(tmp_path / "out" / f"{row['name']}.vtu")
         assert len(written.cells[0].data) == _pipe_cells(N, M, A) and len(written.points) == _pipe_nodes(N, M, A)
+
+
+def _first_cells(made, patch):
+    """Distances from each node on ``patch`` to its neighbour one layer in, and the node arrays'
+    wall-normal lines, measured here from the blocks."""
+    heights, lines = [], []
+    for (block, face), (name, _) in made.geometry.patches.items():
+        if name != patch:
+            continue
+        axis = {"xi": 0, "eta": 1, "zeta": 2}[face[:-1]]
+        X = np.moveaxis(made.blocks[block], axis, 0)
+        X = X[::-1] if face.endswith("1") else X  # from the wall inwards
+        heights.append(np.linalg.norm(X[1] - X[0], axis=-1).ravel())
+        lines.append(np.linalg.norm(np.diff(X, axis=0), axis=-1).reshape(len(X) - 1, -1))
+    return np.concatenate(heights), np.concatenate(lines, axis=1)
+
+
+@pytest.mark.parametrize("geometry, dims, patch", [("pipe", (6, 6, 2), "wall"), ("dfg-cylinder", (6, 5), "cylinder")])
+def test_first_cell_height_on_a_wall_patch(geometry, dims, patch):
+    height = 0.004 if geometry == "pipe" else 0.001
+    spec = f"{height}" if patch == "wall" else f"{patch}={height}"
+    made = meshgen.mesh(geometry, dims, "tfi", first_cell=spec)
+    heights, widths = _first_cells(made, patch)
+    # The wall layer's grid lines are straight in TFI: the mean first cell is the height asked.
+    assert heights.mean() == pytest.approx(height, rel=1e-9)
+    ratios = widths[1:] / widths[:-1]  # cells grow geometrically away from the wall, one ratio
+    np.testing.assert_allclose(ratios, ratios[0, 0], rtol=1e-9)
+    assert ratios[0, 0] > 1.0
+    points, _, _ = merged_mesh(made.geometry, made.blocks)
+    if geometry == "pipe":
+        assert len(points) == _pipe_nodes(*dims)  # the graded blocks still share every interface node
+    assert made.info["first_cell"][patch]["asked"] == height
+
+
+def test_first_cell_elliptic_pipe_is_graded_and_valid():
+    made = meshgen.mesh("pipe", (6, 6, 2), "elliptic", first_cell="0.004")
+    heights, _ = _first_cells(made, "wall")
+    uniform = meshgen.mesh("pipe", (6, 6, 2), "elliptic")
+    assert heights.mean() < 0.5 * _first_cells(uniform, "wall")[0].mean()
+    assert meshgen.evaluate(made)["inverted"]["count"] == 0
+
+
+@pytest.mark.parametrize(
+    "geometry, dims, spec, words",
+    [
+        ("pipe", (N, M, A), "nowhere=0.01", "has no patch 'nowhere'"),
+        ("pipe", (N, M, A), "0.3", "not below the uniform cell"),
+        ("pipe", (N, M, A), "-1", "positive length"),
+        ("semicylinder", (4, 4, 4), "0.01", "multi-block"),
+    ],
+)
+def test_first_cell_bad_input(geometry, dims, spec, words):
+    with pytest.raises(ParameterError, match=words) as caught:
+        meshgen.mesh(geometry, dims, "tfi", first_cell=spec)
+    assert caught.value.parameter == "first_cell"
+
+
+def test_first_cell_on_the_command_line(run_cli, tmp_path):
+    result = run_cli("mesh", "-g", "pipe", "--dims", "4", "4", "2", "-m", "tfi", "--first-cell", "0.01", "-o", "p.msh")
+    assert result.returncode == 0, result.stderr
+    assert "first cells on wall: 0.01 mean" in result.stdout
+    assert json.loads((tmp_path / "p.msh.quality.json").read_text())["method_info"]["first_cell"]["wall"]["asked"] == 0.01

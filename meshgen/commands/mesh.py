@@ -98,6 +98,14 @@ METHOD_HELP = (
     help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
 )
 @click.option(
+    "--first-cell",
+    "first_cell",
+    multiple=True,
+    metavar="[PATCH=]H",
+    help="Multi-block geometries: the first cells on every wall patch (or on PATCH; repeatable) are H high "
+    "(physical length), the grading shared by every block across the interfaces.",
+)
+@click.option(
     "--boundary-layout",
     type=click.Choice(["smoothed", "fixed"]),
     default=None,
@@ -150,6 +158,7 @@ def mesh(
     tol,
     max_iter,
     clusters,
+    first_cell,
     boundary_layout,
     orthogonal,
     chunked,
@@ -188,6 +197,7 @@ def mesh(
         boundary_layout=boundary_layout,
         orthogonal=tuple(orthogonal),
         clusters=tuple(clusters),
+        first_cell=tuple(first_cell),
         output=output,
         format=format_name,
         patches=tuple(patch_items),
@@ -221,6 +231,11 @@ def _print_block_result(made, quiet):
         f"{made.method} mesh of {block_set.name}: {len(block_set.names)} blocks, {block_set.cells} cells "
         f"(--dims {' '.join(map(str, made.dims))}: {block_set.dims_meaning}) in {made.seconds:.2f} s"
     )
+    for name, height in info.get("first_cell", {}).items():
+        echo(
+            f"first cells on {name}: {height['mean']:.3g} mean ({height['min']:.3g} to {height['max']:.3g}), "
+            f"asked {height['asked']:.3g}"
+        )
     if "sweeps" in info:
         echo(
             f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} ({'converged' if info['converged'] else 'not converged'})"
