@@ -1,6 +1,7 @@
-"""Wall grading of a block set by first-cell height (``--first-cell``): the cells next to named
-patches get a physical height H, the node coordinates along the wall-normal axis growing
-geometrically away from the wall (``meshgen.clustering``), and every block that shares that axis
+"""Wall grading of a block set by first-cell height (``--first-cell``) or growth ratio
+(``--cluster PATCH:RATIO``): the cells next to named patches get a physical height H (or grow by
+the ratio), the node coordinates along the wall-normal axis growing geometrically away from the
+wall (``meshgen.clustering``), and every block that shares that axis
 through an interface gets the same coordinates, so the interfaces stay conforming (design notes
 §20).
 
@@ -21,7 +22,7 @@ from meshgen.blocks import BlockSet, tfi_blocks
 from meshgen.clustering import Cluster, clustered_coordinates
 from meshgen.errors import ParameterError
 
-__all__ = ["first_cell_heights", "graded_block_set", "parse_first_cell"]
+__all__ = ["first_cell_heights", "graded_block_set", "parse_first_cell", "parse_wall_clusters"]
 
 
 def parse_first_cell(specs, block_set: BlockSet) -> dict[str, float]:
@@ -50,6 +51,26 @@ def parse_first_cell(specs, block_set: BlockSet) -> dict[str, float]:
     return heights
 
 
+def parse_wall_clusters(specs, block_set: BlockSet) -> dict[str, float]:
+    """``("wall:1.1", ...)`` -> {patch name: growth ratio >= 1}. A block set's axes differ from
+    block to block, so its clustering names a patch instead of an axis and a side."""
+    kinds = {name: kind for name, kind in block_set.patches.values()}
+    ratios = {}
+    for spec in specs:
+        parts = str(spec).split(":")
+        usage = f"{{name}} {spec!r}: the multi-block geometry '{block_set.name}' takes PATCH:RATIO (e.g. wall:1.1; patches: {', '.join(sorted(kinds))})"
+        if len(parts) != 2 or parts[0] not in kinds:
+            raise ParameterError("cluster", usage)
+        try:
+            ratio = float(parts[1])
+        except ValueError:
+            raise ParameterError("cluster", usage) from None
+        if not (np.isfinite(ratio) and ratio >= 1.0):
+            raise ParameterError("cluster", f"{{name}} {spec!r}: the growth ratio must be a number >= 1")
+        ratios[parts[0]] = ratio
+    return ratios
+
+
 def _axis_classes(block_set: BlockSet) -> tuple[dict, dict]:
     """(root, sign): for every (block, axis), the representative of its class and whether its
     coordinates run with (+1) or against (-1) the representative's."""
@@ -73,45 +94,61 @@ def _axis_classes(block_set: BlockSet) -> tuple[dict, dict]:
     return {key: find(key)[0] for key in parent}, {key: find(key)[1] for key in parent}
 
 
-def graded_block_set(block_set: BlockSet, heights: dict[str, float]) -> BlockSet:
+def graded_block_set(block_set: BlockSet, heights: dict[str, float], ratios: dict[str, float] | None = None) -> BlockSet:
     """``block_set`` with the coordinates along each wall-normal axis graded so that the first
-    cells on the patches of ``heights`` ({patch: height}) have that height; the coordinates of
+    cells on the patches of ``heights`` ({patch: height}) have that height, or, on the patches of
+    ``ratios`` ({patch: growth ratio}), grow by that ratio away from the wall; the coordinates of
     every linked axis are the same. ParameterError when a height is not below the cell height the
-    uniform grading gives there. Walls at both ends of an axis: both get the smaller height."""
-    if not heights:
+    uniform grading gives there. Walls at both ends of an axis: both get the smaller height (the
+    larger ratio); a height wins over a ratio."""
+    ratios = dict(ratios or {})
+    if not heights and not ratios:
         return block_set
     root, sign = _axis_classes(block_set)
-    Xs = tfi_blocks(block_set)
+    Xs = tfi_blocks(block_set) if heights else None
     walls: dict = {}  # class -> {side of the representative: [(height, mean line length)]}
+    grown: dict = {}  # class -> {side: ratio}
     for (block, face_name), (name, _) in block_set.patches.items():
-        if name not in heights:
+        if name not in heights and name not in ratios:
             continue
         face = cube.face_named(face_name, block_set.dim)
         key = (block, face.axis)
         side = face.side if sign[key] > 0 else 1 - face.side
-        lines = np.sum(np.linalg.norm(np.diff(Xs[block], axis=face.axis), axis=-1), axis=face.axis)
-        walls.setdefault(root[key], {}).setdefault(side, []).append((heights[name], float(np.mean(lines))))
+        if name in heights:
+            lines = np.sum(np.linalg.norm(np.diff(Xs[block], axis=face.axis), axis=-1), axis=face.axis)
+            walls.setdefault(root[key], {}).setdefault(side, []).append((heights[name], float(np.mean(lines))))
+        else:
+            sides = grown.setdefault(root[key], {})
+            sides[side] = max(sides.get(side, 1.0), ratios[name])
     coords = [list(c) for c in block_set.coords]
-    for representative, sides in walls.items():
+    for representative in {**grown, **walls}:
         n = len(coords[representative[0]][representative[1]]) - 1
-        wanted = {side: np.mean([h / length for h, length in found]) for side, found in sides.items()}
-        first = min(wanted.values())
-        if first >= 1.0 / n:
-            name = block_set.names[representative[0]]
-            raise ParameterError(
-                "first_cell",
-                f"{{name}}: a first cell of {first:.3g} of the wall layer is not below the uniform cell (1/{n}) "
-                f"across block '{name}': give a smaller height or fewer cells",
-            )
-        side = "both" if len(wanted) == 2 else ("min" if 0 in wanted else "max")
+        if representative in walls:
+            wanted = {side: np.mean([h / length for h, length in found]) for side, found in walls[representative].items()}
+            first = min(wanted.values())
+            if first >= 1.0 / n:
+                name = block_set.names[representative[0]]
+                raise ParameterError(
+                    "first_cell",
+                    f"{{name}}: a first cell of {first:.3g} of the wall layer is not below the uniform cell (1/{n}) "
+                    f"across block '{name}': give a smaller height or fewer cells",
+                )
+            cluster = Cluster(representative[1], _side(wanted), first_height=first)
+        else:
+            wanted = grown[representative]
+            cluster = Cluster(representative[1], _side(wanted), ratio=max(wanted.values()))
         try:
-            nodes = clustered_coordinates(n, Cluster(representative[1], side, first_height=first))
+            nodes = clustered_coordinates(n, cluster)
         except ParameterError as exc:
             raise ParameterError("first_cell", exc.template.replace("{name} ", "{name}: ")) from None
         for key, top in root.items():
             if top == representative:
                 coords[key[0]][key[1]] = nodes if sign[key] > 0 else 1.0 - nodes[::-1]
     return BlockSet(**{**block_set.__dict__, "coords": tuple(tuple(c) for c in coords)})
+
+
+def _side(wanted: dict) -> str:
+    return "both" if len(wanted) == 2 else ("min" if 0 in wanted else "max")
 
 
 def first_cell_heights(block_set: BlockSet, Xs, names) -> dict[str, dict]:

@@ -12,7 +12,7 @@ import statistics
 import time
 from pathlib import Path
 
-from meshgen.block_grading import first_cell_heights, graded_block_set, parse_first_cell
+from meshgen.block_grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.blocks import BlockSet, is_multiblock, load_block_set, tfi_blocks
 from meshgen.elliptic_blocks import elliptic_blocks
 from meshgen.errors import ParameterError
@@ -33,7 +33,6 @@ _SINGLE_BLOCK_ONLY = (
     ("device", "device"),
     ("boundary_layout", "boundary_layout"),
     ("orthogonal", "orthogonal"),
-    ("clusters", "cluster"),
     ("patches", "patch"),
     ("ascii", "ascii"),
     ("chunked", "chunked"),
@@ -83,7 +82,7 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
         block_set,
         method,
         tuple(request.dims),
-        (),
+        tuple(request.clusters),
         info,
         statistics.median(timings),
         timings=tuple(timings),
@@ -118,8 +117,9 @@ def _check(request, spec: str, say) -> tuple[str, BlockSet, Path | None, list[st
     params = dict(request.geometry.values) if isinstance(request.geometry, Geometry) else {}
     params.update(request.params or {})
     block_set = load_block_set(spec, params, request.dims)
-    if request.first_cell:
-        block_set = graded_block_set(block_set, parse_first_cell(request.first_cell, block_set))
+    if request.first_cell or request.clusters:
+        heights = parse_first_cell(request.first_cell, block_set)
+        block_set = graded_block_set(block_set, heights, parse_wall_clusters(request.clusters, block_set))
     output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
     for line in notes:
         say(line)

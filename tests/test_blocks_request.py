@@ -156,3 +156,17 @@ def test_first_cell_on_the_command_line(run_cli, tmp_path):
     assert result.returncode == 0, result.stderr
     assert "first cells on wall: 0.01 mean" in result.stdout
     assert json.loads((tmp_path / "p.msh.quality.json").read_text())["method_info"]["first_cell"]["wall"]["asked"] == 0.01
+
+
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_cluster_a_patch_across_blocks(method):
+    made = meshgen.mesh("pipe", (4, 5, 2), method, cluster=("wall:1.2",))
+    _, widths = _first_cells(made, "wall")
+    points, _, _ = merged_mesh(made.geometry, made.blocks)
+    assert len(points) == _pipe_nodes(4, 5, 2)
+    if method == "tfi":  # straight wall-layer lines: the widths themselves grow by 1.2 inwards
+        np.testing.assert_allclose(widths[1:] / widths[:-1], 1.2, rtol=1e-9)
+    else:  # the solver relaxes the grading but keeps it: smaller first cells than the ungraded mesh's
+        uniform = meshgen.mesh("pipe", (4, 5, 2), method)
+        assert widths[0].mean() < 0.8 * _first_cells(uniform, "wall")[1][0].mean()
+    assert made.metadata()["cluster"] == ["wall:1.2"]

@@ -95,7 +95,8 @@ METHOD_HELP = (
     "clusters",
     multiple=True,
     metavar="AXIS:SIDE:RATIO",
-    help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
+    help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric); "
+    "multi-block geometries: PATCH:RATIO, e.g. wall:1.1, the same grading in every block.",
 )
 @click.option(
     "--first-cell",
