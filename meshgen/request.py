@@ -128,7 +128,7 @@ def mesh(
     newest ./runs/*/checkpoint.pt trained on the geometry, else the model bundled for it, else with
     ``elliptic`` (the returned Mesh's ``notes`` say so); or ``tfi``, ``elliptic``, ``neural``
     (``meshgen.methods``). ``params``: geometry parameters over its defaults; ``cluster``: wall
-    clustering specs such as ``"zeta:both:1.1"``; ``first_cell``: first-cell heights on a block set's
+    clustering specs such as ``"zeta:both:1.1"`` (a block set: ``"wall:1.1"``, PATCH:RATIO); ``first_cell``: first-cell heights on a block set's
     patches (``"0.001"``: every wall patch; ``"cylinder=0.0005"``); ``progress``: a callback ``progress(done,
     **figures)`` for methods that report it; ``options``: the method's own (``tol``,
     ``max_iter``, ``orthogonal``, ``boundary_layout``; ``model``, ``correct``, ``polish``, ``device`` for the
