@@ -68,11 +68,12 @@ def read(path) -> Mesh:
 def write(path, mesh: Mesh, *, quality: bool = True) -> dict | None:
     """Write ``mesh`` to ``path`` (format from the extension), atomically: with ``quality`` the
     per-cell metrics as cell data and ``<path>.quality.json`` too, and the quality report returned;
-    without, the mesh alone and None."""
+    without, the mesh alone and None. A block set's mesh (``mesh.blocks``) is written as
+    ``meshgen.formats.multiblock`` writes it (.cgns a zone per block, OpenFOAM, merged .vtu ...)."""
     if not isinstance(mesh, Mesh):
         raise MeshgenError(f"write takes a meshgen.Mesh, got {type(mesh).__name__}")
-    if quality:
-        return mesh.write(path)
+    if quality or mesh.blocks is not None:  # a block set: meshgen.formats.multiblock
+        return mesh.write(path, quality=quality)
     write_mesh(path, mesh.X, metadata=mesh.metadata())
     return None
 

@@ -5,7 +5,8 @@ to write it) and ``carry_out(request) -> Mesh``, which ``meshgen mesh``, every m
 ``carry_out`` loads and checks the geometry, resolves the method (``auto``: a trained model of the
 geometry, else ``elliptic`` with a note saying so), decides between the in-memory and the chunked
 path, names the boundary patches, records the run (``meshgen.meshing.run_metadata``) and writes
-the file with its quality sidecar. Bad input raises MeshgenError (ParameterError naming the
+the file with its quality sidecar. A geometry that declares blocks goes to
+``meshgen.meshing_blocks`` (the Mesh's ``blocks`` hold one node array per block). Bad input raises MeshgenError (ParameterError naming the
 parameter) before any work is done or any file is written.
 """
 
@@ -26,6 +27,7 @@ from meshgen.geometry import Geometry, bind, check_boundary, load_geometry, load
 from meshgen.layout import trained_layout, with_layout
 from meshgen.limits import check_mesh_memory
 from meshgen.meshing import Mesh
+from meshgen.meshing_blocks import block_spec, mesh_block_set
 from meshgen.methods import get_method, make_mesh
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
@@ -51,7 +53,8 @@ class MeshRequest:
     the method's default; an option the method does not take is an error): ``tol``, ``max_iter``,
     ``orthogonal`` (faces), ``boundary_layout`` (elliptic, tfi); ``correct``, ``polish``, ``device``,
     ``checkpoint`` (a path or a loaded ``TrainedModel``) for the neural methods. ``clusters``: wall
-    clustering specs such as ``"zeta:both:1.1"``. ``output``: the file (or OpenFOAM case) to write,
+    clustering specs such as ``"zeta:both:1.1"``; ``first_cell``: first-cell heights on patches of
+    a block set (``"0.001"`` every wall patch, ``"cylinder=0.0005"``; ``meshgen.block_grading``). ``output``: the file (or OpenFOAM case) to write,
     None to keep the mesh in memory only; ``format``: its format instead of the extension's;
     ``patches``: ``FACE=NAME[:TYPE]`` overrides of the geometry's patches; ``ascii``: OpenFOAM
     ASCII. ``chunked``: True (blocks on Dask streamed into the file), False (in memory), None
@@ -73,6 +76,7 @@ class MeshRequest:
     boundary_layout: str | None = None
     orthogonal: tuple[str, ...] = ()
     clusters: tuple[str, ...] = ()
+    first_cell: tuple[str, ...] = ()
     output: str | Path | None = None
     format: str | None = None
     patches: tuple[str, ...] = ()
@@ -106,22 +110,29 @@ def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Me
     kept fields);
     ``progress(label, iterative)``: a context manager yielding a callback ``progress(done,
     **figures)`` or None (``iterative``: the method reports its progress)."""
-    plan = _plan(request, say or (lambda line: None), warn)
+    say = say or (lambda line: None)
     progress = progress or (lambda label, iterative: contextlib.nullcontext(None))
+    spec = block_spec(request.geometry) if request.checkpoint is None else None
+    if spec is not None:  # a geometry of several blocks: meshgen.meshing_blocks
+        return mesh_block_set(request, spec, say, progress)
+    plan = _plan(request, say, warn)
     if plan.chunked:
         return _mesh_in_blocks(request, plan, progress)
     with _warnings_to(warn):
         return _mesh_in_memory(request, plan, progress)
 
 
-def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cluster=(), progress=None, **options) -> Mesh:
+def mesh(
+    geometry, dims, method: str = "auto", *, params: dict | None = None, cluster=(), first_cell=(), progress=None, **options
+) -> Mesh:
     """Mesh ``geometry`` (a name, a plugin file's path, or a loaded Geometry) with ``dims`` cells
     per axis (two numbers for a 2D geometry, three for 3D) by ``method``, as ``meshgen mesh``
     does: ``auto`` (the default) meshes with the model of ``model=`` (a checkpoint path), else the
     newest ./runs/*/checkpoint.pt trained on the geometry, else the model bundled for it, else with
     ``elliptic`` (the returned Mesh's ``notes`` say so); or ``tfi``, ``elliptic``, ``neural``
     (``meshgen.methods``). ``params``: geometry parameters over its defaults; ``cluster``: wall
-    clustering specs such as ``"zeta:both:1.1"``; ``progress``: a callback ``progress(done,
+    clustering specs such as ``"zeta:both:1.1"`` (a block set: ``"wall:1.1"``, PATCH:RATIO); ``first_cell``: first-cell heights on a block set's
+    patches (``"0.001"``: every wall patch; ``"cylinder=0.0005"``); ``progress``: a callback ``progress(done,
     **figures)`` for methods that report it; ``options``: the method's own (``tol``,
     ``max_iter``, ``orthogonal``, ``boundary_layout``; ``model``, ``correct``, ``polish``, ``device`` for the
     neural map). Nothing is written (``Mesh.write``). Raises MeshgenError (ParameterError naming
@@ -135,7 +146,18 @@ def mesh(geometry, dims, method: str = "auto", *, params: dict | None = None, cl
         raise ParameterError(sorted(options)[0], f"{{name}} is no option of mesh() (options: {known})")
     if isinstance(fields.get("orthogonal"), str):
         fields["orthogonal"] = (fields["orthogonal"],)
-    request = MeshRequest(tuple(dims), geometry, params, method, clusters=tuple(cluster), quality=False, **fields)
+    if isinstance(first_cell, (str, int, float)):
+        first_cell = (str(first_cell),)
+    request = MeshRequest(
+        tuple(dims),
+        geometry,
+        params,
+        method,
+        clusters=tuple(cluster),
+        first_cell=tuple(map(str, first_cell)),
+        quality=False,
+        **fields,
+    )
 
     @contextlib.contextmanager
     def callback(label, iterative):
@@ -180,6 +202,11 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
             )
         if request.ascii and not output_format.folder:
             raise ParameterError("ascii", f"{{name}} applies to the openfoam format, not to {output_format.name}")
+    if request.first_cell:
+        raise ParameterError(
+            "first_cell",
+            "{name} grades the patches of multi-block geometries; one block: --cluster AXIS:SIDE:h=HEIGHT (parametric)",
+        )
     patch_overrides = parse_patch_options(request.patches, len(dims))
     coords = node_coordinates(dims, tuple(request.clusters))  # a malformed cluster fails here
     address = scheduler_address(request.scheduler) if output is not None else None

@@ -2,6 +2,7 @@
 record has its reciprocal and the coordinates match; cgnscheck; VTK's CGNS reader shows every
 patch), OpenFOAM (checkMesh, potentialFoam's uniform flow through the pipe), merged .vtu."""
 
+import re
 import shutil
 import subprocess
 
@@ -136,8 +137,67 @@ def test_single_block_formats_refuse_blocks(tmp_path, pipe):
     from meshgen.errors import FormatError
 
     with pytest.raises(FormatError, match="does not take multi-block meshes"):
-        write_blocks(tmp_path / "m.su2", *pipe)
-    assert not (tmp_path / "m.su2").exists()
+        write_blocks(tmp_path / "m.vts", *pipe)
+    assert not (tmp_path / "m.vts").exists()
+
+
+def _pipe_patch_faces(n, m, a):
+    """Boundary faces of the pipe's O-grid by patch: each end a core face and four wall-block faces."""
+    end = n * n + 4 * n * m
+    return {"inlet": end, "outlet": end, "wall": 4 * n * a}
+
+
+def test_su2_of_a_block_set_is_merged_with_outward_markers(tmp_path, pipe):
+    import meshio
+
+    block_set, Xs = pipe
+    path = write_blocks(tmp_path / "m.su2", block_set, Xs)
+    text = path.read_text()
+    n, m, a = PIPE_DIMS
+    mesh = meshio.read(path, file_format="su2")
+    assert len(mesh.points) == ((n + 1) ** 2 + 4 * m * n) * (a + 1)  # interface nodes written once
+    assert sum(len(c.data) for c in mesh.cells if c.type == "hexahedron") == block_set.cells
+    points = np.asarray(mesh.points)
+    markers = re.findall(r"MARKER_TAG= (\S+)\nMARKER_ELEMS= (\d+)\n((?:9 .*\n?)*)", text)
+    assert {name: int(count) for name, count, _ in markers} == _pipe_patch_faces(n, m, a)
+    length = block_set.values["length"]
+    for name, count, body in markers:
+        quads = points[np.array(body.split(), dtype=int).reshape(int(count), 5)[:, 1:]]
+        normals = np.cross(quads[:, 2] - quads[:, 0], quads[:, 3] - quads[:, 1])
+        centres = quads.mean(axis=1)
+        # Outward: the wall's normal points away from the axis, the inlet's (z = 0) down, the outlet's up.
+        outward = {"wall": centres * [1, 1, 0], "inlet": [0, 0, -1], "outlet": [0, 0, 1]}[name]
+        assert np.all(np.sum(normals * outward, axis=1) > 0), name
+        if name != "wall":
+            np.testing.assert_allclose(centres[:, 2], 0.0 if name == "inlet" else length, atol=1e-12)
+
+
+@pytest.mark.skipif(shutil.which("gmsh") is None, reason="gmsh not installed (Debian package gmsh)")
+@pytest.mark.parametrize("case", ["pipe", "dfg"])
+def test_gmsh_reads_the_merged_msh_of_a_block_set(tmp_path, request, case):
+    """Gmsh reads the .msh and writes it again as MSH 2.2: the groups it understood hold the
+    patches' faces (counted from the block faces) and the cells."""
+    block_set, Xs = request.getfixturevalue(case)
+    path = write_blocks(tmp_path / "m.msh", block_set, Xs)
+    result = subprocess.run(
+        [shutil.which("gmsh"), str(path), "-0", "-o", str(tmp_path / "out.msh"), "-format", "msh22"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 0 and "Error" not in result.stdout + result.stderr, result.stdout + result.stderr
+    out = (tmp_path / "out.msh").read_text()
+    names = {int(tag): name for _, tag, name in re.findall(r'^(\d) (\d+) "([^"]+)"$', out, re.M)}
+    counts = {}
+    for line in out.split("$Elements\n", 1)[1].split("$EndElements", 1)[0].split("\n")[1:-1]:
+        group = names[int(line.split()[3])]
+        counts[group] = counts.get(group, 0) + 1
+    expected = {"domain": block_set.cells}
+    for (block, face), (name, _) in block_set.patches.items():
+        shape = [len(t) - 1 for t in block_set.coords[block]]
+        axis = {"xi": 0, "eta": 1, "zeta": 2}[face[:-1]]
+        expected[name] = expected.get(name, 0) + int(np.prod([s for i, s in enumerate(shape) if i != axis]))
+    assert counts == expected
 
 
 @needs_openfoam

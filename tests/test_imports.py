@@ -80,7 +80,7 @@ LAYERS = [
         "meshgen.plugin_calls",
         "meshgen.geometry",
     ],
-    ["meshgen.layout", "meshgen.elliptic", "meshgen.polish", "meshgen.elliptic_blocks", "meshgen.deviation"],
+    ["meshgen.layout", "meshgen.elliptic", "meshgen.polish", "meshgen.elliptic_blocks", "meshgen.block_grading", "meshgen.deviation"],
     [
         "meshgen.quality.kernels",
         "meshgen.quality.compiled",
@@ -99,6 +99,7 @@ LAYERS = [
         "meshgen.chunked",
         "meshgen.methods",
         "meshgen.meshing",
+        "meshgen.meshing_blocks",
         "meshgen.fidelity",
         "meshgen.gates",
         "meshgen.tables",

@@ -8,6 +8,7 @@ import click
 
 from meshgen.errors import GeometryError
 from meshgen.geometry import load_geometry, parse_params
+from meshgen.meshing_blocks import block_spec
 
 __all__ = ["DimsCommand", "dims_option", "geometry_options", "load_selected_geometry", "parse_dims"]
 
@@ -88,8 +89,9 @@ def geometry_options(default="semicylinder"):
 
 
 def load_selected_geometry(spec, params, dims=None):
-    """Load the geometry chosen on the command line; check dims against its dimension."""
-    geometry = load_geometry(spec, parse_params(params))
+    """Load the geometry chosen on the command line; check dims against its dimension. A block set
+    is loaded unchecked: its blocks are checked when ``meshgen.request.carry_out`` meshes it."""
+    geometry = load_geometry(spec, parse_params(params), check=block_spec(spec) is None)
     for line in getattr(geometry.boundary_map, "face_lines", ()):  # a shape file's face assignment
         click.echo(f"{geometry.name}: {line}", err=True)
     if dims is not None and len(dims) != geometry.dim:

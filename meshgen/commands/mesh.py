@@ -6,8 +6,6 @@ import sys
 
 import click
 
-from meshgen.blocks import is_multiblock
-from meshgen.commands._blocks import mesh_block_geometry
 from meshgen.commands._options import DimsCommand, dims_option, geometry_options
 from meshgen.commands._progress import progress_display
 from meshgen.commands._text import echo
@@ -97,7 +95,16 @@ METHOD_HELP = (
     "clusters",
     multiple=True,
     metavar="AXIS:SIDE:RATIO",
-    help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric).",
+    help="Cluster nodes towards a wall (repeatable): e.g. zeta:both:1.1 (growth ratio) or eta:0:h=0.002 (first-cell height, parametric); "
+    "multi-block geometries: PATCH:RATIO, e.g. wall:1.1, the same grading in every block.",
+)
+@click.option(
+    "--first-cell",
+    "first_cell",
+    multiple=True,
+    metavar="[PATCH=]H",
+    help="Multi-block geometries: the first cells on every wall patch (or on PATCH; repeatable) are H high "
+    "(physical length), the grading shared by every block across the interfaces.",
 )
 @click.option(
     "--boundary-layout",
@@ -152,6 +159,7 @@ def mesh(
     tol,
     max_iter,
     clusters,
+    first_cell,
     boundary_layout,
     orthogonal,
     chunked,
@@ -174,15 +182,6 @@ def mesh(
     from the written file, and no per-cell quality arrays are attached (see README).
     """
     _check_method(method)  # an unknown name fails before anything is loaded
-    if checkpoint is None and is_multiblock(geometry):  # a block set: meshgen.commands._blocks does the run
-        unsupported = {"--patch": patch_items, "--ascii": ascii_files, "--correct": correct, "--device": device}
-        unsupported.update({"--cluster": clusters, "--boundary-layout": boundary_layout, "--orthogonal": orthogonal})
-        unsupported.update({"--chunked": chunked, "--scheduler": scheduler, "--polish/--no-polish": polish is not None})
-        mesh_block_geometry(
-            method, geometry, params, dims, output, format_name,
-            tol=tol, max_iter=max_iter, quality=quality, quiet=quiet, unsupported=unsupported,
-        )  # fmt: skip
-        return
     context = click.get_current_context()
     geometry_given = context.get_parameter_source("geometry") != click.core.ParameterSource.DEFAULT
     request = MeshRequest(
@@ -199,6 +198,7 @@ def mesh(
         boundary_layout=boundary_layout,
         orthogonal=tuple(orthogonal),
         clusters=tuple(clusters),
+        first_cell=tuple(first_cell),
         output=output,
         format=format_name,
         patches=tuple(patch_items),
@@ -214,7 +214,36 @@ def mesh(
         warn=lambda text: click.echo(f"Warning: {text}", err=True),
         progress=lambda label, iterative: progress_display(label, interactive and iterative),
     )
-    _print_result(made, format_for(made.output, format_name), quiet)
+    if made.blocks is not None:
+        _print_block_result(made, quiet)
+    else:
+        _print_result(made, format_for(made.output, format_name), quiet)
+
+
+def _print_block_result(made, quiet):
+    """What a block set's run says: blocks, cells, what --dims counted, the sweeps, the file."""
+    info = made.info
+    for line in info.get("warnings", []):
+        click.echo(f"Warning: {line}", err=True)
+    if quiet:
+        return
+    block_set = made.geometry
+    echo(
+        f"{made.method} mesh of {block_set.name}: {len(block_set.names)} blocks, {block_set.cells} cells "
+        f"(--dims {' '.join(map(str, made.dims))}: {block_set.dims_meaning}) in {made.seconds:.2f} s"
+    )
+    for name, height in info.get("first_cell", {}).items():
+        echo(
+            f"first cells on {name}: {height['mean']:.3g} mean ({height['min']:.3g} to {height['max']:.3g}), "
+            f"asked {height['asked']:.3g}"
+        )
+    if "sweeps" in info:
+        echo(
+            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+        )
+    echo(f"wrote {made.output}")
+    for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
+        echo(line)
 
 
 def _print_result(made, output_format, quiet):

@@ -2,7 +2,8 @@
 surface) and one per patch for its boundary elements (3D: quadrangles, 2D: lines).
 
 Entities: one per cube face (tags 1 .. 2*dim, in cube face order: xi0, xi1, eta0, ...), each in
-the physical group of its patch, and the domain (tag 1), bounded by them. All nodes are listed
+the physical group of its patch, and the domain (tag 1), bounded by them; a block set's merged mesh
+(``write_elements``): one entity per patch, its faces recorded as ``block.face``. All nodes are listed
 once, classified on the domain; elements are numbered cells first, then the faces. meshgen's
 metadata sits in a ``$meshgen`` section (``{}`` without metadata) and the patch types in
 ``$meshgenPatches``, sections Gmsh and meshio skip.
@@ -28,7 +29,7 @@ from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import Patch, as_records
 
-__all__ = ["DOMAIN_NAME", "PATCHES_SECTION", "check_patch_name", "read", "read_patches", "write"]
+__all__ = ["DOMAIN_NAME", "PATCHES_SECTION", "check_patch_name", "read", "read_patches", "write", "write_elements"]
 
 DOMAIN_NAME = "domain"
 PATCHES_SECTION = "meshgenPatches"  # the patch types, which MSH has no place for
@@ -44,29 +45,46 @@ def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` with physical groups; ``cell_data`` is not written."""
     node_shape = X.shape[:-1]
     dim = len(node_shape)
-    faces = cube.faces(dim)
-    points = X.reshape(-1, dim)
+    group_of = {face: number for number, patch in enumerate(patches) for face in patch.faces}
+    positive = orientation(X) > 0
+    entities = [(group_of[face.name], boundary_elements(node_shape, face.name, positive)) for face in cube.faces(dim)]
+    write_elements(
+        path,
+        X.reshape(-1, dim),
+        cell_connectivity(node_shape),
+        [p.name for p in patches],
+        entities,
+        metadata,
+        as_records(patches),
+    )
+
+
+def write_elements(path, points, cells, group_names, entities, metadata, records) -> None:
+    """Write an unstructured mesh: ``points`` (N, dim), ``cells`` (M, 8) hexahedra or (M, 4)
+    quads (VTK corner order, 0-based), the physical groups ``group_names`` of the boundary and
+    ``entities`` [(group number, elements)], one boundary entity each (elements (F, 4) quads with
+    outward normals or (E, 2) segments, 0-based); ``records``: the patches' records for the
+    ``$meshgenPatches`` section."""
+    dim = points.shape[1]
     low, high = np.pad(points.min(axis=0), (0, 3 - dim)), np.pad(points.max(axis=0), (0, 3 - dim))
     box = " ".join(f"{v:.17g}" for v in (*low, *high))
-    group_of = {face: 2 + number for number, patch in enumerate(patches) for face in patch.faces}
-    positive = orientation(X) > 0
-    cells = cell_connectivity(node_shape) + 1
+    cells = cells + 1
     with open(path, "wb") as file:
-        lines = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$PhysicalNames", str(len(patches) + 1)]
-        lines += [f'{dim - 1} {2 + n} "{patch.name}"' for n, patch in enumerate(patches)]
+        lines = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$PhysicalNames", str(len(group_names) + 1)]
+        lines += [f'{dim - 1} {2 + n} "{name}"' for n, name in enumerate(group_names)]
         lines += [f'{dim} 1 "{DOMAIN_NAME}"', "$EndPhysicalNames", "$Entities"]
-        lines.append(f"0 {len(faces)} 1 0" if dim == 2 else f"0 0 {len(faces)} 1")
-        for number, face in enumerate(faces, start=1):  # each face entity: box, group, no bounding entities
-            lines.append(f"{number} {box} 1 {group_of[face.name]} 0")
-        bounding = " ".join(str(n) for n in range(1, len(faces) + 1))
-        lines += [f"1 {box} 1 1 {len(faces)} {bounding}", "$EndEntities", "$Nodes"]
+        lines.append(f"0 {len(entities)} 1 0" if dim == 2 else f"0 0 {len(entities)} 1")
+        for number, (group, _) in enumerate(entities, start=1):  # each boundary entity: box, group, no bounding entities
+            lines.append(f"{number} {box} 1 {2 + group} 0")
+        bounding = " ".join(str(n) for n in range(1, len(entities) + 1))
+        lines += [f"1 {box} 1 1 {len(entities)} {bounding}", "$EndEntities", "$Nodes"]
         lines += [f"1 {len(points)} 1 {len(points)}", f"{dim} 1 0 {len(points)}", ""]
         file.write("\n".join(lines).encode())
         write_rows(file, np.arange(1, len(points) + 1), "{}")
         write_rows(file, np.pad(points, ((0, 0), (0, 3 - dim))), "{} {} {}")
-        boundary = [boundary_elements(node_shape, face.name, positive) + 1 for face in faces]
+        boundary = [elements + 1 for _, elements in entities]
         total = len(cells) + sum(len(b) for b in boundary)
-        file.write(f"$EndNodes\n$Elements\n{1 + len(faces)} {total} 1 {total}\n".encode())
+        file.write(f"$EndNodes\n$Elements\n{1 + len(entities)} {total} 1 {total}\n".encode())
         file.write(f"{dim} 1 {GMSH_HEXAHEDRON if dim == 3 else GMSH_QUADRANGLE} {len(cells)}\n".encode())
         write_rows(file, np.column_stack([np.arange(1, len(cells) + 1), cells]), " ".join(["{}"] * (cells.shape[1] + 1)))
         first = len(cells) + 1
@@ -79,7 +97,7 @@ def write(path, X, cell_data, metadata, patches):
         # Always present (an empty {} without metadata): it marks the file as meshgen's, whose
         # boundary elements are its patches rather than cells to evaluate.
         file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
-        file.write(f"${PATCHES_SECTION}\n{json.dumps(as_records(patches))}\n$End{PATCHES_SECTION}\n".encode())
+        file.write(f"${PATCHES_SECTION}\n{json.dumps(records)}\n$End{PATCHES_SECTION}\n".encode())
 
 
 def _section(path, name: str) -> str | None:
@@ -128,6 +146,8 @@ def read_patches(path) -> list:
     first = 1 + (counts[1] if dim == 3 else 0)  # after the counts (and, in 3D, the curves: none)
     face_rows = rows[first : first + counts[dim - 1]]
     types = {record["name"]: record["type"] for record in json.loads(recorded)}
+    if any("." in face for record in json.loads(recorded) for face in record["faces"]):  # a block set's merged mesh
+        return [Patch(r["name"], r["type"], tuple(r["faces"])) for r in json.loads(recorded)]
     faces_of = {}
     for face, row in zip(cube.faces(dim), face_rows):
         physical = int(row.split()[8])  # tag, 6 box values, number of physical tags, the tag

@@ -32,7 +32,7 @@ from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.patches import as_records, from_records
 
-__all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write"]
+__all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write", "write_elements"]
 
 SU2_HEXAHEDRON, SU2_QUADRILATERAL, SU2_LINE = 12, 9, 3
 MARKER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.+-]*")
@@ -47,23 +47,32 @@ def write(path, X, cell_data, metadata, patches):
     """Write node array ``X`` with one marker per patch; ``cell_data`` has no place in .su2."""
     node_shape = X.shape[:-1]
     dim = len(node_shape)
-    cells = cell_connectivity(node_shape)
     positive = orientation(X) > 0
+    markers = [
+        (patch.name, np.concatenate([boundary_elements(node_shape, face, positive) for face in patch.faces])) for patch in patches
+    ]
+    write_elements(path, X.reshape(-1, dim), cell_connectivity(node_shape), markers, metadata, as_records(patches))
+
+
+def write_elements(path, points, cells, markers, metadata, records) -> None:
+    """Write an unstructured mesh: ``points`` (N, dim), ``cells`` (M, 8) hexahedra or (M, 4)
+    quads (VTK corner order, 0-based), ``markers`` [(name, elements)] with elements (F, 4) quads
+    (outward normals) or (E, 2) segments (domain on their left); ``records``: the patches'
+    records for the ``meshgen_patches`` comment."""
+    dim = points.shape[1]
     with open(path, "wb") as file:
         if metadata:
             file.write(f"% meshgen: {metadata_json(metadata)}\n".encode())
-        file.write(f"% meshgen_patches: {json.dumps(as_records(patches))}\n".encode())
+        file.write(f"% meshgen_patches: {json.dumps(records)}\n".encode())
         file.write(f"NDIME= {dim}\nNELEM= {len(cells)}\n".encode())
         kind = SU2_HEXAHEDRON if dim == 3 else SU2_QUADRILATERAL
         rows = np.column_stack([np.full(len(cells), kind), cells, np.arange(len(cells))])
         write_rows(file, rows, " ".join(["{}"] * rows.shape[1]))
-        points = X.reshape(-1, dim)
         file.write(f"NPOIN= {len(points)}\n".encode())
         write_rows(file, points, " ".join(["{}"] * dim))
-        file.write(f"NMARK= {len(patches)}\n".encode())
-        for patch in patches:
-            elements = np.concatenate([boundary_elements(node_shape, face, positive) for face in patch.faces])
-            file.write(f"MARKER_TAG= {patch.name}\nMARKER_ELEMS= {len(elements)}\n".encode())
+        file.write(f"NMARK= {len(markers)}\n".encode())
+        for name, elements in markers:
+            file.write(f"MARKER_TAG= {name}\nMARKER_ELEMS= {len(elements)}\n".encode())
             kind = SU2_QUADRILATERAL if dim == 3 else SU2_LINE
             write_rows(
                 file, np.column_stack([np.full(len(elements), kind), elements]), " ".join(["{}"] * (elements.shape[1] + 1))

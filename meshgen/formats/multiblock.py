@@ -1,7 +1,8 @@
 """Writing block-set meshes (a ``BlockSet`` and its node arrays, one per block): ``.cgns`` one
 structured zone per block with 1-to-1 connectivity, an OpenFOAM case with the interfaces as
-internal faces, and one merged unstructured mesh for the formats meshio writes (``.vtu``, ``.vtk``,
-``.xdmf``); and their quality report and whole-mesh ``meshgen mesh`` run.
+internal faces, one merged unstructured mesh for the formats meshio writes (``.vtu``, ``.vtk``,
+``.xdmf``) and for ``.su2`` (a marker per patch) and ``.msh`` (a physical group per patch), the
+boundary elements outward (2D: the domain on their left).
 """
 
 from __future__ import annotations
@@ -16,15 +17,29 @@ from meshgen.blocks import BlockSet, block_patches, connectivity_records, global
 from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
 from meshgen.formats._cgns import read_zones, write_zones, zone_count
+from meshgen.formats._gmsh import write_elements as write_msh_elements
 from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, FV_SOLUTION
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
+from meshgen.formats._structured import boundary_elements, orientation
+from meshgen.formats._su2 import write_elements as write_su2_elements
 from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
+from meshgen.patches import Patch, as_records
 
-__all__ = ["MERGED_FORMATS", "check_block_output", "patch_faces", "read_zones", "write_blocks", "zone_count"]
+__all__ = [
+    "MERGED_FORMATS",
+    "SOLVER_FORMATS",
+    "check_block_output",
+    "merged_boundary",
+    "patch_faces",
+    "read_zones",
+    "write_blocks",
+    "zone_count",
+]
 
 MERGED_FORMATS = ("vtu", "vtk", "xdmf")  # one merged unstructured mesh, written by meshio
+SOLVER_FORMATS = ("su2", "gmsh")  # .su2 and .msh: one merged mesh with its patches' boundary elements
 
 
 def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Path:
@@ -33,13 +48,14 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
     if format_name is None and Path(path).suffix.lower() == ".vtm":  # a .vts per block and the .vtm listing them
         return check_output_file(path, "mesh.vtm")
     fmt = format_for(path, format_name)
-    if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS):
+    if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS, *SOLVER_FORMATS):
         raise FormatError(
             f"{fmt.name} does not take multi-block meshes ('{block_set.name}' has {len(block_set.names)} blocks); "
-            f"write .cgns (a zone per block), --format openfoam or .{', .'.join(MERGED_FORMATS)} (one merged mesh)"
+            f"write .cgns (a zone per block), --format openfoam, .vtm (a .vts per block) or "
+            f".{', .'.join(MERGED_FORMATS)}, .su2, .msh (one merged mesh)"
         )
     path = check_output_path(path, fmt.name, block_set.dim)
-    if fmt.name in ("cgns", "openfoam"):
+    if fmt.name in ("cgns", "openfoam", *SOLVER_FORMATS):
         from importlib import import_module
 
         module = import_module(fmt.module)
@@ -69,6 +85,24 @@ def patch_faces(block_set: BlockSet) -> list[tuple[str, str, np.ndarray]]:
     return [(name, kinds[name], np.concatenate(parts)) for name, parts in found.items()]
 
 
+def merged_boundary(block_set: BlockSet, Xs) -> tuple[list[Patch], list[np.ndarray]]:
+    """The merged mesh's patches (faces named ``block.face``) and, per patch, its boundary
+    elements in global node numbers: (F, 4) quads with outward normals (3D), (E, 2) segments with
+    the domain on their left (2D)."""
+
+    numbering, _ = global_numbering(block_set)
+    faces_of: dict[str, list[str]] = {}
+    kinds, parts = {}, {}
+    for (block, face_name), (name, kind) in block_set.patches.items():
+        positive = orientation(Xs[block]) > 0
+        local = boundary_elements(numbering[block].shape, face_name, positive)
+        parts.setdefault(name, []).append(numbering[block].reshape(-1)[local])
+        faces_of.setdefault(name, []).append(f"{block_set.names[block]}.{face_name}")
+        kinds[name] = kind
+    patches = [Patch(name, kinds[name], tuple(faces)) for name, faces in faces_of.items()]
+    return patches, [np.concatenate(parts[p.name]) for p in patches]
+
+
 def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, format_name: str | None = None) -> Path:
     """Write the block meshes ``Xs`` to ``path`` (format from the extension, or ``format_name``),
     atomically. Returns the path written (an OpenFOAM case: its folder)."""
@@ -86,6 +120,18 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
         return path
     if fmt.name == "openfoam":
         _write_openfoam(path, block_set, Xs)
+        return path
+    if fmt.name in SOLVER_FORMATS:
+        points, cells, _ = merged_mesh(block_set, Xs)
+        patches, elements = merged_boundary(block_set, Xs)
+        with atomic_write(path, FormatError) as temporary:
+            if fmt.name == "su2":
+                write_su2_elements(
+                    temporary, points, cells, list(zip([p.name for p in patches], elements)), metadata, as_records(patches)
+                )
+            else:
+                entities = list(enumerate(elements))
+                write_msh_elements(temporary, points, cells, [p.name for p in patches], entities, metadata, as_records(patches))
         return path
     import meshio
 
