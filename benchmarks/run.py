@@ -102,6 +102,8 @@ SECTIONS = [
     "solver_formats",
     "memory",
     "chunked",
+    "shapes",
+    "fidelity",
 ]
 
 # figure key -> (comparison, target, unit, what the figure measures)
@@ -134,6 +136,27 @@ TARGETS = {
         1500.0,
         "MB",
         "peak memory of meshgen mesh --dims 1000^3 --chunked, quality included",
+    ),
+    "shape_parametrise_seconds": ("<=", 2.0, "s", "one four-cornered patch of 200k triangles onto the square, 2 cores"),
+    "shape_step_boundary_rel": (
+        "<=",
+        1e-7,
+        "of L",
+        "STEP loft, elliptic 20x20x40: largest boundary-node distance from the CAD surface",
+    ),
+    "shape_step_corners_rel": ("<=", 1e-9, "of L", "STEP loft: largest corner distance from the CAD vertices"),
+    "shape_step_volume_rel": ("<=", 1e-3, "x", "STEP loft: mesh volume against OCC's mass, relative"),
+    "shape_stl_boundary_rel": (
+        "<=",
+        1e-9,
+        "of L",
+        "bent STL duct, TFI and elliptic: largest boundary-node distance from the triangles",
+    ),
+    "fidelity_neural_ratio": (
+        "<=",
+        10.0,
+        "x",
+        "potentialFoam error of the bundled model's mesh / the elliptic mesh's, semicylinder 20x20x40",
     ),
     "family_worst_degrees": ("<=", 0.5, "deg", "family: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
     "exact_converged_seconds": ("<=", 15.0, "s", "training time of exact to converged quality on 2 cores"),
@@ -472,6 +495,18 @@ def boundary_layout(quick: bool) -> dict:
         "gmsh_smoothed_semicylinder": measured,
         "gmsh_smoothed_semicylinder_quoted": bench_layout.GMSH_SMOOTHED,
     }
+
+
+def shapes(quick: bool) -> dict:
+    import bench_shapes
+
+    return bench_shapes.run(quick)
+
+
+def fidelity(quick: bool) -> dict:
+    import bench_fidelity
+
+    return bench_fidelity.run(quick)
 
 
 def family(quick: bool) -> dict:
@@ -853,6 +888,39 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             "gpu_inference_501_seconds",
             note=gpu.get("skipped") or f"{gpu['device']}, into one float64 host array",
         )
+    if "shapes" in sections:
+        shape = sections["shapes"]
+        row = shape["parametrise"]
+        add(f"parametrise a patch of {row['triangles']} triangles (median of 3)", row["seconds_median"], "s",
+            key="shape_parametrise_seconds", judged=row["triangles"] >= 150_000,
+            note=f"foldover-free: {row['foldover_free']}")  # fmt: skip
+        if "step_loft" in shape:
+            row = shape["step_loft"]
+            note = f"elliptic {'x'.join(map(str, row['dims']))}, {row['inverted']} inverted"
+            add(
+                "STEP loft: boundary nodes from the CAD surface",
+                row["boundary_distance_max_rel"],
+                "of L",
+                key="shape_step_boundary_rel",
+                note=note,
+            )
+            add("STEP loft: corners from the CAD vertices", row["corner_distance_max_rel"], "of L", key="shape_step_corners_rel")
+            add("STEP loft: mesh volume against OCC's mass", row["volume_rel_error"], "x", key="shape_step_volume_rel")
+        row = shape["stl_duct"]
+        for method in ("tfi", "elliptic"):
+            add(f"STL duct ({row['triangles']} triangles), {method}: boundary nodes from the triangles",
+                row[method]["boundary_distance_max_rel"], "of L", key="shape_stl_boundary_rel",
+                note=f"{row[method]['inverted']} inverted")  # fmt: skip
+    if "fidelity" in sections and sections["fidelity"].get("rows"):
+        for row in sections["fidelity"]["rows"]:
+            label = row["method"]
+            if row.get("elliptic_error") and "raw" not in label:  # a polished network's mesh
+                add(
+                    f"potentialFoam error, {label} network / elliptic, {'x'.join(map(str, row['dims']))}",
+                    row["max_velocity_error"] / row["elliptic_error"],
+                    "x",
+                    key="fidelity_neural_ratio" if label == "bundled" else None,
+                )
     return rows
 
 
@@ -998,6 +1066,8 @@ def main(argv=None) -> int:
         "solver_formats": lambda: solver_formats(args.quick),
         "memory": lambda: memory_section(args.quick),
         "chunked": lambda: chunked_section(args.quick),
+        "shapes": lambda: shapes(args.quick),
+        "fidelity": lambda: fidelity(args.quick),
     }
     for name in chosen:
         section_header(name)
