@@ -936,7 +936,9 @@ def format_value(value, unit) -> str:
     if unit in ("GFLOP/s", "MB"):
         return f"{value:.0f} {unit}"
     if unit == "x":
-        return f"{value:.2f}x"
+        return f"{value:.2f}x" if value >= 0.01 or value == 0 else f"{value:.2g}x"
+    if unit not in ("s", "deg"):  # a relative figure ("of L") or a count
+        return f"{value:.3g} {unit}"
     if unit == "deg":
         return f"{value:.3f}°"
     if unit == "s" and value < 1:
