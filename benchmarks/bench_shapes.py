@@ -55,8 +55,8 @@ from shape_helpers import (  # noqa: E402
 )
 
 from meshgen.geometry import load_geometry  # noqa: E402
-from meshgen.request import mesh  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
+from meshgen.request import mesh  # noqa: E402
 from meshgen.shapes.parametrise import parametrise, signed_areas  # noqa: E402
 
 
