@@ -80,7 +80,14 @@ LAYERS = [
         "meshgen.plugin_calls",
         "meshgen.geometry",
     ],
-    ["meshgen.layout", "meshgen.elliptic", "meshgen.polish", "meshgen.elliptic_blocks", "meshgen.block_grading", "meshgen.deviation"],
+    [
+        "meshgen.layout",
+        "meshgen.elliptic",
+        "meshgen.polish",
+        "meshgen.elliptic_blocks",
+        "meshgen.block_grading",
+        "meshgen.deviation",
+    ],
     [
         "meshgen.quality.kernels",
         "meshgen.quality.compiled",
