@@ -352,16 +352,7 @@ def train_family(
         FAMILY_STAGES, training, state, saver, run_dir, resume=resume, reporter=reporter, stop=stop
     )
     quality = write_family_summary(checkpoint, run_dir) if summary and not interrupted else None
-    return TrainResult(
-        saver.path,
-        state.stage,
-        state.step,
-        interrupted,
-        checkpoint["elapsed_seconds"],
-        checkpoint["test_loss"],
-        checkpoint,
-        quality,
-    )
+    return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -59,6 +59,12 @@ class TrainResult:
     checkpoint: dict
     summary: dict | None  # the final quality summary (None when interrupted or not asked for)
 
+    @classmethod
+    def of_run(cls, saver, state, interrupted: bool, checkpoint: dict, summary: dict | None) -> TrainResult:
+        """The result of a run that ``run_stages`` ended with ``checkpoint``."""
+        path, seconds, loss = saver.path, checkpoint["elapsed_seconds"], checkpoint["test_loss"]
+        return cls(path, state.stage, state.step, interrupted, seconds, loss, checkpoint, summary)
+
 
 class CheckpointWriter:
     """Saves the whole checkpoint of a run (layout: ``checkpoint.py``) atomically: what

@@ -158,16 +158,7 @@ def train(
         STAGE_TABLE, training, state, saver, run_dir, resume=resume, reporter=reporter, stop=stop
     )
     quality = write_summary(checkpoint, geometry, run_dir) if summary and not interrupted else None
-    return TrainResult(
-        saver.path,
-        state.stage,
-        state.step,
-        interrupted,
-        checkpoint["elapsed_seconds"],
-        checkpoint["test_loss"],
-        checkpoint,
-        quality,
-    )
+    return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
 
 
 def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None):
