@@ -121,15 +121,7 @@ def stream(path, node_shape, dim, metadata, cell_names=(), patches=()):
 
     # libver (earliest, v108): files the HDF5 1.8 and 1.10 libraries of CGNS builds can open.
     with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
-        _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
-        _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
-        _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
-        _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
-
-        base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
-        _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
-        if metadata:
-            _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
+        base = _file_base(root, dim, metadata)
 
         # Zone_t data is int[3][IndexDimension] in C terms: rows vertex, cell, boundary-vertex sizes.
         sizes = np.array([node_shape, cell_shape, [0] * dim], dtype="<i4")
@@ -489,14 +481,7 @@ def write_zones(path, zones, metadata, connections) -> None:
 
     dim = zones[0][1].shape[-1]
     with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
-        _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
-        _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
-        _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
-        _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
-        base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
-        _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
-        if metadata:
-            _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
+        base = _file_base(root, dim, metadata)
         for (name, X, patches), records in zip(zones, connections):
             _check_name(name, "zone")
             node_shape = X.shape[:-1]
@@ -581,3 +566,19 @@ def read_merged(path):
     return meshio.Mesh(
         padded, [(cell_type, np.concatenate(cells))], cell_data={"block": [np.concatenate(owner)]}, field_data=field_data
     )
+
+
+def _file_base(root, dim: int, metadata: dict | None):
+    """The root node attributes, the library version and the one CGNSBase_t of a new file (with
+    ``metadata`` as a Descriptor_t when given). Returns the base node."""
+    import h5py
+
+    _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
+    _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
+    _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
+    _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
+    base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
+    _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
+    if metadata:
+        _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
+    return base
