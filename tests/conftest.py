@@ -76,3 +76,14 @@ def pytest_collection_modifyitems(items):
         for marker, words in TOOL_MARKERS.items():
             if any(word in reasons for word in words):
                 item.add_marker(marker)
+
+
+@pytest.fixture
+def children():
+    """Child processes a test starts; any still running at its end (a failed test) are killed."""
+    started = []
+    yield started
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()

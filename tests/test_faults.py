@@ -56,17 +56,6 @@ def start(folder: Path, *args, helper: tuple = (), preexec_fn=None) -> subproces
     )
 
 
-@pytest.fixture
-def children():
-    """Child processes a test starts; any still running at its end (a failed test) are killed."""
-    started = []
-    yield started
-    for process in started:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
-
-
 def start_stalled(children, folder: Path, kind: str, call: int, *args) -> tuple[subprocess.Popen, Path]:
     """A child whose ``call``-th step of ``kind`` stops and waits; returns it once it waits."""
     marker = folder / f"stalled-{len(children)}"

@@ -586,17 +586,6 @@ def test_full_disk_when_a_run_writes_its_first_file(tmp_path, monkeypatch):
 # signals: real processes, the signal sent while a write is half done (hardening_helpers.py)
 
 
-@pytest.fixture
-def children():
-    """Child processes a test starts; any still running at its end (a failed test) are killed."""
-    started = []
-    yield started
-    for process in started:
-        if process.poll() is None:
-            process.kill()
-            process.communicate()
-
-
 def start_stalled(children, folder: Path, kind: str, call: int, *args) -> tuple[subprocess.Popen, Path]:
     """``meshgen ARGS`` in a child process whose ``call``-th write of ``kind`` stops half-way;
     returns the process and the marker file that appears (holding the half-written file's name)
