@@ -17,7 +17,7 @@ import click
 
 from meshgen import __version__
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean, excerpt
-from meshgen.signals import Terminated, install_termination_handlers
+from meshgen.signals import Terminated, exit_interrupted, install_termination_handlers
 
 __all__ = [
     "COMMANDS",
@@ -97,11 +97,11 @@ class MeshgenGroup(click.Group):
         debug = bool(os.environ.get("MESHGEN_DEBUG"))
         try:
             result = super().main(args=args, prog_name=prog_name or "meshgen", standalone_mode=False, **extra)
-        except click.exceptions.Exit as exc:
-            sys.exit(exc.exit_code)
+        except click.exceptions.Exit as exc:  # 130: a training stopped by Ctrl-C after its checkpoint
+            (exit_interrupted if exc.exit_code == 130 else sys.exit)(exc.exit_code)
         except click.exceptions.Abort:
             click.echo("Aborted.", err=True)
-            sys.exit(130)
+            exit_interrupted(130)
         except click.UsageError as exc:
             if debug:
                 raise
@@ -120,10 +120,10 @@ class MeshgenGroup(click.Group):
             sys.exit(2)
         except Terminated as exc:  # SIGTERM, SIGHUP: unwound like Ctrl-C, every write cleaned up
             click.echo(f"Terminated ({exc}).", err=True)
-            sys.exit(128 + exc.signum)
+            exit_interrupted(128 + exc.signum)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
-            sys.exit(130)
+            exit_interrupted(130)
         except BrokenPipeError:
             sys.exit(1)
         except OSError as exc:  # the machine, not meshgen: a full disk, no permission, a vanished file

@@ -8,8 +8,9 @@ ignored."""
 from __future__ import annotations
 
 import signal
+import sys
 
-__all__ = ["TERMINATING_SIGNALS", "Terminated", "install_termination_handlers", "raise_terminated"]
+__all__ = ["TERMINATING_SIGNALS", "Terminated", "exit_interrupted", "install_termination_handlers", "raise_terminated"]
 
 TERMINATING_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
 
@@ -31,3 +32,13 @@ def install_termination_handlers() -> None:
     for signum in TERMINATING_SIGNALS:
         if signal.getsignal(signum) is not signal.SIG_IGN:
             signal.signal(signum, raise_terminated)
+
+
+def exit_interrupted(status: int):
+    """Exit with ``status`` (130 after Ctrl-C, 128 + signum after SIGTERM/SIGHUP), ignoring any
+    further Ctrl-C or termination signal from here on: the cleanup is done and the exit decided, and
+    an impatient second Ctrl-C during the interpreter's shutdown (slow with torch loaded) would
+    otherwise kill the process by the signal and replace the exit status."""
+    for signum in (signal.SIGINT, *TERMINATING_SIGNALS):
+        signal.signal(signum, signal.SIG_IGN)
+    sys.exit(status)

@@ -30,6 +30,19 @@ def run_cli(tmp_path):
     return run
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _subprocesses_run_this_checkout():
+    """Every ``python -m meshgen`` a test starts (fixtures, examples, helpers) imports this
+    checkout's code, whatever an editable install elsewhere points at."""
+    previous = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), previous]))
+    yield
+    if previous is None:
+        os.environ.pop("PYTHONPATH", None)
+    else:
+        os.environ["PYTHONPATH"] = previous
+
+
 @pytest.fixture(scope="session")
 def semidisk():
     return load_geometry("semidisk")
@@ -51,9 +64,15 @@ def _work_in_tmp_path(tmp_path, monkeypatch):
 @pytest.fixture(autouse=True, scope="session")
 def _layout_cache_in_tmp(tmp_path_factory):
     """The boundary-layout cache (``meshgen.layout.cache_path``) of the whole session, commands run
-    by ``run_cli`` included, in a temporary folder rather than the user's ~/.cache."""
+    by ``run_cli`` included, in a temporary folder rather than the user's ~/.cache; the parallel
+    workers of one run (``-n 2``) share it, so each layout is solved once."""
     previous = os.environ.get("MESHGEN_CACHE_DIR")
-    os.environ["MESHGEN_CACHE_DIR"] = str(tmp_path_factory.mktemp("cache"))
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # workers of one run share a cache (its writes are atomic)
+        cache = tmp_path_factory.getbasetemp().parent / "layout-cache"
+        cache.mkdir(exist_ok=True)
+    else:
+        cache = tmp_path_factory.mktemp("cache")
+    os.environ["MESHGEN_CACHE_DIR"] = str(cache)
     yield
     if previous is None:
         os.environ.pop("MESHGEN_CACHE_DIR", None)
