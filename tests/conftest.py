@@ -1,4 +1,5 @@
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -8,10 +9,43 @@ import pytest
 from meshgen.geometry import load_geometry
 
 REPO = Path(__file__).resolve().parents[1]
+HANDLED_SIGNALS = [getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)]
 
 
 @pytest.fixture
 def run_cli(tmp_path):
+    """Run ``meshgen ARGS`` through the command line's own entry (``meshgen.cli.cli``, its error
+    reporting and exit statuses included) in this process, in tmp_path by default, with ``env``
+    added to the environment for the call. Returns a ``CompletedProcess`` (``returncode``, text
+    ``stdout`` and ``stderr``). In-process runs skip the interpreter start and the imports (torch,
+    numba) a subprocess pays each time; tests about the process itself (signals, imports,
+    concurrency) use ``run_cli_process``."""
+
+    def run(*args, cwd=None, env=None, timeout=None):
+        from click.testing import CliRunner
+
+        from meshgen.cli import cli
+
+        arguments = list(map(str, args))
+        environment = {"MESHGEN_DEBUG": None, **(env or {})}
+        handlers = {signum: signal.getsignal(signum) for signum in HANDLED_SIGNALS}
+        folder = os.getcwd()
+        os.chdir(cwd or tmp_path)
+        try:
+            result = CliRunner(env=environment).invoke(cli, arguments, prog_name="meshgen")
+        finally:
+            os.chdir(folder)
+            for signum, handler in handlers.items():
+                signal.signal(signum, handler)
+        if result.exception is not None and not isinstance(result.exception, SystemExit):
+            raise result.exception  # a bug the CLI did not turn into a message
+        return subprocess.CompletedProcess(["meshgen", *arguments], result.exit_code, result.stdout, result.stderr)
+
+    return run
+
+
+@pytest.fixture
+def run_cli_process(tmp_path):
     """Run ``python -m meshgen ARGS`` in a subprocess (this checkout's code), in tmp_path by default.
     Returns the CompletedProcess with text stdout/stderr."""
 
