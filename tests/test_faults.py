@@ -232,7 +232,7 @@ def test_a_terminating_signal_during_a_write_keeps_the_old_file_and_leaves_no_te
     assert snapshot(tmp_path) == before
 
 
-def test_stale_temporaries_of_gone_processes_are_removed_by_the_next_write(tmp_path, children, run_cli):
+def test_stale_temporaries_of_gone_processes_are_removed_by_the_next_write(tmp_path, children, run_cli_process):
     """SIGKILL (no cleanup can run) during a Plot3D write and during an OpenFOAM write: their
     temporaries stay until the next run that writes there removes them; a temporary whose
     process is alive (this test's) is kept."""
@@ -251,7 +251,7 @@ def test_stale_temporaries_of_gone_processes_are_removed_by_the_next_write(tmp_p
     alive = tmp_path / f".m.tmp-{os.getpid()}.xyz"
     alive.write_text("being written\n")
     for args in (xyz, case):
-        result = run_cli(*args)
+        result = run_cli_process(*args)  # another process: the live temporary is not its own
         assert result.returncode == 0, result.stderr
     assert leftovers(tmp_path) == [alive.name]
     assert len(read_mesh(tmp_path / "m.xyz").points) == 41 * 31 and len(read_mesh(tmp_path / "case").points) == 5 * 4 * 6
