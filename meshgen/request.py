@@ -449,6 +449,8 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
                     progress=blocks_done,
                     evaluate=request.quality,
                     patches=plan.patches,
+                    format=plan.output_format.name,
+                    **({"binary": not request.ascii} if plan.output_format.folder else {}),
                 )
     finally:
         if client is not None:
