@@ -33,7 +33,9 @@ import numpy as np
 from meshgen.errors import FormatError
 from meshgen.grid import cell_connectivity, flat_points
 
-__all__ = ["read", "write"]
+__all__ = ["RECORD_LIMIT", "read", "write", "write_streamed"]
+
+RECORD_LIMIT = 2**31 - 1  # bytes in one Fortran record: its byte count is an int32
 
 
 def write(path, X, cell_data, metadata):
@@ -53,6 +55,39 @@ def write(path, X, cell_data, metadata):
             _write_record(file, dims[:1])
             _write_record(file, dims[1:])
             _write_record(file, coordinates)
+
+
+def write_streamed(path, nodes, metadata, patches=()) -> None:
+    """``write`` of the mesh in ``nodes`` (``meshgen.formats.streamed.NodeFile``): each coordinate
+    block by slabs of the last axis (k), which are contiguous runs of Fortran order; one reading
+    pass per coordinate."""
+    node_shape, dim = tuple(nodes.node_shape), nodes.dim
+    dims = np.array([1, *node_shape], dtype="<i4")
+    order = tuple(range(dim - 1, -1, -1))  # Fortran order: the transpose of C order
+
+    def component_parts():
+        for axis in range(dim):
+            for part in nodes.slabs(dim - 1):
+                yield np.ascontiguousarray(np.transpose(nodes.read(dim - 1, part)[..., axis], order), dtype="<f8").reshape(-1)
+
+    if _is_formatted(path):
+        with open(path, "w") as file:
+            file.write(f"{dims[0]}\n{' '.join(map(str, dims[1:]))}\n")
+            for values in component_parts():
+                file.write("\n".join(map(repr, values.tolist())))
+                file.write("\n")
+        return
+    nbytes = 8 * dim * int(np.prod(node_shape))
+    if nbytes > RECORD_LIMIT:
+        raise FormatError(f"Plot3D: the coordinates ({nbytes} bytes) exceed one Fortran record's 32-bit byte count")
+    marker = np.array([nbytes], dtype="<i4").tobytes()
+    with open(path, "wb") as file:
+        _write_record(file, dims[:1])
+        _write_record(file, dims[1:])
+        file.write(marker)
+        for values in component_parts():
+            values.tofile(file)
+        file.write(marker)
 
 
 def read(path):

@@ -24,12 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.formats._cgns import read_node_block
-from meshgen.formats._structured import corner_volume, write_rows
-from meshgen.grid import BLOCK_NODES
+from meshgen.formats._structured import corner_volume, node_labels, write_rows
+from meshgen.grid import BLOCK_NODES, HEX_CORNERS, QUAD_CORNERS
 
 __all__ = [
     "NodeFile",
     "bounding_box",
+    "cell_slabs",
+    "cells_of_slab",
     "list_end",
     "list_start",
     "list_values",
@@ -69,6 +71,21 @@ class NodeFile:
         stop = min(part.stop + overlap, self.node_shape[axis])
         block = tuple(slice(part.start, stop) if d == axis else slice(0, n) for d, n in enumerate(self.node_shape))
         return read_node_block(self.path, block)
+
+
+def cell_slabs(node_shape, block_nodes: int = BLOCK_NODES) -> list[slice]:
+    """Slabs of cell planes along the first axis (i) with about ``block_nodes`` cells each."""
+    return slab_slices([n - 1 for n in node_shape], 0, block_nodes)
+
+
+def cells_of_slab(node_shape, part: slice) -> np.ndarray:
+    """``meshgen.grid.cell_connectivity``'s rows of the cells whose i index is in ``part``: (cells,
+    8 or 4) int64 labels of the C-order nodes, VTK corner order, cells in C order."""
+    node_shape = tuple(int(n) for n in node_shape)
+    corners = HEX_CORNERS if len(node_shape) == 3 else QUAD_CORNERS
+    strides = np.cumprod((1,) + node_shape[:0:-1])[::-1]
+    first = node_labels(node_shape, (part,) + tuple(slice(0, n - 1) for n in node_shape[1:])).reshape(-1)
+    return first[:, None] + (corners @ strides)[None, :]
 
 
 def map_orientation(nodes: NodeFile) -> float:
