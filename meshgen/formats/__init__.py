@@ -93,7 +93,7 @@ register_format(
     "meshgen.formats._vts",
     "VTK XML structured grid (zlib-compressed, no connectivity), patch ids",
     patches=True,
-    streamed="meshgen.formats._vts",
+    streamed="meshgen.formats._vts_streamed",
 )
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
