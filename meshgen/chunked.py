@@ -225,7 +225,7 @@ def write_chunked_mesh(
     one per face). ``progress(done, total, phase)`` hears about every block. Returns (the report or None,
     {"write_seconds", "quality_seconds"}).
     """
-    fmt = streaming_writer(path, format)
+    fmt = streaming_writer(path, format, X.shape[:-1])
     path = check_output_path(path, format, X.shape[-1])
     if patches is None and geometry is not None:
         patches = geometry_patches(geometry)

@@ -184,16 +184,20 @@ def check_output_path(path: str | os.PathLike, format_name: str | None = None, d
     return check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
 
 
-def streaming_writer(path, format_name: str | None = None):
+def streaming_writer(path, format_name: str | None = None, node_shape=None):
     """The format of ``path`` (or ``format_name``) when a mesh larger than memory can be written in
     it: block by block (``streams``: CGNS) or slab by slab from a scratch node file
-    (``streamed``); FormatError naming the formats that can, otherwise."""
+    (``streamed``); FormatError naming the formats that can, otherwise, or when the format cannot
+    hold a mesh of ``node_shape`` nodes (the module's ``check_node_shape``), before any work."""
     fmt = format_for(path, format_name)
     if not (fmt.streams or fmt.streamed):
         able = ", ".join(f.label for f in FORMATS if f.streams or f.streamed)
         raise FormatError(
             f"{fmt.name} ({fmt.label}) cannot be written block by block, which a mesh larger than memory needs; formats that can: {able}"
         )
+    module = importlib.import_module(fmt.module)
+    if node_shape is not None and hasattr(module, "check_node_shape"):
+        module.check_node_shape(tuple(int(n) for n in node_shape), path)
     return fmt
 
 

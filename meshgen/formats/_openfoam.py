@@ -63,6 +63,7 @@ __all__ = [
     "boundary_owner",
     "case_folder",
     "check_extrusion_patch",
+    "check_node_shape",
     "check_topology",
     "check_output",
     "check_patch_name",
@@ -188,6 +189,13 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     )
 
 
+def check_node_shape(node_shape, path=None) -> None:
+    """FormatError when a mesh of ``node_shape`` nodes (2D: extruded) overflows OpenFOAM's 32-bit labels."""
+    points = int(np.prod(node_shape)) * (2 if len(node_shape) == 2 else 1)
+    if points * 3 > LABEL_LIMIT:
+        raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {points} points")
+
+
 def check_extrusion_patch(patches, dim: int) -> None:
     """FormatError when a 2D mesh's patches take the name of the extrusion's front and back."""
     if dim == 2 and any(patch.name == EXTRUDED_PATCH for patch in patches):
@@ -205,9 +213,7 @@ def write_case(case, node_shape, metadata, patches, write_poly_mesh) -> None:
     check_extrusion_patch(patches, dim)
     if dim == 2:
         patches = list(patches) + [_extrusion_patch()]
-    points = int(np.prod(shape)) * (2 if dim == 2 else 1)
-    if points * 3 > LABEL_LIMIT:
-        raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {points} points")
+    check_node_shape(shape)
     fields = starting_fields(patches, foam_header) if _has_inlet_and_outlet(patches) else {}
     write_fields, kept = fields_to_write(case / "0", fields, previous_fields(case / "constant" / "polyMesh" / RECORD_NAME))
     # The record names the fields as meshgen writes them, kept ones included: a kept field is the

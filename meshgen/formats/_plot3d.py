@@ -33,7 +33,7 @@ import numpy as np
 from meshgen.errors import FormatError
 from meshgen.grid import cell_connectivity, flat_points
 
-__all__ = ["RECORD_LIMIT", "read", "write", "write_streamed"]
+__all__ = ["RECORD_LIMIT", "check_node_shape", "read", "write", "write_streamed"]
 
 RECORD_LIMIT = 2**31 - 1  # bytes in one Fortran record: its byte count is an int32
 
@@ -42,6 +42,7 @@ def write(path, X, cell_data, metadata):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a one-block whole grid; binary for
     ``.xyz``, formatted for ``.fmt``. ``cell_data`` and ``metadata`` have no place in Plot3D."""
     node_shape = X.shape[:-1]
+    check_node_shape(node_shape, path)
     dims = np.array([1, *node_shape], dtype="<i4")
     # Coordinate blocks x, y[, z], each in Fortran order (i fastest): the transpose of C order.
     coordinates = np.ascontiguousarray(np.moveaxis(X, -1, 0).transpose(0, *range(X.ndim - 1, 0, -1)), dtype="<f8")
@@ -55,6 +56,16 @@ def write(path, X, cell_data, metadata):
             _write_record(file, dims[:1])
             _write_record(file, dims[1:])
             _write_record(file, coordinates)
+
+
+def check_node_shape(node_shape, path) -> None:
+    """FormatError when the coordinates of a mesh of ``node_shape`` nodes overflow the 32-bit byte
+    count of a binary file's one record (formatted files have no such limit)."""
+    nbytes = 8 * len(node_shape) * int(np.prod(node_shape))
+    if not _is_formatted(path) and nbytes > RECORD_LIMIT:
+        raise FormatError(
+            f"Plot3D: the coordinates ({nbytes} bytes) overflow a binary record's 32-bit byte count; the formatted .fmt has no limit"
+        )
 
 
 def write_streamed(path, nodes, metadata, patches=()) -> None:
@@ -77,9 +88,8 @@ def write_streamed(path, nodes, metadata, patches=()) -> None:
                 file.write("\n".join(map(repr, values.tolist())))
                 file.write("\n")
         return
+    check_node_shape(node_shape, path)
     nbytes = 8 * dim * int(np.prod(node_shape))
-    if nbytes > RECORD_LIMIT:
-        raise FormatError(f"Plot3D: the coordinates ({nbytes} bytes) exceed one Fortran record's 32-bit byte count")
     marker = np.array([nbytes], dtype="<i4").tobytes()
     with open(path, "wb") as file:
         _write_record(file, dims[:1])
