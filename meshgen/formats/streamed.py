@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from meshgen.formats import format_named
 from meshgen.formats._cgns import read_node_block
 from meshgen.formats._structured import corner_volume, node_labels, write_rows
 from meshgen.grid import BLOCK_NODES, HEX_CORNERS, QUAD_CORNERS
@@ -125,7 +126,5 @@ def list_end(file) -> None:
 def write_streamed(path, nodes: NodeFile, format_name: str, metadata: dict, patches, **options) -> None:
     """Write the mesh of ``nodes`` to ``path`` (a temporary file the caller publishes; an
     OpenFOAM case folder, which publishes itself) in the format ``format_name``."""
-    from meshgen.formats import format_named
-
     module = importlib.import_module(format_named(format_name).streamed)
     module.write_streamed(path, nodes, metadata, patches, **options)
