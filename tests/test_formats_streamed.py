@@ -15,6 +15,7 @@ from openfoam_helpers import check_mesh, needs_openfoam
 
 from meshgen.chunked import tfi_array, write_chunked_mesh
 from meshgen.clustering import node_coordinates
+from meshgen.errors import FormatError
 from meshgen.formats import check_patches, write_mesh
 from meshgen.formats._openfoam import read_list
 from meshgen.formats._vts_streamed import byte_blocks
@@ -31,6 +32,7 @@ FORMATS = [
     ("su2", "mesh.su2", {}),
     ("gmsh", "mesh.msh", {}),
     ("vts", "mesh.vts", {}),
+    ("pvts", "mesh.pvts", {}),
     ("plot3d", "mesh.xyz", {}),
     ("plot3d-ascii", "mesh.fmt", {}),
 ]
@@ -44,7 +46,9 @@ def perturbed_grid(node_shape, mirrored=False, seed=0):
 
 
 def differing(a: Path, b: Path) -> list[str]:
-    """Files under ``a`` and ``b`` (or the files themselves) whose bytes differ."""
+    """Files under ``a`` and ``b`` (or the files themselves, and a .pvts's pieces) whose bytes differ."""
+    if a.suffix == ".pvts":
+        return differing(a.with_suffix(""), b.with_suffix("")) + ([] if filecmp.cmp(a, b, shallow=False) else [a.name])
     if a.is_file():
         return [] if filecmp.cmp(a, b, shallow=False) else [a.name]
     names = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
@@ -124,7 +128,7 @@ def chunked_tfi(semicylinder, cells=(6, 5, 7), block_nodes=120):
     return X
 
 
-@pytest.mark.parametrize("fmt, name", [("openfoam", "case"), ("vts", "mesh.vts"), ("su2", "mesh.su2")])
+@pytest.mark.parametrize("fmt, name", [("openfoam", "case"), ("vts", "mesh.vts"), ("pvts", "mesh.pvts"), ("su2", "mesh.su2")])
 def test_a_chunked_mesh_is_written_as_the_in_memory_mesh_would_be(tmp_path, semicylinder, fmt, name):
     X = chunked_tfi(semicylinder)
     report, timings = write_chunked_mesh(_fresh(tmp_path / "chunked") / name, X, semicylinder, {"run": 1}, format=fmt)
@@ -132,7 +136,8 @@ def test_a_chunked_mesh_is_written_as_the_in_memory_mesh_would_be(tmp_path, semi
     assert differing(tmp_path / "memory" / name, tmp_path / "chunked" / name) == []
     assert report["cells"] == 6 * 5 * 7 and timings["write_seconds"] > 0
     # The mesh, its sidecar, and nothing else: the scratch node file is gone.
-    assert sorted(p.name for p in (tmp_path / "chunked").iterdir()) == sorted([name, f"{name}.quality.json"])
+    pieces = ["mesh"] if fmt == "pvts" else []
+    assert sorted(p.name for p in (tmp_path / "chunked").iterdir()) == sorted([name, f"{name}.quality.json", *pieces])
 
 
 @needs_openfoam
@@ -159,7 +164,7 @@ def test_vtk_reads_a_chunked_vts_whole(tmp_path, semicylinder):
     np.testing.assert_array_equal(points, np.transpose(X.compute(), (2, 1, 0, 3)).reshape(-1, 3))
 
 
-@pytest.mark.parametrize("fmt, name", [("openfoam", "case"), ("gmsh", "mesh.msh")])
+@pytest.mark.parametrize("fmt, name", [("openfoam", "case"), ("gmsh", "mesh.msh"), ("pvts", "mesh.pvts")])
 @pytest.mark.parametrize("when", ["meshing", "writing"])
 def test_an_interrupted_streamed_write_leaves_nothing(tmp_path, semicylinder, monkeypatch, fmt, name, when):
     X = chunked_tfi(semicylinder)
@@ -178,9 +183,39 @@ def test_an_interrupted_streamed_write_leaves_nothing(tmp_path, semicylinder, mo
         monkeypatch.setattr("meshgen.formats.streamed.bounding_box", interrupt)
         monkeypatch.setattr("meshgen.formats._gmsh.bounding_box", interrupt)
         monkeypatch.setattr("meshgen.formats._foam_streamed.internal_faces", interrupt)
+        monkeypatch.setattr("meshgen.formats._pvts.write_piece", interrupt)
     with pytest.raises(KeyboardInterrupt):
         write_chunked_mesh(tmp_path / name, X, semicylinder, progress=progress, format=fmt)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_pvts_pieces_stream_as_in_memory_and_vtk_reads_them_as_one_grid(tmp_path, semicylinder):
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import vtk_to_numpy
+
+    from meshgen.formats import _pvts, read_mesh
+
+    X = perturbed_grid((7, 6, 8))
+    write_mesh(tmp_path / "nodes.cgns", X)
+    patches = check_patches(PATCHES, 3)
+    _pvts.write(_fresh(tmp_path / "memory") / "m.pvts", X, {}, {"run": 1}, patches, piece_nodes=100)
+    nodes = NodeFile(tmp_path / "nodes.cgns", X.shape[:-1], 13)
+    _pvts.write_streamed(_fresh(tmp_path / "streamed") / "m.pvts", nodes, {"run": 1}, patches, piece_nodes=100)
+    assert differing(tmp_path / "memory" / "m.pvts", tmp_path / "streamed" / "m.pvts") == []
+    assert len(list((tmp_path / "streamed" / "m").iterdir())) == 4  # 7 cell planes in pieces of 2
+    reader = vtk.vtkXMLPStructuredGridReader()
+    reader.SetFileName(str(tmp_path / "streamed" / "m.pvts"))
+    reader.Update()
+    grid = reader.GetOutput()
+    assert grid.GetNumberOfPoints() == X.size // 3 and grid.GetNumberOfCells() == 6 * 5 * 7
+    np.testing.assert_array_equal(vtk_to_numpy(grid.GetPoints().GetData()), np.transpose(X, (2, 1, 0, 3)).reshape(-1, 3))
+    np.testing.assert_array_equal(read_mesh(tmp_path / "streamed" / "m.pvts").points, X.reshape(-1, 3))
+    # A folder of the user's under the pieces' name is never replaced.
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(FormatError, match="not the pieces folder"):
+        write_mesh(tmp_path / "mine.pvts", X)
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
 def test_the_cli_writes_a_chunked_openfoam_case_with_its_options(tmp_path):

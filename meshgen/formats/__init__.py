@@ -95,6 +95,14 @@ register_format(
     patches=True,
     streamed="meshgen.formats._vts_streamed",
 )
+register_format(
+    "pvts",
+    [".pvts"],
+    "meshgen.formats._pvts",
+    "VTK XML partitioned structured grid: a .vts piece per slab in the folder <name>/, patch ids",
+    patches=True,
+    streamed="meshgen.formats._pvts",
+)
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
 register_format(
@@ -179,9 +187,13 @@ def check_output_path(path: str | os.PathLike, format_name: str | None = None, d
     fmt = format_for(path, format_name)
     if dim is not None and dim not in fmt.dims:
         raise FormatError(f"{fmt.name} takes {' or '.join(f'{d}D' for d in fmt.dims)} meshes, not {dim}D")
+    module = importlib.import_module(fmt.module)
     if fmt.folder:
-        return importlib.import_module(fmt.module).check_output(path)
-    return check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
+        return module.check_output(path)
+    path = check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
+    if hasattr(module, "check_target"):  # a format that writes more than the file (.pvts: its pieces' folder)
+        module.check_target(path)
+    return path
 
 
 def streaming_writer(path, format_name: str | None = None, node_shape=None):

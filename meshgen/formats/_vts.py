@@ -60,6 +60,7 @@ __all__ = [
     "PATCHES_KEY",
     "PATCH_ARRAY",
     "TYPES",
+    "block_extent",
     "data_array",
     "field_arrays",
     "file_head",
@@ -84,14 +85,16 @@ NUMPY_TYPES = {
 }
 
 
-def write(path, X, cell_data, metadata, patches):
+def write(path, X, cell_data, metadata, patches, block=None, whole_shape=None):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vts with ``cell_data``
     (name -> (cells,) float64, C order of the cells), ``metadata`` and ``patches``
-    (``meshgen.patches.Patch``)."""
+    (``meshgen.patches.Patch``). A piece of a .pvts: ``X`` is the nodes ``block`` (one slice per
+    axis) of a mesh of ``whole_shape`` nodes, whose index range is the file's extent."""
     node_shape = X.shape[:-1]
     dim = len(node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
-    extent = whole_extent(node_shape)
+    block = block or tuple(slice(0, n) for n in node_shape)
+    extent = block_extent(block)
     order = tuple(range(dim - 1, -1, -1))  # VTK's i-fastest order
     pool = ThreadPoolExecutor(max_workers=cpu_count())
     sections = {"FieldData": [], "PointData": [], "CellData": [], "Points": []}
@@ -106,7 +109,7 @@ def write(path, X, cell_data, metadata, patches):
         add("Points", "Points", points, {"NumberOfComponents": 3})
         for name, values in cell_data.items():
             add("CellData", name, np.transpose(np.reshape(values, cell_shape), order).astype("<f4"))
-        add("PointData", PATCH_ARRAY, np.transpose(patch_ids(node_shape, patches), order))
+        add("PointData", PATCH_ARRAY, np.transpose(patch_ids(whole_shape or node_shape, patches, block), order))
         for name, more, codes in field_arrays(metadata, patches):
             add("FieldData", name, codes, more)
 
@@ -169,8 +172,13 @@ def file_head(extent: str, elements: dict) -> bytes:
 FILE_TAIL = b"\n</AppendedData>\n</VTKFile>\n"
 
 
+def block_extent(block) -> str:
+    """VTK's extent of the nodes ``block`` (one slice per axis): first and last index per axis."""
+    return " ".join(f"{s.start} {s.stop - 1}" for s in block) + (" 0 0" if len(block) == 2 else "")
+
+
 def whole_extent(node_shape) -> str:
-    return " ".join(f"0 {n - 1}" for n in node_shape) + (" 0 0" if len(node_shape) == 2 else "")
+    return block_extent(tuple(slice(0, int(n)) for n in node_shape))
 
 
 def field_arrays(metadata, patches) -> list:
