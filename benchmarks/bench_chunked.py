@@ -1,6 +1,7 @@
 """Meshes larger than memory: throughput and peak memory of the block-wise (chunked) path.
 
     python benchmarks/bench_chunked.py [--quick] [--big-dims N] [--folder DIR] [--json FILE]
+    python benchmarks/bench_chunked.py --only-openfoam [--openfoam-dims N] [--folder DIR] [--json FILE]
 
 Each figure is a ``meshgen`` command run in a subprocess by a wrapper whose only child it is (wall
 and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN``):
