@@ -65,6 +65,9 @@ __all__ = [
 MIN_BLOCK_NODES = 1 << 14
 MESH_BYTES_PER_BLOCK_NODE = 200  # measured order: a neural block's map, TFI, correction and result
 CHUNKED_METHODS = ("tfi", "neural")
+# An output's size over its coordinates' (8 bytes each), about, in the formats a chunked mesh is
+# written in through the scratch node file (an ASCII OpenFOAM case: 2.5 times the binary one).
+OUTPUT_SIZE = {"openfoam": 4.6, "su2": 7.0, "gmsh": 7.0, "plot3d-ascii": 3.2}
 
 
 def mesh_block_nodes() -> int:
@@ -231,8 +234,12 @@ def write_chunked_mesh(
         patches = geometry_patches(geometry)
     patches = check_patches(patches, X.shape[-1], path, fmt.name)
     node_shape = X.shape[:-1]
-    copies = 1 if fmt.streams else 2  # the scratch node file and the output
-    check_free_space(path, copies * int(np.prod(node_shape)) * X.shape[-1] * 8)
+    coordinate_bytes = int(np.prod(node_shape)) * X.shape[-1] * 8
+    if fmt.streams:
+        check_free_space(path, coordinate_bytes)
+    else:  # the scratch node file, then the output beside it
+        ratio = OUTPUT_SIZE.get(fmt.name, 1.1) * (2.5 if options.get("binary") is False else 1.0)
+        check_free_space(path, int(coordinate_bytes * (1.0 + ratio)))
     timings = {}
     try:
         with publishing(path) as publication:  # the mesh and its sidecar together, or neither
