@@ -18,18 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.formats._openfoam import (
-    boundary_owner,
-    extrude,
-    extrusion_thickness,
-    foam_header,
-    internal_faces,
-    patch_entries,
-    poly_mesh_note,
-    signed_area,
-    write_boundary,
-    write_case,
-)
+from meshgen.formats._foam_topology import boundary_owner, internal_faces, patch_entries, poly_mesh_note
+from meshgen.formats._openfoam import extrude, extrusion_thickness, foam_header, signed_area, write_boundary, write_case
 from meshgen.formats._structured import boundary_elements, node_labels
 from meshgen.formats.streamed import NodeFile, list_end, list_start, list_values, map_orientation
 
