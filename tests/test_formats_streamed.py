@@ -36,6 +36,7 @@ FORMATS = [
     ("plot3d", "mesh.xyz", {}),
     ("plot3d-ascii", "mesh.fmt", {}),
 ]
+IDS = [f"{f}{'-ascii' if o == {'binary': False} else ''}" for f, _, o in FORMATS]
 
 
 def perturbed_grid(node_shape, mirrored=False, seed=0):
@@ -63,9 +64,7 @@ PATCHES = [
 ]
 
 
-@pytest.mark.parametrize(
-    "fmt, name, options", FORMATS, ids=[f"{f}{'-ascii' if o == {'binary': False} else ''}" for f, _, o in FORMATS]
-)
+@pytest.mark.parametrize("fmt, name, options", FORMATS, ids=IDS)
 def test_each_streamed_file_is_the_in_memory_writers_byte_for_byte(tmp_path, fmt, name, options):
     """Several slab sizes (one node plane, uneven slabs, one slab), both orientations of the map."""
     for mirrored in (False, True):
@@ -89,9 +88,7 @@ def _fresh(folder: Path) -> Path:
     return folder
 
 
-@pytest.mark.parametrize(
-    "fmt, name, options", FORMATS[:4] + FORMATS[5:6], ids=["openfoam", "openfoam-ascii", "su2", "gmsh", "plot3d"]
-)
+@pytest.mark.parametrize("fmt, name, options", FORMATS, ids=IDS)
 def test_2d_streamed_files_equal_the_in_memory_writers(tmp_path, fmt, name, options):
     X = perturbed_grid((7, 6), mirrored=True)
     write_mesh(tmp_path / "nodes.cgns", X)

@@ -9,6 +9,10 @@ atomically itself. ``X`` is the node array of design notes §2;
 ``cell_data`` maps names to per-cell arrays in C order of the cells (i, j[, k]); ``metadata`` is a
 JSON-serialisable dict (geometry, parameters, method, meshgen version) stored where the format
 allows (every format but Plot3D, which has no place for it); ``metadata_of`` reads it back.
+A format that a mesh larger than memory can be written in either takes
+blocks as they come (CGNS: ``stream``, ``write_node_block``) or has
+``write_streamed(path, nodes, metadata, patches)`` reading a scratch node file slab by slab
+(``meshgen.formats.streamed``; registered as ``streamed``).
 Adding a format is one module and one ``register_format`` line.
 
 Every reader returns points in the C order of the nodes (k fastest, as ``flat_points`` writes
