@@ -87,13 +87,15 @@ def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) ->
     return row
 
 
-CHECK_MESH_BYTES_PER_CELL = 700  # checkMesh's peak memory, measured: 644 MB for 1e6 hexahedra
+# checkMesh's peak memory per cell, measured: 644 MB for 1e6 hexahedra, 4.7 GB for 8e6, 15.1 GB for 2.7e7.
+CHECK_MESH_BYTES_PER_CELL = 600
 
 
 def check_mesh(case: Path, cells: int) -> dict:
     """OpenFOAM's ``checkMesh`` on ``case`` of ``cells`` cells: {"mesh_ok", "seconds",
-    "peak_megabytes"}, or {"skipped"} without OpenFOAM or where it would need more than
-    half the memory available now."""
+    "peak_megabytes"}, or {"skipped"} without OpenFOAM or where it would need more than 90 % of
+    the memory available now. It runs first in line for the kernel's out-of-memory killer, so a
+    shared machine's other work is not what a shortfall kills."""
     import shutil
 
     from meshgen.resources import available_memory
@@ -101,12 +103,14 @@ def check_mesh(case: Path, cells: int) -> dict:
     if shutil.which("checkMesh") is None:
         return {"skipped": "OpenFOAM's checkMesh is not installed (Debian package openfoam)"}
     need, available = CHECK_MESH_BYTES_PER_CELL * cells, available_memory()
-    if need > available / 2:
+    if need > 0.9 * available:
         return {"skipped": f"checkMesh would need about {need / 1e9:.0f} GB, {available / 1e9:.0f} GB available"}
     bashrc = next(
         (p for p in ("/usr/share/openfoam/etc/bashrc", "/usr/lib/openfoam/openfoam/etc/bashrc") if Path(p).is_file()), None
     )
-    script = (f"source {bashrc} >/dev/null 2>&1; " if bashrc else "") + f"exec checkMesh -case '{case}'"
+    script = (
+        f"source {bashrc} >/dev/null 2>&1; " if bashrc else ""
+    ) + f"echo 1000 > /proc/self/oom_score_adj; exec checkMesh -case '{case}'"
     wrapped = [sys.executable, "-c", _WRAPPER, "bash", "-c", script]
     figures = json.loads(subprocess.run(wrapped, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1])
     log = subprocess.run(["bash", "-c", script], capture_output=True, text=True) if figures["returncode"] == 0 else None
