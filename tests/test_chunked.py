@@ -211,7 +211,7 @@ def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
     [
         (
             ["-m", "tfi", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.vtu"],
-            "formats that can: .vts, .cgns, --format openfoam",
+            "formats that can: .vts, .pvts, .cgns, --format openfoam",
         ),
         (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.vtk"], "cannot be written block by block"),
         (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "overflow a binary record's 32-bit byte count"),
