@@ -1,6 +1,7 @@
 """Meshes larger than memory: throughput and peak memory of the block-wise (chunked) path.
 
     python benchmarks/bench_chunked.py [--quick] [--big-dims N] [--folder DIR] [--json FILE]
+    python benchmarks/bench_chunked.py --only-openfoam [--openfoam-dims N] [--folder DIR] [--json FILE]
 
 Each figure is a ``meshgen`` command run in a subprocess by a wrapper whose only child it is (wall
 and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN``):
@@ -15,6 +16,10 @@ and CPU seconds from start to exit, peak resident memory from ``RUSAGE_CHILDREN`
   memory and in blocks at the same size (``--no-quality``);
 - the 1000^3 rows are this with ``--big-dims 1000`` run by hand (about 24 GB on disk in
   ``--folder``, tens of minutes): not part of ``benchmarks/run.py``;
+- a chunked mesh in a solver format: ``--chunked --format openfoam`` (binary polyMesh, streamed slab
+  by slab through a scratch .cgns file) at ``--openfoam-dims`` (default 300; ``--quick`` 40) with
+  ``--no-quality``, its peak memory, and OpenFOAM's ``checkMesh`` on the case ("Mesh OK"; skipped
+  with the reason where OpenFOAM is not installed);
 - GPU inference: skipped where torch sees no CUDA device (this machine), with the reason.
 """
 
@@ -82,6 +87,66 @@ def mesh_row(method: str, cells: int, mode: str, quality: bool, folder: Path) ->
     return row
 
 
+# checkMesh's peak memory per cell, measured: 644 MB for 1e6 hexahedra, 4.7 GB for 8e6, 15.1 GB for 2.7e7.
+CHECK_MESH_BYTES_PER_CELL = 600
+
+
+def check_mesh(case: Path, cells: int) -> dict:
+    """OpenFOAM's ``checkMesh`` on ``case`` of ``cells`` cells: {"mesh_ok", "seconds",
+    "peak_megabytes"}, or {"skipped"} without OpenFOAM or where it would need more than 90 % of
+    the memory available now. It runs first in line for the kernel's out-of-memory killer, so a
+    shared machine's other work is not what a shortfall kills."""
+    import shutil
+
+    from meshgen.resources import available_memory
+
+    if shutil.which("checkMesh") is None:
+        return {"skipped": "OpenFOAM's checkMesh is not installed (Debian package openfoam)"}
+    need, available = CHECK_MESH_BYTES_PER_CELL * cells, available_memory()
+    if need > 0.9 * available:
+        return {"skipped": f"checkMesh would need about {need / 1e9:.0f} GB, {available / 1e9:.0f} GB available"}
+    bashrc = next(
+        (p for p in ("/usr/share/openfoam/etc/bashrc", "/usr/lib/openfoam/openfoam/etc/bashrc") if Path(p).is_file()), None
+    )
+    script = (
+        f"source {bashrc} >/dev/null 2>&1; " if bashrc else ""
+    ) + f"echo 1000 > /proc/self/oom_score_adj; exec checkMesh -case '{case}'"
+    wrapped = [sys.executable, "-c", _WRAPPER, "bash", "-c", script]
+    figures = json.loads(subprocess.run(wrapped, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1])
+    log = subprocess.run(["bash", "-c", script], capture_output=True, text=True) if figures["returncode"] == 0 else None
+    return {
+        "mesh_ok": figures["returncode"] == 0 and log is not None and "Mesh OK." in log.stdout,
+        "seconds": figures["seconds"],
+        "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,
+    }
+
+
+def openfoam_row(cells: int, folder: Path) -> dict:
+    """``meshgen mesh -m tfi --dims cells^3 --chunked --no-quality --format openfoam``: time, peak
+    memory, the case's size on disk, then checkMesh on it."""
+    case = folder / f"case-{cells}"
+    row = run_command(
+        [
+            "mesh",
+            "-m",
+            "tfi",
+            "--dims",
+            *[str(cells)] * 3,
+            "--chunked",
+            "--no-quality",
+            "--format",
+            "openfoam",
+            "-o",
+            str(case),
+            "-q",
+        ],
+        folder,
+    )
+    row.update(cells_per_axis=cells, megabytes_written=sum(p.stat().st_size for p in case.rglob("*") if p.is_file()) / 1e6)
+    row["check_mesh"] = check_mesh(case, cells**3)
+    return row
+
+
 GPU_NODES = 501  # per axis: 1.26e8 nodes, 3 GB of float64 coordinates on the host
 GPU_WIDTHS = [85, 85, 85, 85]
 
@@ -118,11 +183,20 @@ def gpu_row(repeats: int = 3) -> dict:
     }
 
 
-def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None) -> dict:
+def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None, openfoam_dims: int | None = None) -> dict:
     same = 60 if quick else 200
     big = big_dims or (80 if quick else 400)
     with tempfile.TemporaryDirectory(dir=folder) as temporary:
         temporary = Path(temporary)
+        openfoam = openfoam_row(openfoam_dims or (40 if quick else 300), temporary)
+        print(
+            f"  {openfoam['command']}: {openfoam['seconds']:.1f} s, peak {openfoam['peak_megabytes']:.0f} MB; "
+            f"checkMesh: {openfoam['check_mesh']}",
+            flush=True,
+        )
+        import shutil
+
+        shutil.rmtree(temporary / f"case-{openfoam['cells_per_axis']}")
         rows = []
         for quality in (True, False):
             for mode in ("--in-memory", "--chunked"):
@@ -179,6 +253,7 @@ def measure(quick: bool, big_dims: int | None = None, folder: Path | None = None
         "big_quality": big_quality_row,
         "throughput_ratio_in_memory_over_chunked": ratios,
         "big_over_same_size_in_memory_ratio": throughput("in-memory", False) / big_row["nodes_per_second"],
+        "openfoam": openfoam,
         "gpu_inference": gpu_row(),
     }
 
@@ -188,9 +263,18 @@ def main():
     parser.add_argument("--quick", action="store_true", help="60^3 and 80^3 instead of 200^3 and 400^3")
     parser.add_argument("--big-dims", type=int, default=None, help="cells per axis of the large chunked run (1000: by hand)")
     parser.add_argument("--folder", type=Path, default=None, help="where the files go (needs (N+1)^3 * 24 bytes free)")
+    parser.add_argument("--openfoam-dims", type=int, default=None, help="cells per axis of the chunked OpenFOAM case (300)")
+    parser.add_argument("--only-openfoam", action="store_true", help="only the chunked OpenFOAM row")
     parser.add_argument("--json", type=Path, default=None, help="write the figures here")
     args = parser.parse_args()
-    data = measure(args.quick, args.big_dims, args.folder)
+    if args.only_openfoam:
+        with tempfile.TemporaryDirectory(dir=args.folder) as temporary:
+            row = openfoam_row(args.openfoam_dims or (40 if args.quick else 300), Path(temporary))
+        print(json.dumps(row, indent=2))
+        if args.json:
+            args.json.write_text(json.dumps(row, indent=2) + "\n")
+        return
+    data = measure(args.quick, args.big_dims, args.folder, args.openfoam_dims)
     print(json.dumps(data["throughput_ratio_in_memory_over_chunked"]))
     if args.json:
         args.json.write_text(json.dumps(data, indent=2) + "\n")

@@ -122,6 +122,13 @@ TARGETS = {
     "elliptic_min_angle_30": (">=", 74.4, "deg", "semicylinder 30^3, mean min angle; smoothed gmsh transfinite mesh 74.42"),
     "elliptic_min_angle_100": (">=", 74.8, "deg", "semicylinder 100^3, mean min angle; smoothed gmsh transfinite mesh 74.79"),
     "chunked_throughput_ratio": ("<=", 1.5, "x", "in-memory / chunked node throughput, 200^3 TFI to .cgns"),
+    "chunked_openfoam_300_peak_megabytes": (
+        "<=",
+        1200.0,
+        "MB",
+        "peak memory of meshgen mesh --dims 300^3 --chunked --format openfoam (streamed polyMesh)",
+    ),
+    "chunked_openfoam_300_check_mesh": (">=", 1.0, "", "checkMesh says Mesh OK (1) on the chunked 300^3 OpenFOAM case"),
     "chunked_1000_peak_megabytes": ("<=", 4000.0, "MB", "peak memory of meshgen mesh --dims 1000 1000 1000 -o big.cgns"),
     "evaluate_chunked_1000_peak_megabytes": ("<=", 1500.0, "MB", "peak memory of meshgen evaluate of the 1000^3 file"),
     "evaluate_chunked_1000_seconds": ("<=", 600.0, "s", "meshgen evaluate of the 1000^3 .cgns file"),
@@ -880,6 +887,26 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             judged=big == 1000,
             cpu=row["cpu_seconds"],
         )
+        if "openfoam" in data:
+            row = data["openfoam"]
+            cells = row["cells_per_axis"]
+            add(
+                f"peak memory, `meshgen mesh -m tfi --dims {cells}^3 --chunked --no-quality --format openfoam`",
+                row["peak_megabytes"],
+                "MB",
+                "chunked_openfoam_300_peak_megabytes",
+                judged=cells == 300,
+                note=f"{row['seconds']:.0f} s, {row['megabytes_written']:.0f} MB written",
+            )
+            checked = row["check_mesh"]
+            add(
+                f"checkMesh on the chunked {cells}^3 OpenFOAM case: Mesh OK (1) or not (0)",
+                None if "skipped" in checked else float(checked["mesh_ok"]),
+                "",
+                "chunked_openfoam_300_check_mesh",
+                judged=cells == 300 and "skipped" not in checked,
+                note=checked.get("skipped") or f"checkMesh {checked['seconds']:.0f} s, peak {checked['peak_megabytes']:.0f} MB",
+            )
         gpu = data["gpu_inference"]
         add(
             "GPU inference, 501^3 nodes, [85]*4",

@@ -19,15 +19,19 @@ per worker thread, whatever the mesh size.
 
 ``meshgen mesh`` takes this path (``meshgen.resources.needs_chunking``) when the in-memory path's
 estimated peak (``IN_MEMORY_BYTES_PER_NODE``) exceeds half of the memory available now, with ``--chunked``, or with
-``--scheduler``. Only formats that can be written in blocks take it (CGNS); the others refuse.
+``--scheduler``. CGNS takes the blocks as they complete; OpenFOAM, .vts, Plot3D, .su2 and .msh take
+them through a scratch CGNS file read back in their node order (``meshgen.formats.streamed``); the
+others (.vtu, .vtk, .xdmf) refuse.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib
 import itertools
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -35,10 +39,11 @@ from meshgen import cube
 from meshgen.atomic import atomic_path
 from meshgen.correction import add_correction_terms, correction_terms, error_figures
 from meshgen.errors import MeshgenError
-from meshgen.formats import check_output_path, check_patches, streaming_writer
+from meshgen.formats import check_output_path, check_patches, format_named, streaming_writer
+from meshgen.formats.streamed import NodeFile, write_streamed
 from meshgen.grid import BLOCK_NODES, block_slices
 from meshgen.patches import geometry_patches
-from meshgen.publish import publishing, reason
+from meshgen.publish import publishing, reason, remove_path, temporary_path
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
 from meshgen.resources import available_memory, check_free_space
@@ -51,6 +56,7 @@ __all__ = [
     "network_map_block",
     "neural_array",
     "run_fraction",
+    "scratch_path",
     "single_threaded_torch",
     "tfi_array",
     "write_chunked_mesh",
@@ -59,6 +65,9 @@ __all__ = [
 MIN_BLOCK_NODES = 1 << 14
 MESH_BYTES_PER_BLOCK_NODE = 200  # measured order: a neural block's map, TFI, correction and result
 CHUNKED_METHODS = ("tfi", "neural")
+# An output's size over its coordinates' (8 bytes each), about, in the formats a chunked mesh is
+# written in through the scratch node file (an ASCII OpenFOAM case: 2.5 times the binary one).
+OUTPUT_SIZE = {"openfoam": 4.6, "su2": 7.0, "gmsh": 7.0, "plot3d-ascii": 3.2}
 
 
 def mesh_block_nodes() -> int:
@@ -193,45 +202,61 @@ def single_threaded_torch(enabled: bool = True):
 
 
 def write_chunked_mesh(
-    path, X, geometry=None, metadata: dict | None = None, client=None, progress=None, evaluate: bool = True, patches=None
+    path,
+    X,
+    geometry=None,
+    metadata: dict | None = None,
+    client=None,
+    progress=None,
+    evaluate: bool = True,
+    patches=None,
+    format: str | None = None,
+    **options,
 ) -> tuple[dict | None, dict]:
-    """Compute the dask node array ``X`` block by block and stream it into ``path`` (a format that
-    can be written in blocks: CGNS), atomically; then, unless ``evaluate`` is False, its quality
-    report computed block-wise from the written file (``meshgen.quality.chunked``) before the
-    file takes its name, written to ``<path>.quality.json``. No per-cell quality arrays are stored
-    (at 1e9 cells they would be 56 GB; ``meshgen evaluate`` computes them block-wise).
+    """Compute the dask node array ``X`` block by block and write it to ``path`` (in the format
+    ``format`` names, default the extension's), atomically; then, unless ``evaluate`` is False,
+    its quality report computed block-wise from the written nodes (``meshgen.quality.chunked``)
+    before the file takes its name, written to ``<path>.quality.json``. No per-cell quality arrays
+    are stored (at 1e9 cells they would be 56 GB; ``meshgen evaluate`` computes them block-wise).
+
+    CGNS takes the blocks as they complete (hyperslab writes). The formats that list the nodes in
+    one order (OpenFOAM, .vts, Plot3D, .su2, .msh) take them through a scratch CGNS file beside the
+    output, read back slab by slab in their order (``meshgen.formats.streamed``) and removed
+    afterwards. ``options``: the format's (OpenFOAM: ``binary``).
 
     ``patches``: the boundary patches (``meshgen.patches.Patch``; default the ``geometry``'s, else
     one per face). ``progress(done, total, phase)`` hears about every block. Returns (the report or None,
     {"write_seconds", "quality_seconds"}).
     """
-    from dask.array.core import slices_from_chunks
-
-    path = check_output_path(path)
-    writer = streaming_writer(path)
+    fmt = streaming_writer(path, format, X.shape[:-1])
+    path = check_output_path(path, format, X.shape[-1])
     if patches is None and geometry is not None:
         patches = geometry_patches(geometry)
-    patches = check_patches(patches, X.shape[-1], path)
+    patches = check_patches(patches, X.shape[-1], path, fmt.name)
     node_shape = X.shape[:-1]
-    dim = X.shape[-1]
-    check_free_space(path, int(np.prod(node_shape)) * dim * 8)
-    blocks = list(X.to_delayed().ravel())
-    slices = [s[:-1] for s in slices_from_chunks(X.chunks)]
-    report, timings = None, {}
+    coordinate_bytes = int(np.prod(node_shape)) * X.shape[-1] * 8
+    if fmt.streams:
+        check_free_space(path, coordinate_bytes)
+    else:  # the scratch node file, then the output beside it
+        ratio = OUTPUT_SIZE.get(fmt.name, 1.1) * (2.5 if options.get("binary") is False else 1.0)
+        check_free_space(path, int(coordinate_bytes * (1.0 + ratio)))
+    timings = {}
     try:
-        with publishing(path) as publication, atomic_path(path) as temporary:  # the mesh and its sidecar together, or neither
-            start = time.perf_counter()
-            with writer.stream(temporary, node_shape, dim, metadata or {}, patches=patches) as zone:
-                for done, (index, block) in enumerate(compute_in_order_of_completion(blocks, client), start=1):
-                    writer.write_node_block(zone, block, slices[index])
-                    del block
-                    if progress is not None:
-                        progress(done, len(blocks), "mesh")
-            timings["write_seconds"] = time.perf_counter() - start
-            if evaluate:
-                start = time.perf_counter()
-                report = chunked_report(temporary, geometry, client=client, progress=progress)
-                timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
+        with publishing(path) as publication:  # the mesh and its sidecar together, or neither
+            if fmt.streams:
+                with atomic_path(path) as temporary:
+                    report = _stream_and_evaluate(temporary, X, geometry, metadata, patches, client, progress, evaluate, timings)
+            else:
+                with scratch_path(path) as scratch:
+                    report = _stream_and_evaluate(scratch, X, geometry, {}, (), client, progress, evaluate, timings)
+                    start = time.perf_counter()
+                    nodes = NodeFile(scratch, tuple(int(n) for n in node_shape), mesh_block_nodes())
+                    if fmt.folder:
+                        write_streamed(path, nodes, fmt.name, metadata or {}, patches, **options)
+                    else:
+                        with atomic_path(path) as temporary:
+                            write_streamed(temporary, nodes, fmt.name, metadata or {}, patches, **options)
+                    timings["write_seconds"] += time.perf_counter() - start
             if report is not None:
                 write_json(sidecar_path(path), {"mesh": os.path.basename(path), **(metadata or {}), **report})
             else:
@@ -239,3 +264,38 @@ def write_chunked_mesh(
     except (OSError, RuntimeError) as exc:  # h5py reports a full disk as either
         raise MeshgenError(f"could not write {path}: {reason(exc)}") from exc
     return report, timings
+
+
+@contextlib.contextmanager
+def scratch_path(path):
+    """A scratch CGNS file's name beside ``path`` (a temporary name of this process, which the next
+    run removes if this one is killed), removed when the block ends, however it ends."""
+    scratch = temporary_path(Path(path).with_name(Path(path).name + "-nodes.cgns"))
+    try:
+        yield scratch
+    finally:
+        remove_path(scratch)
+
+
+def _stream_and_evaluate(target, X, geometry, metadata, patches, client, progress, evaluate, timings) -> dict | None:
+    """Stream the blocks of ``X`` into the CGNS file ``target`` as they complete; its quality
+    report read back from it block-wise (None unless ``evaluate``); ``timings`` filled."""
+    from dask.array.core import slices_from_chunks
+
+    writer = importlib.import_module(format_named("cgns").module)
+    blocks = list(X.to_delayed().ravel())
+    slices = [s[:-1] for s in slices_from_chunks(X.chunks)]
+    start = time.perf_counter()
+    with writer.stream(target, X.shape[:-1], X.shape[-1], metadata or {}, patches=patches) as zone:
+        for done, (index, block) in enumerate(compute_in_order_of_completion(blocks, client), start=1):
+            writer.write_node_block(zone, block, slices[index])
+            del block
+            if progress is not None:
+                progress(done, len(blocks), "mesh")
+    timings["write_seconds"] = time.perf_counter() - start
+    if not evaluate:
+        return None
+    start = time.perf_counter()
+    report = chunked_report(target, geometry, client=client, progress=progress)
+    timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
+    return report

@@ -96,7 +96,7 @@ def chunked_mesh_bytes(dims) -> int:
 
 def check_mesh_memory(dims, chunked: bool) -> None:
     """MeshgenError unless a mesh of ``dims`` cells fits in memory on the path it takes:
-    ``chunked`` (blocks streamed into a .cgns file) or in memory."""
+    ``chunked`` (blocks streamed into the file) or in memory."""
     shape = " x ".join(str(int(n)) for n in dims)
     # Too large even for the chunked path: say so, rather than suggest it.
     check_memory(
@@ -106,7 +106,8 @@ def check_mesh_memory(dims, chunked: bool) -> None:
         check_memory(
             in_memory_mesh_bytes(dims),
             f"a {shape} mesh ({node_count(dims):.3g} nodes) in memory",
-            "meshgen mesh --chunked -o FILE.cgns (methods tfi, neural) writes meshes larger than memory block by block",
+            "meshgen mesh --chunked -o FILE.cgns (or .vts, .su2, .msh, .xyz, --format openfoam; methods tfi, neural) "
+            "writes meshes larger than memory block by block",
         )
 
 

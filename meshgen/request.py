@@ -231,7 +231,7 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
             )
         if request.polish:
             raise ParameterError("polish", "{name} solves the whole mesh at once: it does not apply to a chunked mesh")
-        streaming_writer(output, output_format.name)  # a format that cannot stream fails before any work
+        streaming_writer(output, output_format.name, [n + 1 for n in dims])  # a format that cannot stream fails before any work
     elif address is not None:
         raise ParameterError("scheduler", "{name} runs the chunked path; leave out --in-memory")
     check_mesh_memory(dims, chunked)  # memory first: its message names the chunked path
@@ -449,6 +449,8 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
                     progress=blocks_done,
                     evaluate=request.quality,
                     patches=plan.patches,
+                    format=plan.output_format.name,
+                    **({"binary": not request.ascii} if plan.output_format.folder else {}),
                 )
     finally:
         if client is not None:

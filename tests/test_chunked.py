@@ -209,8 +209,13 @@ def test_evaluate_in_blocks_agrees_with_evaluate_in_memory(tmp_path):
 @pytest.mark.parametrize(
     "args, expected",
     [
-        (["-m", "tfi", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.vtu"], "formats that can: .cgns"),
-        (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "formats that can: .cgns"),
+        (
+            ["-m", "tfi", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.vtu"],
+            "formats that can: .vts, .pvts, .cgns, --format openfoam",
+        ),
+        (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.vtk"], "cannot be written block by block"),
+        (["-m", "tfi", "--dims", "2000", "2000", "2000", "-o", "{dir}/x.xyz"], "overflow a binary record's 32-bit byte count"),
+        (["-m", "tfi", "--dims", "1000", "1000", "1000", "--format", "openfoam", "-o", "{dir}/case"], "32-bit OpenFOAM labels"),
         (["-m", "elliptic", "--dims", "4", "4", "4", "--chunked", "-o", "{dir}/x.cgns"], "methods that can: tfi, neural"),
         (["-m", "tfi", "-g", "semidisk", "--dims", "1000000", "1000000", "-o", "{dir}/x.cgns"], "GB free"),
         (["-m", "tfi", "--dims", "100000", "100000", "100000", "-o", "{dir}/x.cgns"], "even block by block"),

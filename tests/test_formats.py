@@ -366,8 +366,8 @@ def test_unknown_extension_lists_the_valid_ones(tmp_path):
         write_mesh(tmp_path / "mesh.stl", X)
     for extension in ALL_EXTENSIONS:
         assert extension in str(error.value)
-    # .vts, .su2 and .msh are tested with their patches in test_solver_formats.py.
-    assert sorted(extensions()) == sorted(ALL_EXTENSIONS + [".vts", ".su2", ".msh"])
+    # .vts, .su2 and .msh are tested with their patches in test_solver_formats.py, .pvts in test_formats_streamed.py.
+    assert sorted(extensions()) == sorted(ALL_EXTENSIONS + [".vts", ".pvts", ".su2", ".msh"])
     assert os.listdir(tmp_path) == []
 
 

@@ -175,11 +175,12 @@ def mesh(
     counts cells; nodes are dims + 1. The write is atomic: an interrupted run never leaves a
     partial file under the output name.
 
-    Boundary patches (named faces) go into .cgns, .vts, .su2, .msh and OpenFOAM cases.
+    Boundary patches (named faces) go into .cgns, .vts, .pvts, .su2, .msh and OpenFOAM cases.
 
     Meshes larger than memory (e.g. --dims 1000 1000 1000 -o big.cgns) are computed block by block
-    and streamed into a .cgns file with bounded memory; their quality report is computed block-wise
-    from the written file, and no per-cell quality arrays are attached (see README).
+    and streamed with bounded memory into .cgns, .vts, .pvts, .su2, .msh, Plot3D or an OpenFOAM case
+    (the others through a scratch .cgns file beside the output, removed afterwards); their quality
+    report is computed block-wise, and no per-cell quality arrays are attached (see README).
     """
     _check_method(method)  # an unknown name fails before anything is loaded
     context = click.get_current_context()

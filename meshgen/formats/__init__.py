@@ -9,6 +9,10 @@ atomically itself. ``X`` is the node array of design notes §2;
 ``cell_data`` maps names to per-cell arrays in C order of the cells (i, j[, k]); ``metadata`` is a
 JSON-serialisable dict (geometry, parameters, method, meshgen version) stored where the format
 allows (every format but Plot3D, which has no place for it); ``metadata_of`` reads it back.
+A format that a mesh larger than memory can be written in either takes
+blocks as they come (CGNS: ``stream``, ``write_node_block``) or has
+``write_streamed(path, nodes, metadata, patches)`` reading a scratch node file slab by slab
+(``meshgen.formats.streamed``; registered as ``streamed``).
 Adding a format is one module and one ``register_format`` line.
 
 Every reader returns points in the C order of the nodes (k fastest, as ``flat_points`` writes
@@ -69,6 +73,14 @@ class Format:
     dims: tuple[int, ...] = (2, 3)  # mesh dimensions it takes
     folder: bool = False  # writes a folder (an OpenFOAM case), chosen with --format
     streams: bool = False  # written block by block (``stream`` and ``write_node_block``): meshes larger than memory
+    # The module whose ``write_streamed`` writes it slab by slab from a node file
+    # (``meshgen.formats.streamed``): meshes larger than memory, through a scratch CGNS file.
+    streamed: str = ""
+
+    @property
+    def label(self) -> str:
+        """How the user names it: its first extension, or ``--format NAME`` for a folder format."""
+        return self.extensions[0] if self.extensions else f"--format {self.name}"
 
 
 FORMATS: list[Format] = []
@@ -80,7 +92,20 @@ def register_format(name: str, extensions, module: str, description: str, **opti
 
 register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
 register_format(
-    "vts", [".vts"], "meshgen.formats._vts", "VTK XML structured grid (zlib-compressed, no connectivity), patch ids", patches=True
+    "vts",
+    [".vts"],
+    "meshgen.formats._vts",
+    "VTK XML structured grid (zlib-compressed, no connectivity), patch ids",
+    patches=True,
+    streamed="meshgen.formats._vts_streamed",
+)
+register_format(
+    "pvts",
+    [".pvts"],
+    "meshgen.formats._pvts",
+    "VTK XML partitioned structured grid: a .vts piece per slab in the folder <name>/, patch ids",
+    patches=True,
+    streamed="meshgen.formats._pvts",
 )
 register_format("vtk", [".vtk"], "meshgen.formats._meshio", "legacy VTK unstructured grid (binary)")
 register_format("xdmf", [".xdmf"], "meshgen.formats._meshio", "XDMF with inline XML data (one self-contained file)")
@@ -94,17 +119,38 @@ register_format(
     "OpenFOAM case: constant/polyMesh (2D: extruded one cell) and CASE.foam",
     patches=True,
     folder=True,
+    streamed="meshgen.formats._foam_streamed",
 )
-register_format("su2", [".su2"], "meshgen.formats._su2", "SU2 native mesh (ASCII), a MARKER_TAG per patch", patches=True)
+register_format(
+    "su2",
+    [".su2"],
+    "meshgen.formats._su2",
+    "SU2 native mesh (ASCII), a MARKER_TAG per patch",
+    patches=True,
+    streamed="meshgen.formats._su2",
+)
 register_format(
     "gmsh",
     [".msh"],
     "meshgen.formats._gmsh",
     "Gmsh MSH 4.1 (ASCII), a physical group per patch and one for the cells",
     patches=True,
+    streamed="meshgen.formats._gmsh",
 )
-register_format("plot3d", [".xyz"], "meshgen.formats._plot3d", "Plot3D grid, one block, Fortran unformatted, double precision")
-register_format("plot3d-ascii", [".fmt"], "meshgen.formats._plot3d", "Plot3D grid, one block, formatted (ASCII)")
+register_format(
+    "plot3d",
+    [".xyz"],
+    "meshgen.formats._plot3d",
+    "Plot3D grid, one block, Fortran unformatted, double precision",
+    streamed="meshgen.formats._plot3d",
+)
+register_format(
+    "plot3d-ascii",
+    [".fmt"],
+    "meshgen.formats._plot3d",
+    "Plot3D grid, one block, formatted (ASCII)",
+    streamed="meshgen.formats._plot3d",
+)
 
 
 def extensions() -> list[str]:
@@ -145,22 +191,30 @@ def check_output_path(path: str | os.PathLike, format_name: str | None = None, d
     fmt = format_for(path, format_name)
     if dim is not None and dim not in fmt.dims:
         raise FormatError(f"{fmt.name} takes {' or '.join(f'{d}D' for d in fmt.dims)} meshes, not {dim}D")
+    module = importlib.import_module(fmt.module)
     if fmt.folder:
-        return importlib.import_module(fmt.module).check_output(path)
-    return check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
+        return module.check_output(path)
+    path = check_output_file(path, "mesh" + (fmt.extensions or extensions())[0])
+    if hasattr(module, "check_target"):  # a format that writes more than the file (.pvts: its pieces' folder)
+        module.check_target(path)
+    return path
 
 
-def streaming_writer(path, format_name: str | None = None):
-    """The writer module of ``path``'s format (or ``format_name``'s) when it can write a mesh block
-    by block (``stream``, ``write_node_block``); FormatError naming the formats that can, otherwise."""
+def streaming_writer(path, format_name: str | None = None, node_shape=None):
+    """The format of ``path`` (or ``format_name``) when a mesh larger than memory can be written in
+    it: block by block (``streams``: CGNS) or slab by slab from a scratch node file
+    (``streamed``); FormatError naming the formats that can, otherwise, or when the format cannot
+    hold a mesh of ``node_shape`` nodes (the module's ``check_node_shape``), before any work."""
     fmt = format_for(path, format_name)
-    if not fmt.streams:
-        able = ", ".join(ext for f in FORMATS if f.streams for ext in f.extensions)
+    if not (fmt.streams or fmt.streamed):
+        able = ", ".join(f.label for f in FORMATS if f.streams or f.streamed)
         raise FormatError(
-            f"{fmt.name} ({Path(path).suffix}) cannot be written block by block, which a mesh larger than memory "
-            f"needs; formats that can: {able}"
+            f"{fmt.name} ({fmt.label}) cannot be written block by block, which a mesh larger than memory needs; formats that can: {able}"
         )
-    return importlib.import_module(fmt.module)
+    module = importlib.import_module(fmt.module)
+    if node_shape is not None and hasattr(module, "check_node_shape"):
+        module.check_node_shape(tuple(int(n) for n in node_shape), path)
+    return fmt
 
 
 def block_reader(path, format_name: str | None = None):
@@ -169,8 +223,8 @@ def block_reader(path, format_name: str | None = None):
     naming the formats that can, otherwise."""
     fmt = format_for(path, format_name)
     if not fmt.streams:
-        able = ", ".join(ext for f in FORMATS if f.streams for ext in f.extensions)
-        raise FormatError(f"{fmt.name} ({Path(path).suffix}) cannot be read block by block; formats that can: {able}")
+        able = ", ".join(f.label for f in FORMATS if f.streams)
+        raise FormatError(f"{fmt.name} ({fmt.label}) cannot be read block by block; formats that can: {able}")
     return importlib.import_module(fmt.module)
 
 

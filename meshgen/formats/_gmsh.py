@@ -26,14 +26,26 @@ from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.formats.streamed import bounding_box, cell_slabs, cells_of_slab, map_orientation
 from meshgen.grid import cell_connectivity
 from meshgen.patches import Patch, as_records
 
-__all__ = ["DOMAIN_NAME", "PATCHES_SECTION", "check_patch_name", "read", "read_patches", "write", "write_elements"]
+__all__ = [
+    "DOMAIN_NAME",
+    "PATCHES_SECTION",
+    "check_patch_name",
+    "read",
+    "read_patches",
+    "write",
+    "write_elements",
+    "write_parts",
+    "write_streamed",
+]
 
 DOMAIN_NAME = "domain"
 PATCHES_SECTION = "meshgenPatches"  # the patch types, which MSH has no place for
 GMSH_HEXAHEDRON, GMSH_QUADRANGLE, GMSH_LINE = 5, 3, 1
+PART_ROWS = 1 << 20  # node tags written per part
 
 
 def check_patch_name(name: str) -> None:
@@ -65,10 +77,17 @@ def write_elements(path, points, cells, group_names, entities, metadata, records
     ``entities`` [(group number, elements)], one boundary entity each (elements (F, 4) quads with
     outward normals or (E, 2) segments, 0-based); ``records``: the patches' records for the
     ``$meshgenPatches`` section."""
-    dim = points.shape[1]
-    low, high = np.pad(points.min(axis=0), (0, 3 - dim)), np.pad(points.max(axis=0), (0, 3 - dim))
+    box = (points.min(axis=0), points.max(axis=0))
+    write_parts(path, len(points), [points], box, len(cells), [cells], group_names, entities, metadata, records)
+
+
+def write_parts(path, point_count, point_parts, box, cell_count, cell_parts, group_names, entities, metadata, records) -> None:
+    """``write_elements`` with the points and cells given in consecutive parts (iterables of
+    (n, dim) and (m, corners) arrays, 0-based labels) and the points' bounding box (low, high)
+    given ahead: a mesh larger than memory is written part by part."""
+    dim = len(box[0])
+    low, high = np.pad(box[0], (0, 3 - dim)), np.pad(box[1], (0, 3 - dim))
     box = " ".join(f"{v:.17g}" for v in (*low, *high))
-    cells = cells + 1
     with open(path, "wb") as file:
         lines = ["$MeshFormat", "4.1 0 8", "$EndMeshFormat", "$PhysicalNames", str(len(group_names) + 1)]
         lines += [f'{dim - 1} {2 + n} "{name}"' for n, name in enumerate(group_names)]
@@ -78,16 +97,21 @@ def write_elements(path, points, cells, group_names, entities, metadata, records
             lines.append(f"{number} {box} 1 {2 + group} 0")
         bounding = " ".join(str(n) for n in range(1, len(entities) + 1))
         lines += [f"1 {box} 1 1 {len(entities)} {bounding}", "$EndEntities", "$Nodes"]
-        lines += [f"1 {len(points)} 1 {len(points)}", f"{dim} 1 0 {len(points)}", ""]
+        lines += [f"1 {point_count} 1 {point_count}", f"{dim} 1 0 {point_count}", ""]
         file.write("\n".join(lines).encode())
-        write_rows(file, np.arange(1, len(points) + 1), "{}")
-        write_rows(file, np.pad(points, ((0, 0), (0, 3 - dim))), "{} {} {}")
+        for first in range(1, point_count + 1, PART_ROWS):
+            write_rows(file, np.arange(first, min(first + PART_ROWS, point_count + 1)), "{}")
+        for points in point_parts:
+            write_rows(file, np.pad(points, ((0, 0), (0, 3 - dim))), "{} {} {}")
         boundary = [elements + 1 for _, elements in entities]
-        total = len(cells) + sum(len(b) for b in boundary)
+        total = cell_count + sum(len(b) for b in boundary)
         file.write(f"$EndNodes\n$Elements\n{1 + len(entities)} {total} 1 {total}\n".encode())
-        file.write(f"{dim} 1 {GMSH_HEXAHEDRON if dim == 3 else GMSH_QUADRANGLE} {len(cells)}\n".encode())
-        write_rows(file, np.column_stack([np.arange(1, len(cells) + 1), cells]), " ".join(["{}"] * (cells.shape[1] + 1)))
-        first = len(cells) + 1
+        file.write(f"{dim} 1 {GMSH_HEXAHEDRON if dim == 3 else GMSH_QUADRANGLE} {cell_count}\n".encode())
+        first = 1
+        for cells in cell_parts:
+            tags = np.arange(first, first + len(cells))
+            write_rows(file, np.column_stack([tags, cells + 1]), " ".join(["{}"] * (cells.shape[1] + 1)))
+            first += len(cells)
         for number, elements in enumerate(boundary, start=1):
             file.write(f"{dim - 1} {number} {GMSH_QUADRANGLE if dim == 3 else GMSH_LINE} {len(elements)}\n".encode())
             tags = np.arange(first, first + len(elements))
@@ -98,6 +122,31 @@ def write_elements(path, points, cells, group_names, entities, metadata, records
         # boundary elements are its patches rather than cells to evaluate.
         file.write(f"$meshgen\n{metadata_json(metadata)}\n$Endmeshgen\n".encode())
         file.write(f"${PATCHES_SECTION}\n{json.dumps(records)}\n$End{PATCHES_SECTION}\n".encode())
+
+
+def write_streamed(path, nodes, metadata, patches) -> None:
+    """``write`` of the mesh in ``nodes`` (``meshgen.formats.streamed.NodeFile``), slab by slab:
+    the bounding box and orientation first (a reading pass), then points and cells by i-slabs."""
+    node_shape, dim = nodes.node_shape, nodes.dim
+    group_of = {face: number for number, patch in enumerate(patches) for face in patch.faces}
+    positive = map_orientation(nodes) > 0
+    entities = [(group_of[face.name], boundary_elements(node_shape, face.name, positive)) for face in cube.faces(dim)]
+    point_parts = (nodes.read(0, part).reshape(-1, dim) for part in nodes.slabs(0))
+    cell_parts = (cells_of_slab(node_shape, part) for part in cell_slabs(node_shape, nodes.block_nodes))
+    cell_count = int(np.prod([n - 1 for n in node_shape]))
+    names, records = [p.name for p in patches], as_records(patches)
+    write_parts(
+        path,
+        int(np.prod(node_shape)),
+        point_parts,
+        bounding_box(nodes),
+        cell_count,
+        cell_parts,
+        names,
+        entities,
+        metadata,
+        records,
+    )
 
 
 def _section(path, name: str) -> str | None:

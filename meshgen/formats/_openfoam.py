@@ -43,7 +43,8 @@ from meshgen import cube
 from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError, MeshgenWarning, excerpt
 from meshgen.formats._foam_fields import field_record, fields_to_write, kept_warning, previous_fields, starting_fields
-from meshgen.formats._structured import boundary_elements, face_nodes, orientation, write_rows
+from meshgen.formats._foam_topology import boundary_owner, internal_faces, patch_entries, poly_mesh_note
+from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.inputs import InputError, read_input_bytes
@@ -61,16 +62,24 @@ __all__ = [
     "WORD",
     "TOPOLOGY_BLOCK",
     "case_folder",
+    "check_extrusion_patch",
+    "check_node_shape",
     "check_topology",
     "check_output",
     "check_patch_name",
     "extrude",
+    "extrusion_thickness",
+    "foam_header",
     "poly_mesh_folder",
     "read",
     "read_boundary",
     "read_list",
     "read_patches",
+    "signed_area",
     "write",
+    "write_boundary",
+    "write_case",
+    "write_list",
 ]
 
 HEADER = """/*--------------------------------*- C++ -*----------------------------------*\\
@@ -170,20 +179,39 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as ``case/constant/polyMesh`` with the
     boundary ``patches`` (``meshgen.patches.Patch``), atomically: the new polyMesh is written beside
     the old one and swapped in. ``cell_data`` has no place in a polyMesh and is not written."""
+    check_extrusion_patch(patches, X.shape[-1])
+    X3 = extrude(X) if X.shape[-1] == 2 else X
+    write_case(
+        case, X.shape[:-1], metadata, patches, lambda folder, all_patches: _write_poly_mesh(folder, X3, all_patches, binary)
+    )
+
+
+def check_node_shape(node_shape, path=None) -> None:
+    """FormatError when a mesh of ``node_shape`` nodes (2D: extruded) overflows OpenFOAM's 32-bit labels."""
+    points = int(np.prod(node_shape)) * (2 if len(node_shape) == 2 else 1)
+    if points * 3 > LABEL_LIMIT:
+        raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {points} points")
+
+
+def check_extrusion_patch(patches, dim: int) -> None:
+    """FormatError when a 2D mesh's patches take the name of the extrusion's front and back."""
+    if dim == 2 and any(patch.name == EXTRUDED_PATCH for patch in patches):
+        raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
+
+
+def write_case(case, node_shape, metadata, patches, write_poly_mesh) -> None:
+    """Write the case of a mesh of ``node_shape`` nodes (2D: extruded one cell) with ``patches``:
+    ``write_poly_mesh(folder, patches)`` fills a new polyMesh folder (the patches with the
+    extrusion's ``frontAndBack`` in 2D), which is swapped in atomically with the system files,
+    the starting fields and meshgen's record, in one publication."""
     case = Path(case)
-    dim = X.shape[-1]
+    shape = [int(n) for n in node_shape]
+    dim = len(shape)
+    check_extrusion_patch(patches, dim)
     if dim == 2:
-        if any(patch.name == EXTRUDED_PATCH for patch in patches):
-            raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
-        X3 = extrude(X)
         patches = list(patches) + [_extrusion_patch()]
-    else:
-        X3 = X
-    node_shape = X3.shape[:-1]
-    if np.prod(node_shape) * 3 > LABEL_LIMIT:
-        raise FormatError(f"mesh too large for 32-bit OpenFOAM labels: {np.prod(node_shape)} points")
-    shape = [int(n) for n in X.shape[:-1]]
-    fields = starting_fields(patches, _header) if _has_inlet_and_outlet(patches) else {}
+    check_node_shape(shape)
+    fields = starting_fields(patches, foam_header) if _has_inlet_and_outlet(patches) else {}
     write_fields, kept = fields_to_write(case / "0", fields, previous_fields(case / "constant" / "polyMesh" / RECORD_NAME))
     # The record names the fields as meshgen writes them, kept ones included: a kept field is the
     # user's, so it stays unlike the recorded text until the user deletes it.
@@ -202,10 +230,10 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
             remove_stale_temporaries(folder)
         with atomic_path(case / "constant" / "polyMesh") as temporary:
             temporary.mkdir()
-            _write_poly_mesh(temporary, X3, patches, binary)
+            write_poly_mesh(temporary, patches)
             (temporary / RECORD_NAME).write_text(record)
         for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):
-            _write_if_missing(case / "system" / name, _header("dictionary", "system", name) + text)
+            _write_if_missing(case / "system" / name, foam_header("dictionary", "system", name) + text)
         if write_fields:
             publication.make_folder(case / "0")
             for name, text in write_fields.items():
@@ -216,16 +244,11 @@ def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
         warnings.warn(kept_warning(case, kept), MeshgenWarning, stacklevel=2)
 
 
-def extrude(X: np.ndarray) -> np.ndarray:
-    """A 2D node array (n1+1, n2+1, 2) as a 3D one (n1+1, n2+1, 2, 3): z = 0 and z = the typical
-    cell size sqrt(|area| / cells)."""
-    x, y = X[..., 0], X[..., 1]
-    # Shoelace area of each cell as two triangles, summed: the mesh's signed area.
-    area = 0.5 * np.sum(
-        (x[1:, 1:] - x[:-1, :-1]) * (y[:-1, 1:] - y[1:, :-1]) - (x[:-1, 1:] - x[1:, :-1]) * (y[1:, 1:] - y[:-1, :-1])
-    )
-    cells = (X.shape[0] - 1) * (X.shape[1] - 1)
-    thickness = float(np.sqrt(abs(area) / cells)) or 1.0
+def extrude(X: np.ndarray, thickness: float | None = None) -> np.ndarray:
+    """A 2D node array (n1+1, n2+1, 2) as a 3D one (n1+1, n2+1, 2, 3): z = 0 and z = ``thickness``
+    (default the typical cell size ``extrusion_thickness``)."""
+    if thickness is None:
+        thickness = extrusion_thickness(signed_area(X), (X.shape[0] - 1) * (X.shape[1] - 1))
     X3 = np.empty(X.shape[:2] + (2, 3))
     X3[..., :2] = X[:, :, None, :]
     X3[:, :, 0, 2] = 0.0
@@ -233,71 +256,28 @@ def extrude(X: np.ndarray) -> np.ndarray:
     return X3
 
 
+def signed_area(X: np.ndarray) -> float:
+    """The signed area of the cells of a 2D node array (n1+1, n2+1, 2): the shoelace area of each
+    cell as two triangles, summed (a slab of rows gives its share)."""
+    x, y = X[..., 0], X[..., 1]
+    return float(
+        0.5
+        * np.sum((x[1:, 1:] - x[:-1, :-1]) * (y[:-1, 1:] - y[1:, :-1]) - (x[:-1, 1:] - x[1:, :-1]) * (y[1:, 1:] - y[:-1, :-1]))
+    )
+
+
+def extrusion_thickness(area: float, cells: int) -> float:
+    """The thickness of an extruded 2D mesh: its typical cell size sqrt(|area| / cells) (1 for none)."""
+    return float(np.sqrt(abs(area) / cells)) or 1.0
+
+
 def _extrusion_patch():
     return Patch(EXTRUDED_PATCH, "empty", ("zeta0", "zeta1"))
 
 
-def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
-    node_shape = X3.shape[:-1]
-    cell_shape = tuple(n - 1 for n in node_shape)
-    point_ids = np.arange(np.prod(node_shape), dtype=np.int32).reshape(node_shape)
-    cell_ids = np.arange(np.prod(cell_shape), dtype=np.int32).reshape(cell_shape)
-    positive = orientation(X3) > 0
-
-    # Internal faces: for each cell in order, those towards its k+1, j+1 and i+1 neighbours (the
-    # neighbours' numbers increase in that order): upper-triangular order without sorting.
-    face_blocks, owner_blocks, neighbour_blocks = [], [], []
-    for axis in (2, 1, 0):
-        before = tuple(slice(0, -1) if d == axis else slice(None) for d in range(3))
-        after = tuple(slice(1, None) if d == axis else slice(None) for d in range(3))
-        face_blocks.append(face_nodes(point_ids, axis, slice(1, -1), positive))  # planes between cells
-        owner_blocks.append(cell_ids[before])
-        neighbour_blocks.append(cell_ids[after])
-    # Interleave the three families cell by cell: scatter each into a (cells, 3) table.
-    cells = cell_ids.size
-    table_nodes = np.zeros((cells, 3, 4), dtype=np.int32)
-    table_neighbour = np.full((cells, 3), -1, dtype=np.int32)
-    for slot, (nodes, owners, neighbours) in enumerate(zip(face_blocks, owner_blocks, neighbour_blocks)):
-        table_nodes[owners.reshape(-1), slot] = nodes.reshape(-1, 4)
-        table_neighbour[owners.reshape(-1), slot] = neighbours.reshape(-1)
-    present = table_neighbour >= 0
-    internal_nodes = table_nodes[present]
-    internal_owner = np.broadcast_to(np.arange(cells, dtype=np.int32)[:, None], (cells, 3))[present]
-    internal_neighbour = table_neighbour[present]
-
-    boundary_nodes, boundary_owner, entries = [], [], []
-    start = len(internal_nodes)
-    for patch in patches:
-        count = 0
-        for face_name in patch.faces:
-            face = cube.face_named(face_name, 3)
-            boundary_nodes.append(boundary_elements(node_shape, face_name, positive).astype(np.int32))
-            boundary_owner.append(np.take(cell_ids, -1 if face.side else 0, axis=face.axis).reshape(-1))
-            count += len(boundary_owner[-1])
-        entries.append((patch.name, patch.type, count, start))
-        start += count
-
-    faces = np.concatenate([internal_nodes, *boundary_nodes])
-    owner = np.concatenate([internal_owner, *boundary_owner])
-    note = f"nPoints:{point_ids.size}  nCells:{cells}  nFaces:{len(faces)}  nInternalFaces:{len(internal_nodes)}"
-    fmt = "binary" if binary else "ascii"
-    points = X3.reshape(-1, 3)
-    with open(folder / "points", "wb") as file:
-        file.write(_header("vectorField", "constant/polyMesh", "points", fmt).encode())
-        _write_list(file, points, binary, "({} {} {})")
-    with open(folder / "faces", "wb") as file:
-        if binary:
-            file.write(_header("faceCompactList", "constant/polyMesh", "faces", fmt).encode())
-            _write_list(file, np.arange(0, 4 * len(faces) + 1, 4, dtype=np.int32), True)
-            _write_list(file, faces.reshape(-1), True)
-        else:
-            file.write(_header("faceList", "constant/polyMesh", "faces", fmt).encode())
-            _write_list(file, faces, False, "4({} {} {} {})")
-    for name, labels in (("owner", owner), ("neighbour", internal_neighbour)):
-        with open(folder / name, "wb") as file:
-            file.write(_header("labelList", "constant/polyMesh", name, fmt, note).encode())
-            _write_list(file, labels, binary, "{}")
-    lines = [_header("polyBoundaryMesh", "constant/polyMesh", "boundary"), f"{len(entries)}\n(\n"]
+def write_boundary(folder: Path, entries) -> None:
+    """The polyMesh ``boundary`` file of ``entries`` [(name, type, nFaces, startFace)]."""
+    lines = [foam_header("polyBoundaryMesh", "constant/polyMesh", "boundary"), f"{len(entries)}\n(\n"]
     for name, kind, count, first in entries:
         group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
         lines.append(
@@ -308,12 +288,48 @@ def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
     (folder / "boundary").write_text("".join(lines))
 
 
-def _header(class_name, location, object_name, fmt="ascii", note="") -> str:
+def _write_poly_mesh(folder: Path, X3, patches, binary: bool) -> None:
+    node_shape = X3.shape[:-1]
+    cell_shape = tuple(n - 1 for n in node_shape)
+    point_ids = np.arange(np.prod(node_shape), dtype=np.int32).reshape(node_shape)
+    cell_ids = np.arange(np.prod(cell_shape), dtype=np.int32).reshape(cell_shape)
+    positive = orientation(X3) > 0
+    internal_nodes, internal_owner, internal_neighbour = internal_faces(point_ids, cell_ids, positive)
+    boundary_nodes, boundary_owners = [], []
+    for patch in patches:
+        for face_name in patch.faces:
+            boundary_nodes.append(boundary_elements(node_shape, face_name, positive).astype(np.int32))
+            boundary_owners.append(boundary_owner(cell_shape, face_name))
+
+    faces = np.concatenate([internal_nodes, *boundary_nodes])
+    owner = np.concatenate([internal_owner, *boundary_owners])
+    note = poly_mesh_note(node_shape)
+    fmt = "binary" if binary else "ascii"
+    points = X3.reshape(-1, 3)
+    with open(folder / "points", "wb") as file:
+        file.write(foam_header("vectorField", "constant/polyMesh", "points", fmt).encode())
+        write_list(file, points, binary, "({} {} {})")
+    with open(folder / "faces", "wb") as file:
+        if binary:
+            file.write(foam_header("faceCompactList", "constant/polyMesh", "faces", fmt).encode())
+            write_list(file, np.arange(0, 4 * len(faces) + 1, 4, dtype=np.int32), True)
+            write_list(file, faces.reshape(-1), True)
+        else:
+            file.write(foam_header("faceList", "constant/polyMesh", "faces", fmt).encode())
+            write_list(file, faces, False, "4({} {} {} {})")
+    for name, labels in (("owner", owner), ("neighbour", internal_neighbour)):
+        with open(folder / name, "wb") as file:
+            file.write(foam_header("labelList", "constant/polyMesh", name, fmt, note).encode())
+            write_list(file, labels, binary, "{}")
+    write_boundary(folder, patch_entries(node_shape, patches))
+
+
+def foam_header(class_name, location, object_name, fmt="ascii", note="") -> str:
     note = f'\n    note        "{note}";' if note else ""
     return HEADER.format(format=fmt, class_name=class_name, location=location, object_name=object_name, note=note)
 
 
-def _write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None:
+def write_list(file, values: np.ndarray, binary: bool, row: str = "{}") -> None:
     """An OpenFOAM list: ``N`` then ``(`` raw little-endian bytes ``)`` (binary) or one row per
     line (ASCII, ``row`` formats one entry's values)."""
     count = len(values)

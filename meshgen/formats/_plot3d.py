@@ -33,13 +33,16 @@ import numpy as np
 from meshgen.errors import FormatError
 from meshgen.grid import cell_connectivity, flat_points
 
-__all__ = ["read", "write"]
+__all__ = ["RECORD_LIMIT", "check_node_shape", "read", "write", "write_streamed"]
+
+RECORD_LIMIT = 2**31 - 1  # bytes in one Fortran record: its byte count is an int32
 
 
 def write(path, X, cell_data, metadata):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a one-block whole grid; binary for
     ``.xyz``, formatted for ``.fmt``. ``cell_data`` and ``metadata`` have no place in Plot3D."""
     node_shape = X.shape[:-1]
+    check_node_shape(node_shape, path)
     dims = np.array([1, *node_shape], dtype="<i4")
     # Coordinate blocks x, y[, z], each in Fortran order (i fastest): the transpose of C order.
     coordinates = np.ascontiguousarray(np.moveaxis(X, -1, 0).transpose(0, *range(X.ndim - 1, 0, -1)), dtype="<f8")
@@ -53,6 +56,48 @@ def write(path, X, cell_data, metadata):
             _write_record(file, dims[:1])
             _write_record(file, dims[1:])
             _write_record(file, coordinates)
+
+
+def check_node_shape(node_shape, path) -> None:
+    """FormatError when the coordinates of a mesh of ``node_shape`` nodes overflow the 32-bit byte
+    count of a binary file's one record (formatted files have no such limit)."""
+    nbytes = 8 * len(node_shape) * int(np.prod(node_shape))
+    if not _is_formatted(path) and nbytes > RECORD_LIMIT:
+        raise FormatError(
+            f"Plot3D: the coordinates ({nbytes} bytes) overflow a binary record's 32-bit byte count; the formatted .fmt has no limit"
+        )
+
+
+def write_streamed(path, nodes, metadata, patches=()) -> None:
+    """``write`` of the mesh in ``nodes`` (``meshgen.formats.streamed.NodeFile``): each coordinate
+    block by slabs of the last axis (k), which are contiguous runs of Fortran order; one reading
+    pass per coordinate."""
+    node_shape, dim = tuple(nodes.node_shape), nodes.dim
+    dims = np.array([1, *node_shape], dtype="<i4")
+    order = tuple(range(dim - 1, -1, -1))  # Fortran order: the transpose of C order
+
+    def component_parts():
+        for axis in range(dim):
+            for part in nodes.slabs(dim - 1):
+                yield np.ascontiguousarray(np.transpose(nodes.read(dim - 1, part)[..., axis], order), dtype="<f8").reshape(-1)
+
+    if _is_formatted(path):
+        with open(path, "w") as file:
+            file.write(f"{dims[0]}\n{' '.join(map(str, dims[1:]))}\n")
+            for values in component_parts():
+                file.write("\n".join(map(repr, values.tolist())))
+                file.write("\n")
+        return
+    check_node_shape(node_shape, path)
+    nbytes = 8 * dim * int(np.prod(node_shape))
+    marker = np.array([nbytes], dtype="<i4").tobytes()
+    with open(path, "wb") as file:
+        _write_record(file, dims[:1])
+        _write_record(file, dims[1:])
+        file.write(marker)
+        for values in component_parts():
+            values.tofile(file)
+        file.write(marker)
 
 
 def read(path):

@@ -8,19 +8,23 @@ import numpy as np
 
 from meshgen import cube
 
-__all__ = ["boundary_elements", "face_nodes", "orientation", "write_rows"]
+__all__ = ["boundary_elements", "corner_volume", "face_nodes", "node_labels", "orientation", "write_rows"]
 
 
 def orientation(X: np.ndarray) -> float:
     """+1 for a right-handed (2D: counterclockwise) map, -1 otherwise: the sign of the total
     volume (area) of the cells' corner parallelepipeds (parallelograms)."""
+    return 1.0 if corner_volume(X) >= 0 else -1.0
+
+
+def corner_volume(X: np.ndarray) -> float:
+    """The total signed volume (2D: area) of the cells' corner parallelepipeds (parallelograms) of
+    node array ``X``; a slab of nodes with one node of overlap gives its cells' share."""
     dim = X.shape[-1]
     e = [np.diff(X, axis=axis)[tuple(slice(0, -1) if d != axis else slice(None) for d in range(dim))] for axis in range(dim)]
     if dim == 2:
-        total = np.sum(e[0][..., 0] * e[1][..., 1] - e[0][..., 1] * e[1][..., 0])
-    else:
-        total = np.sum(np.einsum("...i,...i", e[0], np.cross(e[1], e[2])))
-    return 1.0 if total >= 0 else -1.0
+        return float(np.sum(e[0][..., 0] * e[1][..., 1] - e[0][..., 1] * e[1][..., 0]))
+    return float(np.sum(np.einsum("...i,...i", e[0], np.cross(e[1], e[2]))))
 
 
 def face_nodes(point_ids: np.ndarray, axis: int, planes: slice, outward_positive: bool) -> np.ndarray:
@@ -43,18 +47,31 @@ def face_nodes(point_ids: np.ndarray, axis: int, planes: slice, outward_positive
     return nodes if outward_positive else nodes[..., ::-1]
 
 
+def node_labels(node_shape, block) -> np.ndarray:
+    """The C-order flat labels (int64) of the nodes ``block`` (one slice per axis) of a grid of
+    ``node_shape`` nodes, shape of the block: built from the block alone, not the whole grid."""
+    node_shape = tuple(int(n) for n in node_shape)
+    strides = np.cumprod((1,) + node_shape[:0:-1])[::-1]
+    labels = np.zeros((), dtype=np.int64)
+    for axis, part in enumerate(block):
+        start, stop, _ = part.indices(node_shape[axis])
+        labels = np.add.outer(labels, np.arange(start, stop, dtype=np.int64) * int(strides[axis]))
+    return labels
+
+
 def boundary_elements(node_shape, face_name: str, positive: bool = True) -> np.ndarray:
     """The boundary elements on cube face ``face_name`` of a grid of ``node_shape`` nodes, as
     labels of the C-order flat nodes (0-based): 3D quads (faces, 4) with outward normals, 2D lines
-    (edges, 2) running with the domain on their left (counterclockwise) for a ``positive`` map."""
+    (edges, 2) running with the domain on their left (counterclockwise) for a ``positive`` map.
+    Memory: the face's nodes only."""
     dim = len(node_shape)
     face = cube.face_named(face_name, dim)
-    point_ids = np.arange(int(np.prod(node_shape)), dtype=np.int64).reshape(node_shape)
-    index = -1 if face.side else 0
+    end = int(node_shape[face.axis]) - 1 if face.side else 0
+    plane = tuple(slice(end, end + 1) if d == face.axis else slice(None) for d in range(dim))
+    point_ids = node_labels(node_shape, plane)
     if dim == 3:
-        plane = slice(-1, None) if face.side else slice(0, 1)
-        return face_nodes(point_ids, face.axis, plane, positive == bool(face.side)).reshape(-1, 4)
-    line = np.take(point_ids, index, axis=face.axis)
+        return face_nodes(point_ids, face.axis, slice(0, 1), positive == bool(face.side)).reshape(-1, 4)
+    line = np.take(point_ids, 0, axis=face.axis)
     segments = np.stack([line[:-1], line[1:]], axis=1)
     # Counterclockwise: eta0 and xi1 run with increasing index, eta1 and xi0 against it.
     forward = (face.axis == 1) != bool(face.side)

@@ -29,10 +29,11 @@ import numpy as np
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.formats.streamed import cell_slabs, cells_of_slab, map_orientation
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.patches import as_records, from_records
 
-__all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write", "write_elements"]
+__all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write", "write_elements", "write_parts", "write_streamed"]
 
 SU2_HEXAHEDRON, SU2_QUADRILATERAL, SU2_LINE = 12, 9, 3
 MARKER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.+-]*")
@@ -59,17 +60,26 @@ def write_elements(path, points, cells, markers, metadata, records) -> None:
     quads (VTK corner order, 0-based), ``markers`` [(name, elements)] with elements (F, 4) quads
     (outward normals) or (E, 2) segments (domain on their left); ``records``: the patches'
     records for the ``meshgen_patches`` comment."""
-    dim = points.shape[1]
+    write_parts(path, points.shape[1], len(points), [points], len(cells), [cells], markers, metadata, records)
+
+
+def write_parts(path, dim: int, point_count: int, point_parts, cell_count: int, cell_parts, markers, metadata, records) -> None:
+    """``write_elements`` with the points and cells given in consecutive parts (iterables of
+    (n, dim) and (m, corners) arrays): a mesh larger than memory is written part by part."""
     with open(path, "wb") as file:
         if metadata:
             file.write(f"% meshgen: {metadata_json(metadata)}\n".encode())
         file.write(f"% meshgen_patches: {json.dumps(records)}\n".encode())
-        file.write(f"NDIME= {dim}\nNELEM= {len(cells)}\n".encode())
+        file.write(f"NDIME= {dim}\nNELEM= {cell_count}\n".encode())
         kind = SU2_HEXAHEDRON if dim == 3 else SU2_QUADRILATERAL
-        rows = np.column_stack([np.full(len(cells), kind), cells, np.arange(len(cells))])
-        write_rows(file, rows, " ".join(["{}"] * rows.shape[1]))
-        file.write(f"NPOIN= {len(points)}\n".encode())
-        write_rows(file, points, " ".join(["{}"] * dim))
+        first = 0
+        for cells in cell_parts:
+            rows = np.column_stack([np.full(len(cells), kind), cells, np.arange(first, first + len(cells))])
+            write_rows(file, rows, " ".join(["{}"] * rows.shape[1]))
+            first += len(cells)
+        file.write(f"NPOIN= {point_count}\n".encode())
+        for points in point_parts:
+            write_rows(file, points, " ".join(["{}"] * dim))
         file.write(f"NMARK= {len(markers)}\n".encode())
         for name, elements in markers:
             file.write(f"MARKER_TAG= {name}\nMARKER_ELEMS= {len(elements)}\n".encode())
@@ -77,6 +87,20 @@ def write_elements(path, points, cells, markers, metadata, records) -> None:
             write_rows(
                 file, np.column_stack([np.full(len(elements), kind), elements]), " ".join(["{}"] * (elements.shape[1] + 1))
             )
+
+
+def write_streamed(path, nodes, metadata, patches) -> None:
+    """``write`` of the mesh in ``nodes`` (``meshgen.formats.streamed.NodeFile``), slab by slab:
+    the orientation first (a reading pass), then cells and points by i-slabs."""
+    node_shape, dim = nodes.node_shape, nodes.dim
+    positive = map_orientation(nodes) > 0
+    markers = [
+        (patch.name, np.concatenate([boundary_elements(node_shape, face, positive) for face in patch.faces])) for patch in patches
+    ]
+    point_parts = (nodes.read(0, part).reshape(-1, dim) for part in nodes.slabs(0))
+    cell_parts = (cells_of_slab(node_shape, part) for part in cell_slabs(node_shape, nodes.block_nodes))
+    cell_count = int(np.prod([n - 1 for n in node_shape]))
+    write_parts(path, dim, int(np.prod(node_shape)), point_parts, cell_count, cell_parts, markers, metadata, as_records(patches))
 
 
 def _comment(path, key: str) -> str | None:

@@ -54,7 +54,22 @@ from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import cell_connectivity
 from meshgen.patches import as_records, from_records
 
-__all__ = ["NUMPY_TYPES", "PATCHES_KEY", "PATCH_ARRAY", "TYPES", "patch_ids", "read", "read_patches", "write"]
+__all__ = [
+    "FILE_TAIL",
+    "NUMPY_TYPES",
+    "PATCHES_KEY",
+    "PATCH_ARRAY",
+    "TYPES",
+    "block_extent",
+    "data_array",
+    "field_arrays",
+    "file_head",
+    "patch_ids",
+    "read",
+    "read_patches",
+    "whole_extent",
+    "write",
+]
 
 PATCHES_KEY = "meshgen_patches"
 PATCH_ARRAY = "patch"
@@ -70,14 +85,16 @@ NUMPY_TYPES = {
 }
 
 
-def write(path, X, cell_data, metadata, patches):
+def write(path, X, cell_data, metadata, patches, block=None, whole_shape=None):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vts with ``cell_data``
     (name -> (cells,) float64, C order of the cells), ``metadata`` and ``patches``
-    (``meshgen.patches.Patch``)."""
+    (``meshgen.patches.Patch``). A piece of a .pvts: ``X`` is the nodes ``block`` (one slice per
+    axis) of a mesh of ``whole_shape`` nodes, whose index range is the file's extent."""
     node_shape = X.shape[:-1]
     dim = len(node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
-    extent = " ".join(f"0 {n - 1}" for n in node_shape) + (" 0 0" if dim == 2 else "")
+    block = block or tuple(slice(0, n) for n in node_shape)
+    extent = block_extent(block)
     order = tuple(range(dim - 1, -1, -1))  # VTK's i-fastest order
     pool = ThreadPoolExecutor(max_workers=cpu_count())
     sections = {"FieldData": [], "PointData": [], "CellData": [], "Points": []}
@@ -92,12 +109,9 @@ def write(path, X, cell_data, metadata, patches):
         add("Points", "Points", points, {"NumberOfComponents": 3})
         for name, values in cell_data.items():
             add("CellData", name, np.transpose(np.reshape(values, cell_shape), order).astype("<f4"))
-        add("PointData", PATCH_ARRAY, np.transpose(patch_ids(node_shape, patches), order))
-        if metadata:
-            codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
-            add("FieldData", METADATA_KEY, codes, {"NumberOfTuples": codes.size})
-        codes = np.frombuffer(json.dumps(as_records(patches)).encode("ascii"), dtype=np.uint8)
-        add("FieldData", PATCHES_KEY, codes, {"NumberOfTuples": codes.size})
+        add("PointData", PATCH_ARRAY, np.transpose(patch_ids(whole_shape or node_shape, patches, block), order))
+        for name, more, codes in field_arrays(metadata, patches):
+            add("FieldData", name, codes, more)
 
         # The offsets in the XML need every array's compressed size: wait for all of them.
         parts, offset, elements = [], 0, {}
@@ -106,40 +120,76 @@ def write(path, X, cell_data, metadata, patches):
             for name, more, dtype, nbytes, blocks in sections[section]:
                 streams = [block.result() for block in blocks]
                 header = compression_header(nbytes, BLOCK_BYTES, streams)
-                attributes = "".join(f' {key}="{value}"' for key, value in more.items())
-                lines.append(
-                    f'<DataArray type="{TYPES[np.dtype(dtype)]}" Name={quoteattr(name)}{attributes} '
-                    f'format="appended" offset="{offset}"/>\n'
-                )
+                lines.append(data_array(dtype, name, more, offset))
                 parts += [header, *streams]
                 offset += len(header) + sum(map(len, streams))
             elements[section] = f"<{section}>\n{''.join(lines)}</{section}>\n" if lines else ""
 
         with open(path, "wb") as file:
-            file.write(
-                (
-                    '<?xml version="1.0"?>\n<VTKFile type="StructuredGrid" version="1.0" byte_order="LittleEndian" '
-                    'header_type="UInt64" compressor="vtkZLibDataCompressor">\n'
-                    f'<StructuredGrid WholeExtent="{extent}">\n{elements["FieldData"]}<Piece Extent="{extent}">\n'
-                    f"{elements['PointData']}{elements['CellData']}{elements['Points']}</Piece>\n</StructuredGrid>\n"
-                    '<AppendedData encoding="raw">\n_'
-                ).encode()
-            )
+            file.write(file_head(extent, elements))
             for part in parts:
                 file.write(part)
-            file.write(b"\n</AppendedData>\n</VTKFile>\n")
+            file.write(FILE_TAIL)
     finally:
         pool.shutdown(cancel_futures=True)
 
 
-def patch_ids(node_shape, patches) -> np.ndarray:
+def patch_ids(node_shape, patches, block=None) -> np.ndarray:
     """(n1+1, n2+1[, n3+1]) int32: the index of the patch each boundary node lies on (the first
-    listed where patches meet), -1 inside."""
-    ids = np.full(node_shape, -1, dtype=np.int32)
+    listed where patches meet), -1 inside; of the nodes ``block`` only (one slice per axis), if given."""
+    node_shape = tuple(int(n) for n in node_shape)
+    block = block or tuple(slice(0, n) for n in node_shape)
+    ids = np.full(tuple(s.stop - s.start for s in block), -1, dtype=np.int32)
     for number in range(len(patches) - 1, -1, -1):  # the first listed is written last and wins
         for face_name in patches[number].faces:
-            ids[cube.face_named(face_name, len(node_shape)).node_index] = number
+            face = cube.face_named(face_name, len(node_shape))
+            end = node_shape[face.axis] - 1 if face.side else 0
+            if block[face.axis].start <= end < block[face.axis].stop:
+                ids[tuple(end - s.start if d == face.axis else slice(None) for d, s in enumerate(block))] = number
     return ids
+
+
+def data_array(dtype, name: str, more: dict, offset: int) -> str:
+    """The XML line of an appended DataArray at ``offset`` in the appended data."""
+    attributes = "".join(f' {key}="{value}"' for key, value in more.items())
+    return (
+        f'<DataArray type="{TYPES[np.dtype(dtype)]}" Name={quoteattr(name)}{attributes} format="appended" offset="{offset}"/>\n'
+    )
+
+
+def file_head(extent: str, elements: dict) -> bytes:
+    """The file up to its appended data: ``elements`` maps FieldData, PointData, CellData, Points
+    to their XML ('' for none)."""
+    return (
+        '<?xml version="1.0"?>\n<VTKFile type="StructuredGrid" version="1.0" byte_order="LittleEndian" '
+        'header_type="UInt64" compressor="vtkZLibDataCompressor">\n'
+        f'<StructuredGrid WholeExtent="{extent}">\n{elements["FieldData"]}<Piece Extent="{extent}">\n'
+        f"{elements['PointData']}{elements['CellData']}{elements['Points']}</Piece>\n</StructuredGrid>\n"
+        '<AppendedData encoding="raw">\n_'
+    ).encode()
+
+
+FILE_TAIL = b"\n</AppendedData>\n</VTKFile>\n"
+
+
+def block_extent(block) -> str:
+    """VTK's extent of the nodes ``block`` (one slice per axis): first and last index per axis."""
+    return " ".join(f"{s.start} {s.stop - 1}" for s in block) + (" 0 0" if len(block) == 2 else "")
+
+
+def whole_extent(node_shape) -> str:
+    return block_extent(tuple(slice(0, int(n)) for n in node_shape))
+
+
+def field_arrays(metadata, patches) -> list:
+    """[(name, more, values)] of the FieldData: the metadata's JSON bytes (if any) and the patches'."""
+    arrays = []
+    if metadata:
+        codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
+        arrays.append((METADATA_KEY, {"NumberOfTuples": codes.size}, codes))
+    codes = np.frombuffer(json.dumps(as_records(patches)).encode("ascii"), dtype=np.uint8)
+    arrays.append((PATCHES_KEY, {"NumberOfTuples": codes.size}, codes))
+    return arrays
 
 
 # --- reading ---------------------------------------------------------------------------------
