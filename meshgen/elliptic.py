@@ -79,7 +79,7 @@ COARSEST_CELLS = 4  # coarsen an axis while it has more cells than this
 SEMI_COARSENING = 0.1  # coarsen only axes at least this strongly coupled relative to the strongest
 PRE_SMOOTHING, POST_SMOOTHING = 1, 1  # relaxation sweeps before and after the coarse-grid correction
 DAMPING = 1.0  # of the line-ADI step; damping (0.85) gave more cycles in every case tried
-COMPILED_NODES = 40**3  # grids with at least this many nodes run the compiled kernels (3D)
+COMPILED_NODES = 50**3  # grids with at least this many nodes run the compiled kernels (3D; see uses_kernels)
 COARSEST_SWEEPS = 40  # relaxation sweeps that solve the coarsest grid (at most 3 interior nodes per axis)
 
 
@@ -174,8 +174,10 @@ class Level:
 
 def uses_kernels(coords) -> bool:
     """Whether the multigrid hierarchy of a grid with these parametric coordinates runs the compiled
-    kernels: 3D and at least ``COMPILED_NODES`` nodes, where they save more than importing numba and
-    loading its cached code costs a fresh process (about 0.2 s)."""
+    kernels: 3D and at least ``COMPILED_NODES`` nodes. The kernels take a fifth to a quarter of the
+    NumPy code's CPU time at every size, but importing numba and loading their cached code costs a
+    fresh process about 0.7 s of CPU; a whole solve repays that from about 50^3 nodes (NumPy 0.9 s
+    there, 0.5 s at 40^3)."""
     return len(coords) == 3 and int(np.prod([len(t) for t in coords])) >= COMPILED_NODES
 
 
@@ -204,8 +206,9 @@ def banded(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return columns, values
 
 
-def hierarchy(coords, axis_weights=None) -> list[Level]:
-    """Levels from the given grid (first) to the coarsest (last).
+def hierarchy(coords, axis_weights=None, compiled: bool | None = None) -> list[Level]:
+    """Levels from the given grid (first) to the coarsest (last); ``compiled``: whether they run
+    the compiled kernels (3D only; default: ``uses_kernels(coords)``).
 
     ``axis_weights``: the typical size of A_aa (the weight of r_aa) per axis; the coupling
     strength of axis a on a grid is then A_aa / h_a^2. An axis is coarsened only while it has more
@@ -226,7 +229,7 @@ def hierarchy(coords, axis_weights=None) -> list[Level]:
         strongest = strength[coarsenable].max()
         coarsen = coarsenable & (strength >= SEMI_COARSENING * strongest)
         chain.append(tuple(coarser_coordinates(t) if c else t for t, c in zip(chain[-1], coarsen)))
-    compiled = uses_kernels(coords)
+    compiled = uses_kernels(coords) if compiled is None else compiled
     return [Level(c, chain[i + 1] if i + 1 < len(chain) else None, compiled) for i, c in enumerate(chain)]
 
 
