@@ -35,7 +35,7 @@ __all__ = ["defect", "operator", "relax", "threads", "transfer"]
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 CHUNKS_PER_THREAD = 4  # work split finer than the threads: a thread that the OS delays holds up less
 THREADED_NODES = 3 * 30**3  # smaller arrays are done in the calling thread (a chunk's hand-over costs ~0.1 ms)
-_POOL: list = []  # the thread pool, made on first use
+_POOL: list = []  # (process id, thread pool), made on first use in each process
 
 
 def threads() -> int:
@@ -50,11 +50,12 @@ def _across(kernel, count: int, *args) -> None:
     if workers == 1 or count < 2 or args[0].size < THREADED_NODES:
         kernel(*args, 0, count)
         return
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(max_workers=workers, thread_name_prefix="meshgen-winslow"))
+    if not _POOL or _POOL[0][0] != os.getpid():  # none yet, or made before this process was forked
+        _POOL[:] = [(os.getpid(), ThreadPoolExecutor(max_workers=workers, thread_name_prefix="meshgen-winslow"))]
+    pool = _POOL[0][1]
     chunks = min(count, workers * CHUNKS_PER_THREAD)
     bounds = [count * c // chunks for c in range(chunks + 1)]
-    for future in [_POOL[0].submit(kernel, *args, a, b) for a, b in zip(bounds[:-1], bounds[1:])]:
+    for future in [pool.submit(kernel, *args, a, b) for a, b in zip(bounds[:-1], bounds[1:])]:
         future.result()
 
 
