@@ -25,11 +25,13 @@ class AndersonMixing:
         self.depth = depth
         self.output_changes: list[np.ndarray] = []
         self.update_changes: list[np.ndarray] = []
+        self.gram = np.zeros((0, 0))  # dot products of update_changes, kept from call to call
         self.previous = None  # (update, output) of the previous cycle
 
     def restart(self) -> None:
         self.output_changes.clear()
         self.update_changes.clear()
+        self.gram = np.zeros((0, 0))
         self.previous = None
 
     def next_iterate(self, x: np.ndarray, output: np.ndarray) -> np.ndarray:
@@ -37,16 +39,31 @@ class AndersonMixing:
             return output
         update = output - x
         if self.previous is not None:
-            self.update_changes.append(update - self.previous[0])
+            newest = update - self.previous[0]
+            self.update_changes.append(newest)
             self.output_changes.append(output - self.previous[1])
-            del self.update_changes[: -self.depth], self.output_changes[: -self.depth]
+            row = np.array([_dot(change, newest) for change in self.update_changes])
+            count = len(row)
+            gram = np.empty((count, count))
+            gram[:-1, :-1] = self.gram
+            gram[-1, :] = gram[:, -1] = row
+            drop = max(count - self.depth, 0)
+            del self.update_changes[:drop], self.output_changes[:drop]
+            self.gram = gram[drop:, drop:]
         self.previous = (update, output)
         if not self.update_changes:
             return output
-        gram = np.array([[np.vdot(a, b) for b in self.update_changes] for a in self.update_changes])
-        target = np.array([np.vdot(a, update) for a in self.update_changes])
-        gamma = np.linalg.lstsq(gram, target, rcond=1e-12)[0]
+        target = np.array([_dot(a, update) for a in self.update_changes])
+        gamma = np.linalg.lstsq(self.gram, target, rcond=1e-12)[0]
         mixed = output.copy()
+        scaled = np.empty_like(output)
         for weight, change in zip(gamma, self.output_changes):
-            mixed -= weight * change
+            mixed -= np.multiply(change, weight, out=scaled)
         return mixed
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Sum of the products of two same-shaped arrays. NumPy's own loop, not BLAS: a BLAS dot
+    starts its threads for each call, which costs milliseconds for a face's few thousand values
+    and more on a loaded machine."""
+    return float(np.einsum("i,i->", a.ravel(), b.ravel()))

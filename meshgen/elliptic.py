@@ -51,6 +51,7 @@ from meshgen.winslow import centre_coefficient, component_array, node_array, ste
 __all__ = [
     "COARSEST_CELLS",
     "COARSEST_SWEEPS",
+    "COMPILED_NODES",
     "DAMPING",
     "DEFAULT_MAX_ITER",
     "DEFAULT_TOL",
@@ -58,6 +59,7 @@ __all__ = [
     "ConvergenceWarning",
     "Level",
     "along_axes",
+    "banded",
     "build_elliptic",
     "coarser_coordinates",
     "elliptic",
@@ -66,6 +68,8 @@ __all__ = [
     "smooth",
     "solve_lines",
     "solve_winslow",
+    "stencil_weights",
+    "uses_kernels",
     "v_cycle",
 ]
 
@@ -75,6 +79,7 @@ COARSEST_CELLS = 4  # coarsen an axis while it has more cells than this
 SEMI_COARSENING = 0.1  # coarsen only axes at least this strongly coupled relative to the strongest
 PRE_SMOOTHING, POST_SMOOTHING = 1, 1  # relaxation sweeps before and after the coarse-grid correction
 DAMPING = 1.0  # of the line-ADI step; damping (0.85) gave more cycles in every case tried
+COMPILED_NODES = 50**3  # grids with at least this many nodes run the compiled kernels (3D; see uses_kernels)
 COARSEST_SWEEPS = 40  # relaxation sweeps that solve the coarsest grid (at most 3 interior nodes per axis)
 
 
@@ -113,19 +118,97 @@ def along_axes(matrices, F: np.ndarray) -> np.ndarray:
 
 
 class Level:
-    """One grid of the multigrid hierarchy: its stencils and the transfers to the next coarser one."""
+    """One grid of the multigrid hierarchy: its stencils and the transfers to the next coarser one.
 
-    def __init__(self, coords, coarse_coords=None):
+    ``compiled``: whether this grid's relaxation, residual and transfers run as the numba kernels of
+    ``meshgen.winslow_compiled`` (3D only; ``hierarchy`` chooses them for every grid when the finest
+    is large, see ``uses_kernels``), else as NumPy array operations; ``weights`` holds the kernels'
+    stencil weights and ``bands`` the transfers as (columns, values) of their non-zeros per row.
+    """
+
+    def __init__(self, coords, coarse_coords=None, compiled: bool = False):
         self.grid = stencils(coords)
         self.interior = (slice(None),) + (slice(1, -1),) * len(coords)
+        self.compiled = bool(compiled) and len(coords) == 3
+        if self.compiled:
+            self.weights = stencil_weights(self.grid)
         if coarse_coords is not None:
             self.prolong = [interpolation_matrix(tc, t) for t, tc in zip(coords, coarse_coords)]
             self.restrict_solution = [interpolation_matrix(t, tc) for t, tc in zip(coords, coarse_coords)]
             self.restrict_residual = [p.T / p.T.sum(axis=1, keepdims=True) for p in self.prolong]
+            if self.compiled:
+                self.bands = {
+                    name: [banded(m) for m in getattr(self, name)]
+                    for name in ("prolong", "restrict_solution", "restrict_residual")
+                }
+
+    def transfer(self, name: str, F: np.ndarray) -> np.ndarray:
+        """The transfer ``name`` (prolong, restrict_solution, restrict_residual) applied to F (dim, ...)."""
+        if not self.compiled:
+            return along_axes(getattr(self, name), F)
+        from meshgen import winslow_compiled
+
+        for axis, (columns, values) in enumerate(self.bands[name]):
+            F = winslow_compiled.transfer(F, columns, values, axis)
+        return F
+
+    def defect(self, R: np.ndarray, f) -> np.ndarray:
+        """f - N(R) (``f`` None: zero) at the interior nodes, zero on the boundary: shaped as R."""
+        if self.compiled:
+            from meshgen import winslow_compiled
+
+            return winslow_compiled.defect(R, f, self.weights)
+        residual, _ = winslow_operator(R, self.grid)
+        full = np.zeros_like(R)
+        full[self.interior] = -residual if f is None else f - residual
+        return full
+
+    def operator(self, R: np.ndarray):
+        """Normalised Winslow residual and axial coefficients of R on this grid (``winslow_operator``)."""
+        if not self.compiled:
+            return winslow_operator(R, self.grid)
+        from meshgen import winslow_compiled
+
+        return winslow_compiled.operator(R, *self.weights)
 
 
-def hierarchy(coords, axis_weights=None) -> list[Level]:
-    """Levels from the given grid (first) to the coarsest (last).
+def uses_kernels(coords) -> bool:
+    """Whether the multigrid hierarchy of a grid with these parametric coordinates runs the compiled
+    kernels: 3D and at least ``COMPILED_NODES`` nodes. The kernels take a fifth to a quarter of the
+    NumPy code's CPU time at every size, but importing numba and loading their cached code costs a
+    fresh process about 0.7 s of CPU; a whole solve repays that from about 50^3 nodes (NumPy 0.9 s
+    there, 0.5 s at 40^3)."""
+    return len(coords) == 3 and int(np.prod([len(t) for t in coords])) >= COMPILED_NODES
+
+
+def stencil_weights(grid) -> tuple:
+    """The six (3, n_a - 1) weight arrays of the compiled kernels: first-derivative (minus, centre,
+    plus) per axis, then second-derivative, at each interior index (``meshgen.winslow.Stencils``)."""
+    arrays = []
+    for kind in (grid.first, grid.second):
+        for axis, weights in enumerate(kind):
+            inner = len(grid.coords[axis]) - 2
+            arrays.append(np.ascontiguousarray(np.stack([np.broadcast_to(np.ravel(w), (inner,)) for w in weights])))
+    return tuple(arrays)
+
+
+def banded(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A transfer matrix (rows, columns) as its non-zeros per row: columns and values, both
+    (rows, most non-zeros in a row), rows with fewer padded with value 0."""
+    rows, cols = np.nonzero(matrix)  # row-major: each row's non-zeros together, in order
+    starts = np.searchsorted(rows, np.arange(matrix.shape[0]))
+    slot = np.arange(len(rows)) - starts[rows]
+    width = max(int(slot.max()) + 1 if len(rows) else 1, 1)
+    columns = np.zeros((matrix.shape[0], width), dtype=np.int64)
+    values = np.zeros((matrix.shape[0], width))
+    columns[rows, slot] = cols
+    values[rows, slot] = matrix[rows, cols]
+    return columns, values
+
+
+def hierarchy(coords, axis_weights=None, compiled: bool | None = None) -> list[Level]:
+    """Levels from the given grid (first) to the coarsest (last); ``compiled``: whether they run
+    the compiled kernels (3D only; default: ``uses_kernels(coords)``).
 
     ``axis_weights``: the typical size of A_aa (the weight of r_aa) per axis; the coupling
     strength of axis a on a grid is then A_aa / h_a^2. An axis is coarsened only while it has more
@@ -146,7 +229,8 @@ def hierarchy(coords, axis_weights=None) -> list[Level]:
         strongest = strength[coarsenable].max()
         coarsen = coarsenable & (strength >= SEMI_COARSENING * strongest)
         chain.append(tuple(coarser_coordinates(t) if c else t for t, c in zip(chain[-1], coarsen)))
-    return [Level(c, chain[i + 1] if i + 1 < len(chain) else None) for i, c in enumerate(chain)]
+    compiled = uses_kernels(coords) if compiled is None else compiled
+    return [Level(c, chain[i + 1] if i + 1 < len(chain) else None, compiled) for i, c in enumerate(chain)]
 
 
 def _largest_node_norm(D: np.ndarray) -> float:
@@ -197,6 +281,12 @@ def smooth(R: np.ndarray, f, level: Level, sweeps: int) -> float:
     """
     grid = level.grid
     jacobi_step = np.inf
+    if level.compiled:
+        from meshgen import winslow_compiled
+
+        for sweep in range(sweeps):
+            jacobi_step = winslow_compiled.relax(R, f, level.weights, DAMPING, sweep == sweeps - 1)
+        return jacobi_step
     for sweep in range(sweeps):
         residual, axial = winslow_operator(R, grid)
         if f is not None:
@@ -219,17 +309,14 @@ def v_cycle(levels: list[Level], index: int, R: np.ndarray, f) -> float:
     if index == len(levels) - 1:
         return smooth(R, f, level, COARSEST_SWEEPS)
     smooth(R, f, level, PRE_SMOOTHING)
-    residual, _ = winslow_operator(R, level.grid)
-    residual = -residual if f is None else f - residual
     coarse = levels[index + 1]
-    R_coarse_start = along_axes(level.restrict_solution, R)
-    full_residual = np.zeros_like(R)
-    full_residual[level.interior] = residual
-    coarse_f, _ = winslow_operator(R_coarse_start, coarse.grid)
-    coarse_f += along_axes(level.restrict_residual, full_residual)[coarse.interior]
+    R_coarse_start = level.transfer("restrict_solution", R)
+    full_residual = level.defect(R, f)
+    coarse_f, _ = coarse.operator(R_coarse_start)
+    coarse_f += level.transfer("restrict_residual", full_residual)[coarse.interior]
     R_coarse = R_coarse_start.copy()
     v_cycle(levels, index + 1, R_coarse, coarse_f)
-    R += along_axes(level.prolong, R_coarse - R_coarse_start)
+    R += level.transfer("prolong", R_coarse - R_coarse_start)
     return smooth(R, f, level, POST_SMOOTHING)
 
 
@@ -251,17 +338,17 @@ def solve_winslow(
     """
     start = time.perf_counter()
     starts = [component_array(X0)]
-    _, axial = winslow_operator(starts[0], stencils(coords))
+    _, axial = Level(coords, compiled=uses_kernels(coords)).operator(starts[0])
     levels = hierarchy(coords, [np.median(a) for a in axial])
     for level in levels[:-1]:
-        starts.append(along_axes(level.restrict_solution, starts[-1]))
+        starts.append(level.transfer("restrict_solution", starts[-1]))
 
     # Full-multigrid start: each level begins from its own initial mesh plus the interpolated
     # departure of the coarser solution from the coarser initial mesh, then gets one V-cycle.
     R = starts[-1].copy()
     smooth(R, None, levels[-1], COARSEST_SWEEPS)
     for index in range(len(levels) - 2, -1, -1):
-        R = starts[index] + along_axes(levels[index].prolong, R - starts[index + 1])
+        R = starts[index] + levels[index].transfer("prolong", R - starts[index + 1])
         if index > 0:
             v_cycle(levels, index, R, None)
     del starts  # memory: the finest start alone is as large as the mesh
@@ -286,8 +373,8 @@ def solve_winslow(
             acceleration.restart()
         R = acceleration.next_iterate(before, R)
 
-    step, axial = winslow_operator(R, levels[0].grid)
-    residual = _largest_node_norm(step / centre_coefficient(axial, levels[0].grid)) / length
+    step, axial = levels[0].operator(R)
+    residual = _largest_node_norm(step / centre_coefficient(list(axial), levels[0].grid)) / length
     info = {
         "solver": "nonlinear multigrid (FAS V(1,1) cycles, line-ADI relaxation, full-multigrid start, Anderson mixing)",
         "iterations": iterations,

@@ -16,7 +16,10 @@ every face onto itself:
    normal part is the surface's curvature and is left alone, so the nodes stay exactly on the
    surface. Solved by frozen-coefficient (Picard) steps: pull the physical residual back to the
    face parameters through the surface's tangents (central differences of the map) and solve the
-   scalar Winslow operator for the parameter update (a sparse direct solve, Anderson-mixed);
+   scalar Winslow operator for the parameter update (a sparse direct solve, Anderson-mixed; at the
+   mesh's resolution, where the start is the layout and close, the factorisation is kept while each
+   step shrinks to at most ``REFACTOR_RATE`` of the one before, a chord method: the frozen
+   coefficients change little from step to step, and factorising costs ten times a solve);
 3. between the fine nodes s is the tensor product of C1 cubic Hermite interpolation (slopes by
    finite differences), which on an edge reduces to the 1D interpolation of the edge's values, so
    the two faces that share an edge agree on it to round-off and g(s(p)) stays continuous.
@@ -75,6 +78,7 @@ RESOLUTION = 64  # fine-grid cells per face side (parametric spacing 1/64)
 ARC_SAMPLES = 64  # chords per fine cell when measuring an edge's arc length
 FACE_TOL = 1e-11  # stop when the largest parameter update of a face is below this
 FACE_MAX_ITER = 200
+REFACTOR_RATE = 0.5  # factorise the face operator again when a step shrank by less than this
 RELAX_TOL = 1e-9  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
 TANGENT_STEP = 1e-6  # parametric step of the central differences that give the surface's tangents
 
@@ -259,12 +263,16 @@ def coons_start(edge_u: tuple, coords) -> np.ndarray:
     return U
 
 
-def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER):
+def surface_grid(
+    boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER, refactor_rate=0.0
+):
     """The Winslow surface grid of the face ``t[axis] = side`` on the tensor grid of ``coords``
     (the parametric node coordinates along its two tangent axes, increasing order).
 
     ``U``: (n_p, n_q, 2) face parameters: the sides' values (kept) and a start inside.
-    ``boundary``: the geometry's map. Returns the solved face parameters (same shape) and
+    ``boundary``: the geometry's map. ``refactor_rate``: keep the factorised operator while each
+    step is at most this fraction of the one before (0: factorise every step, which the fine grid's
+    hard faces need: the flower's caps take 160 steps so, and more than 200 keeping it). Returns the solved face parameters (same shape) and
     ``{"iterations", "final_update"}`` (the largest parameter change of the last step).
     """
     from scipy.sparse.linalg import splu
@@ -273,7 +281,7 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
     shape = U.shape[:-1]
     grid = stencils(coords)
     mixing = AndersonMixing(ANDERSON_DEPTH)
-    update = np.inf
+    update = previous = np.inf
     iterations = 0
     while iterations < max_iter:
         X = boundary(_lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
@@ -311,7 +319,8 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
         scale_q = 1.0 / (grid.coords[1][2:] - grid.coords[1][:-2])[None, :]
         trace = g11 * scale_p**2 + g22 * scale_q**2
         c12 = -g12 * scale_p * scale_q / trace
-        operator = splu(_scalar_operator(c11, c22, c12, grid))
+        if iterations == 0 or update > refactor_rate * previous:
+            operator = splu(_scalar_operator(c11, c22, c12, grid), permc_spec="MMD_AT_PLUS_A")
         step = np.stack([operator.solve(-target[..., c].ravel()) for c in range(2)], axis=-1).reshape(inner_shape + (2,))
         iterations += 1
         previous, update = update, float(np.abs(step).max())
@@ -378,7 +387,7 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
         if min(len(c) for c in face_coords) < 3:
             continue  # no interior nodes on this face
         start = layout.apply(face.points(coords))[:, [a, b]].reshape(len(face_coords[0]), len(face_coords[1]), 2)
-        U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol)
+        U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol, refactor_rate=REFACTOR_RATE)
         X[face.node_index] = plain(_lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
         iterations[face.name] = info["iterations"]
     return iterations

@@ -69,6 +69,7 @@ LAYERS = [
         "meshgen.clustering",
         "meshgen.tfi",
         "meshgen.winslow",
+        "meshgen.winslow_compiled",
         "meshgen.anderson",
         "meshgen.orthogonal",
         "meshgen.patches",
