@@ -393,7 +393,8 @@ def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylind
     assert result.returncode == 0, result.stderr
     X = read_points(tmp_path / "m.vtu", dims)
     coords = node_coordinates(dims, ["zeta:both:1.15"])
-    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-6)
+    # NumPy's float32 forward pass (meshing) against torch's (network_at): float32 round-off
+    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-5)
     # Along the axis z = 2 zeta for the exact Winslow map of a prism; the network keeps it closely,
     # so physical cell heights grow by the ratio asked for.
     heights = np.diff(X[2, 2, :, 2])
