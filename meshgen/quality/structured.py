@@ -28,7 +28,7 @@ __all__ = [
     "use_compiled",
 ]
 
-NUMPY_CELLS = 200_000  # below: the NumPy kernels, unless numba is loaded already
+NUMPY_CELLS = 500_000  # below: the NumPy kernels, unless numba is loaded already (break-even about 9e5)
 
 
 def use_compiled(cells: int, kernels: str = "auto") -> bool:
