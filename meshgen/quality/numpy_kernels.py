@@ -3,7 +3,7 @@ definition (design notes §7), block by block of ``BLOCK_CELLS`` cells.
 
 Two uses: the compiled kernels (``meshgen.quality.compiled``) are tested against it, and small
 meshes take it instead of them (``meshgen.quality.structured``): importing numba and loading the
-compiled kernels costs a process about a second, more than NumPy needs for 2e5 cells."""
+compiled kernels costs a process about a second, more than NumPy needs for 5e5 cells."""
 
 from __future__ import annotations
 
