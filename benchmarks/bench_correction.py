@@ -76,7 +76,7 @@ def measure(geometry, checkpoint: dict, n: int) -> dict:
     from meshgen.correction import correct_boundary
     from meshgen.elliptic import elliptic
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import mesh_from_model
+    from meshgen.neural.network_map import mesh_from_model
     from meshgen.quality import quality_report
     from meshgen.tfi import parametric_grid
 

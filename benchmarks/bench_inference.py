@@ -103,15 +103,15 @@ print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stim
 """
 
 
-def mesh_command(cells: int, folder: Path, environment: dict | None = None) -> dict:
-    """Run ``meshgen mesh --dims cells^3 -o out.vtu -q`` in ``folder`` (with ``environment``,
+def mesh_command(cells: int, folder: Path, environment: dict | None = None, options=()) -> dict:
+    """Run ``meshgen mesh --dims cells^3 -o out.vtu -q [options]`` in ``folder`` (with ``environment``,
     default this process's, and this checkout first on PYTHONPATH) by a wrapper process whose only
     child it is. Returns its wall and CPU seconds from start to exit (``import torch``, meshing,
     quality, writing), its peak resident memory (ru_maxrss of the wrapper's RUSAGE_CHILDREN: this
     process's would mix in earlier children) and the size of the file written."""
     environment = dict(os.environ if environment is None else environment)
     environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
-    command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q"]
+    command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q", *options]
     result = subprocess.run(
         [sys.executable, "-c", _WRAPPER, *command], cwd=folder, env=environment, check=True, capture_output=True, text=True
     )

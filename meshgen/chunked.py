@@ -42,6 +42,7 @@ from meshgen.errors import MeshgenError
 from meshgen.formats import check_output_path, check_patches, format_named, streaming_writer
 from meshgen.formats.streamed import NodeFile, write_streamed
 from meshgen.grid import BLOCK_NODES, block_slices
+from meshgen.neural.network_map import bubble_on_grid, evaluate_network, model_boundary_errors
 from meshgen.patches import geometry_patches
 from meshgen.publish import publishing, reason, remove_path, temporary_path
 from meshgen.quality.chunked import chunked_report
@@ -130,11 +131,9 @@ def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
     """The map M of a trained network (``checkpoint["model"]``) on the tensor grid of
     ``sub_coords``: center + scale N (soft boundary) or TFI + scale b N (exact boundary, whose TFI
     on these nodes is ``tfi_block``). Shape (len(sub_coords[0]), ..., d), float64."""
-    from meshgen.neural.inference import bubble_on_grid, evaluate_on_grid
-
     shape = tuple(len(c) for c in sub_coords)
     dim = len(sub_coords)
-    N = evaluate_on_grid(model, sub_coords, workers=1).reshape(*shape, dim)
+    N = evaluate_network(model, sub_coords, workers=1).reshape(*shape, dim)
     scale = float(model["scale"])
     if not model["exact_boundary"]:
         N *= scale
@@ -169,8 +168,6 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     ``correct_boundary``: X = M + TFI[g - M] (``meshgen.correction.add_boundary_correction``
     block by block, the face errors computed once on the faces alone); else the network's map M.
     """
-    from meshgen.neural.inference import model_boundary_errors
-
     coords = [np.asarray(c, dtype=float) for c in coords]
     boundary_values = face_values(geometry.boundary, coords)
     tfi_terms = face_terms(boundary_values, coords) if model["exact_boundary"] else None

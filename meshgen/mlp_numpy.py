@@ -33,7 +33,7 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 
-__all__ = ["CHUNK_NODES", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
+__all__ = ["CHUNK_NODES", "finite_output", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
 
 CHUNK_NODES = 8192
 
@@ -155,6 +155,14 @@ def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: i
         else:
             with ThreadPoolExecutor(max_workers=workers) as pool:
                 list(pool.map(run, range(0, count, span)))
+    return out
+
+
+def finite_output(out: np.ndarray) -> np.ndarray:
+    """``out`` when every value the network gave is finite, else MeshgenError (never a NaN mesh)."""
+    bad = out.size - int(np.count_nonzero(np.isfinite(out)))
+    if bad:
+        raise MeshgenError(f"the network's output is non-finite (NaN or infinity) at {bad} of {out.size} values: no mesh written")
     return out
 
 

@@ -29,6 +29,7 @@ from meshgen.limits import check_mesh_memory
 from meshgen.meshing import Mesh
 from meshgen.meshing_blocks import block_spec, mesh_block_set
 from meshgen.methods import get_method, make_mesh
+from meshgen.neural.models import TrainedModel, find_model
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
 from meshgen.resources import check_free_space, needs_chunking
@@ -271,15 +272,13 @@ def _neural_model(request: MeshRequest, dims, warn, fallback: bool):
     """The model to mesh with (``meshgen.neural.inference.find_model``) and the geometry it was
     trained on, with its parameters: the one asked for when the model was trained on it, else the
     model's. With ``fallback`` and no checkpoint, (None, geometry) when no trained model fits."""
-    # The neural package is loaded only when a model is needed: it brings torch.
-    from meshgen.neural.family import load_family_member
-    from meshgen.neural.models import TrainedModel, find_model
-
     spec, checkpoint = request.geometry, request.checkpoint
     given_params = dict(request.params or {})
     if isinstance(checkpoint, TrainedModel):  # a model the caller loaded (meshgen compare)
         return checkpoint, load_checked_geometry(spec or DEFAULT_GEOMETRY, request.params, dims)
     if checkpoint is not None:
+        from meshgen.neural.family import load_family_member  # torch
+
         # A family checkpoint: the parameters pick the member (inside the trained ranges).
         named = None if spec is None else spec.name if isinstance(spec, Geometry) else load_geometry(spec).name
         member = load_family_member(checkpoint, given_params, named)

@@ -54,7 +54,7 @@ def neural_figures(model, geometry, cells: int) -> dict:
     the corrected and polished one (the default: ``meshgen.polish``)."""
     from meshgen.correction import correct_boundary
     from meshgen.layout import trained_layout, with_layout
-    from meshgen.neural.inference import mesh_from_model
+    from meshgen.neural.network_map import mesh_from_model
     from meshgen.polish import polish
     from meshgen.tfi import parametric_grid
 

@@ -117,7 +117,7 @@ def soft_model(rng):
 
 
 def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_the_error(semicylinder):
-    from meshgen.neural.inference import mesh_from_model
+    from meshgen.neural.network_map import mesh_from_model
     from meshgen.tfi import parametric_grid
 
     model = soft_model(np.random.default_rng(1))
@@ -146,8 +146,8 @@ def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_th
 
 
 def test_bundled_neural_model_in_blocks_equals_the_in_memory_map(semicylinder):
-    from meshgen.neural.inference import mesh_from_model
     from meshgen.neural.models import find_model
+    from meshgen.neural.network_map import mesh_from_model
     from meshgen.tfi import parametric_grid
 
     model = find_model(geometry_name="semicylinder").checkpoint["model"]

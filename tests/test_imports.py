@@ -92,6 +92,7 @@ LAYERS = [
     [
         "meshgen.quality.kernels",
         "meshgen.quality.compiled",
+        "meshgen.quality.numpy_kernels",
         "meshgen.quality.structured",
         "meshgen.quality.faces",
         "meshgen.quality.faces_openfoam",

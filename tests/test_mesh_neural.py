@@ -15,9 +15,10 @@ from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cl
 from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
-from meshgen.neural.inference import evaluate_on_grid, mesh_from_model
+from meshgen.neural.inference import evaluate_on_grid
 from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.models import MODELS_DIR
+from meshgen.neural.network_map import mesh_from_model
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
 from meshgen.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
@@ -150,7 +151,9 @@ def test_exact_boundary_map_on_a_clustered_grid(semicylinder):
 
     trained_on = with_layout(semicylinder, trained_layout(checkpoint))  # mesh_from_model takes the geometry as trained
     X = mesh_from_model(checkpoint["model"], coords, trained_on, chunk=64)
-    np.testing.assert_allclose(X, network_at(checkpoint, coords, semicylinder), rtol=0, atol=1e-6)
+    # NumPy's float32 products (meshing) against torch's (network_at): equal to float32 round-off
+    # through four 85-wide layers, times the model's scale
+    np.testing.assert_allclose(X, network_at(checkpoint, coords, semicylinder), rtol=0, atol=1e-5)
 
 
 @pytest.mark.parametrize("name, dims", [("semicylinder", (5, 7, 4)), ("semidisk", (9, 6)), ("canal", (3, 4, 6))])
@@ -270,7 +273,7 @@ def test_correction_of_an_error_inside_one_face_fades_as_the_closed_form(semicyl
 def test_correction_block_by_block_from_the_model_equals_the_whole_mesh(soft_3d, semicylinder):
     """What a block-wise mesher does: the boundary errors from the faces alone, then each block's
     nodes from the network plus the correction on that block."""
-    from meshgen.neural.inference import model_boundary_errors
+    from meshgen.neural.network_map import model_boundary_errors
 
     model = load_checkpoint(soft_3d)["model"]
     coords = node_coordinates((9, 6, 7), ["xi:both:1.2"])
@@ -390,7 +393,8 @@ def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylind
     assert result.returncode == 0, result.stderr
     X = read_points(tmp_path / "m.vtu", dims)
     coords = node_coordinates(dims, ["zeta:both:1.15"])
-    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-6)
+    # NumPy's float32 forward pass (meshing) against torch's (network_at): float32 round-off
+    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-5)
     # Along the axis z = 2 zeta for the exact Winslow map of a prism; the network keeps it closely,
     # so physical cell heights grow by the ratio asked for.
     heights = np.diff(X[2, 2, :, 2])

@@ -111,3 +111,30 @@ def test_blas_threads_are_restored_after_concurrent_passes():
     assert get() == before
     for result in results[1:]:
         np.testing.assert_array_equal(result, results[0])
+
+
+def test_meshing_with_the_bundled_network_imports_no_torch(tmp_path):
+    """``meshgen mesh`` with the bundled model on a CPU: NumPy's forward pass, torch never imported
+    (the device check included: no NVIDIA device is visible with CUDA_VISIBLE_DEVICES empty)."""
+    import os
+    import subprocess
+    import sys
+
+    script = (
+        "import sys; from meshgen.cli import main; sys.argv = ['meshgen', 'mesh', '--dims', '3', '3', '3', '-o', 'm.vtu', '-q'];"
+        "\ntry:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\nprint('torch' in sys.modules)"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(BUNDLED.parents[3]), "CUDA_VISIBLE_DEVICES": ""}
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=environment, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "False"
+    assert (tmp_path / "m.vtu").is_file()
+
+
+def test_auto_device_is_cpu_without_a_visible_gpu(monkeypatch):
+    from meshgen.neural.device import inference_device, nvidia_device_visible
+
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "")
+    assert nvidia_device_visible() is False
+    if not torch.cuda.is_available():
+        assert inference_device("auto") == "cpu"

@@ -66,7 +66,8 @@ def test_exact_boundary_map_meets_the_boundary(tmp_path, semidisk):
     with torch.no_grad():
         N = network(torch.from_numpy(grid.reshape(-1, 2)).float()).double().numpy().reshape(X.shape)
     expected = tfi(semidisk, None, coords) + checkpoint["model"]["scale"] * bubble(grid)[..., None] * N
-    np.testing.assert_allclose(X, expected, atol=1e-12)
+    # meshing evaluates the network with NumPy, this with torch: equal to float32 round-off
+    np.testing.assert_allclose(X, expected, atol=1e-6)
     assert np.abs(N).max() > 1e-4
 
 

@@ -1,14 +1,19 @@
-"""The compiled quality kernels against the plain-NumPy reference definition
-(``tests/quality_reference.py``): random, strongly distorted (folded, inverted) and degenerate
+"""The compiled quality kernels against the plain-NumPy definition
+(``meshgen.quality.numpy_kernels``): random, strongly distorted (folded, inverted) and degenerate
 meshes, structured and unstructured paths, and a block of a mesh evaluated with the whole mesh's
 tolerance."""
 
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
-from quality_reference import reference_cell_metrics
 
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.quality import METRICS, cell_metrics_unstructured
+from meshgen.quality.numpy_kernels import numpy_cell_metrics as reference_cell_metrics
 from meshgen.quality.structured import structured_metrics
 
 
@@ -30,7 +35,7 @@ def assert_agree(metrics, degenerate, reference, reference_degenerate):
 @pytest.mark.parametrize("sigma", [0.02, 0.3, 0.8])
 def test_compiled_kernels_agree_with_the_numpy_reference(dims, sigma):
     X = distorted(dims, sigma, seed=int(sigma * 100) + len(dims))
-    metrics, degenerate, _ = structured_metrics(X)
+    metrics, degenerate, _ = structured_metrics(X, kernels="compiled")
     reference, reference_degenerate = reference_cell_metrics(X)
     assert_agree(metrics, degenerate, reference, reference_degenerate)
     if sigma >= 0.3:  # folded faces and inverted cells are covered
@@ -49,7 +54,7 @@ def test_degenerate_inverted_and_non_finite_cells_agree(dims):
     X[-1, -1] = np.inf
     X[-2, 2] = X[-3, 2] + (X[-3, 2] - X[-2, 2])  # a node mirrored through its neighbour: inverted cells
     with np.errstate(invalid="ignore", over="ignore"):
-        metrics, degenerate, info = structured_metrics(X)
+        metrics, degenerate, info = structured_metrics(X, kernels="compiled")
     reference, reference_degenerate = reference_cell_metrics(X)
     # X[2, 0] and X[-1, -1] are a line of nodes in 3D, one node in 2D
     assert degenerate.any() and info["nonfinite_nodes"] == 2 * (X.shape[2] if len(dims) == 3 else 1)
@@ -60,7 +65,7 @@ def test_degenerate_inverted_and_non_finite_cells_agree(dims):
 @pytest.mark.parametrize("dims", [(9, 8, 7), (11, 10)])
 def test_a_block_of_cells_gets_its_values_in_the_whole_mesh(dims):
     X = distorted(dims, 0.3, seed=2)
-    whole, whole_degenerate, _ = structured_metrics(X)
+    whole, whole_degenerate, _ = structured_metrics(X, kernels="compiled")
     cell_shape = tuple(dims)
     # cells 2..6 along axis 0 (the others in full) from the nodes of cells 1..7: one neighbour layer
     X_block = X[1:9]
@@ -71,3 +76,20 @@ def test_a_block_of_cells_gets_its_values_in_the_whole_mesh(dims):
     for name in METRICS:
         np.testing.assert_array_equal(part[name], expected[name], err_msg=name)
     np.testing.assert_array_equal(degenerate, whole_degenerate.reshape(cell_shape)[2:7].reshape(-1))
+
+
+def test_small_meshes_take_the_numpy_kernels_without_loading_numba(tmp_path):
+    """A fresh process's quality of a small mesh never imports numba, and gives the compiled values."""
+    X = distorted((6, 5, 4), 0.3, seed=9)
+    np.save(tmp_path / "X.npy", X)
+    script = (
+        "import sys, numpy as np; from meshgen.quality.structured import structured_metrics; "
+        f"m, d, _ = structured_metrics(np.load({str(tmp_path / 'X.npy')!r})); "
+        f"np.save({str(tmp_path / 'm.npy')!r}, np.stack([m[k] for k in {list(METRICS)!r}])); "
+        "print('numba' in sys.modules)"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=environment, check=True)
+    assert done.stdout.strip() == "False"
+    compiled, _, _ = structured_metrics(X, kernels="compiled")
+    np.testing.assert_allclose(np.load(tmp_path / "m.npy"), np.stack([compiled[k] for k in METRICS]), rtol=0, atol=1e-12)

@@ -23,6 +23,8 @@ from meshgen.errors import MeshgenError, ParameterError
 from meshgen.formats import read_mesh
 from meshgen.methods import METHODS, TRAINED, get_method
 from meshgen.neural.config import resolve_config
+from meshgen.neural.device import inference_device
+from meshgen.neural.models import load_model
 from meshgen.neural.session import check_training_size
 from meshgen.quality import VALID_RULE, as_node_array, cells_for_quality, evaluate_file, recorded_metadata
 from meshgen.request import MeshRequest, carry_out
@@ -109,8 +111,6 @@ def neural_method(name: str, geometry, budget: Budget, checkpoint_path=None, rep
     ``history`` (path of the loss history CSV, or None). ``reporter``: a function of the training
     configuration that returns a training reporter (``meshgen.neural.progress.reporter_for``), or None.
     """
-    from meshgen.neural.inference import inference_device  # torch
-    from meshgen.neural.models import load_model
     from meshgen.neural.train import train
 
     def total_loss(test_loss):

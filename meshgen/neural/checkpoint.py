@@ -29,19 +29,10 @@ from pathlib import Path
 import torch
 
 from meshgen.atomic import atomic_path
-from meshgen.errors import MeshgenError
-from meshgen.inputs import InputError, check_input_file
+from meshgen.neural.checkpoint_data import FORMAT, FORMAT_VERSION, CheckpointError, check_checkpoint, check_readable
 from meshgen.publish import reason
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
-
-
-FORMAT = "meshgen-checkpoint"
-FORMAT_VERSION = 1
-
-
-class CheckpointError(MeshgenError):
-    """A checkpoint is missing, damaged, foreign or too new."""
 
 
 def save_checkpoint(path: str | os.PathLike, checkpoint: dict) -> None:
@@ -68,51 +59,12 @@ def load_checkpoint(path: str | os.PathLike) -> dict:
     meshgen (a higher ``format_version``).
     """
     path = Path(path)
-    if not path.exists():
-        raise CheckpointError(f"checkpoint {path} does not exist")
-    try:
-        check_input_file(path, "checkpoint")  # a FIFO or a device is never handed to torch
-    except InputError as exc:
-        raise CheckpointError(str(exc)) from None
+    check_readable(path)  # a FIFO or a device is never handed to torch
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except (pickle.UnpicklingError, RuntimeError, EOFError, zipfile.BadZipFile, ValueError, OSError) as exc:
         raise CheckpointError(f"checkpoint {path} {_load_failure(path, exc)}") from exc
-    if not isinstance(checkpoint, dict) or checkpoint.get("format") != FORMAT:
-        raise CheckpointError(f"{path} is not a meshgen checkpoint")
-    version = checkpoint.get("format_version")
-    if not isinstance(version, int) or version > FORMAT_VERSION:
-        raise CheckpointError(
-            f"checkpoint {path} has format version {version!r}, newer than this meshgen reads ({FORMAT_VERSION}): upgrade meshgen"
-        )
-    missing = [key for key in ("model", "geometry", "config") if key not in checkpoint]
-    if missing:
-        raise CheckpointError(f"checkpoint {path} lacks {', '.join(missing)}: not a complete meshgen checkpoint")
-    model, geometry = checkpoint["model"], checkpoint["geometry"]
-    if not (isinstance(model, dict) and isinstance(geometry, dict) and {"name", "spec", "dim", "params"} <= set(geometry)):
-        raise CheckpointError(f"checkpoint {path}: its model or geometry entry is damaged: not a meshgen checkpoint")
-    if model.get("dim") != geometry["dim"]:
-        raise CheckpointError(
-            f"checkpoint {path} holds a {model.get('dim')}D map but records the {geometry['dim']}D geometry "
-            f"'{geometry['name']}': not a consistent meshgen checkpoint"
-        )
-    _check_values(checkpoint, path)
-    return checkpoint
-
-
-def _check_values(checkpoint: dict, path: Path) -> None:
-    """CheckpointError for weights that are not finite numbers, or a training state that is not
-    one (a stage, non-negative step counts): a damaged file fails here, before anything is written."""
-    state = checkpoint["model"].get("state_dict", {})
-    tensors = list(state.values()) if isinstance(state, dict) else []
-    if not all(isinstance(t, torch.Tensor) and bool(torch.isfinite(t).all()) for t in tensors):
-        raise CheckpointError(f"checkpoint {path}: its network holds non-finite weights (NaN or infinity): the file is damaged")
-    if "stage" in checkpoint:
-        steps = [checkpoint.get(key) for key in ("step", "stage_step")]
-        if checkpoint["stage"] not in ("pretrain", "adam", "lbfgs", "done") or not all(
-            isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in steps
-        ):
-            raise CheckpointError(f"checkpoint {path}: its training state (stage, step) is damaged")
+    return check_checkpoint(checkpoint, path)
 
 
 def _load_failure(path: Path, exc: Exception) -> str:

@@ -41,6 +41,8 @@ from meshgen.geometry import check_boundary, load_recorded_geometry
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_points
 from meshgen.neural.model import INPUT_MAP, bubble
+from meshgen.neural.models import TrainedModel, display_path
+from meshgen.neural.network_map import mesh_from_model
 from meshgen.tfi import parametric_grid, transfinite_on_grid
 
 __all__ = [
@@ -287,8 +289,6 @@ def is_family(checkpoint: dict) -> bool:
 def mesh_member(checkpoint: dict, values: dict, coords) -> np.ndarray:
     """Node array of the member with ``values`` (name -> number, checked against the ranges) on the
     tensor grid of ``coords``: one forward pass of the family network, exact boundary."""
-    from meshgen.neural.inference import mesh_from_model
-
     family = family_from_checkpoint(checkpoint)
     values = family.check_values(values)
     return mesh_from_model(member_model(checkpoint["model"], family.normalised(values)), coords, family.member(values))
@@ -299,8 +299,6 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
     command line, as a ``meshgen.neural.models.TrainedModel`` whose model is the member's plain
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
     Returns None when ``path`` is no family checkpoint."""
-    from meshgen.neural.models import TrainedModel, display_path
-
     path = Path(path)
     checkpoint = checkpoints.load_checkpoint(path)
     if not is_family(checkpoint):

@@ -27,6 +27,7 @@ from meshgen.cube import face_samples
 from meshgen.geometry import load_recorded_geometry
 from meshgen.layout import trained_layout, with_layout
 from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.network_map import CHUNK_NODES, mesh_from_model
 
 __all__ = ["MLP", "bubble", "normalisation", "describe", "load_checkpoint", "mesh_from_checkpoint"]
 
@@ -99,8 +100,6 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
     Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.inference``).
     Returns the node array X, shape (len(coords[0]), ..., dim), float64.
     """
-    from meshgen.neural.inference import CHUNK_NODES, mesh_from_model
-
     model = checkpoint["model"]
     if model["exact_boundary"] and geometry is None:
         geometry = geometry_from_checkpoint(checkpoint)

@@ -4,7 +4,7 @@ Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/
 (skipping runs of another geometry or other parameters than the ones given); else the model
 bundled in ``meshgen/_models/`` for its geometry with default parameters.
 
-The method (``build_neural``): the model's map on the tensor grid (``meshgen.neural.inference``),
+The method (``build_neural``): the model's map on the tensor grid (``meshgen.neural.network_map``),
 then the boundary correction X = N + TFI[g - N] (``meshgen.correction``).
 """
 
@@ -22,9 +22,9 @@ from meshgen.correction import boundary_errors, correct_boundary, error_figures
 from meshgen.errors import MeshgenError, ParameterError
 from meshgen.geometry import load_geometry
 from meshgen.layout import trained_layout, with_layout
-from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
+from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
 from meshgen.neural.config import ConfigError, preset_paths, resolve_config, schema, to_dict
-from meshgen.neural.inference import mesh_from_model, network_layers
+from meshgen.neural.network_map import mesh_from_model
 from meshgen.polish import polish as polish_mesh
 
 __all__ = [
@@ -180,14 +180,14 @@ def bundled_models() -> dict[str, Path]:
 
 
 def load_model(path, source: str = "checkpoint", record: dict | None = None) -> TrainedModel:
-    """Load the checkpoint at ``path`` (``weights_only``: a file carrying code fails to load)."""
+    """Load the checkpoint at ``path`` as plain data, without torch (a file carrying code is refused unread)."""
     path = Path(path)
-    checkpoint = load_checkpoint(path)
+    checkpoint = read_plain_checkpoint(path)
     if "family" in checkpoint:  # meshgen.neural.family: a member is chosen with --param
         raise CheckpointError(
             f"checkpoint {path} holds a family of shapes: mesh a member with --checkpoint {path} --param name=value"
         )
-    network_layers(checkpoint["model"])  # a foreign model description fails here, before any work
+    check_network(checkpoint["model"])  # a foreign model description fails here, before any work
     return TrainedModel(path, checkpoint, source, record or {})
 
 

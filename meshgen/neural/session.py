@@ -15,6 +15,7 @@ from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
 from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.device import inference_device
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
 
@@ -164,8 +165,6 @@ def prepare_run(
             f"'{geometry_object.name}' is {geometry_object.dim}D"
         )
     check_training_size(config, geometry_object.dim)
-    from meshgen.neural.inference import inference_device
-
     device = inference_device(device)
     if threads is not None:
         import torch

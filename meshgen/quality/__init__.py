@@ -2,7 +2,8 @@
 
 Where things are:
 
-- ``kernels``: the metric definitions and the vectorised kernels on one block of cells;
+- ``kernels``: the metric definitions; ``compiled``: the numba kernels; ``numpy_kernels``: the same
+  metrics in plain NumPy (small meshes, and the compiled kernels' test reference);
 - ``structured``: node arrays (``cell_metrics``); ``faces``: unstructured cells, face neighbours
   by face matching (``match_faces``, ``cell_metrics_unstructured``);
 - ``report``: summaries, inverted cells, verdict, boundary deviation (``quality_report``);

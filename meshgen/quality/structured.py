@@ -1,22 +1,44 @@
 """Per-cell metrics of a structured node array (n1+1, n2+1[, n3+1], dim): the compiled kernels of
-``meshgen.quality.compiled`` read corners and face neighbours straight from the array."""
+``meshgen.quality.compiled`` read corners and face neighbours straight from the array.
+
+Small meshes in a process that has not loaded numba take the NumPy kernels of
+``meshgen.quality.numpy_kernels`` instead (``kernels="auto"``): importing numba and loading the
+compiled kernels from its cache costs about a second, NumPy needs less than that for
+``NUMPY_CELLS`` cells. Both agree to 1e-12 (tested)."""
 
 from __future__ import annotations
+
+import sys
 
 import numpy as np
 
 from meshgen.errors import MeshgenError
 from meshgen.limits import MAX_COORDINATE
+from meshgen.quality import numpy_kernels
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS, WORST
 
 __all__ = [
+    "NUMPY_CELLS",
     "apply_degenerate",
     "cell_metrics",
     "check_node_array",
     "degenerate_tolerance",
     "orientation_2d",
     "structured_metrics",
+    "use_compiled",
 ]
+
+NUMPY_CELLS = 500_000  # below: the NumPy kernels, unless numba is loaded already (break-even about 9e5)
+
+
+def use_compiled(cells: int, kernels: str = "auto") -> bool:
+    """Whether ``cells`` cells take the compiled kernels: ``kernels`` "compiled", "numpy", or "auto"
+    (compiled when numba is loaded already or there are at least ``NUMPY_CELLS`` cells)."""
+    if kernels not in ("auto", "compiled", "numpy"):
+        raise ValueError(f"kernels must be auto, compiled or numpy, not {kernels!r}")
+    if kernels == "auto":
+        return "numba" in sys.modules or cells >= NUMPY_CELLS
+    return kernels == "compiled"
 
 
 def check_node_array(X) -> np.ndarray:
@@ -26,12 +48,15 @@ def check_node_array(X) -> np.ndarray:
     return X
 
 
-def degenerate_tolerance(points) -> tuple[float, int]:
+def degenerate_tolerance(points, kernels: str = "auto") -> tuple[float, int]:
     """Degenerate-edge length and the number of non-finite nodes of ``points`` (N, dim), from the
     finite coordinates' bounding box."""
-    from meshgen.quality.compiled import finite_extent
-
-    low, high, nonfinite = finite_extent(np.ascontiguousarray(points, dtype=float))
+    points = np.ascontiguousarray(points, dtype=float)
+    if use_compiled(len(points), kernels):
+        from meshgen.quality.compiled import finite_extent
+    else:
+        finite_extent = numpy_kernels.finite_extent
+    low, high, nonfinite = finite_extent(points)
     if not np.all(np.isfinite(low)):
         return 0.0, int(nonfinite)
     largest = max(float(np.abs(low).max()), float(np.abs(high).max()))
@@ -59,22 +84,30 @@ def apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:
     sj[degenerate] = np.minimum(np.where(np.isfinite(sj[degenerate]), sj[degenerate], 0.0), 0.0)
 
 
-def structured_metrics(X, tolerance=None, orientation=None, cells=None):
+def structured_metrics(X, tolerance=None, orientation=None, cells=None, kernels: str = "auto"):
     """Per-cell metrics (C order of cells), the degenerate mask and info (non-finite nodes) of node
     array ``X``.
 
     ``tolerance`` (degenerate-edge length) and ``orientation`` (2D: +1 or -1) default to those of
     ``X`` itself; a block of a larger mesh passes the whole mesh's, so its cells get the values they
     get in the whole. ``cells``: per axis a slice of the cells to evaluate (default all); the others
-    serve as face neighbours only."""
-    from meshgen.quality import compiled
-
+    serve as face neighbours only. ``kernels``: see ``use_compiled`` (a block of cells always
+    takes the compiled ones)."""
     X = np.ascontiguousarray(check_node_array(X))
     dim = X.shape[-1]
     cell_shape = tuple(n - 1 for n in X.shape[:-1])
     nonfinite = None
+    if cells is None and not use_compiled(int(np.prod(cell_shape)), kernels):
+        if tolerance is None:
+            tolerance, nonfinite = degenerate_tolerance(X.reshape(-1, dim), kernels="numpy")
+        if dim == 2 and orientation is None:
+            orientation = orientation_2d(X)
+        metrics, degenerate = numpy_kernels.numpy_cell_metrics(X, tolerance, orientation)
+        return metrics, degenerate, {"nonfinite_nodes": nonfinite}
+    from meshgen.quality import compiled
+
     if tolerance is None:
-        tolerance, nonfinite = degenerate_tolerance(X.reshape(-1, dim))
+        tolerance, nonfinite = degenerate_tolerance(X.reshape(-1, dim), kernels="compiled")
     if cells is None:
         cells = tuple(slice(0, n) for n in cell_shape)
     first = tuple(int(s.start) for s in cells)
