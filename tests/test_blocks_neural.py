@@ -41,10 +41,10 @@ def test_tiny_training_writes_a_block_checkpoint(pipe_checkpoint):
     assert {key.split(".")[1] for key in weights} == {"0", "1", "2", "3", "4"}  # one network per block
 
 
-@pytest.mark.parametrize("dims, polish", [((4, 2, 3), False), ((6, 3, 5), False), ((4, 2, 3), True)])
+@pytest.mark.parametrize("dims, polish", [((4, 2, 3), None), ((6, 3, 5), None), ((4, 2, 3), True)])
 def test_neural_pipe_is_conforming_exact_on_its_boundary_and_valid(pipe_checkpoint, dims, polish):
     made = meshgen.mesh("pipe", dims, method="neural", model=str(pipe_checkpoint), polish=polish)
-    assert ("polish" in made.info) == polish
+    assert ("polish" in made.info) == bool(polish)  # polished only when asked
     assert made.method == "neural" and made.X is None
     block_set = made.geometry
     assert made.info["correction"]["interface_gap_before"] > 0  # the networks alone do not conform
@@ -96,11 +96,11 @@ def test_train_and_mesh_the_pipe_through_the_cli(run_cli, tmp_path):
     assert trained.returncode == 0, trained.stderr
     assert "Trained pipe for 42 steps" in trained.stdout
     checkpoint = tmp_path / "runs" / "pipe-1" / "checkpoint.pt"
-    result = run_cli("mesh", "-g", "pipe", "--dims", "4", "2", "3", "--method", "neural", "--no-polish", "-o", "pipe.cgns")
+    result = run_cli("mesh", "-g", "pipe", "--dims", "4", "2", "3", "--method", "neural", "-o", "pipe.cgns")
     assert result.returncode == 0, result.stderr  # the model: the newest run of the pipe under ./runs
     assert "runs/pipe-1/checkpoint.pt" in result.stdout + result.stderr
     zones = read_zones(tmp_path / "pipe.cgns")
-    made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(checkpoint), polish=False)
+    made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(checkpoint))
     assert [zone["name"] for zone in zones] == list(made.geometry.names)
     for zone, X in zip(zones, made.blocks):  # the file holds the mesh the Python call makes
         np.testing.assert_array_equal(zone["X"], X)
