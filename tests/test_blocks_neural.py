@@ -90,19 +90,18 @@ def test_interface_stencil_is_the_winslow_residual_of_one_smooth_map():
         torch.testing.assert_close(residual, expected, atol=2e-5, rtol=1e-4)
 
 
-def test_train_and_mesh_the_pipe_through_the_cli(run_cli, tmp_path):
+def test_train_the_pipe_through_the_cli_and_mesh_the_newest_run(run_cli, tmp_path, monkeypatch):
     tiny = [f"--set={item}" for item in (*TINY, *TINY_BLOCKS)]
     trained = run_cli("train", "-g", "pipe", "--out", "runs/pipe-1", "--quiet", *tiny)
     assert trained.returncode == 0, trained.stderr
     assert "Trained pipe for 42 steps" in trained.stdout
-    checkpoint = tmp_path / "runs" / "pipe-1" / "checkpoint.pt"
-    result = run_cli("mesh", "-g", "pipe", "--dims", "4", "2", "3", "--method", "neural", "-o", "pipe.cgns")
-    assert result.returncode == 0, result.stderr  # the model: the newest run of the pipe under ./runs
-    assert "runs/pipe-1/checkpoint.pt" in result.stdout + result.stderr
+    monkeypatch.chdir(tmp_path)  # auto: the newest run of the pipe under ./runs
+    made = meshgen.mesh("pipe", (4, 2, 3))
+    assert made.method == "neural" and "runs/pipe-1/checkpoint.pt" in made.notes[0]
+    made.write(tmp_path / "pipe.cgns")
     zones = read_zones(tmp_path / "pipe.cgns")
-    made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(checkpoint))
     assert [zone["name"] for zone in zones] == list(made.geometry.names)
-    for zone, X in zip(zones, made.blocks):  # the file holds the mesh the Python call makes
+    for zone, X in zip(zones, made.blocks):  # the file holds the mesh
         np.testing.assert_array_equal(zone["X"], X)
     assert all(len(zone["connections"]) >= 3 for zone in zones)  # every interface, from both sides
 
