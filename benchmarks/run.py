@@ -45,7 +45,11 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``chunked``: meshes larger than memory (``bench_chunked.py``): TFI to ``.cgns`` in memory and in
   blocks at 200^3 (throughput ratio), the chunked path at 400^3 and ``meshgen evaluate --chunked``
   of that file (peak memory), a neural mesh in blocks; the 1000^3 rows are
-  ``bench_chunked.py --big-dims 1000`` by hand; the GPU row is skipped without a CUDA device.
+  ``bench_chunked.py --big-dims 1000`` by hand; the GPU row is skipped without a CUDA device;
+- ``blocks_neural``: the pipe's model (``benchmarks/models/pipe``, one network per block) against the
+  multi-block elliptic mesh at --dims 8 4 4 and 16 8 4 (--quick: 4 2 4 and 8 4 4, not judged): the
+  network's conforming mesh and the default (polished) mesh, inverted cells, interface gaps
+  (``bench_blocks_neural.py``).
 
 The summary at the end lists the headline figures with their targets and met /
 not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
@@ -106,10 +110,17 @@ SECTIONS = [
     "chunked",
     "shapes",
     "fidelity",
+    "blocks_neural",
 ]
 
 # figure key -> (comparison, target, unit, what the figure measures)
 TARGETS = {
+    "neural_pipe_min_angle_degrees": (
+        "<=",
+        0.5,
+        "deg",
+        "neural pipe model: |mean min angle - multi-block elliptic's|, worst of --dims 8 4 4 and 16 8 4; 0 inverted, conforming",
+    ),
     "inference_101_seconds": ("<=", 0.6, "s", "forward pass of a [85]*4 network on 101^3 nodes, 2 cores"),
     "mesh_command_100_seconds": (
         "<=",
@@ -528,6 +539,12 @@ def fidelity(quick: bool) -> dict:
     import bench_fidelity
 
     return bench_fidelity.run(quick)
+
+
+def blocks_neural(quick: bool) -> dict:
+    import bench_blocks_neural
+
+    return bench_blocks_neural.run(quick)
 
 
 def family(quick: bool) -> dict:
@@ -970,6 +987,28 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                     "x",
                     key="fidelity_neural_ratio" if label == "bundled" else None,
                 )
+    if "blocks_neural" in sections and not sections["blocks_neural"].get("skipped"):
+        data = sections["blocks_neural"]
+        model = data["model"]
+        for row in data["rows"]:
+            if row["mesh"] == "elliptic":
+                continue
+            add(
+                f"pipe {' '.join(map(str, row['dims']))}, {row['mesh']}: mean min angle - elliptic's",
+                row["difference_degrees"],
+                "deg",
+                note=f"{row['inverted']} inverted, interface gap {row['interface_gap_max']:.0e}, {row['sweeps']} sweeps",
+            )
+        add(
+            "neural pipe model (default mesh): worst |mean min angle - elliptic's| of 2 resolutions",
+            data["worst_difference_degrees"],
+            "deg",
+            "neural_pipe_min_angle_degrees",
+            judged=data["judged"],
+            note=f"model {model['bytes'] // 1000} kB, {model['steps']} steps, trained {model['training_seconds']:.0f} s",
+        )
+        if data["judged"] and not data["met"]:
+            rows[-1]["met"] = False  # an inverted cell or a gap fails the target whatever the angles
     return rows
 
 
@@ -1119,6 +1158,7 @@ def main(argv=None) -> int:
         "chunked": lambda: chunked_section(args.quick),
         "shapes": lambda: shapes(args.quick),
         "fidelity": lambda: fidelity(args.quick),
+        "blocks_neural": lambda: blocks_neural(args.quick),
     }
     for name in chosen:
         section_header(name)

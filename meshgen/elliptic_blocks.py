@@ -246,7 +246,12 @@ def _junction_stencil(block_set: BlockSet, numbering, junctions):
 
 
 def elliptic_blocks(
-    block_set: BlockSet, tol: float | None = None, max_iter: int | None = None, progress=None, slide: bool | None = None
+    block_set: BlockSet,
+    tol: float | None = None,
+    max_iter: int | None = None,
+    progress=None,
+    slide: bool | None = None,
+    initial=None,
 ):
     """Multi-block Winslow mesh of ``block_set``: (list of node arrays, one per block, interface
     nodes identical in every block; info dict as ``meshgen.elliptic.solve_winslow``'s, with
@@ -254,11 +259,12 @@ def elliptic_blocks(
     characteristic length; ``max_iter``: most sweeps; ``slide``: nodes on flat patches (a pipe's
     inlet, a channel's straight walls) slide in their plane so that grid lines meet it at right
     angles (``planar_sliding``), else every boundary node stays where the TFI put it; default: on
-    in 2D, off in 3D."""
+    in 2D, off in 3D. ``initial``: the node arrays to start from (conforming, on the boundary: a
+    network's corrected mesh; copied), else the TFI."""
     tol = DEFAULT_TOL if tol is None else tol
     max_sweeps = MAX_SWEEPS if max_iter is None else max_iter
     start = time.perf_counter()
-    Xs = tfi_blocks(block_set)
+    Xs = tfi_blocks(block_set) if initial is None else [np.array(X, dtype=float) for X in initial]
     if min(min(shape) for shape in block_set.node_shapes) < 3:
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     junctions, numbering, count = junction_nodes(block_set)

@@ -27,7 +27,7 @@ from meshgen.geometry import Geometry, bind, check_boundary, load_geometry, load
 from meshgen.layout import trained_layout, with_layout
 from meshgen.limits import check_mesh_memory
 from meshgen.meshing import Mesh
-from meshgen.meshing_blocks import block_spec, mesh_block_set
+from meshgen.meshing_blocks import block_spec, checkpoint_block_spec, mesh_block_set
 from meshgen.methods import get_method, make_mesh
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.patches import geometry_patches, parse_patch_options
@@ -113,7 +113,9 @@ def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Me
     **figures)`` or None (``iterative``: the method reports its progress)."""
     say = say or (lambda line: None)
     progress = progress or (lambda label, iterative: contextlib.nullcontext(None))
-    spec = block_spec(request.geometry) if request.checkpoint is None else None
+    spec = block_spec(request.geometry)
+    if spec is None and request.geometry is None and request.checkpoint is not None:
+        spec = checkpoint_block_spec(request.checkpoint)  # a block set's model names its geometry
     if spec is not None:  # a geometry of several blocks: meshgen.meshing_blocks
         return mesh_block_set(request, spec, say, progress)
     plan = _plan(request, say, warn)

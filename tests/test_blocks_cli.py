@@ -33,7 +33,7 @@ def test_mesh_dfg_tfi_vtu(run_cli, tmp_path):
         (["--dims", "4", "2", "-o", "x.cgns"], "--dims needs 3 numbers (N M A"),
         (["--dims", "4", "2", "3", "-o", "x.vts"], "vts does not take multi-block meshes"),
         (["--dims", "4", "2", "3", "--cluster", "zeta:both:1.1", "-o", "x.cgns"], "takes PATCH:RATIO (e.g. wall:1.1"),
-        (["--dims", "4", "2", "3", "--method", "neural", "-o", "x.cgns"], "method 'neural' does not mesh multi-block"),
+        (["--dims", "4", "2", "3", "--method", "neural", "-o", "x.cgns"], "no trained model for pipe"),
     ],
 )
 def test_bad_block_requests_are_one_line(run_cli, tmp_path, args, words):

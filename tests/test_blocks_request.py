@@ -70,7 +70,7 @@ def test_mesh_write_and_api_write_of_a_block_set(tmp_path):
 @pytest.mark.parametrize(
     "options, parameter",
     [
-        ({"method": "neural"}, "method"),
+        ({"method": "tfi", "correct": False}, "correct"),
         ({"method": "tfi", "tol": 1e-3}, "tol"),
         ({"boundary_layout": "fixed"}, "boundary_layout"),
         ({"chunked": True}, "chunked"),

@@ -145,7 +145,8 @@ def train(
     for line in summary_lines(summary["network"]):
         echo(f"  {line}")
     if not run.config.model.exact_boundary:
-        echo(f"Network corrected to N + TFI[g - N] (what meshgen mesh writes), {size} mesh:")
+        corrected = "faces made conforming" if run.block_set is not None else "N + TFI[g - N]"
+        echo(f"Network corrected to {corrected} (what meshgen mesh writes), {size} mesh:")
         for line in summary_lines(summary["corrected"]):
             echo(f"  {line}")
     echo(f"TFI, {size} mesh:")

@@ -22,6 +22,7 @@ from meshgen.correction import boundary_errors, correct_boundary, error_figures
 from meshgen.errors import MeshgenError, ParameterError
 from meshgen.geometry import load_geometry
 from meshgen.layout import trained_layout, with_layout
+from meshgen.neural.block_inference import check_block_model, is_block_model
 from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
 from meshgen.neural.config import ConfigError, preset_paths, resolve_config, schema, to_dict
 from meshgen.neural.network_map import mesh_from_model
@@ -187,7 +188,10 @@ def load_model(path, source: str = "checkpoint", record: dict | None = None) -> 
         raise CheckpointError(
             f"checkpoint {path} holds a family of shapes: mesh a member with --checkpoint {path} --param name=value"
         )
-    check_network(checkpoint["model"])  # a foreign model description fails here, before any work
+    if is_block_model(checkpoint["model"]):  # one network per block (meshgen.neural.block_train)
+        check_block_model(checkpoint["model"])
+    else:
+        check_network(checkpoint["model"])  # a foreign model description fails here, before any work
     return TrainedModel(path, checkpoint, source, record or {})
 
 
@@ -265,6 +269,9 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto", poli
         model = find_model(geometry_name=geometry.name, params=dict(geometry.values))
     elif not isinstance(model, TrainedModel):
         model = find_model(model, geometry_name=geometry.name, params=dict(geometry.values))
+    if is_block_model(model.checkpoint["model"]):
+        name = model.geometry_entry["name"]
+        raise ParameterError("checkpoint", f"{{name}} {model.path} meshes the multi-block geometry '{name}': mesh with -g {name}")
     if len(coords) != model.dim:
         raise ParameterError("dims", f"model {model.path} is {model.dim}D: {{name}} needs {model.dim} numbers, got {len(coords)}")
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on

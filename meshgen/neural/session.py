@@ -11,6 +11,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
@@ -40,6 +41,7 @@ class Run:
     family: object | None = None  # meshgen.neural.family.Family when parameters are varied (--vary)
     fresh_name: bool = False  # run_dir is a default name: the run takes it, or the next free one
     force: bool = False  # --force: overwrite a run folder of another geometry or configuration
+    block_set: object | None = None  # meshgen.blocks.BlockSet when the geometry declares blocks (one network per block)
 
 
 def is_run_folder(path: Path) -> bool:
@@ -132,10 +134,11 @@ def prepare_run(
         trained_on = checkpoint["geometry"]
         spec = trained_on["spec"]
         merged = {**trained_on["params"], **parse_params(params)}
+        blocks = "blocks" in trained_on  # checked without the boundary: a block set's is per block
         if geometry:
-            geometry_object = load_geometry(geometry, merged)
+            geometry_object = load_geometry(geometry, merged, check=not blocks)
         else:
-            geometry_object = load_recorded_geometry(spec, merged, where=f"checkpoint {resume_path}")
+            geometry_object = load_recorded_geometry(spec, merged, check=not blocks, where=f"checkpoint {resume_path}")
         if geometry_object.name != trained_on["name"] or geometry_object.values != dict(trained_on["params"]):
             raise CheckpointError(
                 f"checkpoint {resume_path} was trained on {trained_on['name']} {trained_on['params']}, "
@@ -155,7 +158,10 @@ def prepare_run(
     else:
         config = resolve_config(preset or ("family" if vary else "default"), config_file, overrides, steps, seed)
         geometry = geometry or "semicylinder"
-        geometry_object = load_geometry(geometry, parse_params(params))
+        blocks = is_multiblock(geometry)
+        geometry_object = load_geometry(geometry, parse_params(params), check=not blocks)
+        if vary and blocks:
+            raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
         if vary:
             _refuse_family_keys(config, preset, overrides)
             family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
@@ -174,9 +180,15 @@ def prepare_run(
     if out is not None and resume is None:
         check_run_folder(run_dir, config, geometry_object, force)
     fresh_name = out is None and resume is None
+    block_set = None
+    if blocks:  # its blocks, interfaces and patches checked now, before the run folder exists
+        from meshgen.neural.block_train import SUMMARY_DIMS
+
+        block_set = load_block_set(geometry, geometry_object.values, (SUMMARY_DIMS,) * geometry_object.dim)
     return Run(
-        config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force
-    )
+        config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,
+        block_set,
+    )  # fmt: skip
 
 
 def _flat(mapping: dict, prefix: str = "") -> dict:
@@ -265,6 +277,19 @@ def run_training(run: Run, quiet: bool = False):
                     resume=run.resume,
                     reporter=reporter,
                     stop=stop_requested.is_set,
+                )
+            if run.block_set is not None:
+                from meshgen.neural.block_train import train_blocks
+
+                return train_blocks(
+                    run.config,
+                    run.block_set,
+                    run.run_dir,
+                    device=run.device,
+                    resume=run.resume,
+                    reporter=reporter,
+                    stop=stop_requested.is_set,
+                    geometry_spec=run.geometry_spec,
                 )
             return train(
                 run.config,

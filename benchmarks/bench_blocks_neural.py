@@ -1,0 +1,127 @@
+"""The neural pipe model (one network per block, ``meshgen train -g pipe``) against the multi-block
+elliptic mesh, at two resolutions, through the request path (``meshgen.mesh``).
+
+    python benchmarks/bench_blocks_neural.py [--quick] [--json FILE] [--checkpoint PATH]
+
+Per resolution: the elliptic mesh (started from the TFI), the default neural mesh (the networks'
+mesh after the conforming correction) and ``--polish`` (that mesh polished by the multi-block
+elliptic solver; --quick leaves it out): seconds, sweeps, inverted cells, mean and worst min angle, the largest
+gap between matching interface nodes (0: identical), the largest distance of a wall node from the
+circle of radius R. Target (issue's benchmark row): 0 inverted, conforming, mean min angle within
+0.5 deg of the elliptic mesh's at both resolutions (--dims 8 4 4 and 16 8 4; --quick: 4 2 4 and
+8 4 4, not judged). The model: ``benchmarks/models/pipe/checkpoint.pt`` (its training time is in
+the JSON). The machine's load average is recorded: other work slows the wall times.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import meshgen  # noqa: E402
+from meshgen.blocks import interface_gaps, merged_mesh  # noqa: E402
+from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
+from meshgen.quality import quality_report  # noqa: E402
+
+MODEL = Path(__file__).resolve().parent / "models" / "pipe" / "checkpoint.pt"
+DIMS = [(8, 4, 4), (16, 8, 4)]
+QUICK_DIMS = [(4, 2, 4), (8, 4, 4)]
+TARGET_DEGREES = 0.5
+
+
+def measure(dims, method: str, checkpoint: Path, polish: bool | None = None) -> dict:
+    options = {} if method == "elliptic" else {"model": str(checkpoint), "polish": polish}
+    if polish:
+        options["max_iter"] = 200
+    start = time.perf_counter()
+    made = meshgen.mesh("pipe", dims, method=method, **options)
+    seconds = time.perf_counter() - start
+    block_set = made.geometry
+    points, cells, _ = merged_mesh(block_set, made.blocks)
+    report = quality_report((points, cells))
+    radius = block_set.values["radius"]
+    wall = np.concatenate([X[-1].reshape(-1, 3) for X in made.blocks[1:]])  # xi = 1 of the four wall blocks
+    info = made.info
+    return {
+        "dims": list(dims),
+        "mesh": method if method == "elliptic" else ("neural --polish" if polish else "neural (default)"),
+        "cells": int(len(cells)),
+        "seconds": seconds,
+        "sweeps": int(info.get("sweeps", info.get("polish", {}).get("sweeps", 0))),
+        "inverted": int(report["inverted"]["count"]),
+        "min_angle_mean": float(report["metrics"]["min_angle"]["mean"]),
+        "min_angle_worst": float(report["metrics"]["min_angle"]["min"]),
+        "interface_gap_max": max(interface_gaps(block_set, made.blocks)),
+        "wall_distance_max": float(np.abs(np.hypot(wall[:, 0], wall[:, 1]) - radius).max()),
+        "network_interface_gap_rel": info.get("correction", {}).get("interface_gap_before"),
+    }
+
+
+def run(quick: bool = False, checkpoint: Path = MODEL) -> dict:
+    if not Path(checkpoint).is_file():
+        print(f"blocks_neural: skipped (no model at {checkpoint}: meshgen train -g pipe, then copy its checkpoint.pt there)")
+        return {"skipped": True}
+    trained = load_checkpoint(checkpoint)
+    rows, differences = [], []
+    for dims in QUICK_DIMS if quick else DIMS:
+        elliptic = measure(dims, "elliptic", checkpoint)
+        network = measure(dims, "neural", checkpoint)
+        polished = None if quick else measure(dims, "neural", checkpoint, polish=True)
+        for row in (elliptic, network, polished) if polished is not None else (elliptic, network):
+            row["difference_degrees"] = row["min_angle_mean"] - elliptic["min_angle_mean"]
+            rows.append(row)
+            print(
+                f"pipe {' '.join(map(str, dims)):>8s} {row['mesh']:22s} {row['cells']:6d} cells {row['seconds']:6.1f} s "
+                f"{row['sweeps']:3d} sweeps  inverted {row['inverted']}  mean min angle {row['min_angle_mean']:6.2f} "
+                f"({row['difference_degrees']:+.2f})  worst {row['min_angle_worst']:5.1f}  interface gap "
+                f"{row['interface_gap_max']:.1e}  wall {row['wall_distance_max']:.1e}",
+                flush=True,
+            )
+        differences.append(abs(network["difference_degrees"]))
+    neural_rows = [row for row in rows if row["mesh"] == "neural (default)"]
+    met = (
+        all(row["inverted"] == 0 and row["interface_gap_max"] == 0.0 for row in neural_rows)
+        and max(differences) <= TARGET_DEGREES
+    )
+    result = {
+        "quick": quick,
+        "rows": rows,
+        "worst_difference_degrees": max(differences),
+        "target_degrees": TARGET_DEGREES,
+        "met": bool(met),
+        "judged": not quick,
+        "model": {
+            "checkpoint": str(checkpoint),
+            "bytes": Path(checkpoint).stat().st_size,
+            "widths": list(trained["model"]["widths"]),
+            "steps": trained["step"],
+            "training_seconds": trained["elapsed_seconds"],
+        },
+        "load_average": os.getloadavg(),
+    }
+    print(f"neural pipe: worst |mean min angle - elliptic's| {max(differences):.2f} deg (target {TARGET_DEGREES}): "
+          f"{'met' if met else 'NOT met'}{'' if not quick else ' (quick: not judged)'}")  # fmt: skip
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--checkpoint", type=Path, default=MODEL)
+    args = parser.parse_args()
+    result = run(args.quick, args.checkpoint)
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,161 @@
+"""Meshing a block set with its trained model (``meshgen.neural.block_train``): every block's
+network on its own tensor grid, then one conforming correction of all blocks (design notes §20,
+docs/design-multiblock-neural.md).
+
+The correction first settles one position per mesh node that lies on a block face: a node on an
+interface takes the mean of the images of all blocks that hold it; a node on a curved patch (or on
+two patches) takes the geometry's boundary map; a node on one flat patch only (a pipe's inlet)
+takes the mean projected onto the patch's plane (it slides in the plane, as in the elliptic mesh).
+Each block is then corrected to those face positions, X + C[target - X] with the blending of
+``meshgen.correction.add_boundary_correction``, so that the faces are the targets to round-off;
+interface nodes are finally made bit-identical (``meshgen.blocks.unify_interfaces``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from meshgen import cube
+from meshgen.blocks import BlockSet, check_handedness, global_numbering, interface_gaps, unify_interfaces
+from meshgen.correction import add_boundary_correction
+from meshgen.neural.checkpoint_data import CheckpointError, check_network
+from meshgen.neural.network_map import evaluate_network
+from meshgen.tfi import boundary_faces
+
+__all__ = [
+    "FLAT_TOLERANCE",
+    "block_model",
+    "check_block_model",
+    "face_plane",
+    "face_targets",
+    "is_block_model",
+    "network_blocks",
+    "neural_blocks",
+]
+
+
+FLAT_TOLERANCE = 1e-9  # a patch face is flat when its points lie within this (relative) of a plane
+
+
+def face_plane(points: np.ndarray, length: float):
+    """(unit normal, offset) of the plane through ``points`` (N, d) when they all lie within
+    ``FLAT_TOLERANCE * length`` of it, else None."""
+    centre = points.mean(axis=0)
+    _, singular, vt = np.linalg.svd(points - centre, full_matrices=False)
+    normal = vt[-1]
+    if np.max(np.abs((points - centre) @ normal)) > FLAT_TOLERANCE * length:
+        return None
+    return normal, float(centre @ normal)
+
+
+def is_block_model(model: dict) -> bool:
+    """Whether a ``checkpoint["model"]`` description holds one network per block."""
+    return isinstance(model, dict) and "blocks" in model
+
+
+def block_model(model: dict, index: int) -> dict:
+    """The single-network description of block ``index`` of a block model."""
+    prefix = f"networks.{index}."
+    state = {k[len(prefix) :]: v for k, v in model["state_dict"].items() if k.startswith(prefix)}
+    return {**{k: v for k, v in model.items() if k not in ("blocks", "state_dict")}, "state_dict": state}
+
+
+def check_block_model(model: dict) -> None:
+    """CheckpointError unless ``model`` is a block model whose every network is a meshgen network and
+    whose weights are all used."""
+    names = model.get("blocks")
+    if not (isinstance(names, list) and names and all(isinstance(n, str) for n in names)):
+        raise CheckpointError("the checkpoint's block model names no blocks: the file is damaged")
+    used = 0
+    for index in range(len(names)):
+        sub = block_model(model, index)
+        check_network(sub)
+        used += len(sub["state_dict"])
+    if used != len(model.get("state_dict", {})):
+        raise CheckpointError("the checkpoint's block model holds weights of no block: the file is damaged")
+
+
+def _check_fits(model: dict, block_set: BlockSet) -> None:
+    if list(model["blocks"]) != list(block_set.names) or int(model["dim"]) != block_set.dim:
+        raise CheckpointError(
+            f"the model's blocks ({', '.join(model['blocks'])}) are not those of '{block_set.name}' ({', '.join(block_set.names)})"
+        )
+
+
+def network_blocks(model: dict, block_set: BlockSet, device: str = "cpu") -> list[np.ndarray]:
+    """Every block's network on its tensor grid (``block_set.coords``), in physical units: node
+    arrays as ``meshgen.blocks`` takes them (not yet conforming, nor on the boundary)."""
+    _check_fits(model, block_set)
+    center, scale = np.asarray(model["center"], dtype=float), float(model["scale"])
+    Xs = []
+    for index, coords in enumerate(block_set.coords):
+        shape = tuple(len(c) for c in coords)
+        values = evaluate_network(block_model(model, index), list(coords), device=device)
+        Xs.append(values.reshape(*shape, block_set.dim) * scale + center)
+    return Xs
+
+
+def face_targets(block_set: BlockSet, Xs) -> tuple[np.ndarray, list[np.ndarray]]:
+    """One position per node of the merged mesh ((count, d)) for the nodes on block faces (the
+    module docstring's rules; other nodes hold the blocks' mean, unused), and the global numbering."""
+    dim = block_set.dim
+    numbering, count = global_numbering(block_set)
+    sums, copies = np.zeros((count, dim)), np.zeros(count)
+    for X, ids in zip(Xs, numbering):
+        np.add.at(sums, ids.reshape(-1), X.reshape(-1, dim))
+        np.add.at(copies, ids.reshape(-1), 1.0)
+    target = sums / copies[:, None]
+    pinned, pinned_value = np.zeros(count, dtype=bool), np.zeros((count, dim))
+    normals, offsets = np.full((count, dim), np.nan), np.full(count, np.nan)
+    for (block, face_name), _ in sorted(block_set.patches.items()):
+        face = cube.face_named(face_name, dim)
+        ids = numbering[block][face.node_index].reshape(-1)
+        images = block_set.geometries[block].boundary(face.points(block_set.coords[block]))
+        plane = face_plane(images, block_set.length)
+        if plane is None:
+            conflict = np.ones(len(ids), dtype=bool)
+        else:
+            normal, offset = plane
+            known = ~np.isnan(offsets[ids])
+            same = np.abs(np.abs(normals[ids] @ normal) - 1.0) < 1e-9
+            same &= np.abs(np.abs(offsets[ids]) - abs(offset)) < 1e-9 * block_set.length
+            conflict = known & ~same
+            normals[ids[~known]], offsets[ids[~known]] = normal, offset
+        pinned[ids[conflict]] = True
+        pinned_value[ids[conflict]] = images[conflict]
+    sliding = ~pinned & ~np.isnan(offsets)
+    n = normals[sliding]
+    target[sliding] -= (np.einsum("ij,ij->i", target[sliding], n) - offsets[sliding])[:, None] * n
+    target[pinned] = pinned_value[pinned]
+    return target, numbering
+
+
+def neural_blocks(block_set: BlockSet, model: dict, correct: bool = True, device: str = "cpu"):
+    """The block set's mesh from a block model (``checkpoint["model"]``): (node arrays, info).
+    With ``correct`` (the default) the conforming correction of the module docstring: faces on
+    their targets to round-off, interface nodes identical; without it, the networks' own nodes
+    with the interfaces merely unified (refused when they do not coincide). ``info``: the
+    interface gap and boundary error before the correction (relative to the set's length)."""
+    Xs = network_blocks(model, block_set, device=device)
+    length = block_set.length
+    gap = max(interface_gaps(block_set, Xs), default=0.0) / length
+    target, numbering = face_targets(block_set, Xs)
+    moved = 0.0
+    for X, ids, coords in zip(Xs, numbering, block_set.coords):
+        errors = [target[ids[index]] - X[index] for index, _ in boundary_faces(list(coords))]
+        moved = max(moved, max(float(np.linalg.norm(e, axis=-1).max()) for e in errors))
+        if correct:
+            add_boundary_correction(X, errors, list(coords))
+    if correct:
+        unify_interfaces(block_set, Xs)
+    else:
+        unify_interfaces(block_set, Xs, tolerance=np.inf)
+    check_handedness(block_set, Xs)
+    info = {
+        "corrected": bool(correct),
+        "interface_gap_before": gap,
+        "face_error_before": moved / length,
+        "definition": "largest distance, relative to the characteristic length, between the networks' face nodes and "
+        "their conforming positions (interface mean, boundary map, or projection onto a flat patch)",
+    }
+    return Xs, info

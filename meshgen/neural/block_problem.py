@@ -1,0 +1,304 @@
+"""What a block set's networks are trained on (design notes §20, docs/design-multiblock-neural.md):
+one MLP per block, all in normalised units of the whole set, and the loss terms that make them one
+mesh.
+
+- L1, the Winslow residual: inside every block on its own randomly shifted finite-difference grid
+  (as a single shape), and across every interface on stencils whose normal neighbours lie in the
+  two blocks (block a's network on a's side, b's on b's side, the normal step scaled by the
+  blocks' mean lengths as ``meshgen.elliptic_blocks`` glues them), so interface nodes are solved
+  as interior nodes of the whole mesh, as the multi-block elliptic mesh solves them;
+- L2, the boundary: each block's network fitted to its boundary map on its patch faces (on a flat
+  patch only the distance from the plane counts: nodes slide in it, as in the elliptic mesh), and
+  the two networks of every interface made to agree on the shared face.
+
+Every draw comes from the run's ``torch.Generator`` in a fixed order (a resumed run repeats an
+uninterrupted one); boundary-map values are computed once into fixed pools.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from meshgen import cube
+from meshgen.blocks import BlockSet
+from meshgen.neural.block_inference import face_plane
+from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
+from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
+from meshgen.neural.model import MLP
+from meshgen.neural.winslow import winslow_residual
+from meshgen.tfi import tfi, transfinite
+
+__all__ = [
+    "INTERFACE_STEP",
+    "BlockNetworks",
+    "BlockProblem",
+    "block_boundary_term",
+    "block_pde_term",
+    "block_problem",
+    "block_sample",
+    "block_samples",
+    "fixed_block_points",
+    "interface_stencil",
+    "patch_pool",
+    "pretrain_block_pool",
+]
+
+INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
+POOL_STEPS = 16  # boundary pool: this many steps' worth of patch points per face
+
+
+class BlockNetworks(torch.nn.Module):
+    """One MLP per block (``networks[i]`` maps block i's unit cube to normalised physical points)."""
+
+    def __init__(self, dim: int, widths: list[int], count: int):
+        super().__init__()
+        self.networks = torch.nn.ModuleList(MLP(dim, widths) for _ in range(count))
+
+
+@dataclass
+class BlockProblem:
+    """A block set in normalised units (the whole set scaled into [-1/2, 1/2]^d).
+
+    ``boundaries``: per block, (N, d) cube-boundary points -> (N, d) normalised points (NumPy);
+    ``interfaces``: (a, face a, b, face b, transform, ratio) with ratio = a's mean length across
+    the interface over b's; ``patch_faces``: (block, face, plane) per patch face, plane None or
+    (unit normal (d,), offset) in normalised units."""
+
+    dim: int
+    names: tuple
+    boundaries: list
+    interfaces: list
+    patch_faces: list
+    center: np.ndarray
+    scale: float
+    device: torch.device
+    exact: bool = False  # the networks are soft-boundary maps; the mesh is corrected to the faces
+
+
+def _mean_length(geometry, axis: int, dim: int) -> float:
+    """Mean length of the TFI grid lines (8 cells per axis) of a block along ``axis``."""
+    X = tfi(geometry, None, [np.linspace(0.0, 1.0, 9)] * dim)
+    return float(np.linalg.norm(np.diff(X, axis=axis), axis=-1).sum(axis=axis).mean())
+
+
+def face_points(face: cube.Face, tangents: np.ndarray) -> np.ndarray:
+    """Parametric points (N, d) on ``face`` with ``tangents`` (N, d-1) along its tangent axes."""
+    points = np.empty((len(tangents), face.dim))
+    points[:, list(face.tangent_axes)] = tangents
+    points[:, face.axis] = float(face.side)
+    return points
+
+
+def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=None) -> BlockProblem:
+    """The normalised problem of ``block_set``; ``center``/``scale`` default to the bounding box of
+    all blocks' boundaries (its centre and largest extent)."""
+    dim = block_set.dim
+    samples = cube.face_samples(dim, 17)
+    if center is None:
+        mapped = np.concatenate([g.boundary(samples) for g in block_set.geometries])
+        low, high = mapped.min(axis=0), mapped.max(axis=0)
+        center, scale = (low + high) / 2.0, float(np.max(high - low))
+    center, scale = np.asarray(center, dtype=float), float(scale)
+
+    def normalised(geometry):
+        return lambda points: (geometry.boundary(points) - center) / scale
+
+    boundaries = [normalised(g) for g in block_set.geometries]
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * (dim - 1), indexing="ij"), -1).reshape(-1, dim - 1)
+    patch_faces = []
+    for (block, face_name), _ in sorted(block_set.patches.items()):
+        face = cube.face_named(face_name, dim)
+        plane = face_plane(boundaries[block](face_points(face, grid)), 1.0)
+        patch_faces.append((block, face, plane))
+    interfaces = []
+    for i in block_set.interfaces:
+        ratio = _mean_length(block_set.geometries[i.a], i.face_a.axis, dim) / _mean_length(
+            block_set.geometries[i.b], i.face_b.axis, dim
+        )
+        interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
+    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device)
+
+
+# ---------------------------------------------------------------------------------------------
+# fixed pools
+
+
+def patch_pool(problem: BlockProblem, count: int, seed: int) -> dict:
+    """``count`` points per patch face with their images, local sizes and planes, on the device:
+    ``points`` (F, count, d), ``images`` (F, count, d), ``size`` (F, count), ``normal`` (F, d)
+    (zero for a curved face); ``interface_size``: per interface, the mean local size of its face."""
+    generator = torch.Generator().manual_seed(seed)
+    dim = problem.dim
+    points, images, sizes, normals = [], [], [], []
+    for block, face, plane in problem.patch_faces:
+        tangents = torch.rand((count, dim - 1), generator=generator, dtype=torch.float64).numpy()
+        p = face_points(face, tangents)
+        image = problem.boundaries[block](p)
+        points.append(p)
+        images.append(image)
+        sizes.append(boundary_local_size(problem.boundaries[block], p, image))
+        normals.append(np.zeros(dim) if plane is None else plane[0])
+    interface_size = []
+    for a, face_a, *_ in problem.interfaces:  # one mean local size per shared face
+        p = face_points(face_a, torch.rand((64, dim - 1), generator=generator, dtype=torch.float64).numpy())
+        interface_size.append(float(np.mean(boundary_local_size(problem.boundaries[a], p))))
+    device = problem.device
+    return {
+        "interface_size": interface_size,
+        "points": torch.from_numpy(np.stack(points)).float().to(device),
+        "images": torch.from_numpy(np.stack(images)).float().to(device),
+        "size": torch.from_numpy(np.stack(sizes)).float().to(device),
+        "normal": torch.from_numpy(np.stack(normals)).float().to(device),
+    }
+
+
+def pretrain_block_pool(problem: BlockProblem, count: int, seed: int) -> list[dict]:
+    """Per block, ``count`` interior and ``count`` boundary points with their TFI images (the
+    L-BFGS fit that starts a run from a valid map)."""
+    generator = torch.Generator().manual_seed(seed)
+    pools = []
+    for boundary in problem.boundaries:
+        points = torch.cat([sample_interior(count, problem.dim, generator), sample_boundary(count, problem.dim, generator)])
+        targets = torch.from_numpy(transfinite(boundary, list(points.double().numpy().T)))
+        pools.append({"points": points.to(problem.device), "targets": targets.float().to(problem.device)})
+    return pools
+
+
+# ---------------------------------------------------------------------------------------------
+# one step's draws
+
+
+def _nodes_per_block(interior: int, blocks: int, dim: int) -> int:
+    return max(1, round((interior / blocks) ** (1.0 / dim)))
+
+
+def block_sample(problem: BlockProblem, config, generator: torch.Generator, pool_count: int) -> dict:
+    """One step's draws on the host (CPU tensors): ``grid`` (blocks, 2d) float64 (each block's
+    shifted training grid), ``tangent`` (interfaces, M, d-1) points on every interface (inside a
+    margin of one stencil step), ``index`` (patch faces, K) into the patch pool."""
+    dim, blocks = problem.dim, len(problem.names)
+    shares = len(problem.patch_faces) + len(problem.interfaces)
+    per_face = max(8, config.points.boundary // max(1, shares))
+    margin = INTERFACE_STEP
+    tangent = margin + (1 - 2 * margin) * torch.rand((len(problem.interfaces), per_face, dim - 1), generator=generator)
+    return {
+        "grid": torch.rand((blocks, 2 * dim), generator=generator, dtype=torch.float64),
+        "tangent": tangent,
+        "index": torch.randint(0, pool_count, (len(problem.patch_faces), per_face), generator=generator),
+    }
+
+
+def fixed_block_points(problem: BlockProblem, config, pool_count: int, seed: int) -> dict:
+    """The L-BFGS stage's fixed draw: the unshifted grids (``grid`` with scale 1) and one draw of
+    interface and patch points, from their own seed."""
+    generator = torch.Generator().manual_seed(seed)
+    draw = block_sample(problem, config, generator, pool_count)
+    draw["grid"] = torch.zeros_like(draw["grid"])
+    draw["grid"][:, 0::2] = 1.0  # scale 1 (grid_from_draws with min_scale < 1), offset 0
+    return {k: v.to(problem.device) for k, v in draw.items()}
+
+
+def block_samples(config, problem: BlockProblem, inputs: dict, random: bool = True):
+    """(PDE sample, boundary sample) of one step's draws on the device."""
+    m = _nodes_per_block(config.points.interior, len(problem.names), problem.dim)
+    min_scale = config.points.grid_min_scale if (random and config.points.random_grid) else 1.0
+    grids = [grid_from_draws(draws, m, min_scale) for draws in inputs["grid"]]
+    return (grids, inputs["tangent"]), (inputs["index"], inputs["tangent"])
+
+
+# ---------------------------------------------------------------------------------------------
+# the terms
+
+
+def _to_b(points_a: torch.Tensor, face_a: cube.Face, face_b: cube.Face, transform) -> torch.Tensor:
+    """Block b's parametric points of block a's points ``points_a`` (..., d) near the interface
+    face: tangents by the Transform, the normal coordinate mirrored across the shared face."""
+    columns = [None] * face_a.dim
+    for axis, t in enumerate(transform):
+        target = abs(t) - 1
+        value = points_a[..., axis]
+        if axis == face_a.axis:  # distance from the face, into b
+            depth = (value - face_a.side).abs()
+            columns[target] = depth if face_b.side == 0 else 1.0 - depth
+        else:
+            columns[target] = value if t > 0 else 1.0 - value
+    return torch.stack(columns, dim=-1)
+
+
+def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch.Tensor):
+    """Winslow residual (M, d) across ``interface`` at its points ``tangent`` (M, d-1), and the two
+    networks' images of those points ((M, d) each). The stencil runs along (u, tangents): u < 0 in
+    block a (parametric step ``INTERFACE_STEP``), u > 0 in block b (step times the length ratio),
+    u = 0 the mean of the two images."""
+    a, face_a, b, face_b, transform, ratio = interface
+    dim, h = problem.dim, INTERFACE_STEP
+    offsets = torch.tensor([-1.0, 0.0, 1.0], device=tangent.device)
+    m = tangent.shape[0]
+    grids = torch.meshgrid(*([offsets] * (dim - 1)), indexing="ij")
+    shifts = torch.stack([g.reshape(-1) for g in grids], -1) * h  # (3^(d-1), d-1)
+    base = tangent[:, None, :] + shifts[None]  # (M, 3^(d-1), d-1)
+    inward = 1.0 if face_a.side == 0 else -1.0
+
+    def on_a(depth):  # block a's points at parametric distance ``depth`` from the face
+        points = torch.empty((*base.shape[:2], dim), device=tangent.device)
+        points[..., list(face_a.tangent_axes)] = base
+        points[..., face_a.axis] = face_a.side + inward * depth
+        return points
+
+    inner, surface = on_a(h), on_a(0.0)
+    net_a, net_b = networks[a], networks[b]
+    value_a = net_a(torch.cat([inner, surface]).reshape(-1, dim)).reshape(2, *base.shape[:2], dim)
+    across = _to_b(surface, face_a, face_b, transform)
+    outer = across.clone()
+    step_b = h * ratio
+    outer[..., face_b.axis] = across[..., face_b.axis] + (step_b if face_b.side == 0 else -step_b)
+    value_b = net_b(torch.cat([across, outer]).reshape(-1, dim)).reshape(2, *base.shape[:2], dim)
+    centre = 0.5 * (value_a[1] + value_b[0])
+    values = torch.stack([value_a[0], centre, value_b[1]], dim=1)  # (M, 3, 3^(d-1), d)
+    values = values.reshape(m, *([3] * dim), dim)
+    _, first, second = grid_derivatives(values, [h] * dim)
+    squeeze = (slice(None), *([0] * dim))
+    middle = (3 ** (dim - 1) - 1) // 2  # the point itself in the flattened tangent stencil
+    return winslow_residual(first[squeeze], second[squeeze]), value_a[1][:, middle], value_b[0][:, middle]
+
+
+def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
+    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils."""
+    grids, tangents = sample
+    residuals = []
+    for net, (axes, spacing) in zip(networks, grids):
+        nodes = grid_points(axes)
+        values = net(nodes.reshape(-1, problem.dim).float()).reshape(*nodes.shape)
+        _, first, second = grid_derivatives(values, spacing)
+        residuals.append(winslow_residual(first, second).reshape(-1, problem.dim))
+    for interface, tangent in zip(problem.interfaces, tangents):
+        residuals.append(interface_stencil(networks, problem, interface, tangent)[0])
+    return pde_loss(torch.cat(residuals))
+
+
+def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sample) -> torch.Tensor:
+    """L2: patch faces fitted (normal distance only on flat ones), interfaces' images agreeing;
+    errors relative to the local size of the boundary where ``method.boundary_error`` says so."""
+    index, tangents = sample
+    predicted, targets, sizes = [], [], []
+    for number, (block, _, plane) in enumerate(problem.patch_faces):
+        rows = index[number]
+        points = pool["points"][number].index_select(0, rows)
+        image = pool["images"][number].index_select(0, rows)
+        value = networks[block](points)
+        if plane is not None:  # only the distance from the plane: nodes slide in a flat patch
+            normal = pool["normal"][number]
+            value = image + ((value - image) @ normal)[:, None] * normal
+        predicted.append(value)
+        targets.append(image)
+        sizes.append(pool["size"][number].index_select(0, rows))
+    for number, (interface, tangent) in enumerate(zip(problem.interfaces, tangents)):
+        _, value_a, value_b = interface_stencil(networks, problem, interface, tangent)
+        predicted.append(value_a)
+        targets.append(value_b)
+        sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), device=value_a.device))
+    size = torch.cat(sizes) if config.method.boundary_error == "relative" else None
+    return boundary_loss(torch.cat(predicted), torch.cat(targets), config.method.point_weights, size)[0]

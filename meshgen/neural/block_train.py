@@ -1,0 +1,276 @@
+"""Training one model for a block set (design notes §20, docs/design-multiblock-neural.md): one MLP
+per block, trained together by the stage runner (``meshgen.neural.stages.run_stages``) on the
+terms of ``meshgen.neural.block_problem``: a fit of every block to its TFI, then Adam (PCGrad and
+the learned reweighting of L1 and L2, as for one shape), then L-BFGS on fixed points.
+
+The checkpoint has the single-shape layout (``meshgen.neural.checkpoint``); its ``model`` entry
+adds ``blocks`` (the block names, in the set's order) and holds every block's weights under
+``networks.<i>.`` in one plain ``state_dict``; its ``geometry`` entry adds ``blocks`` too.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import torch
+
+from meshgen.blocks import BlockSet, merged_mesh, tfi_blocks
+from meshgen.neural.block_inference import network_blocks, neural_blocks
+from meshgen.neural.block_problem import (
+    POOL_STEPS,
+    BlockNetworks,
+    block_boundary_term,
+    block_pde_term,
+    block_problem,
+    block_sample,
+    block_samples,
+    fixed_block_points,
+    patch_pool,
+    pretrain_block_pool,
+)
+from meshgen.neural.history import TrainState, state_from_checkpoint
+from meshgen.neural.model import INPUT_MAP
+from meshgen.neural.pcgrad import assign, flatten, project_conflicting
+from meshgen.neural.reweighting import UncertaintyWeights
+from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
+from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, make_optimizer
+from meshgen.quality import quality_report, write_json
+
+__all__ = ["BLOCK_STAGES", "SUMMARY_DIMS", "block_gradients", "block_stage_table", "describe_blocks", "train_blocks"]
+
+SUMMARY_DIMS = 8  # the final summary and the training's block set: 8 per --dims number
+BLOCK_STAGES = ("pretrain", "adam", "lbfgs")
+
+
+def describe_blocks(training: Training, names) -> dict:
+    """The plain-data description of a block set's trained maps (``meshgen.neural.model``'s, plus
+    ``blocks``; weights of block i under ``networks.<i>.``)."""
+    problem, config = training.problem, training.config
+    return {
+        "dim": problem.dim,
+        "widths": [int(w) for w in config.model.widths],
+        "activation": "tanh",
+        "input": INPUT_MAP,
+        "exact_boundary": False,
+        "center": [float(c) for c in problem.center],
+        "scale": float(problem.scale),
+        "blocks": list(names),
+        "state_dict": {k: v.detach().cpu().clone() for k, v in training.network.state_dict().items()},
+    }
+
+
+def _per_face(training: Training) -> int:
+    problem = training.problem
+    return max(8, training.config.points.boundary // max(1, len(problem.patch_faces) + len(problem.interfaces)))
+
+
+def _terms(training: Training, pool, pde_sample, boundary_sample, factors):
+    """L1, L2 and the gradients of the weighted terms on the networks' weights (flat), side by side."""
+    networks, problem, config = training.network.networks, training.problem, training.config
+    parameters = list(training.network.parameters())
+
+    def pde_part():
+        pde = block_pde_term(networks, problem, pde_sample)
+        return pde, flatten(torch.autograd.grad(factors[0] * pde, parameters, allow_unused=True, materialize_grads=True))
+
+    def boundary_part():
+        boundary = block_boundary_term(networks, problem, config, pool, boundary_sample)
+        return boundary, flatten(
+            torch.autograd.grad(factors[1] * boundary, parameters, allow_unused=True, materialize_grads=True)
+        )
+
+    (pde, g1), (boundary, g2) = training.terms(pde_part, boundary_part)
+    return pde, boundary, g1, g2
+
+
+def block_gradients(training: Training, inputs: dict, pool: dict) -> dict:
+    """The device part of one Adam step (``meshgen.neural.steps.adam_gradients`` for a block set):
+    L1, L2, the update (PCGrad or the sum), L and the reweighting gradient."""
+    weights, config = training.weights, training.config
+    pde_sample, boundary_sample = block_samples(config, training.problem, inputs)
+    factors = weights.factors().detach()
+    pde, boundary, g1, g2 = _terms(training, pool, pde_sample, boundary_sample, factors)
+    finite = torch.isfinite(pde) & torch.isfinite(boundary)
+    update, conflict = project_conflicting(g1, g2) if config.method.pcgrad else (g1 + g2, (g1 @ g2) < 0)
+    total = weights.objective(pde.detach(), boundary.detach())
+    gradients = {
+        "update": torch.where(finite, update, torch.zeros_like(update)),
+        "L1": pde.detach(),
+        "L2": boundary.detach(),
+        "total": torch.where(finite, total.detach(), torch.nan),
+        "conflict": conflict.int(),
+    }
+    if weights.learned:
+        (gradients["a_gradient"],) = torch.autograd.grad(total, weights.log_a)
+    return gradients
+
+
+def _pretrain_step(training: Training, optimizer, pools) -> dict:
+    networks = training.network.networks
+
+    def loss():
+        return torch.stack([(net(p["points"]) - p["targets"]).square().sum(-1).mean() for net, p in zip(networks, pools)]).mean()
+
+    def closure():
+        optimizer.zero_grad(set_to_none=True)
+        value = loss()
+        if torch.isfinite(value):
+            value.backward()
+        return value
+
+    optimizer.step(closure)
+    with torch.no_grad():
+        return {"total": loss()}
+
+
+def _fixed_losses(training: Training, pool, fixed) -> tuple:
+    pde_sample, boundary_sample = block_samples(training.config, training.problem, fixed, random=False)
+    with torch.no_grad():
+        pde = block_pde_term(training.network.networks, training.problem, pde_sample)
+        boundary = block_boundary_term(training.network.networks, training.problem, training.config, pool, boundary_sample)
+    return float(pde), float(boundary)
+
+
+def _lbfgs_step(training: Training, optimizer, pool, fixed) -> dict:
+    parameters = list(training.network.parameters())
+    weights = training.weights
+    factors = weights.factors().detach()
+    pde_sample, boundary_sample = block_samples(training.config, training.problem, fixed, random=False)
+    last = {}
+
+    def closure():
+        pde, boundary, g1, g2 = _terms(training, pool, pde_sample, boundary_sample, factors)
+        assign(parameters, g1 + g2)
+        last.update(L1=pde.detach(), L2=boundary.detach())
+        return (factors[0] * pde + factors[1] * boundary).detach()
+
+    optimizer.step(closure)
+    a = weights.a().detach()
+    total = weights.objective(last["L1"], last["L2"]).detach()
+    return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": optimizer.param_groups[0]["lr"]}
+
+
+def block_stage_table(pool: dict, pool_count: int) -> tuple:
+    """The stages of a block set's run (the runner's table): ``pretrain``, ``adam``, ``lbfgs``."""
+
+    def balance(training: Training, say) -> None:
+        weights, config = training.weights, training.config
+        if not (weights.learned and config.method.balance_start):
+            return
+        fixed = fixed_block_points(training.problem, config, pool_count, config.seed + 2)
+        pde, boundary = _fixed_losses(training, pool, fixed)
+        weights.balance(pde, boundary)
+        say(f"reweighting started at the balance of L1 {pde:.3g}, L2 {boundary:.3g}")
+
+    def adam_steps(t: Training) -> AdamSteps:
+        return AdamSteps(
+            t,
+            lambda: block_sample(t.problem, t.config, t.generator, pool_count),
+            lambda inputs: block_gradients(t, inputs, pool),
+        )
+
+    return (
+        Stage(
+            "pretrain",
+            optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config),
+            points=lambda t, state: pretrain_block_pool(t.problem, t.config.pretrain.points, t.config.seed + 1),
+            step=lambda t, optimizer, scheduler, pools: _pretrain_step(t, optimizer, pools),
+        ),
+        Stage(
+            "adam",
+            optimizer=lambda t: make_optimizer("adam", t.network, t.weights, t.config),
+            points=lambda t, state: adam_steps(t),
+            step=lambda t, optimizer, scheduler, steps: steps(optimizer, scheduler),
+            start=balance,
+            block=lambda t: DEVICE_BLOCK if t.problem.device.type == "cuda" else 1,
+        ),
+        Stage(
+            "lbfgs",
+            optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
+            points=lambda t, state: fixed_block_points(t.problem, t.config, pool_count, t.config.seed + 2),
+            step=lambda t, optimizer, scheduler, fixed: _lbfgs_step(t, optimizer, pool, fixed),
+        ),
+    )
+
+
+def train_blocks(
+    config,
+    block_set: BlockSet,
+    run_dir,
+    *,
+    device: str = "cpu",
+    resume: dict | None = None,
+    reporter=None,
+    stop=None,
+    geometry_spec: str | None = None,
+    summary: bool = True,
+) -> TrainResult:
+    """Train (or continue, ``resume``) one model for ``block_set``: as ``meshgen.neural.train.train``
+    for one shape (the same run folder, checkpoint layout, history and summary), with one network
+    per block. The networks map each block's unit cube; meshes of any --dims come from them."""
+    run_dir = Path(run_dir)
+    device = torch.device(device)
+    center = scale = None
+    if resume is not None:
+        center, scale = resume["model"]["center"], resume["model"]["scale"]
+    problem = block_problem(block_set, device, center, scale)
+    torch.manual_seed(config.seed)
+    network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
+    weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
+    weights.to(device)
+    generator = torch.Generator().manual_seed(config.seed)
+    state = TrainState(BLOCK_STAGES[0])
+    if resume is not None:
+        network.load_state_dict(resume["model"]["state_dict"])
+        weights.load_state_dict(resume["reweighting"])
+        generator.set_state(resume["rng"]["sampler"])
+        state = state_from_checkpoint(resume)
+    parallel = device.type == "cpu" and torch.get_num_threads() >= 2
+    training = Training(network, weights, problem, config, generator, TermRunner(parallel))
+    pool_count = _per_face(training) * POOL_STEPS
+    pool = patch_pool(problem, pool_count, config.seed + 3)
+    test_points = fixed_block_points(problem, config, pool_count, config.seed + 5)
+
+    def describe_run() -> dict:
+        pde, boundary = _fixed_losses(training, pool, test_points)
+        return {
+            "model": describe_blocks(training, block_set.names),
+            "geometry": {
+                "name": block_set.name,
+                "spec": geometry_spec or block_set.name,
+                "dim": block_set.dim,
+                "params": dict(block_set.values),
+                "blocks": list(block_set.names),
+            },
+            "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
+            "test_loss": {"pde": pde, "boundary": boundary, "total": pde + boundary},
+        }
+
+    saver = CheckpointWriter(training, describe_run, run_dir / "checkpoint.pt", state)
+    table = block_stage_table(pool, pool_count)
+    checkpoint, interrupted = run_stages(table, training, state, saver, run_dir, resume=resume, reporter=reporter, stop=stop)
+    quality = write_block_summary(checkpoint, block_set, run_dir) if summary and not interrupted else None
+    return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
+
+
+def write_block_summary(checkpoint: dict, block_set: BlockSet, run_dir) -> dict:
+    """Quality of the block set's mesh (the training's --dims) from the networks alone, after the
+    conforming correction (what ``meshgen mesh`` writes), and by TFI; ``summary.json``."""
+
+    def report(Xs):
+        points, cells, _ = merged_mesh(block_set, Xs)
+        return quality_report((points, cells))
+
+    corrected, info = neural_blocks(block_set, checkpoint["model"])
+    summary = {
+        "dims": [SUMMARY_DIMS] * block_set.dim,
+        "network": report(network_blocks(checkpoint["model"], block_set)),
+        "corrected": report(corrected),
+        "tfi": report(tfi_blocks(block_set)),
+        "interface_gap_before": info["interface_gap_before"],
+        "test_loss": checkpoint["test_loss"],
+        "step": checkpoint["step"],
+        "training_seconds": checkpoint["elapsed_seconds"],
+    }
+    write_json(Path(run_dir) / "summary.json", summary)
+    return summary

@@ -1,0 +1,122 @@
+"""The neural method for block sets: one tiny training run of the pipe (a few dozen steps), meshed
+through the request path, checked against closed forms (the wall is the circle of radius R, the
+inlet and outlet the planes z = 0 and z = L), an independent Jacobian computation
+(``mesh_checks.corner_jacobians``) and the blocks' own interface nodes compared pairwise."""
+
+import numpy as np
+import pytest
+from mesh_checks import corner_jacobians
+from neural_helpers import TINY, tiny_config
+
+import meshgen
+from meshgen.blocks import face_index, load_block_set
+from meshgen.errors import MeshgenError
+from meshgen.formats.multiblock import read_zones
+from meshgen.neural.block_train import train_blocks
+from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.request import MeshRequest, carry_out
+
+RADIUS, LENGTH = 0.5, 4.0  # the pipe's defaults
+
+
+TINY_BLOCKS = ("pretrain.steps=20", "pretrain.points=300", "lbfgs.max_iter=10", "adam.steps=20", "model.widths=[16,16]")
+
+
+@pytest.fixture(scope="module")
+def pipe_checkpoint(tmp_path_factory):
+    """A pipe model after 20 TFI-fit, 20 Adam and 2 L-BFGS steps (about 4 s of CPU)."""
+    run_dir = tmp_path_factory.mktemp("pipe-run")
+    config = tiny_config(*TINY_BLOCKS)
+    block_set = load_block_set("pipe", None, (4, 2, 4))
+    result = train_blocks(config, block_set, run_dir, summary=False, geometry_spec="pipe")
+    return result.checkpoint_path
+
+
+def test_tiny_training_writes_a_block_checkpoint(pipe_checkpoint):
+    checkpoint = load_checkpoint(pipe_checkpoint)  # the restricted loader: plain data only
+    assert checkpoint["stage"] == "done" and checkpoint["step"] == 20 + 20 + 2
+    assert checkpoint["model"]["blocks"] == ["core", "east", "north", "west", "south"]
+    assert checkpoint["geometry"]["blocks"] == checkpoint["model"]["blocks"]
+    weights = checkpoint["model"]["state_dict"]
+    assert {key.split(".")[1] for key in weights} == {"0", "1", "2", "3", "4"}  # one network per block
+
+
+@pytest.mark.parametrize("dims, polish", [((4, 2, 3), None), ((6, 3, 5), None), ((4, 2, 3), True)])
+def test_neural_pipe_is_conforming_exact_on_its_boundary_and_valid(pipe_checkpoint, dims, polish):
+    made = meshgen.mesh("pipe", dims, method="neural", model=str(pipe_checkpoint), polish=polish)
+    assert ("polish" in made.info) == bool(polish)  # polished only when asked
+    assert made.method == "neural" and made.X is None
+    block_set = made.geometry
+    assert made.info["correction"]["interface_gap_before"] > 0  # the networks alone do not conform
+    for interface in block_set.interfaces:  # interface nodes: the same numbers in both blocks
+        index_a, index_b = face_index(block_set, interface)
+        nodes_a = made.blocks[interface.a].reshape(-1, 3)[index_a]
+        nodes_b = made.blocks[interface.b].reshape(-1, 3)[index_b]
+        assert np.array_equal(nodes_a, nodes_b)
+    for block, X in zip(block_set.names, made.blocks):
+        assert np.all(corner_jacobians(X) > 0), block  # no inverted (or degenerate) cell
+        np.testing.assert_allclose(X[..., 0, 2], 0.0, atol=1e-12)  # inlet plane
+        np.testing.assert_allclose(X[..., -1, 2], LENGTH, rtol=1e-13)  # outlet plane
+        if block != "core":  # xi = 1 of every wall block is on the wall
+            np.testing.assert_allclose(np.hypot(X[-1, ..., 0], X[-1, ..., 1]), RADIUS, rtol=1e-13)
+    inlet = np.concatenate([X[..., 0, :2].reshape(-1, 2) for X in made.blocks])
+    assert np.hypot(*inlet.T).max() <= RADIUS * (1 + 1e-13)  # sliding nodes stay inside the disc
+
+
+def test_interface_stencil_is_the_winslow_residual_of_one_smooth_map():
+    """Two blocks of a box split at x = 1 (b twice as long, its xi reversed or not): the residual
+    on the glued stencil equals the single map's Winslow residual on an ordinary stencil."""
+    import torch
+
+    from meshgen import cube
+    from meshgen.neural.block_problem import INTERFACE_STEP, BlockProblem, interface_stencil
+    from meshgen.neural.derivatives import stencil_derivatives
+    from meshgen.neural.winslow import winslow_residual
+
+    def smooth(p):
+        x, y, z = p.unbind(-1)
+        return torch.stack([x + 0.1 * torch.sin(y) * x**2, y + 0.2 * x * z + 0.1 * y**2, z + 0.05 * x**2 * y], -1)
+
+    problem = BlockProblem(3, ("a", "b"), [], [], [], np.zeros(3), 1.0, torch.device("cpu"))
+    tangent = 0.1 + 0.8 * torch.rand(6, 2, generator=torch.Generator().manual_seed(0))
+    _, first, second = stencil_derivatives(smooth, torch.cat([torch.ones(6, 1), tangent], 1), INTERFACE_STEP)
+    expected = winslow_residual(first, second)
+    block_a = smooth
+    forward = lambda xi: smooth(torch.stack([1 + 2 * xi[..., 0], xi[..., 1], xi[..., 2]], -1))  # noqa: E731
+    reversed_ = lambda xi: smooth(torch.stack([3 - 2 * xi[..., 0], 1 - xi[..., 1], xi[..., 2]], -1))  # noqa: E731
+    xi0, xi1 = cube.face_named("xi0", 3), cube.face_named("xi1", 3)
+    for block_b, face_b, transform in ((forward, xi0, (1, 2, 3)), (reversed_, xi1, (-1, -2, 3))):
+        residual, _, _ = interface_stencil([block_a, block_b], problem, (0, xi1, 1, face_b, transform, 0.5), tangent)
+        torch.testing.assert_close(residual, expected, atol=2e-5, rtol=1e-4)
+
+
+def test_train_the_pipe_through_the_cli_and_mesh_the_newest_run(run_cli, tmp_path, monkeypatch):
+    tiny = [f"--set={item}" for item in (*TINY, *TINY_BLOCKS)]
+    trained = run_cli("train", "-g", "pipe", "--out", "runs/pipe-1", "--quiet", *tiny)
+    assert trained.returncode == 0, trained.stderr
+    assert "Trained pipe for 42 steps" in trained.stdout
+    monkeypatch.chdir(tmp_path)  # auto: the newest run of the pipe under ./runs
+    made = meshgen.mesh("pipe", (4, 2, 3))
+    assert made.method == "neural" and "runs/pipe-1/checkpoint.pt" in made.notes[0]
+    made.write(tmp_path / "pipe.cgns")
+    zones = read_zones(tmp_path / "pipe.cgns")
+    assert [zone["name"] for zone in zones] == list(made.geometry.names)
+    for zone, X in zip(zones, made.blocks):  # the file holds the mesh
+        np.testing.assert_array_equal(zone["X"], X)
+    assert all(len(zone["connections"]) >= 3 for zone in zones)  # every interface, from both sides
+
+
+def test_block_model_refused_for_a_single_block_geometry(pipe_checkpoint):
+    with pytest.raises(MeshgenError, match="trained on 'pipe', not on 'semicylinder'"):
+        meshgen.mesh("semicylinder", (4, 4, 4), method="neural", model=str(pipe_checkpoint))
+
+
+def test_checkpoint_alone_names_its_block_set(pipe_checkpoint):
+    made = carry_out(MeshRequest((4, 2, 3), checkpoint=str(pipe_checkpoint), quality=False))  # no geometry given
+    assert made.method == "neural" and made.geometry.name == "pipe" and len(made.blocks) == 5
+
+
+def test_neural_without_a_model_is_one_clear_error(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no runs/ here
+    with pytest.raises(MeshgenError, match="no trained model for pipe"):
+        meshgen.mesh("pipe", (4, 2, 3), method="neural")
