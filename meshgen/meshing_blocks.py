@@ -20,6 +20,9 @@ from meshgen.errors import MeshgenError, ParameterError
 from meshgen.formats.multiblock import check_block_output
 from meshgen.geometry import Geometry, available_names, load_geometry, plugin_module
 from meshgen.meshing import Mesh
+from meshgen.neural.block_inference import is_block_model, neural_blocks
+from meshgen.neural.device import inference_device
+from meshgen.neural.models import TrainedModel, find_model
 
 __all__ = ["BLOCK_METHODS", "block_spec", "checkpoint_block_spec", "mesh_block_set"]
 
@@ -73,9 +76,6 @@ def checkpoint_block_spec(checkpoint) -> str | None:
 def _block_model(request, block_set_name: str, params: dict, fallback: bool, warn=None):
     """The block model to mesh with (``meshgen.neural.models.find_model``: the checkpoint given, else
     the newest run of the geometry), or None with ``fallback`` when there is none."""
-    from meshgen.neural.block_inference import is_block_model
-    from meshgen.neural.models import TrainedModel, find_model
-
     checkpoint = request.checkpoint
     try:
         if isinstance(checkpoint, TrainedModel):
@@ -140,9 +140,6 @@ def _neural(request, block_set: BlockSet, model, progress=None):
     started from another mesh than the TFI, does not return to the TFI-started state: measured on
     the pipe at 8 4 4, the polished mesh of the benchmark model was 2.4 degrees of mean min angle
     below the network's own after 200 sweeps (a slow mode: the core turned about the axis)."""
-    from meshgen.neural.block_inference import neural_blocks
-    from meshgen.neural.inference import inference_device
-
     device = inference_device(request.device or "auto")
     correct = request.correct is not False
     Xs, correction = neural_blocks(block_set, model.checkpoint["model"], correct=correct, device=device)
