@@ -82,6 +82,7 @@ LAYERS = [
     ],
     [
         "meshgen.layout",
+        "meshgen.layout_family",
         "meshgen.elliptic",
         "meshgen.polish",
         "meshgen.elliptic_blocks",
