@@ -47,8 +47,11 @@ def run_meshgen(capsys, *args):
 @pytest.fixture(scope="module")
 def flower_run(tmp_path_factory):
     """A tiny flower family (twist 0..180, 6 Adam steps) trained through the command line."""
+    import meshgen.neural.family_train as family_train
+
     folder = tmp_path_factory.mktemp("family") / "run"
-    with pytest.raises(SystemExit) as stopped:
+    with pytest.raises(SystemExit) as stopped, pytest.MonkeyPatch.context() as patch:
+        patch.setattr(family_train, "SUMMARY_CELLS", 8)  # the validation's meshes, polished: small to keep the fixture fast
         cli.main(
             [
                 "train",
