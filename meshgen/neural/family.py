@@ -380,7 +380,7 @@ def validation_note(checkpoint: dict, values: dict, polished: bool = True) -> st
     record = checkpoint["family"].get("validation")
     at = ", ".join(f"{k}={v:g}" for k, v in values.items())
     if not isinstance(record, dict) or not record.get("members"):
-        return f"member {at} is not validated: this family checkpoint has no validation record (training did not finish)"
+        return f"member {at} is not validated: this family checkpoint has no validation record (its training did not finish, or an older meshgen made it)"
     points = int(record["points"])
     positions = [(values[n] - lo) / (hi - lo) * (points - 1) for n, (lo, hi) in family.ranges.items()]
     around = [sorted({math.floor(t + 1e-9), math.ceil(t - 1e-9)}) for t in positions]
