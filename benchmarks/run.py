@@ -33,8 +33,10 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``correction``: ``default`` trained on each 3D built-in, its corrected mesh at 30^3, 100^3 and
   200^3 against the converged elliptic mesh (``bench_correction.py``; the longest section);
 - ``family``: one network per family of shapes (``meshgen train --vary``, ``bench_family.py``): flower
-  (twist 0..180) and semicylinder (radius 0.5..2, length 1..4), training time, per-member meshing
-  time at 40^3, and the worst of 10 random members against its elliptic mesh;
+  (twist 0..180), the README's flower (twist 0..180, amplitude 0.1..0.3) and semicylinder (radius
+  0.5..2, length 1..4), training time, per-member meshing time at 40^3, and the worst (inverted
+  cells first, then angle) of the validation grid (3 values per parameter, corners included) and 10
+  random members against its elliptic mesh;
 - ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
@@ -809,7 +811,7 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             worst = case["worst"]
             at = ", ".join(f"{k}={v:.3g}" for k, v in worst["params"].items())
             add(
-                f"family worst member, {name}: |min angle - elliptic's|",
+                f"family worst member (inverted cells first, then angle), {name}: |min angle - elliptic's|",
                 abs(worst["difference_degrees"]),
                 "deg",
                 "family_worst_degrees",

@@ -371,14 +371,16 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
     ``geometry``: a smoothed geometry (``smoothed``); ``coords``: the mesh's parametric node
     coordinates per axis; ``X``: its node array (3D), whose face nodes are replaced by the
     discrete Winslow surface grid of the face at the mesh's resolution (edges kept, the smoothed
-    layout as the start). Why: an elliptic mesh's layers next to a face then solve the same discrete
+    layout as the start: the map's own ``layout_at(**values)`` when it has one, as a family
+    member's interpolated layout does, else the geometry's solved layout). Why: an elliptic mesh's layers next to a face then solve the same discrete
     equations as the face itself, so an extruded shape gives an exactly extruded mesh (the layout's
     fine-grid interpolant differs from that by the discretisation error, which a flow solver sees
     as skewed cells). Returns the Picard iterations per face name.
     """
     if geometry.dim != 3:
         return {}
-    layout = layout_of(unsmoothed(geometry))
+    own = getattr(geometry.boundary_map, "layout_at", None)  # a layout given with the map (a family's)
+    layout = own(**geometry.values) if own is not None else layout_of(unsmoothed(geometry))
     plain = unsmoothed(geometry).boundary
     iterations = {}
     for face in faces(3):

@@ -283,7 +283,8 @@ def _neural_model(request: MeshRequest, dims, warn, fallback: bool):
 
         # A family checkpoint: the parameters pick the member (inside the trained ranges).
         named = None if spec is None else spec.name if isinstance(spec, Geometry) else load_geometry(spec).name
-        member = load_family_member(checkpoint, given_params, named)
+        polished = request.polish is not False and request.correct is not False  # the mesh the user gets
+        member = load_family_member(checkpoint, given_params, named, warn=warn, polished=polished)
         if member is not None:
             return _check_model_dims(*member, dims)
     chosen = None

@@ -83,6 +83,7 @@ LAYERS = [
     ],
     [
         "meshgen.layout",
+        "meshgen.layout_family",
         "meshgen.elliptic",
         "meshgen.polish",
         "meshgen.elliptic_blocks",

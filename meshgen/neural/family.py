@@ -29,6 +29,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -38,6 +39,7 @@ import torch
 from meshgen.cube import face_samples
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import check_boundary, load_recorded_geometry
+from meshgen.layout_family import FamilyLayout, interpolated_member, solve_family_layout
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_points
 from meshgen.neural.model import INPUT_MAP, bubble
@@ -49,6 +51,7 @@ __all__ = [
     "Family",
     "FamilyMLP",
     "FamilyMesher",
+    "VALIDATION_POINTS",
     "describe_family_model",
     "family_from_checkpoint",
     "family_scale",
@@ -61,8 +64,10 @@ __all__ = [
     "network_from_model",
     "parse_vary",
     "range_text",
+    "validation_note",
 ]
 
+VALIDATION_POINTS = 3  # members per varied parameter on the validation grid: both ends (the box's corners) and the middle
 FD_STEP = 1e-5  # parameter step of the TFI's difference quotient, as a fraction of the range
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _VARY = re.compile(rf"^\s*([A-Za-z_]\w*)\s*=\s*({_NUMBER})\s*:\s*({_NUMBER})\s*$")
@@ -100,6 +105,11 @@ class Family:
     base: object  # Geometry
     spec: str
     ranges: dict  # name -> (low, high), in the order of the network's inputs
+    layout: FamilyLayout | None = None  # the smoothed layout over the box; None: each member's own map (fixed layout)
+
+    @property
+    def layout_name(self) -> str:
+        return "fixed" if self.layout is None else "smoothed"
 
     @property
     def names(self) -> list[str]:
@@ -121,8 +131,10 @@ class Family:
         return {n: lo + (float(t) + 1) / 2 * (hi - lo) for t, (n, (lo, hi)) in zip(q, self.ranges.items())}
 
     def member(self, values):
-        """The bound Geometry of the member with varied ``values`` (name -> number, unchecked)."""
-        return self.base.with_params(**values)
+        """The bound Geometry of the member with varied ``values`` (name -> number, unchecked), with
+        the family's boundary layout (the smoothed one interpolated over the box, or its own map)."""
+        member = self.base.with_params(**values)
+        return member if self.layout is None else interpolated_member(member, self.layout)
 
     def check_values(self, given: dict, where: str = "") -> dict[str, float]:
         """The varied values of a member from ``given`` (name -> number): every name must be a
@@ -152,6 +164,12 @@ class Family:
                 )
         return values
 
+    def grid(self, points: int = VALIDATION_POINTS) -> list[dict[str, float]]:
+        """The members of the tensor grid of ``points`` equally spaced values per varied parameter,
+        ends included (so the 2^k corners of the box are members): ``points``^k dicts."""
+        axes = [[(n, float(v)) for v in np.linspace(lo, hi, points)] for n, (lo, hi) in self.ranges.items()]
+        return [dict(member) for member in itertools.product(*axes)]
+
     def corners(self) -> list[dict[str, float]]:
         """The range's 2^k corners and its middle (where the geometry is checked and sized)."""
         ends = [[(n, lo), (n, hi)] for n, (lo, hi) in self.ranges.items()]
@@ -162,10 +180,12 @@ def range_text(ranges) -> list[str]:
     return [f"{name}={low:g}:{high:g}" for name, (low, high) in ranges.items()]
 
 
-def make_family(geometry, spec: str, ranges: dict) -> Family:
+def make_family(geometry, spec: str, ranges: dict, layout: str = "fixed") -> Family:
     """The family of ``geometry`` (bound to its fixed values) with ``ranges`` varied, checked: every
     varied name is a parameter of the geometry not also fixed by --param, and the geometry accepts
-    every corner of the ranges and their middle (boundary map checked as on load)."""
+    every corner of the ranges and their middle (boundary map checked as on load). ``layout``
+    "smoothed": the smoothed layout solved on a grid over the box and interpolated
+    (``meshgen.layout_family``); "fixed": each member's own map."""
     if not ranges:
         raise MeshgenError("a family needs at least one --vary name=low:high")
     for name in ranges:
@@ -187,6 +207,16 @@ def make_family(geometry, spec: str, ranges: dict) -> Family:
             raise MeshgenError(
                 f"--vary {' '.join(range_text(ranges))}: geometry '{geometry.name}' rejects the member {at}: {exc}"
             ) from None
+    if layout == "smoothed":
+        try:
+            family = Family(geometry, spec, dict(ranges), solve_family_layout(geometry, family.ranges))
+        except GeometryError as exc:
+            raise MeshgenError(
+                f"--vary {' '.join(range_text(ranges))}: {exc}; narrow the range, or train on the fixed layout "
+                f"(--set boundary_layout=fixed), which a flow solver may see as skewed cells"
+            ) from None
+    elif layout != "fixed":
+        raise MeshgenError(f"unknown boundary layout '{layout}' (layouts: smoothed, fixed)")
     return family
 
 
@@ -279,7 +309,8 @@ def family_from_checkpoint(checkpoint: dict) -> Family:
     entry = checkpoint["geometry"]
     ranges = {k: (float(lo), float(hi)) for k, (lo, hi) in checkpoint["family"]["ranges"].items()}
     base = load_recorded_geometry(entry["spec"], dict(entry["params"]), check=False, where="the checkpoint")
-    return Family(base, entry["spec"], ranges)
+    layout = checkpoint["family"].get("layout")
+    return Family(base, entry["spec"], ranges, None if layout is None else FamilyLayout.from_record(layout))
 
 
 def is_family(checkpoint: dict) -> bool:
@@ -294,10 +325,12 @@ def mesh_member(checkpoint: dict, values: dict, coords) -> np.ndarray:
     return mesh_from_model(member_model(checkpoint["model"], family.normalised(values)), coords, family.member(values))
 
 
-def load_family_member(path, values: dict, geometry_name: str | None = None):
+def load_family_member(path, values: dict, geometry_name: str | None = None, warn=None, polished: bool = True):
     """The member of the family checkpoint at ``path`` with the parameters ``values`` given on the
     command line, as a ``meshgen.neural.models.TrainedModel`` whose model is the member's plain
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
+    ``warn`` (a callable taking one line; else Python's ``warnings``) hears :func:`validation_note`'s
+    line when there is one (``polished``: whether the mesh will be polished).
     Returns None when ``path`` is no family checkpoint."""
     path = Path(path)
     checkpoint = checkpoints.load_checkpoint(path)
@@ -310,6 +343,9 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
             f"leave out --geometry (the checkpoint sets it)"
         )
     values = family.check_values(values, f" of {display_path(path)}")
+    note = validation_note(checkpoint, values, polished)
+    if note is not None:
+        warn(note) if warn is not None else warnings.warn(note, stacklevel=2)
     model = member_model(checkpoint["model"], family.normalised(values))
 
     class FamilyMember(TrainedModel):
@@ -324,7 +360,45 @@ def load_family_member(path, values: dict, geometry_name: str | None = None):
 
     member = FamilyMember(path, {**checkpoint, "model": model}, "checkpoint")
     entry = checkpoint["geometry"]
-    return member, load_recorded_geometry(entry["spec"], {**entry["params"], **values}, where=f"checkpoint {path}")
+    geometry = load_recorded_geometry(entry["spec"], {**entry["params"], **values}, where=f"checkpoint {path}")
+    return member, geometry if family.layout is None else interpolated_member(geometry, family.layout)
+
+
+def validation_note(checkpoint: dict, values: dict, polished: bool = True) -> str | None:
+    """One line on what the training's validation says of the member ``values`` (name -> number,
+    inside the ranges), or None when it has nothing to warn of. The validation
+    (``checkpoint["family"]["validation"]``, written at the end of training) meshed every member of
+    a grid of ``points`` values per parameter and counted the inverted cells of the network's own
+    mesh and of the polished mesh (what ``meshgen mesh`` writes by default). The count that is
+    judged is that of the mesh the user gets: the polished one (``polished``) or the network's own.
+    A grid member is judged by its own count; a member between grid values by the grid members
+    around it (the corners of its grid cell): it is warned of when one of them failed. A checkpoint
+    without the record (training stopped early) is warned of for every member."""
+    family = family_from_checkpoint(checkpoint)
+    record = checkpoint["family"].get("validation")
+    at = ", ".join(f"{k}={v:g}" for k, v in values.items())
+    if not isinstance(record, dict) or not record.get("members"):
+        return f"member {at} is not validated: this family checkpoint has no validation record (its training did not finish, or an older meshgen made it)"
+    points = int(record["points"])
+    positions = [(values[n] - lo) / (hi - lo) * (points - 1) for n, (lo, hi) in family.ranges.items()]
+    around = [sorted({math.floor(t + 1e-9), math.ceil(t - 1e-9)}) for t in positions]
+    neighbours = {tuple(index) for index in itertools.product(*around)}
+    failed = []
+    for member in record["members"]:
+        index = tuple(round((member["params"][n] - lo) / (hi - lo) * (points - 1)) for n, (lo, hi) in family.ranges.items())
+        if index in neighbours and member["polished_inverted" if polished else "network_inverted"]:
+            failed.append(member)
+    if not failed:
+        return None
+    size = " x ".join(str(n) for n in record["dims"])
+    counts = "; ".join(
+        f"{', '.join(f'{k}={v:g}' for k, v in m['params'].items())}: {m['network_inverted']} inverted in the network's mesh, "
+        f"{m['polished_inverted']} polished"
+        for m in failed
+    )
+    if len(neighbours) == 1:
+        return f"member {at} failed the training's {size} validation: {counts}"
+    return f"member {at} lies between validated members, and some of them failed the training's {size} validation: {counts}"
 
 
 # ---------------------------------------------------------------------------------------------

@@ -21,8 +21,10 @@ import numpy as np
 import torch
 
 from meshgen.errors import ParameterError
+from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points, training_grid
 from meshgen.neural.family import (
+    VALIDATION_POINTS,
     Family,
     FamilyMLP,
     describe_family_model,
@@ -38,12 +40,14 @@ from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
 from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, make_optimizer
 from meshgen.neural.winslow import winslow_residual
+from meshgen.polish import polish
 from meshgen.quality import quality_report, write_json
 from meshgen.tfi import parametric_grid, tfi, transfinite
 
 __all__ = [
     "FAMILY_UNUSED_KEYS",
     "LBFGS_RESAMPLE",
+    "END_SHARE",
     "MEMBERS_PER_STEP",
     "FamilyProblem",
     "check_family_keys",
@@ -52,11 +56,13 @@ __all__ = [
     "family_residual_loss",
     "lbfgs_batch",
     "summary_table",
+    "tensors",
     "train_family",
     "write_family_summary",
 ]
 
 MEMBERS_PER_STEP = 4  # members sampled per training step (their residuals are one batch)
+END_SHARE = 1 / 3  # chance that an Adam member's parameter sits at an end of its range (sample_members)
 TEST_MEMBERS = 8  # fixed held-out members of the test loss
 TEST_SEED = 271828
 LBFGS_INTERIOR = 8  # stratified members of the L-BFGS batch, beside the range's corners and middle
@@ -110,10 +116,18 @@ class FamilyProblem:
         return lambda points: (member.boundary(points) - self.center) / self.scale
 
 
-def sample_members(problem: FamilyProblem, count: int, generator: torch.Generator):
-    """``count`` members uniform in the ranges: q (count, k) float64 and the loss weights
-    (S / s_p)^2 (count,)."""
-    q = 2 * torch.rand((count, len(problem.family.ranges)), generator=generator, dtype=torch.float64) - 1
+def sample_members(problem: FamilyProblem, count: int, generator: torch.Generator, ends: float = 0.0):
+    """``count`` members in the ranges: q (count, k) float64 and the loss weights (S / s_p)^2
+    (count,). Each parameter is uniform in its range, except that with probability ``ends`` it sits
+    at one of the range's two ends (either with equal chance): with ``END_SHARE`` and k parameters
+    a member is a corner of the box with probability END_SHARE^k and on its boundary with
+    1 - (1 - END_SHARE)^k, so the corners, where members are most extreme, are trained as often as
+    the validation grid meets them. The same random numbers are drawn whatever ``ends`` is."""
+    shape = (count, len(problem.family.ranges))
+    q = 2 * torch.rand(shape, generator=generator, dtype=torch.float64) - 1
+    snap = torch.rand(shape, generator=generator, dtype=torch.float64) < ends
+    side = torch.where(torch.rand(shape, generator=generator, dtype=torch.float64) < 0.5, -1.0, 1.0).to(torch.float64)
+    q = torch.where(snap, side, q)
     return q, member_weights(problem, q)
 
 
@@ -215,7 +229,7 @@ def family_sample(training: Training) -> dict:
     dim = problem.family.base.dim
     draws = torch.rand(2 * dim, generator=generator, dtype=torch.float64)
     axes, _ = grid_from_draws(draws, grid_nodes(config, dim), grid_min_scale(config))
-    q, weights = sample_members(problem, MEMBERS_PER_STEP, generator)
+    q, weights = sample_members(problem, MEMBERS_PER_STEP, generator, END_SHARE)
     return {"grid": draws, "q": q, "weights": weights, "tfi": members_tfi(problem, q, axes)}
 
 
@@ -309,6 +323,12 @@ def train_family(
     ``summary.json`` in ``run_dir``, as ``meshgen.neural.train.train`` does, and returns its
     TrainResult; ``resume`` continues a saved family checkpoint."""
     run_dir, device = Path(run_dir), torch.device(device)
+    if config.boundary_layout != family.layout_name:
+        raise ParameterError(
+            "boundary_layout",
+            f"{{name}} is {config.boundary_layout} but the family was made on the {family.layout_name} layout: "
+            f"make it with make_family(..., layout={config.boundary_layout!r})",
+        )
     dim = family.base.dim
     center, scale = family_scale(family)
     if resume is not None:
@@ -328,6 +348,7 @@ def train_family(
         state = state_from_checkpoint(resume)
     training = Training(network, weights, problem, config, generator, TermRunner(False))
     test_members = fixed_members(problem, TEST_MEMBERS, TEST_SEED, grid_nodes(config, dim))
+    layout_record = None if family.layout is None else tensors(family.layout.record())
 
     def describe_run() -> dict:
         with torch.no_grad():
@@ -337,6 +358,7 @@ def train_family(
             "family": {
                 "ranges": {k: [float(lo), float(hi)] for k, (lo, hi) in family.ranges.items()},
                 "members_per_step": MEMBERS_PER_STEP,
+                **({} if layout_record is None else {"layout": layout_record}),
             },
             "geometry": {"name": family.base.name, "spec": family.spec, "dim": dim, "params": dict(family.base.values)},
             "test_loss": {
@@ -355,41 +377,82 @@ def train_family(
     return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
 
 
+def tensors(record: dict) -> dict:
+    """``record`` with its NumPy arrays (in lists) as torch tensors: a checkpoint holds no NumPy."""
+    return {
+        k: [torch.from_numpy(v) if isinstance(v, np.ndarray) else v for v in value] if isinstance(value, list) else value
+        for k, value in record.items()
+    }
+
+
 # ---------------------------------------------------------------------------------------------
 # the end-of-training summary
 
 
 def write_family_summary(checkpoint: dict, run_dir) -> dict:
-    """Mesh ``SUMMARY_CELLS``^d cells of the range's corners and middle with the family network and
-    with TFI, measure them (``meshgen.quality``, boundary deviation included), write
-    ``summary.json`` in ``run_dir`` and return it; ``worst`` indexes the worst member
-    (:func:`worst_member`: most inverted cells, then lowest mean minimum angle)."""
+    """Validate the family: mesh every member of its validation grid (``Family.grid``:
+    ``VALIDATION_POINTS`` values per varied parameter, the box's corners included) at
+    ``SUMMARY_CELLS``^d cells with the family network, polish a copy as ``meshgen mesh`` does by
+    default (``meshgen.polish``), mesh it with TFI, measure the three (``meshgen.quality``, boundary
+    deviation included), write ``summary.json`` in ``run_dir`` and return it. ``worst`` indexes the
+    worst member (:func:`worst_member`: most inverted cells of the network's mesh, then lowest mean
+    minimum angle); ``failing`` lists the members whose network or polished mesh has an inverted
+    cell. The per-member inverted counts are also written into the checkpoint
+    (``checkpoint["family"]["validation"]``, saved again in place), so that ``meshgen mesh --param``
+    can say when a member was not valid (``meshgen.neural.family.validation_note``)."""
     family = family_from_checkpoint(checkpoint)
     coords = parametric_grid([SUMMARY_CELLS] * family.base.dim)
     members = []
-    for values in family.corners():
+    for values in family.grid(VALIDATION_POINTS):
         geometry = family.member(values)
         start = time.perf_counter()
         X = mesh_member(checkpoint, values, coords)
         seconds = time.perf_counter() - start
+        polished = X.copy()
+        polish(polished, geometry, coords)
         members.append(
             {
                 "params": values,
                 "network": quality_report(X, geometry),
+                "polished": quality_report(polished, geometry),
                 "tfi": quality_report(tfi(geometry, None, coords), geometry),
                 "meshing_seconds": seconds,
             }
         )
+    failing = [
+        {
+            "params": m["params"],
+            "network_inverted": m["network"]["inverted"]["count"],
+            "polished_inverted": m["polished"]["inverted"]["count"],
+        }
+        for m in members
+        if m["network"]["inverted"]["count"] or m["polished"]["inverted"]["count"]
+    ]
     summary = {
         "dims": [SUMMARY_CELLS] * family.base.dim,
         "ranges": checkpoint["family"]["ranges"],
+        "validation_points": VALIDATION_POINTS,
         "members": members,
         "worst": worst_member(members),
+        "failing": failing,
         "test_loss": checkpoint["test_loss"],
         "step": checkpoint["step"],
         "training_seconds": checkpoint["elapsed_seconds"],
     }
     write_json(Path(run_dir) / "summary.json", summary)  # atomic; non-finite figures as null
+    checkpoint["family"]["validation"] = {
+        "points": VALIDATION_POINTS,
+        "dims": [SUMMARY_CELLS] * family.base.dim,
+        "members": [
+            {
+                "params": m["params"],
+                "network_inverted": int(m["network"]["inverted"]["count"]),
+                "polished_inverted": int(m["polished"]["inverted"]["count"]),
+            }
+            for m in members
+        ],
+    }
+    checkpoints.save_checkpoint(Path(run_dir) / "checkpoint.pt", checkpoint)
     return summary
 
 
@@ -407,16 +470,41 @@ def worst_member(members) -> int:
 
 
 def summary_table(summary: dict) -> list[str]:
-    """Lines for the terminal: per summarised member, inverted cells and mean minimum angle of the
-    network's mesh and of TFI's."""
+    """Lines for the terminal: per validated member, inverted cells and mean minimum angle of the
+    network's mesh, of the polished mesh (what ``meshgen mesh`` writes) and of TFI's; then the
+    failing members, or that there are none."""
     size = " x ".join(str(n) for n in summary["dims"])
-    lines = [f"{size} meshes of the range's corners and middle (inverted cells, mean min angle):"]
+    points = summary.get("validation_points", VALIDATION_POINTS)
+    count = len(summary["members"])
+    lines = [
+        f"{size} meshes of {count} members, {points} values per varied parameter (the range's corners included); "
+        "inverted cells, mean min angle:"
+    ]
+
+    def figures(report) -> str:
+        return f"{report['inverted']['count']} inverted, {report['metrics']['min_angle']['mean']:.2f} deg"
+
     for index, member in enumerate(summary["members"]):
         at = ", ".join(f"{k}={v:g}" for k, v in member["params"].items())
-        net, ref = member["network"], member["tfi"]
+        line = f"  {at}: network {figures(member['network'])}"
+        if "polished" in member:
+            line += f"; polished {figures(member['polished'])}"
+        lines.append(line + f"; TFI {figures(member['tfi'])}" + ("  (worst)" if index == summary["worst"] else ""))
+    failing = summary.get("failing")
+    if failing is None:
+        return lines
+
+    def verdict(key: str) -> str:
+        bad = sum(1 for m in failing if m[key])
+        return f"all {count} valid" if not bad else f"{bad} of {count} NOT valid"
+
+    lines.append(
+        f"Validity (no inverted cell): polished meshes (what meshgen mesh writes) {verdict('polished_inverted')}; "
+        f"the network's own meshes (--no-polish) {verdict('network_inverted')}."
+    )
+    for member in failing:
+        at = ", ".join(f"{k}={v:g}" for k, v in member["params"].items())
         lines.append(
-            f"  {at}: network {net['inverted']['count']} inverted, {net['metrics']['min_angle']['mean']:.2f} deg; "
-            f"TFI {ref['inverted']['count']} inverted, {ref['metrics']['min_angle']['mean']:.2f} deg"
-            + ("  (worst)" if index == summary["worst"] else "")
+            f"  NOT valid: {at}: {member['network_inverted']} inverted cells in the network's mesh, {member['polished_inverted']} polished"
         )
     return lines

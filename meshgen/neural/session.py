@@ -241,10 +241,8 @@ def _family(config, geometry, spec: str, params, vary):
             "--vary trains the exact-boundary form (TFI + b N) alone: use --preset family or exact, "
             "or --set model.exact_boundary=true"
         )
-    if config.boundary_layout != "fixed":
-        # The smoothed layout is solved per shape (seconds each): a family learns each member's own map.
-        raise ConfigError("--vary trains on each member's own boundary map: use --preset family, or --set boundary_layout=fixed")
-    return make_family(geometry, spec, ranges)
+    # smoothed: the layout solved on a grid over the box and interpolated (meshgen.layout_family)
+    return make_family(geometry, spec, ranges, config.boundary_layout)
 
 
 def run_training(run: Run, quiet: bool = False):
