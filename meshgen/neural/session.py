@@ -245,11 +245,25 @@ def _family(config, geometry, spec: str, params, vary):
     return make_family(geometry, spec, ranges, config.boundary_layout)
 
 
+def _trainer(run: Run):
+    """(training function, what it trains, its extra keywords) of ``run``: a family, a block set
+    or one shape, all run by the one stage runner (design notes §15)."""
+    if run.family is not None:
+        from meshgen.neural.family_train import train_family
+
+        return train_family, run.family, {}
+    if run.block_set is not None:
+        from meshgen.neural.block_train import train_blocks
+
+        return train_blocks, run.block_set, {"geometry_spec": run.geometry_spec}
+    from meshgen.neural.train import train
+
+    return train, run.geometry, {"geometry_spec": run.geometry_spec}
+
+
 def run_training(run: Run, quiet: bool = False):
     """Create the run folder, train with a progress bar (or log lines), save on the first Ctrl-C
     (a second one aborts). Returns the TrainResult."""
-    from meshgen.neural.train import train
-
     created, release = claim_run_folder(run)  # a folder of its own, locked while the run trains
     reporter = reporter_for(run.config, quiet)
     stop_requested = threading.Event()
@@ -264,40 +278,16 @@ def run_training(run: Run, quiet: bool = False):
     previous = {signum: signal.signal(signum, on_interrupt) for signum in stop_signals()}
     try:
         with reporter:
-            if run.family is not None:
-                from meshgen.neural.family_train import train_family
-
-                return train_family(
-                    run.config,
-                    run.family,
-                    run.run_dir,
-                    device=run.device,
-                    resume=run.resume,
-                    reporter=reporter,
-                    stop=stop_requested.is_set,
-                )
-            if run.block_set is not None:
-                from meshgen.neural.block_train import train_blocks
-
-                return train_blocks(
-                    run.config,
-                    run.block_set,
-                    run.run_dir,
-                    device=run.device,
-                    resume=run.resume,
-                    reporter=reporter,
-                    stop=stop_requested.is_set,
-                    geometry_spec=run.geometry_spec,
-                )
-            return train(
+            trainer, subject, extra = _trainer(run)
+            return trainer(
                 run.config,
-                run.geometry,
+                subject,
                 run.run_dir,
                 device=run.device,
                 resume=run.resume,
                 reporter=reporter,
                 stop=stop_requested.is_set,
-                geometry_spec=run.geometry_spec,
+                **extra,
             )
     except BaseException:
         # A run that fails before writing anything (e.g. a plugin that fails on its first points)
