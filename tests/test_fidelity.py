@@ -34,7 +34,7 @@ def test_the_canal_vortex_is_a_potential_flow_tangent_to_the_tube():
 
 
 @needs_potential_foam
-def test_elliptic_and_polished_neural_meshes_reproduce_uniform_flow(tmp_path):
+def test_elliptic_and_neural_meshes_polished_or_raw_reproduce_uniform_flow(tmp_path):
     elliptic = meshgen.mesh("semicylinder", DIMS, method="elliptic")
     reference = potential_flow_error(elliptic.X, elliptic.geometry, tmp_path / "elliptic")["max"]
     assert reference < 1e-3
@@ -43,11 +43,11 @@ def test_elliptic_and_polished_neural_meshes_reproduce_uniform_flow(tmp_path):
     polished = meshgen.mesh("semicylinder", DIMS, method="neural")
     assert polished.info["polish"]["converged"]
     assert potential_flow_error(polished.X, polished.geometry, tmp_path / "neural")["max"] <= 10 * max(reference, 1e-6)
-    # The network's mesh alone (no polish) is what the solver cannot use: far off.
+    # The network's own mesh (no polish): trained on the smoothed layout's lattice, where the faces
+    # solve the discrete equations, it is the extrusion the solver needs to within 10x too.
     raw = meshgen.mesh("semicylinder", DIMS, method="neural", polish=False)
-    result = potential_flow_error(raw.X, raw.geometry, tmp_path / "raw")
-    assert result["max"] > 100 * max(reference, 1e-6)
-    assert result["worst_cell"][2] <= 2  # next to the inlet
+    assert "polish" not in raw.info
+    assert potential_flow_error(raw.X, raw.geometry, tmp_path / "raw")["max"] <= 10 * max(reference, 1e-6)
 
 
 @needs_potential_foam

@@ -80,6 +80,11 @@ class PointsConfig:
     random_grid: bool = True  # fd: shift and rescale the training grid at random every step
     grid_min_scale: float = 0.8  # fd: the random grid spans a fraction in [this, 1] of each axis
     boundary_pool: int = 64  # boundary points are drawn from a fixed pool of this many steps' worth (0: fresh)
+    # fd: every training grid lies on the smoothed layout's fine lattice (spacing 1/64), where its
+    # faces solve the discrete Winslow equations, so the residual is zero for the interior those faces
+    # imply (an extruded shape: its extrusion); off the lattice it is not (design notes §18). With the
+    # fixed layout the lattice is only a grid of spacing 1/64
+    lattice: bool = False
 
 
 @dataclass
@@ -435,6 +440,8 @@ def validate(config: TrainConfig) -> None:
         need(config.method.derivatives == "fd", "method.derivatives", "must be fd with model.exact_boundary")
         need(not config.method.reweighting, "method.reweighting", "must be false with model.exact_boundary (no L2)")
         need(not config.method.pcgrad, "method.pcgrad", "must be false with model.exact_boundary (no L2)")
+    if config.points.lattice:
+        need(config.method.derivatives == "fd", "points.lattice", "needs method.derivatives fd")
     _check_bounds(config)
 
 

@@ -21,7 +21,15 @@ import itertools
 
 import torch
 
-__all__ = ["grid_derivatives", "training_grid", "grid_from_draws", "grid_points", "stencil_derivatives", "autograd_derivatives"]
+__all__ = [
+    "autograd_derivatives",
+    "grid_derivatives",
+    "grid_from_draws",
+    "grid_points",
+    "lattice_grid_from_draws",
+    "stencil_derivatives",
+    "training_grid",
+]
 
 
 def _shifted(values: torch.Tensor, offsets) -> torch.Tensor:
@@ -89,9 +97,30 @@ def grid_from_draws(draws: torch.Tensor, nodes: int, min_scale: float = 1.0):
     return list(axes.unbind(0)), list(h.unbind(0))
 
 
+def lattice_grid_from_draws(draws: torch.Tensor, nodes: int, cells: int):
+    """Training grids on the lattice of spacing 1/``cells`` (the smoothed layout's fine grid, on
+    which its face grids solve the discrete Winslow equations): ``nodes`` interior nodes per axis
+    plus a one-node halo, every node a lattice node. ``draws``: (..., 2 dim) uniform draws in
+    [0, 1) as :func:`grid_from_draws` takes them (the offsets' draws, the odd entries, are used);
+    per axis the offset is one of the ``cells - nodes`` lattice positions that keep the grid in
+    the cube. Tensor arithmetic alone (a CUDA graph replays it). Returns (axes, spacing): ``dim``
+    float64 tensors of shape (..., nodes + 2) and ``dim`` spacings 1/cells as 0-d tensors."""
+    offsets = torch.floor(draws[..., 1::2] * (cells - nodes)).clamp(0, cells - nodes - 1)
+    steps = torch.arange(nodes + 2, dtype=torch.float64, device=draws.device)
+    axes = (offsets[..., None] + steps) / cells  # (..., dim, nodes + 2)
+    h = torch.tensor(1.0 / cells, dtype=torch.float64, device=draws.device)
+    return list(axes.unbind(-2)), [h] * (draws.shape[-1] // 2)
+
+
 def grid_points(axes) -> torch.Tensor:
-    """Tensor-product nodes of 1D ``axes`` (lengths n1..nd): shape (n1, ..., nd, d), index order (i, j[, k])."""
-    return torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1)
+    """Tensor-product nodes of ``axes``: 1D (lengths n1..nd) -> (n1, ..., nd, d), index order (i, j[, k]);
+    or batches of grids, each axis (B, n_i) -> (B, n1, ..., nd, d)."""
+    if axes[0].ndim == 1:
+        return torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1)
+    dim = len(axes)
+    shape = (axes[0].shape[0], *(a.shape[1] for a in axes))
+    views = [a.reshape(a.shape[0], *[-1 if d == i else 1 for d in range(dim)]).expand(shape) for i, a in enumerate(axes)]
+    return torch.stack(views, dim=-1)
 
 
 def stencil_derivatives(function, points: torch.Tensor, h: float):

@@ -15,12 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from meshgen.layout import RESOLUTION
 from meshgen.neural.config import TrainConfig
 from meshgen.neural.derivatives import (
     autograd_derivatives,
     grid_derivatives,
     grid_from_draws,
     grid_points,
+    lattice_grid_from_draws,
     stencil_derivatives,
     training_grid,
 )
@@ -42,8 +44,9 @@ __all__ = [
     "evaluate_losses",
     "grid_min_scale",
     "grid_nodes_per_axis",
+    "grid_of_draws",
     "grid_residual",
-    "grid_tfi",
+    "grid_tfi_derivatives",
     "lbfgs_points",
     "make_test_set",
     "pde_term",
@@ -72,12 +75,19 @@ class Problem:
     device: torch.device
 
 
-def grid_tfi(problem: Problem, axes) -> torch.Tensor:
-    """Normalised TFI at the nodes of the grid ``axes`` (1D float64 tensors), flattened in
-    :func:`grid_points`' order: (n, d) float32 on the CPU."""
+def grid_tfi_derivatives(problem: Problem, axes, spacing) -> tuple[torch.Tensor, torch.Tensor]:
+    """TFI's central differences (``grid_derivatives``) at the interior nodes of the grid ``axes``,
+    computed in float64 and returned as float32 on the CPU: first ([B,] m1, .., md, d, d), second
+    ([B,] m1, .., md, d, d, d). The exact-boundary form's residual adds them to the differences of
+    b N alone: in float32 the differences of TFI itself (values ~1, second differences over h^2)
+    leave a round-off residual (about 1e-4 at h = 1/64) that no network can remove; b N is small,
+    so its differences are exact to float32's precision."""
     dim = problem.dim
-    broadcast = [a.cpu().reshape([-1 if d == i else 1 for d in range(dim)]).numpy() for i, a in enumerate(axes)]
-    return torch.from_numpy(transfinite(problem.boundary, broadcast)).float().reshape(-1, dim)
+    batch = list(axes[0].shape[:-1])  # a batch of grids (lattice blocks): (B, n_i) per axis
+    broadcast = [a.cpu().reshape(batch + [-1 if d == i else 1 for d in range(dim)]).numpy() for i, a in enumerate(axes)]
+    values = torch.from_numpy(transfinite(problem.boundary, broadcast))
+    _, first, second = grid_derivatives(values, [float(h) for h in spacing])
+    return first.float(), second.float()
 
 
 def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=None) -> torch.Tensor:
@@ -88,17 +98,21 @@ def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=N
     return tfi_values + bubble(points)[:, None] * output
 
 
-def grid_residual(network: MLP, problem: Problem, axes, spacing, tfi_values=None) -> torch.Tensor:
+def grid_residual(network: MLP, problem: Problem, axes, spacing, tfi_derivatives=None) -> torch.Tensor:
     """Winslow residual at the interior nodes of the grid ``axes`` (1D float64 tensors, halo
-    included) by finite differences: (m1, ..., md, d). The exact-boundary form needs TFI at the
-    nodes: ``tfi_values`` ((n, d) on the device, :func:`grid_tfi`), computed here when not given."""
+    included; or (B, n_i) tensors, a batch of B grids) by finite differences: ([B,] m1, ..., md, d).
+    The exact-boundary form needs TFI's differences at the interior nodes: ``tfi_derivatives``
+    ((first, second) on the device, :func:`grid_tfi_derivatives`), computed here when not given."""
     nodes = grid_points(axes)
     flat = nodes.reshape(-1, problem.dim).float().to(problem.device)
-    if problem.exact and tfi_values is None:
-        tfi_values = grid_tfi(problem, axes).to(problem.device)
-    values = apply_map(network, problem, flat, tfi_values).reshape(*nodes.shape)
-    _, first, second = grid_derivatives(values, spacing)
-    return winslow_residual(first, second)
+    if not problem.exact:
+        _, first, second = grid_derivatives(network(flat).reshape(*nodes.shape), spacing)
+        return winslow_residual(first, second)
+    if tfi_derivatives is None:
+        tfi_derivatives = tuple(t.to(problem.device) for t in grid_tfi_derivatives(problem, axes, spacing))
+    # the differences of TFI + b N: TFI's (float64, given) plus those of b N (float32)
+    _, first, second = grid_derivatives((bubble(flat)[:, None] * network(flat)).reshape(*nodes.shape), spacing)
+    return winslow_residual(first + tfi_derivatives[0], second + tfi_derivatives[1])
 
 
 def points_residual(network: MLP, problem: Problem, points: torch.Tensor) -> torch.Tensor:
@@ -118,9 +132,35 @@ def grid_min_scale(config: TrainConfig, random: bool = True) -> float:
     return config.points.grid_min_scale if (random and config.points.random_grid) else 1.0
 
 
+def grid_of_draws(config: TrainConfig, dim: int, draws: torch.Tensor):
+    """The training grid (axes, spacing) of an Adam step's draws ((2 d,) uniform float64): randomly
+    shifted and scaled (``grid_from_draws``), or with ``points.lattice`` one block of the smoothed
+    layout's fine lattice at a random lattice offset (``lattice_grid_from_draws``)."""
+    nodes = grid_nodes_per_axis(config, dim)
+    if config.points.lattice:  # at most RESOLUTION - 2 interior nodes per axis fit the lattice
+        return lattice_grid_from_draws(draws, min(nodes, RESOLUTION - 2), RESOLUTION)
+    return grid_from_draws(draws, nodes, grid_min_scale(config))
+
+
+def lattice_blocks(config: TrainConfig, dim: int, generator: torch.Generator):
+    """The L-BFGS stage's fixed grid with ``points.lattice``: 4^d lattice blocks of m/4 interior
+    nodes per axis (as many residual points as one m^d block) at lattice offsets drawn from
+    ``generator``: spread over the cube, not one corner of it (fewer, larger blocks were measured
+    to let L-BFGS fit the blocks and bend the map between them)."""
+    nodes = max(1, min(grid_nodes_per_axis(config, dim), RESOLUTION - 2) // 4)
+    draws = torch.rand((4**dim, 2 * dim), generator=generator, dtype=torch.float64)
+    return lattice_grid_from_draws(draws, nodes, RESOLUTION)
+
+
 def sample_pde_points(config: TrainConfig, dim: int, generator: torch.Generator, random: bool = True):
     """One step's interior points: a training grid (axes, spacing) for fd, random points for autograd."""
     if config.method.derivatives == "fd":
+        if config.points.lattice:
+            return (
+                grid_of_draws(config, dim, torch.rand(2 * dim, generator=generator, dtype=torch.float64))
+                if random
+                else lattice_blocks(config, dim, generator)
+            )
         return training_grid(dim, grid_nodes_per_axis(config, dim), generator, grid_min_scale(config, random))
     return sample_interior(config.points.interior, dim, generator)
 
@@ -170,15 +210,15 @@ def drawn_boundary(draw: dict, pool, dim: int):
 def sample_step(config: TrainConfig, problem: Problem, generator: torch.Generator, pool=None) -> dict:
     """What the host gives one Adam step, as CPU tensors drawn from ``generator`` in a fixed order:
     ``grid`` (2 d,) float64, the draws of the training grid (fd; the exact-boundary form adds
-    ``tfi`` (n, d) float32, TFI at its nodes: the geometry is NumPy code) or ``points`` (N, d)
+    ``tfi_first``, ``tfi_second``, TFI's differences at its nodes: the geometry is NumPy code) or ``points`` (N, d)
     random interior points (autograd); then the :func:`boundary_draw` (none for the exact-boundary
     form, which has no boundary loss)."""
     inputs = {}
     if config.method.derivatives == "fd":
         inputs["grid"] = torch.rand(2 * problem.dim, generator=generator, dtype=torch.float64)
         if problem.exact:
-            axes, _ = grid_from_draws(inputs["grid"], grid_nodes_per_axis(config, problem.dim), grid_min_scale(config))
-            inputs["tfi"] = grid_tfi(problem, axes)
+            axes, spacing = grid_of_draws(config, problem.dim, inputs["grid"])
+            inputs["tfi_first"], inputs["tfi_second"] = grid_tfi_derivatives(problem, axes, spacing)
     else:
         inputs["points"] = sample_interior(config.points.interior, problem.dim, generator)
     if problem.exact:
@@ -191,8 +231,8 @@ def step_samples(config: TrainConfig, problem: Problem, inputs: dict, pool=None)
     size or None), or None) of one step from its :func:`sample_step` inputs on the device."""
     dim = problem.dim
     if "grid" in inputs:
-        axes, spacing = grid_from_draws(inputs["grid"], grid_nodes_per_axis(config, dim), grid_min_scale(config))
-        pde = (axes, spacing, inputs.get("tfi"))
+        axes, spacing = grid_of_draws(config, dim, inputs["grid"])
+        pde = (axes, spacing, (inputs["tfi_first"], inputs["tfi_second"]) if "tfi_first" in inputs else None)
     else:
         pde = inputs["points"]
     if problem.exact:
@@ -268,7 +308,7 @@ def lbfgs_points(problem: Problem, config: TrainConfig) -> dict:
     pde = sample_pde_points(config, problem.dim, generator, random=False)
     if problem.exact and config.method.derivatives == "fd":  # TFI at the fixed grid once, not per iteration
         axes, spacing = pde
-        pde = (axes, spacing, grid_tfi(problem, axes).to(problem.device))
+        pde = (axes, spacing, tuple(t.to(problem.device) for t in grid_tfi_derivatives(problem, axes, spacing)))
     if problem.exact:
         return {"pde": pde, "boundary": None}
     rows = boundary_draw(problem, config, generator)["boundary"].to(problem.device)

@@ -1,0 +1,91 @@
+"""Training grids on the smoothed layout's fine lattice (``points.lattice``) and the exact-boundary
+residual with TFI's differences in float64 (design notes §18).
+
+The smoothed layout's faces solve the discrete Winslow equations on a lattice of spacing
+1/RESOLUTION; the semicylinder is an extrusion, so its TFI is the extrusion of its cap and solves
+the 3D discrete equations on that lattice too. Checked here against an independent float64
+computation of the residual of TFI + b N from the boundary map.
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from meshgen.geometry import load_geometry
+from meshgen.layout import RESOLUTION, with_layout
+from meshgen.neural.config import ConfigError, resolve_config
+from meshgen.neural.derivatives import grid_derivatives, grid_points, lattice_grid_from_draws, training_grid
+from meshgen.neural.model import MLP, bubble, normalisation, normalised_boundary
+from meshgen.neural.problem import Problem, grid_residual, lattice_blocks, sample_pde_points
+from meshgen.neural.winslow import winslow_residual
+from meshgen.tfi import transfinite
+
+
+@pytest.fixture(scope="module")
+def problem():
+    geometry = with_layout(load_geometry("semicylinder"), "smoothed")
+    center, scale = normalisation(geometry)
+    return Problem(3, normalised_boundary(geometry, center, scale), center, scale, True, torch.device("cpu"))
+
+
+def zero_network():
+    network = MLP(3, [8, 8])
+    torch.nn.init.zeros_(network.layers[-1].weight)
+    torch.nn.init.zeros_(network.layers[-1].bias)
+    return network
+
+
+def test_lattice_grids_lie_on_the_lattice_inside_the_cube():
+    draws = torch.rand((50, 6), generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    axes, spacing = lattice_grid_from_draws(draws, 16, RESOLUTION)
+    assert [tuple(a.shape) for a in axes] == [(50, 18)] * 3 and all(float(h) == 1.0 / RESOLUTION for h in spacing)
+    for axis in axes:
+        steps = axis * RESOLUTION
+        assert torch.equal(steps, steps.round()) and float(axis.min()) >= 0.0 and float(axis.max()) <= 1.0
+        torch.testing.assert_close(axis[:, 1:] - axis[:, :-1], torch.full((50, 17), 1.0 / RESOLUTION, dtype=torch.float64))
+    ends = lattice_grid_from_draws(torch.tensor([0.0, 0.0, 0.5, 0.999999], dtype=torch.float64), 16, RESOLUTION)[0]
+    assert float(ends[0][0]) == 0.0 and float(ends[1][-1]) == 1.0  # the first and the last lattice position
+    # a batch of grids: each the tensor grid of its own axes
+    nodes = grid_points(axes)
+    assert torch.equal(nodes[7], grid_points([a[7] for a in axes]))
+
+
+def test_tfi_of_an_extruded_shape_solves_the_lattice_equations_and_not_others(problem):
+    network = zero_network()  # N = 0: the map is TFI of the smoothed layout
+    generator = torch.Generator().manual_seed(1)
+    axes, spacing = lattice_blocks(resolve_config("exact"), 3, generator)
+    shifted, shifted_spacing = training_grid(3, 16, generator, 0.8)  # the grids of points.lattice: false
+    with torch.no_grad():
+        assert float(grid_residual(network, problem, axes, spacing).abs().max()) < 1e-6
+        assert float(grid_residual(network, problem, shifted, shifted_spacing).abs().max()) > 1e-3
+
+
+def test_split_residual_equals_the_float64_residual_of_tfi_plus_bubble_network(problem):
+    torch.manual_seed(0)
+    network = MLP(3, [8, 8])
+    with torch.no_grad():
+        for tensor in network.layers[-1].parameters():  # N ~ 1e-4: a trained exact network's size on this shape
+            tensor.mul_(1e-4)
+    config = resolve_config("exact")
+    axes, spacing = sample_pde_points(config, 3, torch.Generator().manual_seed(2))
+    with torch.no_grad():
+        ours = grid_residual(network, problem, axes, spacing)
+        nodes = grid_points(axes)
+        flat = nodes.reshape(-1, 3)
+        tfi = torch.from_numpy(transfinite(problem.boundary, list(flat.numpy().T)))
+        values = tfi + bubble(flat)[:, None] * network.double()(flat)
+        _, first, second = grid_derivatives(values.reshape(nodes.shape), spacing)
+        reference = winslow_residual(first, second)
+        # the same in float32 throughout: TFI's own differences lose digits to cancellation
+        _, first, second = grid_derivatives(values.float().reshape(nodes.shape), [float(h) for h in spacing])
+        plain = winslow_residual(first, second)
+    assert float(reference.abs().max()) > 1e-5  # a residual the comparison can see
+    error = float((ours.double() - reference).abs().max())
+    assert error < 1e-2 * float(reference.abs().max())
+    assert error < 0.01 * float((plain.double() - reference).abs().max())  # float32 alone: above the residual itself
+
+
+def test_lattice_needs_finite_differences():
+    with pytest.raises(ConfigError, match="'points.lattice' needs method.derivatives fd"):
+        resolve_config("pinn", None, ["points.lattice=true"])
