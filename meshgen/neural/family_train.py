@@ -82,6 +82,7 @@ FAMILY_UNUSED_KEYS = {
     "method.boundary_weight": _NO_BOUNDARY_LOSS,
     "points.boundary": _NO_BOUNDARY_LOSS,
     "points.boundary_pool": _NO_BOUNDARY_LOSS,
+    "points.lattice": "a family's members each have a layout of their own: no one lattice to train on",
     "pretrain.steps": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "pretrain.lr": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "pretrain.points": "a family starts from every member's TFI (N = 0) and has no TFI fit",
