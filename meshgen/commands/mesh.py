@@ -85,7 +85,8 @@ METHOD_HELP = (
     "--tol",
     type=float,
     default=None,
-    help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].",
+    help="elliptic: stop when the largest node update, relative to the characteristic length (multi-block geometries: "
+    "to the node's local cell size), is below this [default: 1e-6].",
 )
 @click.option(
     "--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100]."
