@@ -11,7 +11,7 @@ matches the box's cell size h = 2 BOX / N; the rectangles upstream, below and ab
 cells of size about h, those downstream grow from h by the ratio 1 + wake_growth / N (parameter
 ``wake_growth``, default 1.5). For a given number of cells the forces on the cylinder are most
 accurate with N large: the cells go to the cylinder and the box around it, and the far wake, where
-the flow varies slowly, gets coarse cells (docs/design-dfg.md).
+the flow varies slowly, gets coarse cells (design notes §20).
 """
 
 import numpy as np

@@ -240,7 +240,8 @@ def _print_block_result(made, quiet):
         )
     if "sweeps" in info:
         echo(
-            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} of the local cell size "
+            f"({'converged' if info['converged'] else 'not converged'})"
         )
     echo(f"wrote {made.output}")
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
