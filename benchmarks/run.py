@@ -164,6 +164,8 @@ TARGETS = {
         "x",
         "potentialFoam error of the bundled model's mesh / the elliptic mesh's, semicylinder 20x20x40",
     ),
+    "blocks_pipe_min_angle": (">=", 40.0, "deg", "pipe O-grid, elliptic: worst min angle at every resolution"),
+    "blocks_pipe_max_angle": ("<=", 140.0, "deg", "pipe O-grid, elliptic: worst max angle at every resolution"),
     "blocks_pipe_potential": ("<=", 1e-6, "", "pipe 40 around x 80 along, elliptic, default tol: potentialFoam max |U - U_in|"),
     "dfg_10k_drag": ("abs<=", 0.1, "%", "DFG 2D-1 at most 10k cells: drag error against 5.5795"),
     "dfg_10k_lift": ("abs<=", 3.0, "%", "DFG 2D-1 at most 10k cells: lift error against 0.0106"),
@@ -942,6 +944,13 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 )
     if "blocks" in sections:
         data = sections["blocks"]
+        elliptic = [row for row in data.get("pipe", []) if row["method"] == "elliptic"]
+        if elliptic:
+            sizes = ", ".join(" ".join(map(str, row["dims"])) for row in elliptic)
+            add(f"pipe elliptic ({sizes}): worst min angle", min(row["worst_min_angle"] for row in elliptic), "deg",
+                key="blocks_pipe_min_angle", note=f"{sum(row['inverted'] for row in elliptic)} inverted")  # fmt: skip
+            add(f"pipe elliptic ({sizes}): worst max angle", max(row["worst_max_angle"] for row in elliptic), "deg",
+                key="blocks_pipe_max_angle")  # fmt: skip
         for row in data.get("pipe", []):
             if row.get("potential_error") is not None:
                 add(f"pipe {' '.join(map(str, row['dims']))} elliptic: potentialFoam max |U - U_in|", row["potential_error"], "",
