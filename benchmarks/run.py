@@ -51,7 +51,12 @@ Sections, in order (all on the semicylinder, the reference shape):
 - ``blocks_neural``: the pipe's model (``benchmarks/models/pipe``, one network per block) against the
   multi-block elliptic mesh at --dims 8 4 4 and 16 8 4 (--quick: 4 2 4 and 8 4 4, not judged): the
   network's conforming mesh and the default (polished) mesh, inverted cells, interface gaps
-  (``bench_blocks_neural.py``).
+  (``bench_blocks_neural.py``);
+- ``blocks``: multi-block meshes (``bench_blocks.py``): the pipe O-grid's worst angles against
+  resolution and, at 40 around by 80 along with the elliptic solver's default tolerance,
+  potentialFoam's largest |U - U_inlet|; the DFG 2D-1 benchmark (``examples/dfg/run_dfg.py``) at
+  2.4k, 9.6k and 38k cells, drag, lift and dp against Schaefer and Turek's values (--quick: the
+  small pipes only).
 
 The summary at the end lists the headline figures with their targets and met /
 not met; ``--json`` keeps everything measured, with keys that name their units (``seconds``,
@@ -113,6 +118,7 @@ SECTIONS = [
     "shapes",
     "fidelity",
     "blocks_neural",
+    "blocks",
 ]
 
 # figure key -> (comparison, target, unit, what the figure measures)
@@ -192,6 +198,15 @@ TARGETS = {
         "x",
         "potentialFoam error of the bundled model's raw mesh (--no-polish) / the elliptic mesh's, semicylinder 20x20x40",
     ),
+    "blocks_pipe_min_angle": (">=", 40.0, "deg", "pipe O-grid, elliptic: worst min angle at every resolution"),
+    "blocks_pipe_max_angle": ("<=", 140.0, "deg", "pipe O-grid, elliptic: worst max angle at every resolution"),
+    "blocks_pipe_potential": ("<=", 1e-6, "", "pipe 40 around x 80 along, elliptic, default tol: potentialFoam max |U - U_in|"),
+    "dfg_10k_drag": ("abs<=", 0.1, "%", "DFG 2D-1 at most 10k cells: drag error against 5.5795"),
+    "dfg_10k_lift": ("abs<=", 3.0, "%", "DFG 2D-1 at most 10k cells: lift error against 0.0106"),
+    "dfg_10k_dp": ("abs<=", 0.5, "%", "DFG 2D-1 at most 10k cells: front-back pressure difference error against 0.1175"),
+    "dfg_40k_drag": ("abs<=", 0.05, "%", "DFG 2D-1 at most 40k cells: drag error"),
+    "dfg_40k_lift": ("abs<=", 1.0, "%", "DFG 2D-1 at most 40k cells: lift error"),
+    "dfg_40k_dp": ("abs<=", 0.2, "%", "DFG 2D-1 at most 40k cells: pressure difference error"),
     "family_worst_degrees": ("<=", 0.5, "deg", "family: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
     "exact_converged_seconds": ("<=", 15.0, "s", "training time of exact to converged quality on 2 cores"),
     "default_converged_seconds": ("<=", 90.0, "s", "training time of default to converged quality on 2 cores"),
@@ -553,6 +568,12 @@ def blocks_neural(quick: bool) -> dict:
     import bench_blocks_neural
 
     return bench_blocks_neural.run(quick)
+
+
+def blocks(quick: bool) -> dict:
+    import bench_blocks
+
+    return bench_blocks.run(quick)
 
 
 def family(quick: bool) -> dict:
@@ -1024,6 +1045,25 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
         )
         if data["judged"] and not data["met"]:
             rows[-1]["met"] = False  # an inverted cell or a gap fails the target whatever the angles
+    if "blocks" in sections:
+        data = sections["blocks"]
+        elliptic = [row for row in data.get("pipe", []) if row["method"] == "elliptic"]
+        if elliptic:
+            sizes = ", ".join(" ".join(map(str, row["dims"])) for row in elliptic)
+            add(f"pipe elliptic ({sizes}): worst min angle", min(row["worst_min_angle"] for row in elliptic), "deg",
+                key="blocks_pipe_min_angle", note=f"{sum(row['inverted'] for row in elliptic)} inverted")  # fmt: skip
+            add(f"pipe elliptic ({sizes}): worst max angle", max(row["worst_max_angle"] for row in elliptic), "deg",
+                key="blocks_pipe_max_angle")  # fmt: skip
+        for row in data.get("pipe", []):
+            if row.get("potential_error") is not None:
+                add(f"pipe {' '.join(map(str, row['dims']))} elliptic: potentialFoam max |U - U_in|", row["potential_error"], "",
+                    key="blocks_pipe_potential", note=f"{row['sweeps']} sweeps, default tol")  # fmt: skip
+        for row in data.get("dfg", []):
+            budget = {0.001: "10k", 0.0005: "40k"}.get((row.get("targets") or {}).get("drag"))
+            for name in ("drag", "lift", "dp"):
+                add(f"DFG 2D-1 --dims {' '.join(map(str, row['dims']))} ({row['cells']} cells): {name} error",
+                    100 * row[f"{name}_error"], "%", key=f"dfg_{budget}_{name}" if budget else None,
+                    note="" if row["converged"] else "simpleFoam did not converge")  # fmt: skip
     return rows
 
 
@@ -1174,6 +1214,7 @@ def main(argv=None) -> int:
         "shapes": lambda: shapes(args.quick),
         "fidelity": lambda: fidelity(args.quick),
         "blocks_neural": lambda: blocks_neural(args.quick),
+        "blocks": lambda: blocks(args.quick),
     }
     for name in chosen:
         section_header(name)

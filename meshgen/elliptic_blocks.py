@@ -22,6 +22,11 @@ After each sweep, two kinds of nodes that no glued block holds inside move by th
   angles, and a straight extrusion (the pipe) is meshed as the extrusion of its section's mesh.
 
 Nodes on curved patches and on two patches stay where the TFI put them.
+
+Stopping rule: a sweep's update is the largest node displacement relative to the node's local
+cell size (its shortest grid edge in the TFI start), the measure a flow solver feels: a node that
+moves by a fraction of its cells' size changes their face areas and volumes by that fraction, so
+a straight extrusion (the pipe) is an extrusion to that relative accuracy at every resolution.
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ from meshgen.blocks import BlockSet, global_numbering, tfi_blocks
 from meshgen.elliptic import DEFAULT_TOL, AndersonMixing, hierarchy, v_cycle
 from meshgen.winslow import component_array, node_array, stencils, winslow_operator
 
-__all__ = ["elliptic_blocks", "glue", "junction_nodes"]
+__all__ = ["elliptic_blocks", "glue", "junction_nodes", "local_cell_sizes"]
 
 MAX_SWEEPS = 200  # Schwarz sweeps over all interfaces
 # Multigrid V-cycles per glued block and sweep, by dimension: the 3D pipe at 32 x 16 x 4 takes 91
@@ -199,6 +204,22 @@ def _slide(block_set: BlockSet, Xs, numbering, count, sliding) -> None:
         X[mask] = values[ids[mask]]
 
 
+def local_cell_sizes(block_set: BlockSet, Xs, numbering, count) -> np.ndarray:
+    """(count,) for every unique node, its shortest grid edge over every block holding it."""
+    sizes = np.full(count, np.inf)
+    for X, ids in zip(Xs, numbering):
+        shortest = np.full(X.shape[:-1], np.inf)
+        for axis in range(block_set.dim):
+            edges = np.linalg.norm(np.diff(X, axis=axis), axis=-1)
+            lower = [slice(None)] * block_set.dim
+            upper = [slice(None)] * block_set.dim
+            lower[axis], upper[axis] = slice(0, -1), slice(1, None)
+            shortest[tuple(lower)] = np.minimum(shortest[tuple(lower)], edges)
+            shortest[tuple(upper)] = np.minimum(shortest[tuple(upper)], edges)
+        np.minimum.at(sizes, ids.reshape(-1), shortest.reshape(-1))
+    return sizes
+
+
 def _gather(Xs, numbering, count) -> np.ndarray:
     """The unique nodes (count, dim) of the blocks' arrays."""
     values = np.empty((count, Xs[0].shape[-1]))
@@ -255,8 +276,8 @@ def elliptic_blocks(
 ):
     """Multi-block Winslow mesh of ``block_set``: (list of node arrays, one per block, interface
     nodes identical in every block; info dict as ``meshgen.elliptic.solve_winslow``'s, with
-    ``sweeps``). ``tol``: stop when a sweep moves no node by more than ``tol`` times the
-    characteristic length; ``max_iter``: most sweeps; ``slide``: nodes on flat patches (a pipe's
+    ``sweeps``). ``tol``: stop when a sweep moves no node by more than ``tol`` times its local cell
+    size (``local_cell_sizes``; ``final_update`` is in that unit); ``max_iter``: most sweeps; ``slide``: nodes on flat patches (a pipe's
     inlet, a channel's straight walls) slide in their plane so that grid lines meet it at right
     angles (``planar_sliding``), else every boundary node stays where the TFI put it; default: on
     in 2D, off in 3D. ``initial``: the node arrays to start from (conforming, on the boundary: a
@@ -269,7 +290,7 @@ def elliptic_blocks(
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     junctions, numbering, count = junction_nodes(block_set)
     stencil = _junction_stencil(block_set, numbering, junctions)
-    length = block_set.length
+    sizes = local_cell_sizes(block_set, Xs, numbering, count)
     levels = []  # per interface: the multigrid hierarchy of its glued block (coordinates do not change)
     for interface in block_set.interfaces:
         glued, coords, _, _ = glue(block_set, Xs, interface)
@@ -294,7 +315,7 @@ def elliptic_blocks(
         _slide(block_set, Xs, numbering, count, sliding)
         sweeps += 1
         output = _gather(Xs, numbering, count)
-        previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1))) / length
+        previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1) / sizes))
         first = first or update
         if progress is not None:
             done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
@@ -321,6 +342,6 @@ def elliptic_blocks(
     if not info["converged"]:
         info["warnings"] = [
             f"multi-block elliptic solver did not converge: after {sweeps} sweep(s) the largest node update is "
-            f"{update:.3g} of the characteristic length (tolerance {tol:g}); raise --max-iter or --tol"
+            f"{update:.3g} of the local cell size (tolerance {tol:g}); raise --max-iter or --tol"
         ]
     return Xs, info

@@ -1,15 +1,17 @@
 """The DFG 2D-1 benchmark (Schaefer and Turek, 1996) on a meshgen multi-block mesh, solved with
 OpenFOAM's simpleFoam: steady laminar flow past a cylinder at Re = 20.
 
-    python examples/dfg/run_dfg.py --dims 16 12            # mesh, solve, print drag, lift, dp
-    python examples/dfg/run_dfg.py --dims 16 12 --json out.json
+    python examples/dfg/run_dfg.py --dims 34 20            # mesh, solve, print drag, lift, dp
+    python examples/dfg/run_dfg.py --dims 34 20 --json out.json --param wake_growth=1.5
 
 Channel [0, 2.2] x [0, 0.41], cylinder D = 0.1 at (0.2, 0.2); inflow U(y) = 4 Um y (H - y) / H^2 with
 Um = 0.3, nu = 1e-3 (mean velocity 0.2, Re = 20). The 2D mesh (``meshgen mesh -g dfg-cylinder
 --format openfoam``) is one cell deep with ``empty`` front and back. Set-up: laminar, SIMPLEC,
-second-order convection (linearUpwind), forceCoeffs on the cylinder with magUInf = 0.2, lRef = D
-and Aref = D x depth (c = 2 F / (rho 0.2^2 D) per unit depth), patchProbes of p at the cylinder's
-front (0.15, 0.2) and back (0.25, 0.2). Reference: c_D = 5.57953523384, c_L = 0.010618948146,
+second-order convection (linearUpwind), converged until the initial residuals are below 1e-9 (p)
+and 1e-10 (U); forceCoeffs on the cylinder with magUInf = 0.2, lRef = D and Aref = D x depth
+(c = 2 F / (rho 0.2^2 D) per unit depth). The pressure difference is p at the cylinder's front
+(0.15, 0.2) minus p at its back (0.25, 0.2), each interpolated along the wall from the cylinder
+faces' values (``wall_pressure``). Reference: c_D = 5.57953523384, c_L = 0.010618948146,
 dp = 0.11752016697 (design notes §11).
 
 Needs OpenFOAM (v1912 or later, the ESI syntax) on PATH or in /usr/share/openfoam.
@@ -30,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 REFERENCE = {"drag": 5.57953523384, "lift": 0.010618948146, "dp": 0.11752016697}
-HEIGHT, U_MAX, NU, D = 0.41, 0.3, 1e-3, 0.1
+HEIGHT, U_MAX, NU, D, CENTRE = 0.41, 0.3, 1e-3, 0.1, (0.2, 0.2)
 HEADER = "FoamFile {{ version 2.0; format ascii; class {cls}; object {name}; }}\n"
 BASHRC = ("/usr/share/openfoam/etc/bashrc", "/usr/lib/openfoam/openfoam/etc/bashrc")
 
@@ -68,6 +70,37 @@ def poly_mesh(case: Path):
     return points, faces, boundary
 
 
+def _list_body(path: Path) -> str:
+    """The text between the outer parentheses of an ASCII OpenFOAM list file (or field entry)."""
+    text = path.read_text()
+    text = text[text.index("}", text.index("FoamFile")) + 1 :]
+    if "internalField" in text:
+        text = text[text.index("internalField") :]
+        text = text[: text.index("boundaryField")]
+    return text[text.index("(") + 1 : text.rindex(")")]
+
+
+def wall_pressure(case: Path, time_name: str, angles) -> np.ndarray:
+    """p on the cylinder at the polar ``angles`` (radians, about the centre (0.2, 0.2)): the
+    cylinder faces' values (zero-gradient: their cells' p), interpolated along the wall by the
+    quadratic through the three faces nearest in angle. The nearest face alone sits half a face
+    away from a probe point, where p differs from the stagnation value by O(angle^2)."""
+    points, faces, boundary = poly_mesh(case)
+    count, start = boundary["cylinder"]
+    owner = np.array(_list_body(case / "constant" / "polyMesh" / "owner").split(), dtype=int)[start : start + count]
+    pressure = np.array(_list_body(case / time_name / "p").split(), dtype=float)[owner]
+    centres = points[faces[start : start + count]].mean(axis=1)
+    theta = np.arctan2(centres[:, 1] - CENTRE[1], centres[:, 0] - CENTRE[0])
+    values = []
+    for angle in angles:
+        offset = np.angle(np.exp(1j * (theta - angle)))  # wrapped to (-pi, pi]
+        nearest = np.argsort(np.abs(offset))[:3]
+        t, v = offset[nearest], pressure[nearest]
+        weights = [np.prod([(0.0 - t[j]) / (t[i] - t[j]) for j in range(3) if j != i]) for i in range(3)]
+        values.append(float(np.dot(weights, v)))
+    return np.array(values)
+
+
 def set_up(case: Path) -> dict:
     """0/, constant/ and system/ for simpleFoam; returns the mesh's depth and cell count."""
     points, faces, boundary = poly_mesh(case)
@@ -93,7 +126,6 @@ def set_up(case: Path) -> dict:
     )
     write(case / "constant" / "transportProperties", "dictionary", f"transportModel Newtonian;\nnu {NU};\n")
     write(case / "constant" / "turbulenceProperties", "dictionary", "simulationType laminar;\n")
-    z = 0.5 * depth
     write(
         case / "system" / "controlDict",
         "dictionary",
@@ -103,8 +135,6 @@ def set_up(case: Path) -> dict:
         '    coefficients { type forceCoeffs; libs ("libforces.so"); writeControl timeStep; writeInterval 1;\n'
         "        patches (cylinder); rho rhoInf; rhoInf 1; liftDir (0 1 0); dragDir (1 0 0); CofR (0.2 0.2 0);\n"
         f"        pitchAxis (0 0 1); magUInf 0.2; lRef {D}; Aref {D * depth:.17g}; }}\n"
-        '    pressure { type patchProbes; libs ("libsampling.so"); writeControl timeStep; writeInterval 1;\n'
-        f"        patches (cylinder); fields (p); probeLocations ((0.15 0.2 {z:.17g}) (0.25 0.2 {z:.17g})); }}\n"
         "}\n",
     )
     write(
@@ -135,15 +165,25 @@ def last_row(path: Path, columns: list[str]) -> dict:
     return {name: float(values[header.index(name)]) for name in columns}
 
 
-def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bool = False) -> dict:
-    """Mesh, set up, solve; returns cells, seconds (mesh, solver), drag, lift, dp and their errors."""
+def history(path: Path, columns: list[str], back: int) -> dict:
+    """The largest relative change of each column over the last ``back`` rows of a .dat file."""
+    lines = path.read_text().splitlines()
+    header = [line for line in lines if line.startswith("#")][-1].lstrip("#").split()
+    rows = np.array([line.split() for line in lines if line.strip() and not line.startswith("#")][-back - 1 :], dtype=float)
+    return {name: float(np.ptp(rows[:, header.index(name)]) / abs(rows[-1, header.index(name)])) for name in columns}
+
+
+def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bool = False, params=()) -> dict:
+    """Mesh, set up, solve; returns cells, seconds (mesh, solver), drag, lift, dp, their errors and
+    the convergence checks. ``params``: ``NAME=VALUE`` strings for meshgen's ``--param``."""
     env = foam_environment()
     if shutil.which("simpleFoam", path=env.get("PATH")) is None:
         raise SystemExit("simpleFoam not found: install OpenFOAM (Debian: apt install openfoam)")
     shutil.rmtree(case, ignore_errors=True)
     start = time.perf_counter()
+    options = [item for value in params for item in ("--param", value)]
     meshed = subprocess.run(
-        [sys.executable, "-m", "meshgen", "mesh", "-g", "dfg-cylinder", "--dims", *map(str, dims), "--method", method,
+        [sys.executable, "-m", "meshgen", "mesh", "-g", "dfg-cylinder", "--dims", *map(str, dims), *options, "--method", method,
          "--format", "openfoam", "-o", str(case), "--no-quality", "-q"],
         capture_output=True, text=True,
     )  # fmt: skip
@@ -159,14 +199,21 @@ def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bo
     iterations = len(re.findall(r"^Time = ", solved.stdout, re.M))
     coefficients = next((case / "postProcessing" / "coefficients").glob("*/coefficient*.dat"))
     forces = last_row(coefficients, ["Cd", "Cl"])
-    p_file = next((case / "postProcessing" / "pressure").glob("*/p"))
-    front, back = [float(v) for v in p_file.read_text().strip().splitlines()[-1].split()[1:3]]
+    changes = history(coefficients, ["Cd", "Cl"], 50)
+    last_time = max(
+        (folder for folder in case.iterdir() if folder.name.isdigit() and folder.name != "0"), key=lambda f: int(f.name)
+    )
+    front, back = wall_pressure(case, last_time.name, [np.pi, 0.0])
     cells = int(re.search(r"nCells:\s*(\d+)", (case / "constant" / "polyMesh" / "owner").read_text())[1])
     result = {
         "dims": list(dims),
         "method": method,
+        "params": list(params),
         "cells": cells,
         "iterations": iterations,
+        "converged": "SIMPLE solution converged" in solved.stdout,
+        "drag_change_last_50": changes["Cd"],
+        "lift_change_last_50": changes["Cl"],
         "mesh_seconds": mesh_seconds,
         "solver_seconds": solver_seconds,
         "drag": forces["Cd"],
@@ -177,7 +224,9 @@ def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bo
         result[f"{key}_error"] = result[key] / REFERENCE[key] - 1.0
     if not quiet:
         print(f"DFG 2D-1 on dfg-cylinder --dims {' '.join(map(str, dims))} ({method}): {cells} cells, "
-              f"mesh {mesh_seconds:.1f} s, simpleFoam {iterations} iterations in {solver_seconds:.1f} s")  # fmt: skip
+              f"mesh {mesh_seconds:.1f} s, simpleFoam {iterations} iterations in {solver_seconds:.1f} s "
+              f"({'converged' if result['converged'] else 'NOT converged'}; over the last 50 iterations drag changed "
+              f"by {changes['Cd']:.1e}, lift by {changes['Cl']:.1e})")  # fmt: skip
         for key, label in (("drag", "drag c_D"), ("lift", "lift c_L"), ("dp", "dp")):
             print(f"  {label:9s} {result[key]:.6g}   reference {REFERENCE[key]:.6g}   error {100 * result[key + '_error']:+.3f}%")
     return result
@@ -185,12 +234,13 @@ def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bo
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dims", nargs=2, type=int, default=[16, 12], metavar=("N", "M"))
+    parser.add_argument("--dims", nargs=2, type=int, default=[34, 20], metavar=("N", "M"))
     parser.add_argument("--method", default="elliptic", choices=["tfi", "elliptic"])
     parser.add_argument("--case", default="dfg-case", type=Path)
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="a dfg-cylinder parameter")
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
     args = parser.parse_args()
-    result = run(args.dims, args.method, args.case)
+    result = run(args.dims, args.method, args.case, params=args.param)
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))
 

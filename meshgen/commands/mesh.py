@@ -85,7 +85,8 @@ METHOD_HELP = (
     "--tol",
     type=float,
     default=None,
-    help="elliptic: stop when the largest node update, relative to the characteristic length, is below this [default: 1e-6].",
+    help="elliptic: stop when the largest node update, relative to the characteristic length (multi-block geometries: "
+    "to the node's local cell size), is below this [default: 1e-6].",
 )
 @click.option(
     "--max-iter", type=click.IntRange(1), default=None, help="elliptic: most iterations (multigrid cycles) [default: 100]."
@@ -240,7 +241,8 @@ def _print_block_result(made, quiet):
         )
     if "sweeps" in info:
         echo(
-            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} ({'converged' if info['converged'] else 'not converged'})"
+            f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} of the local cell size "
+            f"({'converged' if info['converged'] else 'not converged'})"
         )
     echo(f"wrote {made.output}")
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
