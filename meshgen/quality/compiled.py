@@ -304,9 +304,9 @@ def _node(X, i, j, k):
 def _hex_row(X, centroid, i, j, k0, k1, tolerance, out, degenerate, c0):
     """Cells (i, j, k0 <= k < k1) into ``out[:, c0 + k - k0]`` as ``_store_hex`` leaves them.
 
-    ``X`` (3, n1+1, n2+1, n3+1) coordinates by component; ``centroid`` (3, n1+2, n2+2, n3+2) the
-    cell centroids with a layer of NaN around them (cell (i, j, k) at [:, i+1, j+1, k+1]), so that a
-    missing face neighbour is NaN without a branch. Unsigned indices and unit strides along k let
+    ``X`` (3, ni, n2+1, n3+1) node coordinates by component; ``centroid`` (3, ni+1, n2+2, n3+2)
+    the centroids of the cells with a layer of NaN around them (cell (i, j, k) at [:, i+1, j+1,
+    k+1]), so that a missing face neighbour is NaN without a branch (``_slab`` makes both). Unsigned indices and unit strides along k let
     LLVM vectorise this loop over cells: numba wraps negative signed indices, and a runtime stride
     makes LLVM version the loop on it being 1."""
     i, j, c0 = uint64(i), uint64(j), uint64(c0)
@@ -371,33 +371,48 @@ def structured_hex(X, first, last, tolerance, out, degenerate):
     number of those cells, in C order. Rows of cells along k, each a vectorised loop (``_hex_row``),
     then a scalar pass for the ``acos`` of the row (no vector ``acos`` in LLVM without a vector
     math library)."""
+    n2, n3 = X.shape[1] - 1, X.shape[2] - 1
+    m2, m3 = last[1] - first[1], last[2] - first[2]
+    for i in prange(first[0], last[0]):
+        nodes = np.empty((3, 2, n2 + 1, n3 + 1))
+        centroid = np.empty((3, 3, n2 + 2, n3 + 2))
+        _slab(X, i, nodes, centroid)
+        for j in range(first[1], last[1]):
+            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
+            _hex_row(nodes, centroid, 0, j, first[2], last[2], tolerance, out, degenerate, c0)
+            _angles(out, c0, c0 + m3)
+
+
+@njit(**_JIT)
+def _slab(X, i, nodes, centroid):
+    """What the cells (i, :, :) of node array ``X`` (n1+1, n2+1, n3+1, 3) need, for ``_hex_row``:
+    ``nodes`` (3, 2, n2+1, n3+1) the node planes i and i+1 by component; ``centroid`` (3, 3, n2+2,
+    n3+2) the centroids of the cells i-1, i, i+1 (summed in VTK corner order) with a layer of NaN
+    around them, NaN where there is no such cell. Per plane of cells, so that the extra memory is a
+    few planes per thread, not a copy of the mesh."""
     n1, n2, n3 = X.shape[0] - 1, X.shape[1] - 1, X.shape[2] - 1
-    centroid = np.full((3, n1 + 2, n2 + 2, n3 + 2), np.nan)
-    components = np.empty((3, n1 + 1, n2 + 1, n3 + 1))
-    for i in prange(n1 + 1):
+    for a in range(2):
         for j in range(n2 + 1):
             for k in range(n3 + 1):
                 for d in range(3):
-                    components[d, i, j, k] = X[i, j, k, d]
-    for i in prange(n1):
+                    nodes[d, a, j, k] = X[i + a, j, k, d]
+    centroid[:] = np.nan
+    for a in range(3):
+        ii = i - 1 + a
+        if ii < 0 or ii >= n1:
+            continue
         for j in range(n2):
             for k in range(n3):
                 for d in range(3):
-                    s = X[i, j, k, d]
-                    s = s + X[i + 1, j, k, d]
-                    s = s + X[i + 1, j + 1, k, d]
-                    s = s + X[i, j + 1, k, d]
-                    s = s + X[i, j, k + 1, d]
-                    s = s + X[i + 1, j, k + 1, d]
-                    s = s + X[i + 1, j + 1, k + 1, d]
-                    s = s + X[i, j + 1, k + 1, d]
-                    centroid[d, i + 1, j + 1, k + 1] = s * 0.125
-    m2, m3 = last[1] - first[1], last[2] - first[2]
-    for i in prange(first[0], last[0]):
-        for j in range(first[1], last[1]):
-            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
-            _hex_row(components, centroid, i, j, first[2], last[2], tolerance, out, degenerate, c0)
-            _angles(out, c0, c0 + m3)
+                    s = X[ii, j, k, d]
+                    s = s + X[ii + 1, j, k, d]
+                    s = s + X[ii + 1, j + 1, k, d]
+                    s = s + X[ii, j + 1, k, d]
+                    s = s + X[ii, j, k + 1, d]
+                    s = s + X[ii + 1, j, k + 1, d]
+                    s = s + X[ii + 1, j + 1, k + 1, d]
+                    s = s + X[ii, j + 1, k + 1, d]
+                    centroid[d, a, j + 1, k + 1] = s * 0.125
 
 
 @njit(parallel=True, **_JIT)
