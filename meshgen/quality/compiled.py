@@ -1,6 +1,6 @@
 """The per-cell metrics (definitions in ``meshgen.quality.kernels``) as compiled numba kernels.
 
-One scalar function per cell kind (``_hex_cell``, ``_quad_cell``) holds the arithmetic; four
+One function per cell kind (``_hex_cell``, ``_quad_cell``) holds the arithmetic; four
 drivers feed it corner coordinates and the centroids of the face neighbours, in parallel over
 cells (``prange``): structured node arrays (``structured_hex``, ``structured_quad``; neighbours
 are the cells at index +-1) and points + connectivity (``unstructured_hex``, ``unstructured_quad``;
@@ -9,7 +9,10 @@ corner order. The arithmetic follows the vectorised NumPy definition operation b
 IEEE double precision (``fastmath=False``), so the kernels agree with it to round-off of the
 library ``acos`` (tested to 1e-12).
 
-A cell is written as corner array ``P[q]``, q = s0 + 2 s1 (+ 4 s2) for the corner at offsets
+The structured hexahedra run as loops over rows of cells along k that LLVM vectorises (AVX-512:
+8 cells per instruction; ``_hex_row``), the ``acos`` of the angles in a scalar pass after each row.
+
+A cell is written as corners ``P[q]``, q = s0 + 2 s1 (+ 4 s2) for the corner at offsets
 (s0, s1[, s2]) from the cell's first node. Compiled code is cached on disk (``cache=True``): the
 first call in a fresh installation compiles for some seconds, later processes load it.
 """
@@ -19,9 +22,10 @@ from __future__ import annotations
 import math
 import os
 
+import llvmlite.binding as llvm
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, uint64
 
 # Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
 # on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.
@@ -34,6 +38,13 @@ _DEGREES = 180.0 / math.pi
 # VTK corner order of a hexahedron / quad, as corner q (centroids are summed in this order).
 HEX_Q_OF_VTK = np.array([0, 1, 3, 2, 4, 5, 7, 6])
 QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
+
+# The row loop over cells (``_hex_row``) reads 2 arrays and writes 8 rows: LLVM checks at run time
+# that they do not overlap, more checks than its default limits (8 and 128) allow, without which
+# it would not vectorise the loop. Raised for this process's LLVM (it changes what loops may be
+# vectorised, never the arithmetic of one).
+llvm.set_option("", "-runtime-memory-check-threshold=1024")
+llvm.set_option("", "-vectorize-memory-check-threshold=1024")
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 
@@ -70,11 +81,15 @@ def _unit2(x, y):
 
 
 @njit(inline="always", **_JIT)
+def _sub(a, b):
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(inline="always", **_JIT)
 def _edge(P, low, high):
-    """(unit edge, edge, length) from corner ``low`` to corner ``high``."""
-    ex, ey, ez = P[high, 0] - P[low, 0], P[high, 1] - P[low, 1], P[high, 2] - P[low, 2]
-    ux, uy, uz, length = _unit3(ex, ey, ez)
-    return (ux, uy, uz), (ex, ey, ez), length
+    e = _sub(P[high], P[low])
+    ux, uy, uz, length = _unit3(e[0], e[1], e[2])
+    return (ux, uy, uz), e, length
 
 
 @njit(inline="always", **_JIT)
@@ -89,9 +104,6 @@ def _cross3(a, b):
 
 @njit(inline="always", **_JIT)
 def _axis(P, l0, l1, l2, l3, step, tolerance):
-    """The four edges along one axis (low corners l0..l3 for the offsets (0,0), (1,0), (0,1), (1,1)
-    along the other two axes): their unit vectors, the unit principal direction (unit sum of the
-    edges), the mean edge length, and whether an edge is not longer than ``tolerance``."""
     u0, e0, d0 = _edge(P, l0, l0 + step)
     u1, e1, d1 = _edge(P, l1, l1 + step)
     u2, e2, d2 = _edge(P, l2, l2 + step)
@@ -100,26 +112,24 @@ def _axis(P, l0, l1, l2, l3, step, tolerance):
     sy = e0[1] + e1[1] + e2[1] + e3[1]
     sz = e0[2] + e1[2] + e2[2] + e3[2]
     px, py, pz, _ = _unit3(sx, sy, sz)
-    short = _short(d0, tolerance) or _short(d1, tolerance) or _short(d2, tolerance) or _short(d3, tolerance)
+    short = _short(d0, tolerance) | _short(d1, tolerance) | _short(d2, tolerance) | _short(d3, tolerance)
     return (u0, u1, u2, u3), (px, py, pz), (d0 + d1 + d2 + d3) * 0.25, short
 
 
 @njit(inline="always", **_JIT)
 def _corner_jacobian(U0, U1, U2, s0, s1, s2):
-    """det of the forward unit edges at corner (s0, s1, s2), and u1 x u2 (the corner normal of
-    the face normal to axis 0 there)."""
     normal = _cross3(U1[s0 + 2 * s2], U2[s0 + 2 * s1])
     return _dot3(U0[s1 + 2 * s2], normal), normal
 
 
 @njit(inline="always", **_JIT)
-def _face(P, G, N, face, ua0, ua1, ub0, ub1, q00, q10, q01, q11, principal, normals):
+def _face(P, G, Nf, ua0, ua1, ub0, ub1, q00, q10, q01, q11, principal, normals):
     """One hex face: (largest and smallest corner cosine, reflex corner?, |n . principal|,
-    |n . unit direction to the neighbour's centroid|). ``ua0, ua1``: unit edges along the face's
-    first axis at offset 0, 1 along the second; ``ub0, ub1`` along the second; ``normals``: the
-    corner normals ua x ub at corners (0,0), (1,0), (1,1), (0,1) where known (axis 0), else None."""
-    d1 = (P[q11, 0] - P[q00, 0], P[q11, 1] - P[q00, 1], P[q11, 2] - P[q00, 2])
-    d2 = (P[q01, 0] - P[q10, 0], P[q01, 1] - P[q10, 1], P[q01, 2] - P[q10, 2])
+    |n . unit direction to the neighbour's centroid ``Nf``|). ``ua0, ua1``: unit edges along the
+    face's first axis at offset 0, 1 along the second; ``ub0, ub1`` along the second; ``normals``:
+    the corner normals ua x ub at corners (0,0), (1,0), (1,1), (0,1) where known (axis 0), else None."""
+    d1 = _sub(P[q11], P[q00])
+    d2 = _sub(P[q01], P[q10])
     n = _cross3(d1, d2)
     c0, c1, c2, c3 = _dot3(ua0, ub0), -_dot3(ua0, ub1), _dot3(ua1, ub1), -_dot3(ua1, ub0)
     if normals is None:
@@ -130,29 +140,33 @@ def _face(P, G, N, face, ua0, ua1, ub0, ub1, q00, q10, q01, q11, principal, norm
     reflex = min(min(r0, r1), min(r2, r3)) < 0.0
     unx, uny, unz, _ = _unit3(n[0], n[1], n[2])
     centroid_cosine = abs(unx * principal[0] + uny * principal[1] + unz * principal[2])
-    dx, dy, dz = N[face, 0] - G[0], N[face, 1] - G[1], N[face, 2] - G[2]
-    if not math.isfinite(dx + dy + dz):
-        dx, dy, dz = principal
+    dx, dy, dz = Nf[0] - G[0], Nf[1] - G[1], Nf[2] - G[2]
+    finite = math.isfinite(dx + dy + dz)
+    dx = dx if finite else principal[0]
+    dy = dy if finite else principal[1]
+    dz = dz if finite else principal[2]
     tx, ty, tz, _ = _unit3(dx, dy, dz)
     face_cosine = abs(unx * tx + uny * ty + unz * tz)
     return max(max(c0, c1), max(c2, c3)), min(min(c0, c1), min(c2, c3)), reflex, centroid_cosine, face_cosine
 
 
-@njit(**_JIT)
-def _hex_cell(P, G, N, tolerance, out, degenerate, c):
-    """Metrics of one hexahedron into ``out[:, c]``, ``degenerate[c]``.
+@njit(inline="always", **_JIT)
+def _hex_cell(P, G, N, tolerance):
+    """Metrics of one hexahedron, the angles still as cosines: (largest corner cosine, cosine of the
+    largest angle, whether that is a reflex corner's, aspect ratio, non-orthogonality, face-alignment
+    cosine, scaled Jacobian, degenerate).
 
-    ``P`` (8, 3) corners by q; ``G`` (3,) its centroid; ``N`` (6, 3) centroid of the cell across
-    face (axis, side) at row 2 axis + side, NaN where there is none. Unit edges ``U<axis>[t]``,
-    t = t0 + 2 t1 for the offsets (t0, t1) along the other two axes, ascending."""
+    ``P`` 8 corners by q, each an (x, y, z) tuple; ``G`` its centroid; ``N`` 6 centroids of the cell
+    across face (axis, side) at 2 axis + side, NaN where there is none. Unit edges ``U<axis>[t]``,
+    t = t0 + 2 t1 for the offsets (t0, t1) along the other two axes, ascending. Branch-free (selects
+    only), so that a loop over cells vectorises."""
     U0, p0, m0, short0 = _axis(P, 0, 2, 4, 6, 1, tolerance)
     U1, p1, m1, short1 = _axis(P, 0, 1, 4, 5, 2, tolerance)
     U2, p2, m2, short2 = _axis(P, 0, 1, 2, 3, 4, tolerance)
-    degenerate[c] = short0 or short1 or short2
+    degenerate = short0 | short1 | short2
     longest = max(max(m0, m1), m2)
     shortest = min(min(m0, m1), m2)
-    aspect_ratio = longest / shortest if shortest > 0.0 else np.inf
-
+    aspect_ratio = longest / (shortest if shortest > 0.0 else 1.0) if shortest > 0.0 else np.inf
     j000, n000 = _corner_jacobian(U0, U1, U2, 0, 0, 0)
     j100, n100 = _corner_jacobian(U0, U1, U2, 1, 0, 0)
     j010, n010 = _corner_jacobian(U0, U1, U2, 0, 1, 0)
@@ -164,27 +178,35 @@ def _hex_cell(P, G, N, tolerance, out, degenerate, c):
     scaled_jacobian = _nanmin(
         _nanmin(_nanmin(j000, j100), _nanmin(j110, j010)), _nanmin(_nanmin(j001, j101), _nanmin(j111, j011))
     )
-
-    # Faces (axis, side) -> row 2 axis + side; per face (ua0, ua1, ub0, ub1) and corners q00, q10,
-    # q01, q11 (offsets along its first and second axis).
-    f0 = _face(P, G, N, 0, U1[0], U1[2], U2[0], U2[2], 0, 2, 4, 6, p0, (n000, n010, n011, n001))
-    f1 = _face(P, G, N, 1, U1[1], U1[3], U2[1], U2[3], 1, 3, 5, 7, p0, (n100, n110, n111, n101))
-    f2 = _face(P, G, N, 2, U0[0], U0[2], U2[0], U2[1], 0, 1, 4, 5, p1, None)
-    f3 = _face(P, G, N, 3, U0[1], U0[3], U2[2], U2[3], 2, 3, 6, 7, p1, None)
-    f4 = _face(P, G, N, 4, U0[0], U0[1], U1[0], U1[1], 0, 1, 2, 3, p2, None)
-    f5 = _face(P, G, N, 5, U0[2], U0[3], U1[2], U1[3], 4, 5, 6, 7, p2, None)
-
+    f0 = _face(P, G, N[0], U1[0], U1[2], U2[0], U2[2], 0, 2, 4, 6, p0, (n000, n010, n011, n001))
+    f1 = _face(P, G, N[1], U1[1], U1[3], U2[1], U2[3], 1, 3, 5, 7, p0, (n100, n110, n111, n101))
+    f2 = _face(P, G, N[2], U0[0], U0[2], U2[0], U2[1], 0, 1, 4, 5, p1, None)
+    f3 = _face(P, G, N[3], U0[1], U0[3], U2[2], U2[3], 2, 3, 6, 7, p1, None)
+    f4 = _face(P, G, N[4], U0[0], U0[1], U1[0], U1[1], 0, 1, 2, 3, p2, None)
+    f5 = _face(P, G, N[5], U0[2], U0[3], U1[2], U1[3], 4, 5, 6, 7, p2, None)
     largest_cosine = max(max(max(f0[0], f1[0]), max(f2[0], f3[0])), max(f4[0], f5[0]))
     smallest_cosine = min(min(min(f0[1], f1[1]), min(f2[1], f3[1])), min(f4[1], f5[1]))
     reflex_cosine = -2.0
-    for f in (f0, f1, f2, f3, f4, f5):
-        if f[2]:
-            reflex_cosine = max(reflex_cosine, f[1])
-    any_reflex = f0[2] or f1[2] or f2[2] or f3[2] or f4[2] or f5[2]
+    reflex_cosine = max(reflex_cosine, f0[1]) if f0[2] else reflex_cosine
+    reflex_cosine = max(reflex_cosine, f1[1]) if f1[2] else reflex_cosine
+    reflex_cosine = max(reflex_cosine, f2[1]) if f2[2] else reflex_cosine
+    reflex_cosine = max(reflex_cosine, f3[1]) if f3[2] else reflex_cosine
+    reflex_cosine = max(reflex_cosine, f4[1]) if f4[2] else reflex_cosine
+    reflex_cosine = max(reflex_cosine, f5[1]) if f5[2] else reflex_cosine
+    any_reflex = f0[2] | f1[2] | f2[2] | f3[2] | f4[2] | f5[2]
     centroid_alignment = min(min(min(f0[3], f1[3]), min(f2[3], f3[3])), min(f4[3], f5[3]))
     face_alignment = min(min(min(f0[4], f1[4]), min(f2[4], f3[4])), min(f4[4], f5[4]))
-    _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment,
-            scaled_jacobian, out, c)  # fmt: skip
+    max_cosine = reflex_cosine if any_reflex else smallest_cosine
+    return (
+        largest_cosine,
+        max_cosine,
+        any_reflex,
+        aspect_ratio,
+        1.0 - centroid_alignment,
+        face_alignment,
+        scaled_jacobian,
+        degenerate,
+    )
 
 
 @njit(inline="always", **_JIT)
@@ -273,53 +295,124 @@ def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
 # drivers
 
 
+@njit(inline="always", **_JIT)
+def _node(X, i, j, k):
+    return (X[0, i, j, k], X[1, i, j, k], X[2, i, j, k])
+
+
+@njit(**_JIT)
+def _hex_row(X, centroid, i, j, k0, k1, tolerance, out, degenerate, c0):
+    """Cells (i, j, k0 <= k < k1) into ``out[:, c0 + k - k0]`` as ``_store_hex`` leaves them.
+
+    ``X`` (3, ni, n2+1, n3+1) node coordinates by component; ``centroid`` (3, ni+1, n2+2, n3+2)
+    the centroids of the cells with a layer of NaN around them (cell (i, j, k) at [:, i+1, j+1,
+    k+1]), so that a missing face neighbour is NaN without a branch (``_slab`` makes both). Unsigned indices and unit strides along k let
+    LLVM vectorise this loop over cells: numba wraps negative signed indices, and a runtime stride
+    makes LLVM version the loop on it being 1."""
+    i, j, c0 = uint64(i), uint64(j), uint64(c0)
+    one = uint64(1)
+    i1, j1, two = i + one, j + one, one + one
+    for kk in range(uint64(k1 - k0)):
+        k = kk + uint64(k0)
+        P = (
+            _node(X, i, j, k),
+            _node(X, i1, j, k),
+            _node(X, i, j1, k),
+            _node(X, i1, j1, k),
+            _node(X, i, j, k + one),
+            _node(X, i1, j, k + one),
+            _node(X, i, j1, k + one),
+            _node(X, i1, j1, k + one),
+        )
+        kc = k + uint64(1)
+        G = _node(centroid, i1, j1, kc)
+        N = (
+            _node(centroid, i, j1, kc),
+            _node(centroid, i + two, j1, kc),
+            _node(centroid, i1, j, kc),
+            _node(centroid, i1, j + two, kc),
+            _node(centroid, i1, j1, k),
+            _node(centroid, i1, j1, kc + uint64(1)),
+        )
+        _store_hex(_hex_cell(P, G, N, tolerance), out, degenerate, c0 + kk)
+
+
+@njit(inline="always", **_JIT)
+def _store_hex(r, out, degenerate, c):
+    """``_hex_cell``'s cosines and metrics into ``out[:, c]``; ``_angles`` turns the cosines into angles."""
+    out[0, c] = r[0]
+    out[1, c] = r[1]
+    out[2, c] = 1.0 if r[2] else 0.0
+    out[3, c] = r[3]
+    out[4, c] = r[4]
+    out[5, c] = r[5]
+    out[6, c] = r[6]
+    degenerate[c] = r[7]
+
+
+@njit(**_JIT)
+def _angles(out, first, last):
+    """Angles of cells ``first <= c < last`` from the cosines ``_store_hex`` left in ``out``: row 0
+    the largest corner cosine, row 1 the max-angle cosine, row 2 whether it is a reflex corner's,
+    row 5 the face-alignment cosine."""
+    for c in range(first, last):
+        min_angle = _degrees_of_cosine(out[0, c])
+        max_angle = 360.0 - _degrees_of_cosine(out[1, c]) if out[2, c] != 0.0 else _degrees_of_cosine(out[1, c])
+        out[0, c] = min_angle
+        out[1, c] = max_angle
+        out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
+        out[5, c] = _degrees_of_cosine(out[5, c])
+
+
 @njit(parallel=True, **_JIT)
 def structured_hex(X, first, last, tolerance, out, degenerate):
     """Metrics of the cells first[d] <= index < last[d] of node array ``X`` (n1+1, n2+1, n3+1, 3)
     (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
-    number of those cells, in C order."""
+    number of those cells, in C order. Rows of cells along k, each a vectorised loop (``_hex_row``),
+    then a scalar pass for the ``acos`` of the row (no vector ``acos`` in LLVM without a vector
+    math library)."""
+    n2, n3 = X.shape[1] - 1, X.shape[2] - 1
+    m2, m3 = last[1] - first[1], last[2] - first[2]
+    for i in prange(first[0], last[0]):
+        nodes = np.empty((3, 2, n2 + 1, n3 + 1))
+        centroid = np.empty((3, 3, n2 + 2, n3 + 2))
+        _slab(X, i, nodes, centroid)
+        for j in range(first[1], last[1]):
+            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
+            _hex_row(nodes, centroid, 0, j, first[2], last[2], tolerance, out, degenerate, c0)
+            _angles(out, c0, c0 + m3)
+
+
+@njit(**_JIT)
+def _slab(X, i, nodes, centroid):
+    """What the cells (i, :, :) of node array ``X`` (n1+1, n2+1, n3+1, 3) need, for ``_hex_row``:
+    ``nodes`` (3, 2, n2+1, n3+1) the node planes i and i+1 by component; ``centroid`` (3, 3, n2+2,
+    n3+2) the centroids of the cells i-1, i, i+1 (summed in VTK corner order) with a layer of NaN
+    around them, NaN where there is no such cell. Per plane of cells, so that the extra memory is a
+    few planes per thread, not a copy of the mesh."""
     n1, n2, n3 = X.shape[0] - 1, X.shape[1] - 1, X.shape[2] - 1
-    centroid = np.empty((n1, n2, n3, 3))
-    for i in prange(n1):
+    for a in range(2):
+        for j in range(n2 + 1):
+            for k in range(n3 + 1):
+                for d in range(3):
+                    nodes[d, a, j, k] = X[i + a, j, k, d]
+    centroid[:] = np.nan
+    for a in range(3):
+        ii = i - 1 + a
+        if ii < 0 or ii >= n1:
+            continue
         for j in range(n2):
             for k in range(n3):
                 for d in range(3):
-                    s = X[i, j, k, d]
-                    s = s + X[i + 1, j, k, d]
-                    s = s + X[i + 1, j + 1, k, d]
-                    s = s + X[i, j + 1, k, d]
-                    s = s + X[i, j, k + 1, d]
-                    s = s + X[i + 1, j, k + 1, d]
-                    s = s + X[i + 1, j + 1, k + 1, d]
-                    s = s + X[i, j + 1, k + 1, d]
-                    centroid[i, j, k, d] = s * 0.125
-    m2, m3 = last[1] - first[1], last[2] - first[2]
-    for i in prange(first[0], last[0]):
-        P = np.empty((8, 3))
-        N = np.empty((6, 3))
-        for j in range(first[1], last[1]):
-            for k in range(first[2], last[2]):
-                for q in range(8):
-                    for d in range(3):
-                        P[q, d] = X[i + (q & 1), j + ((q >> 1) & 1), k + (q >> 2), d]
-                for face in range(6):
-                    axis, side = face >> 1, face & 1
-                    ni, nj, nk = i, j, k
-                    delta = 1 if side else -1
-                    if axis == 0:
-                        ni += delta
-                    elif axis == 1:
-                        nj += delta
-                    else:
-                        nk += delta
-                    if 0 <= ni < n1 and 0 <= nj < n2 and 0 <= nk < n3:
-                        for d in range(3):
-                            N[face, d] = centroid[ni, nj, nk, d]
-                    else:
-                        for d in range(3):
-                            N[face, d] = np.nan
-                c = ((i - first[0]) * m2 + (j - first[1])) * m3 + (k - first[2])
-                _hex_cell(P, centroid[i, j, k], N, tolerance, out, degenerate, c)
+                    s = X[ii, j, k, d]
+                    s = s + X[ii + 1, j, k, d]
+                    s = s + X[ii + 1, j + 1, k, d]
+                    s = s + X[ii, j + 1, k, d]
+                    s = s + X[ii, j, k + 1, d]
+                    s = s + X[ii + 1, j, k + 1, d]
+                    s = s + X[ii + 1, j + 1, k + 1, d]
+                    s = s + X[ii, j + 1, k + 1, d]
+                    centroid[d, a, j + 1, k + 1] = s * 0.125
 
 
 @njit(parallel=True, **_JIT)
@@ -369,6 +462,34 @@ def _centroids(points, cells):
     return centroid
 
 
+@njit(inline="always", **_JIT)
+def _corner(points, cells, c, k):
+    return (points[cells[c, k], 0], points[cells[c, k], 1], points[cells[c, k], 2])
+
+
+@njit(inline="always", **_JIT)
+def _neighbour_centroid(centroid, neighbour, face, c):
+    other = neighbour[face, c]
+    if other < 0:
+        return (np.nan, np.nan, np.nan)
+    return (centroid[other, 0], centroid[other, 1], centroid[other, 2])
+
+
+@njit(**_JIT)
+def _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, first, last):
+    """Cells ``first <= c < last`` of ``unstructured_hex``."""
+    for c in range(first, last):
+        # corners by q (VTK order 0, 1, 3, 2, 4, 5, 7, 6)
+        P = (_corner(points, cells, c, 0), _corner(points, cells, c, 1), _corner(points, cells, c, 3),
+             _corner(points, cells, c, 2), _corner(points, cells, c, 4), _corner(points, cells, c, 5),
+             _corner(points, cells, c, 7), _corner(points, cells, c, 6))  # fmt: skip
+        N = (_neighbour_centroid(centroid, neighbour, 0, c), _neighbour_centroid(centroid, neighbour, 1, c),
+             _neighbour_centroid(centroid, neighbour, 2, c), _neighbour_centroid(centroid, neighbour, 3, c),
+             _neighbour_centroid(centroid, neighbour, 4, c), _neighbour_centroid(centroid, neighbour, 5, c))  # fmt: skip
+        _store_hex(_hex_cell(P, (centroid[c, 0], centroid[c, 1], centroid[c, 2]), N, tolerance), out, degenerate, c)
+    _angles(out, first, last)
+
+
 @njit(parallel=True, **_JIT)
 def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
     """Metrics of hexahedra ``cells`` (M, 8) (VTK corner order) on ``points`` (N, 3); ``neighbour``
@@ -377,17 +498,7 @@ def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
     n = cells.shape[0]
     chunk = 1024
     for block in prange((n + chunk - 1) // chunk):
-        P = np.empty((8, 3))
-        N = np.empty((6, 3))
-        for c in range(block * chunk, min(n, (block + 1) * chunk)):
-            for k in range(8):
-                for d in range(3):
-                    P[HEX_Q_OF_VTK[k], d] = points[cells[c, k], d]
-            for face in range(6):
-                other = neighbour[face, c]
-                for d in range(3):
-                    N[face, d] = centroid[other, d] if other >= 0 else np.nan
-            _hex_cell(P, centroid[c], N, tolerance, out, degenerate, c)
+        _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, block * chunk, min(n, (block + 1) * chunk))
 
 
 @njit(parallel=True, **_JIT)
