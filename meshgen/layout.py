@@ -48,6 +48,7 @@ from meshgen import __version__
 from meshgen.atomic import atomic_path
 from meshgen.cube import edges, faces
 from meshgen.errors import GeometryError
+from meshgen.layout_start import harmonic_start, lift
 from meshgen.winslow import stencils, winslow_operator
 
 __all__ = [
@@ -82,12 +83,12 @@ LAYOUTS = ("smoothed", "fixed")
 DEFAULT_LAYOUT = "smoothed"
 RESOLUTION = 64  # fine-grid cells per face side (parametric spacing 1/64)
 ARC_SAMPLES = 64  # chords per fine cell when measuring an edge's arc length
-FACE_TOL = 1e-9  # converged when the largest parameter change of a full Newton step is below this
+FACE_TOL = 1e-8  # converged when the largest parameter change of a full Newton step is below this
 FACE_MAX_ITER = 30  # Newton steps per face: quadratic convergence takes 5 to 10
 LINE_SEARCH_HALVINGS = 12  # a Newton step is halved at most this often before the solve counts as stalled
 STEP_CELLS = 1.0  # no node moves further than this many (smallest) cells in one Newton step
 NEWTON_STEP = 1e-7  # parametric step of the forward differences that give the Newton Jacobian
-RELAX_TOL = 1e-9  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
+RELAX_TOL = 1e-8  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
 SOLVER_VERSION = 2  # part of the cache key: layouts cached by another face solver are solved again
 TANGENT_STEP = 1e-6  # parametric step of the central differences that give the surface's tangents
 
@@ -211,43 +212,6 @@ def _edge_values(boundary, dim: int, axes: tuple, sides: tuple, cells: int) -> n
     return values
 
 
-def _lift(axis: int, side: int, U: np.ndarray) -> np.ndarray:
-    """Face parameters U (..., 2) of the face ``t[axis] = side`` -> cube points (..., 3)."""
-    a, b = (d for d in range(3) if d != axis)
-    points = np.empty(U.shape[:-1] + (3,))
-    points[..., axis] = side
-    points[..., a], points[..., b] = U[..., 0], U[..., 1]
-    return points
-
-
-def _scalar_operator(c11, c22, c12, grid):
-    """Sparse matrix of ``c11 f_pp + c22 f_qq + 2 c12 f_pq`` (the three-point stencils of
-    ``grid``, a 2D ``meshgen.winslow.Stencils``; f_pq the product of the first-derivative ones) on
-    the interior nodes of the face grid, zero Dirichlet values outside; coefficients (m_p, m_q)."""
-    from scipy import sparse
-
-    m_p, m_q = c11.shape
-    index = np.arange(m_p * m_q).reshape(m_p, m_q)
-    rows, cols, vals = [], [], []
-    second_p, second_q = grid.second
-    first_p, first_q = grid.first
-    for dp in (-1, 0, 1):
-        for dq in (-1, 0, 1):
-            coefficient = 2.0 * c12 * first_p[dp + 1] * first_q[dq + 1]
-            if dq == 0:
-                coefficient = coefficient + c11 * second_p[dp + 1]
-            if dp == 0:
-                coefficient = coefficient + c22 * second_q[dq + 1]
-            target = np.full((m_p, m_q), -1)
-            i0, i1 = max(0, -dp), m_p - max(0, dp)
-            j0, j1 = max(0, -dq), m_q - max(0, dq)
-            target[i0:i1, j0:j1] = index[i0 + dp : i1 + dp, j0 + dq : j1 + dq]
-            keep = target >= 0
-            rows.append(index[keep]), cols.append(target[keep])
-            vals.append(np.broadcast_to(coefficient, (m_p, m_q))[keep])
-    return sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m_p * m_q, m_p * m_q))
-
-
 def coons_start(edge_u: tuple, coords) -> np.ndarray:
     """Face parameters on the face grid of ``coords`` (t_p, t_q): the four sides' values
     ``edge_u`` = (p0, p1, q0, q1) (the parameter along each side, the other being 0 or 1) and
@@ -281,7 +245,7 @@ def _tangents(boundary, axis: int, side: int, U: np.ndarray) -> tuple[np.ndarray
             moved = U.copy()
             moved[:, d] = np.clip(moved[:, d] + sign * TANGENT_STEP, 0.0, 1.0)
             probes.append(moved)
-    images = boundary(_lift(axis, side, np.concatenate(probes))).reshape(4, -1, 3)
+    images = boundary(lift(axis, side, np.concatenate(probes))).reshape(4, -1, 3)
     return tuple((images[2 * d] - images[2 * d + 1]) / (probes[2 * d][:, d] - probes[2 * d + 1][:, d])[:, None] for d in range(2))
 
 
@@ -344,14 +308,14 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
     grid = stencils(coords)
 
     def state_of(U):
-        X = boundary(_lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
+        X = boundary(lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
         return X, _tangents(boundary, axis, side, U[1:-1, 1:-1].reshape(-1, 2))
 
     def evaluate(U, state, moved):
         X, (tu, tv) = state
         X, tu, tv = X.copy(), tu.copy(), tv.copy()
         points = U[1:-1, 1:-1][moved]
-        X[1:-1, 1:-1][moved] = boundary(_lift(axis, side, points))
+        X[1:-1, 1:-1][moved] = boundary(lift(axis, side, points))
         flat = moved.ravel()
         tu[flat], tv[flat] = _tangents(boundary, axis, side, points)
         return _tangential_residual(X, tu, tv, grid)
@@ -428,7 +392,8 @@ def compute_layout(geometry, cells: int = RESOLUTION, max_iter: int = FACE_MAX_I
         # sides of the face: p = 0, 1 (the tangent axis a fixed) carry the parameter along b, and vice versa
         edge_u = (side_values(a, 0), side_values(a, 1), side_values(b, 0), side_values(b, 1))
         t = np.linspace(0.0, 1.0, cells + 1)
-        U, info = surface_grid(boundary, face.axis, face.side, coons_start(edge_u, (t, t)), (t, t), max_iter=max_iter)
+        start = harmonic_start(boundary, face.axis, face.side, coons_start(edge_u, (t, t)), (t, t))
+        U, info = surface_grid(boundary, face.axis, face.side, start, (t, t), max_iter=max_iter)
         _require_converged(geometry, face.name, info, "")
         face_values[(face.axis, face.side)] = U
         face_info[face.name] = info
@@ -462,7 +427,7 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
         start = layout.apply(face.points(coords))[:, [a, b]].reshape(len(face_coords[0]), len(face_coords[1]), 2)
         U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol)
         _require_converged(geometry, face.name, info, " at the mesh's resolution")
-        X[face.node_index] = plain(_lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
+        X[face.node_index] = plain(lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
         iterations[face.name] = info["iterations"]
     return iterations
 
