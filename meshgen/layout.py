@@ -39,6 +39,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -65,6 +66,7 @@ __all__ = [
     "STEP_CELLS",
     "TANGENT_STEP",
     "Layout",
+    "LayoutWarning",
     "cache_path",
     "compute_layout",
     "coons_start",
@@ -289,6 +291,7 @@ def _jacobian(evaluate, U: np.ndarray, state, F: np.ndarray):
     return sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
 
 
+@np.errstate(all="ignore")  # a diverging trial step gives inf/NaN, which the solve checks for itself
 def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER):
     """The Winslow surface grid of the face ``t[axis] = side`` on the tensor grid of ``coords``
     (the parametric node coordinates along its two tangent axes, increasing order).
@@ -355,6 +358,10 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
     return U, {"iterations": iterations, "final_update": update, "converged": converged}
 
 
+class LayoutWarning(UserWarning):
+    """A face of the smoothed layout was not solved again at the mesh's resolution."""
+
+
 def _require_converged(geometry, face_name: str, info: dict, where: str) -> None:
     """Raise a one-line GeometryError when the surface grid of ``face_name`` did not converge."""
     if info["converged"]:
@@ -410,8 +417,9 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
     member's interpolated layout does, else the geometry's solved layout). Why: an elliptic mesh's layers next to a face then solve the same discrete
     equations as the face itself, so an extruded shape gives an exactly extruded mesh (the layout's
     fine-grid interpolant differs from that by the discretisation error, which a flow solver sees
-    as skewed cells). Returns the Newton steps per face name; raises GeometryError when a face's
-    grid does not converge.
+    as skewed cells). Returns the Newton steps per face name. A face whose grid does not converge
+    at this resolution keeps the layout's interpolated nodes (the layout itself is converged:
+    ``compute_layout`` raises otherwise), with a LayoutWarning that names it.
     """
     if geometry.dim != 3:
         return {}
@@ -426,9 +434,17 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
             continue  # no interior nodes on this face
         start = layout.apply(face.points(coords))[:, [a, b]].reshape(len(face_coords[0]), len(face_coords[1]), 2)
         U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol)
-        _require_converged(geometry, face.name, info, " at the mesh's resolution")
-        X[face.node_index] = plain(lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
         iterations[face.name] = info["iterations"]
+        if not info["converged"]:  # keep the solved layout's own nodes on this face, and say so
+            warnings.warn(
+                f"boundary layout of '{geometry.name}': face {face.name} was not solved again at the mesh's resolution "
+                f"(update {info['final_update']:.1e} after {info['iterations']} Newton steps); it keeps the smoothed "
+                "layout's interpolated nodes",
+                LayoutWarning,
+                stacklevel=2,
+            )
+            continue
+        X[face.node_index] = plain(lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
     return iterations
 
 
