@@ -286,3 +286,20 @@ def test_an_unconverged_layout_raises_one_line_naming_geometry_face_and_update()
     assert "\n" not in message
     assert "'flower'" in message and "twist=180" in message and "face " in message and "update" in message
     assert "--boundary-layout fixed" in message and "boundary_layout=fixed" in message
+
+
+def test_lobed_flower_caps_solve_on_their_planes_inside_the_section():
+    """amplitude=0.3 (the top of its range): the caps' face map, the Coons patch of the lobed
+    section, is nearly singular near the long edge; the caps' grids must converge anyway, lie on
+    the cap planes inside the closed-form section. (No inversion check here: at this amplitude
+    even the fixed layout's TFI section has a slightly inverted cell at 8 x 8, a limit of the
+    geometry's map, not of the layout.)"""
+    values = {"radius": 1.0, "amplitude": 0.3, "length": 2.0, "twist": 0.0}
+    plain = load_geometry("flower", values)
+    layout = layout_of(plain, FLOWER_LAYOUT_CELLS)
+    assert all(info["converged"] and info["final_update"] < 1e-8 for info in layout.face_info.values())
+    for name, height in (("zeta0", 0.0), ("zeta1", values["length"])):
+        cap = _face_grid(plain, name, FLOWER_LAYOUT_CELLS).reshape(-1, 3)
+        assert np.abs(cap[:, 2] - height).max() < 1e-12
+        theta = np.arctan2(cap[:, 1], cap[:, 0])
+        assert np.all(np.hypot(cap[:, 0], cap[:, 1]) <= values["radius"] * (1 + values["amplitude"] * np.cos(5 * theta)) + 1e-12)
