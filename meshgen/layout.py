@@ -14,12 +14,15 @@ every face onto itself:
    grid x = g(u, v): the tangential part of ``g22 x_xixi - 2 g12 x_xieta + g11 x_etaeta`` (the
    same discrete operator as ``meshgen.winslow``, on the surface's physical points) is zero. The
    normal part is the surface's curvature and is left alone, so the nodes stay exactly on the
-   surface. Solved by frozen-coefficient (Picard) steps: pull the physical residual back to the
-   face parameters through the surface's tangents (central differences of the map) and solve the
-   scalar Winslow operator for the parameter update (a sparse direct solve, Anderson-mixed; at the
-   mesh's resolution, where the start is the layout and close, the factorisation is kept while each
-   step shrinks to at most ``REFACTOR_RATE`` of the one before, a chord method: the frozen
-   coefficients change little from step to step, and factorising costs ten times a solve);
+   surface. Solved by Newton's method on the residual's components along the surface's tangents
+   g_u, g_v (central differences of the map), with the Jacobian by colour-grouped forward
+   differences and a backtracking line search. A frozen-coefficient (Picard) step, which solves
+   the scalar Winslow operator for the pulled-back residual, leaves out the change of the tangents
+   along the surface; on a strongly twisted face that term, the surface's curvature times the
+   residual's normal part, makes the smoothest error mode grow, and on a nearly degenerate face
+   map (the flower's caps at large amplitude) the pulled-back residual is no step to take
+   unchecked. A face that does not converge raises a one-line GeometryError: an unconverged
+   layout is never returned;
 3. between the fine nodes s is the tensor product of C1 cubic Hermite interpolation (slopes by
    finite differences), which on an edge reduces to the 1D interpolation of the edge's values, so
    the two faces that share an edge agree on it to round-off and g(s(p)) stays continuous.
@@ -36,16 +39,17 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from meshgen import __version__
-from meshgen.anderson import ANDERSON_DEPTH, AndersonMixing
 from meshgen.atomic import atomic_path
 from meshgen.cube import edges, faces
 from meshgen.errors import GeometryError
+from meshgen.layout_start import harmonic_start, lift
 from meshgen.winslow import stencils, winslow_operator
 
 __all__ = [
@@ -54,10 +58,15 @@ __all__ = [
     "FACE_MAX_ITER",
     "FACE_TOL",
     "LAYOUTS",
+    "LINE_SEARCH_HALVINGS",
+    "NEWTON_STEP",
     "RELAX_TOL",
     "RESOLUTION",
+    "SOLVER_VERSION",
+    "STEP_CELLS",
     "TANGENT_STEP",
     "Layout",
+    "LayoutWarning",
     "cache_path",
     "compute_layout",
     "coons_start",
@@ -76,10 +85,13 @@ LAYOUTS = ("smoothed", "fixed")
 DEFAULT_LAYOUT = "smoothed"
 RESOLUTION = 64  # fine-grid cells per face side (parametric spacing 1/64)
 ARC_SAMPLES = 64  # chords per fine cell when measuring an edge's arc length
-FACE_TOL = 1e-11  # stop when the largest parameter update of a face is below this
-FACE_MAX_ITER = 200
-REFACTOR_RATE = 0.5  # factorise the face operator again when a step shrank by less than this
-RELAX_TOL = 1e-9  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
+FACE_TOL = 1e-8  # converged when the largest parameter change of a full Newton step is below this
+FACE_MAX_ITER = 30  # Newton steps per face: quadratic convergence takes 5 to 10
+LINE_SEARCH_HALVINGS = 12  # a Newton step is halved at most this often before the solve counts as stalled
+STEP_CELLS = 1.0  # no node moves further than this many (smallest) cells in one Newton step
+NEWTON_STEP = 1e-7  # parametric step of the forward differences that give the Newton Jacobian
+RELAX_TOL = 1e-8  # the same at the mesh's resolution (relax_faces): far below the volume solver's 1e-6
+SOLVER_VERSION = 2  # part of the cache key: layouts cached by another face solver are solved again
 TANGENT_STEP = 1e-6  # parametric step of the central differences that give the surface's tangents
 
 
@@ -149,7 +161,7 @@ class Layout:
     nodes (3D: the 12 edges; 2D: the 4 sides, keyed by ``((axis,), (side,))``).
     ``face_values[(axis, side)]`` (3D): (RESOLUTION + 1, RESOLUTION + 1, 2), the face parameters
     (along its two tangent axes, increasing order) at the fine nodes.
-    ``face_info``: per face name, the Picard iterations and final update of its surface solve.
+    ``face_info``: per face name, the Newton steps, final update and convergence of its surface solve.
     """
 
     dim: int
@@ -202,43 +214,6 @@ def _edge_values(boundary, dim: int, axes: tuple, sides: tuple, cells: int) -> n
     return values
 
 
-def _lift(axis: int, side: int, U: np.ndarray) -> np.ndarray:
-    """Face parameters U (..., 2) of the face ``t[axis] = side`` -> cube points (..., 3)."""
-    a, b = (d for d in range(3) if d != axis)
-    points = np.empty(U.shape[:-1] + (3,))
-    points[..., axis] = side
-    points[..., a], points[..., b] = U[..., 0], U[..., 1]
-    return points
-
-
-def _scalar_operator(c11, c22, c12, grid):
-    """Sparse matrix of ``c11 f_pp + c22 f_qq + 2 c12 f_pq`` (the three-point stencils of
-    ``grid``, a 2D ``meshgen.winslow.Stencils``; f_pq the product of the first-derivative ones) on
-    the interior nodes of the face grid, zero Dirichlet values outside; coefficients (m_p, m_q)."""
-    from scipy import sparse
-
-    m_p, m_q = c11.shape
-    index = np.arange(m_p * m_q).reshape(m_p, m_q)
-    rows, cols, vals = [], [], []
-    second_p, second_q = grid.second
-    first_p, first_q = grid.first
-    for dp in (-1, 0, 1):
-        for dq in (-1, 0, 1):
-            coefficient = 2.0 * c12 * first_p[dp + 1] * first_q[dq + 1]
-            if dq == 0:
-                coefficient = coefficient + c11 * second_p[dp + 1]
-            if dp == 0:
-                coefficient = coefficient + c22 * second_q[dq + 1]
-            target = np.full((m_p, m_q), -1)
-            i0, i1 = max(0, -dp), m_p - max(0, dp)
-            j0, j1 = max(0, -dq), m_q - max(0, dq)
-            target[i0:i1, j0:j1] = index[i0 + dp : i1 + dp, j0 + dq : j1 + dq]
-            keep = target >= 0
-            rows.append(index[keep]), cols.append(target[keep])
-            vals.append(np.broadcast_to(coefficient, (m_p, m_q))[keep])
-    return sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(m_p * m_q, m_p * m_q))
-
-
 def coons_start(edge_u: tuple, coords) -> np.ndarray:
     """Face parameters on the face grid of ``coords`` (t_p, t_q): the four sides' values
     ``edge_u`` = (p0, p1, q0, q1) (the parameter along each side, the other being 0 or 1) and
@@ -263,82 +238,147 @@ def coons_start(edge_u: tuple, coords) -> np.ndarray:
     return U
 
 
-def surface_grid(
-    boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER, refactor_rate=0.0
-):
+def _tangents(boundary, axis: int, side: int, U: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The surface's tangents g_u, g_v (N, 3) at face parameters U (N, 2), by central differences
+    of the map (steps of TANGENT_STEP, one-sided where the parameter is 0 or 1)."""
+    probes = []
+    for d in range(2):
+        for sign in (1.0, -1.0):
+            moved = U.copy()
+            moved[:, d] = np.clip(moved[:, d] + sign * TANGENT_STEP, 0.0, 1.0)
+            probes.append(moved)
+    images = boundary(lift(axis, side, np.concatenate(probes))).reshape(4, -1, 3)
+    return tuple((images[2 * d] - images[2 * d + 1]) / (probes[2 * d][:, d] - probes[2 * d + 1][:, d])[:, None] for d in range(2))
+
+
+def _tangential_residual(X: np.ndarray, tu: np.ndarray, tv: np.ndarray, grid) -> np.ndarray:
+    """The Winslow residual of the surface grid X (n_p, n_q, 3) projected on the tangents (the
+    interior nodes' tu, tv, each (m_p * m_q, 3)): (m_p, m_q, 2), zero where the grid is solved. NaN
+    where a cell has zero area."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        residual, _ = winslow_operator(np.ascontiguousarray(np.moveaxis(X, -1, 0)), grid)
+    res = np.moveaxis(residual, 0, -1).reshape(-1, 3)
+    return np.stack([(tu * res).sum(-1), (tv * res).sum(-1)], axis=-1).reshape(residual.shape[1:] + (2,))
+
+
+def _jacobian(evaluate, U: np.ndarray, state, F: np.ndarray):
+    """Sparse Jacobian (2 m, 2 m) of the tangential residual F (m_p, m_q, 2) by the interior face
+    parameters, by forward differences (step NEWTON_STEP) in nine colours: a node's residual
+    depends on its 3 x 3 neighbours only, so the nodes with the same (i mod 3, j mod 3) are moved
+    together, and only they are mapped again. ``evaluate(U, state, moved)`` gives F after moving
+    the nodes of the boolean mask ``moved``."""
+    from scipy import sparse
+
+    m_p, m_q = F.shape[:2]
+    index = np.arange(m_p * m_q).reshape(m_p, m_q)
+    ip, iq = np.meshgrid(np.arange(m_p), np.arange(m_q), indexing="ij")
+    rows, cols, vals = [], [], []
+    for cp in range(3):
+        for cq in range(3):
+            owner_p, owner_q = ip + (cp - ip + 1) % 3 - 1, iq + (cq - iq + 1) % 3 - 1  # the moved neighbour
+            valid = (owner_p < m_p) & (owner_q < m_q) & (owner_p >= 0) & (owner_q >= 0)
+            moved = np.zeros((m_p, m_q), dtype=bool)
+            moved[cp::3, cq::3] = True
+            for d in range(2):
+                trial = U.copy()
+                trial[1:-1, 1:-1][moved, d] += NEWTON_STEP
+                change = (evaluate(trial, state, moved) - F) / NEWTON_STEP
+                for e in range(2):
+                    rows.append(2 * index[valid] + e)
+                    cols.append(2 * index[owner_p[valid], owner_q[valid]] + d)
+                    vals.append(change[..., e][valid])
+    size = 2 * m_p * m_q
+    return sparse.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(size, size))
+
+
+@np.errstate(all="ignore")  # a diverging trial step gives inf/NaN, which the solve checks for itself
+def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: float = FACE_TOL, max_iter: int = FACE_MAX_ITER):
     """The Winslow surface grid of the face ``t[axis] = side`` on the tensor grid of ``coords``
     (the parametric node coordinates along its two tangent axes, increasing order).
 
     ``U``: (n_p, n_q, 2) face parameters: the sides' values (kept) and a start inside.
-    ``boundary``: the geometry's map. ``refactor_rate``: keep the factorised operator while each
-    step is at most this fraction of the one before (0: factorise every step, which the fine grid's
-    hard faces need: the flower's caps take 160 steps so, and more than 200 keeping it). Returns the solved face parameters (same shape) and
-    ``{"iterations", "final_update"}`` (the largest parameter change of the last step).
+    ``boundary``: the geometry's map. Newton's method on the tangential residual (``_jacobian``),
+    with a backtracking line search on its 2-norm that also rejects a step folding the grid.
+    Returns the solved face parameters (same shape) and ``{"iterations", "final_update",
+    "converged"}``: ``final_update`` is the largest parameter change of the last full Newton step,
+    and ``converged`` says it fell below ``tol``; it is False when ``max_iter`` steps did not get
+    there or the line search found no decrease. The caller decides what an unconverged grid means.
     """
     from scipy.sparse.linalg import splu
 
     U = np.array(U, dtype=float)
     shape = U.shape[:-1]
     grid = stencils(coords)
-    mixing = AndersonMixing(ANDERSON_DEPTH)
-    update = previous = np.inf
-    iterations = 0
+
+    def state_of(U):
+        X = boundary(lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
+        return X, _tangents(boundary, axis, side, U[1:-1, 1:-1].reshape(-1, 2))
+
+    def evaluate(U, state, moved):
+        X, (tu, tv) = state
+        X, tu, tv = X.copy(), tu.copy(), tv.copy()
+        points = U[1:-1, 1:-1][moved]
+        X[1:-1, 1:-1][moved] = boundary(lift(axis, side, points))
+        flat = moved.ravel()
+        tu[flat], tv[flat] = _tangents(boundary, axis, side, points)
+        return _tangential_residual(X, tu, tv, grid)
+
+    state = state_of(U)
+    F = _tangential_residual(state[0], *state[1], grid)
+    if not np.all(np.isfinite(F)):
+        raise GeometryError("boundary layout: the start of a face's surface grid has a zero-area cell")
+    norm = float(np.linalg.norm(F))
+    update, iterations, converged = np.inf, 0, False
     while iterations < max_iter:
-        X = boundary(_lift(axis, side, U).reshape(-1, 3)).reshape(shape + (3,))
-        residual, axial = winslow_operator(np.ascontiguousarray(np.moveaxis(X, -1, 0)), grid)  # over the trace
-        # The surface's tangents g_u, g_v at the interior nodes, by central differences of the map.
-        inner = U[1:-1, 1:-1].reshape(-1, 2)
-        probes = []
-        for d in range(2):
-            for sign in (1.0, -1.0):
-                moved = inner.copy()
-                moved[:, d] = np.clip(moved[:, d] + sign * TANGENT_STEP, 0.0, 1.0)
-                probes.append(moved)
-        images = boundary(_lift(axis, side, np.concatenate(probes))).reshape(4, -1, 3)
-        spans = [probes[2 * d][:, d] - probes[2 * d + 1][:, d] for d in range(2)]
-        tu, tv = ((images[2 * d] - images[2 * d + 1]) / spans[d][:, None] for d in range(2))
-        # Least-squares pull-back of the physical residual onto the tangent plane: the parameter
-        # change whose image best matches it, (T^T T)^-1 T^T r.
-        res = np.moveaxis(residual, 0, -1).reshape(-1, 3)
-        a11, a12, a22 = (tu * tu).sum(-1), (tu * tv).sum(-1), (tv * tv).sum(-1)
-        ru, rv = (tu * res).sum(-1), (tv * res).sum(-1)
-        det_t = a11 * a22 - a12**2
-        if np.any(det_t <= 0) or not np.all(np.isfinite(det_t)):
-            raise GeometryError("boundary layout: the geometry's face map is singular inside a face")
-        inner_shape = (shape[0] - 2, shape[1] - 2)
-        target = np.stack([(a22 * ru - a12 * rv) / det_t, (a11 * rv - a12 * ru) / det_t], axis=-1).reshape(inner_shape + (2,))
-        # The operator's own normalised coefficients: A_aa / trace on the axes, the mixed one
-        # (-g12 / trace) from the grid's metric.
-        x_p, x_q = ((X[2:, 1:-1] - X[:-2, 1:-1]), (X[1:-1, 2:] - X[1:-1, :-2]))
-        g11, g12, g22 = (x_p * x_p).sum(-1), (x_p * x_q).sum(-1), (x_q * x_q).sum(-1)
-        if np.any(g11 * g22 - g12**2 <= 0):
-            raise GeometryError("boundary layout: a face's surface grid degenerated (zero-area cell)")
-        c11, c22 = axial
-        # g12 / trace from the raw differences: scale by the first-derivative factors, as axial does
-        scale_p = 1.0 / (grid.coords[0][2:] - grid.coords[0][:-2])[:, None]
-        scale_q = 1.0 / (grid.coords[1][2:] - grid.coords[1][:-2])[None, :]
-        trace = g11 * scale_p**2 + g22 * scale_q**2
-        c12 = -g12 * scale_p * scale_q / trace
-        if iterations == 0 or update > refactor_rate * previous:
-            operator = splu(_scalar_operator(c11, c22, c12, grid), permc_spec="MMD_AT_PLUS_A")
-        step = np.stack([operator.solve(-target[..., c].ravel()) for c in range(2)], axis=-1).reshape(inner_shape + (2,))
-        iterations += 1
-        previous, update = update, float(np.abs(step).max())
-        if not np.isfinite(update):
-            raise GeometryError("boundary layout: a face's surface grid diverged")
-        if update < tol:
-            U[1:-1, 1:-1] += step
+        try:
+            step = splu(_jacobian(evaluate, U, state, F), permc_spec="MMD_AT_PLUS_A").solve(-F.ravel()).reshape(F.shape)
+        except RuntimeError:  # a singular Jacobian: the face map is degenerate inside the face
             break
-        if update > previous:
-            mixing.restart()
-        inner = U[1:-1, 1:-1]
-        U[1:-1, 1:-1] = np.clip(mixing.next_iterate(inner.copy(), inner + step), 0.0, 1.0)
-    np.clip(U, 0.0, 1.0, out=U)
-    return U, {"iterations": iterations, "final_update": update}
+        iterations += 1
+        update = float(np.abs(step).max())
+        if not np.isfinite(update):
+            break
+        if update < tol:
+            U[1:-1, 1:-1] = np.clip(U[1:-1, 1:-1] + step, 0.0, 1.0)
+            converged = True
+            break
+        longest = STEP_CELLS * min(float(np.diff(c).min()) for c in grid.coords)  # the trust region
+        for halving in range(LINE_SEARCH_HALVINGS + 1):
+            alpha = min(1.0, longest / update) * 0.5**halving
+            trial = U.copy()
+            trial[1:-1, 1:-1] = np.clip(U[1:-1, 1:-1] + alpha * step, 0.0, 1.0)
+            trial_state = state_of(trial)
+            trial_F = _tangential_residual(trial_state[0], *trial_state[1], grid)
+            trial_norm = float(np.linalg.norm(trial_F))
+            if np.isfinite(trial_norm) and trial_norm <= (1.0 - 1e-4 * alpha) * norm:
+                break
+        else:
+            break  # no decrease along the Newton direction: stalled
+        U, state, F, norm = trial, trial_state, trial_F, trial_norm
+    return U, {"iterations": iterations, "final_update": update, "converged": converged}
 
 
-def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
-    """The smoothed layout of ``geometry`` (a Geometry), on a fine grid of ``cells`` per side."""
+class LayoutWarning(UserWarning):
+    """A face of the smoothed layout was not solved again at the mesh's resolution."""
+
+
+def _require_converged(geometry, face_name: str, info: dict, where: str) -> None:
+    """Raise a one-line GeometryError when the surface grid of ``face_name`` did not converge."""
+    if info["converged"]:
+        return
+    values = ", ".join(f"{k}={v:g}" for k, v in sorted(geometry.values.items()))
+    raise GeometryError(
+        f"the smoothed boundary layout of '{geometry.name}' ({values}) does not converge{where}: face {face_name} "
+        f"stopped at a parameter update of {info['final_update']:.1e} after {info['iterations']} Newton steps; "
+        "mesh it with --boundary-layout fixed (training: --set boundary_layout=fixed)"
+    )
+
+
+def compute_layout(geometry, cells: int = RESOLUTION, max_iter: int = FACE_MAX_ITER) -> Layout:
+    """The smoothed layout of ``geometry`` (a Geometry), on a fine grid of ``cells`` per side.
+    Raises GeometryError naming the geometry, the face and its last update when a face's surface
+    grid does not converge within ``max_iter`` Newton steps: an unconverged layout is never
+    returned."""
     boundary = geometry.boundary
     dim = geometry.dim
     if dim == 2:
@@ -359,7 +399,9 @@ def compute_layout(geometry, cells: int = RESOLUTION) -> Layout:
         # sides of the face: p = 0, 1 (the tangent axis a fixed) carry the parameter along b, and vice versa
         edge_u = (side_values(a, 0), side_values(a, 1), side_values(b, 0), side_values(b, 1))
         t = np.linspace(0.0, 1.0, cells + 1)
-        U, info = surface_grid(boundary, face.axis, face.side, coons_start(edge_u, (t, t)), (t, t))
+        start = harmonic_start(boundary, face.axis, face.side, coons_start(edge_u, (t, t)), (t, t))
+        U, info = surface_grid(boundary, face.axis, face.side, start, (t, t), max_iter=max_iter)
+        _require_converged(geometry, face.name, info, "")
         face_values[(face.axis, face.side)] = U
         face_info[face.name] = info
     return Layout(3, edge_values, face_values, face_info)
@@ -375,7 +417,9 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
     member's interpolated layout does, else the geometry's solved layout). Why: an elliptic mesh's layers next to a face then solve the same discrete
     equations as the face itself, so an extruded shape gives an exactly extruded mesh (the layout's
     fine-grid interpolant differs from that by the discretisation error, which a flow solver sees
-    as skewed cells). Returns the Picard iterations per face name.
+    as skewed cells). Returns the Newton steps per face name. A face whose grid does not converge
+    at this resolution keeps the layout's interpolated nodes (the layout itself is converged:
+    ``compute_layout`` raises otherwise), with a LayoutWarning that names it.
     """
     if geometry.dim != 3:
         return {}
@@ -389,9 +433,18 @@ def relax_faces(geometry, coords, X: np.ndarray, tol: float = RELAX_TOL) -> dict
         if min(len(c) for c in face_coords) < 3:
             continue  # no interior nodes on this face
         start = layout.apply(face.points(coords))[:, [a, b]].reshape(len(face_coords[0]), len(face_coords[1]), 2)
-        U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol, refactor_rate=REFACTOR_RATE)
-        X[face.node_index] = plain(_lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
+        U, info = surface_grid(plain, face.axis, face.side, start, face_coords, tol=tol)
         iterations[face.name] = info["iterations"]
+        if not info["converged"]:  # keep the solved layout's own nodes on this face, and say so
+            warnings.warn(
+                f"boundary layout of '{geometry.name}': face {face.name} was not solved again at the mesh's resolution "
+                f"(update {info['final_update']:.1e} after {info['iterations']} Newton steps); it keeps the smoothed "
+                "layout's interpolated nodes",
+                LayoutWarning,
+                stacklevel=2,
+            )
+            continue
+        X[face.node_index] = plain(lift(face.axis, face.side, U).reshape(-1, 3)).reshape(U.shape[:-1] + (3,))
     return iterations
 
 
@@ -417,7 +470,7 @@ def layout_of(geometry, cells: int = RESOLUTION) -> Layout:
 def cache_path(geometry, cells: int = RESOLUTION):
     """The file that keeps the layout of ``geometry`` between runs: in ``$MESHGEN_CACHE_DIR``, else
     ``$XDG_CACHE_HOME/meshgen``, else ``~/.cache/meshgen``, under ``layouts/``, named by a hash of
-    meshgen's version, the plugin's name and source text (a shape file's: the hash of its content
+    meshgen's version, ``SOLVER_VERSION``, the plugin's name and source text (a shape file's: the hash of its content
     and options, ``meshgen.shapes.loader.content_hash``), its parameter values and ``cells``.
     None for a plugin whose source file cannot be read (its layout is then computed every run)."""
     content = getattr(geometry.boundary_map, "content_hash", None)  # a shape file: its bytes' hash
@@ -425,7 +478,7 @@ def cache_path(geometry, cells: int = RESOLUTION):
         source = content.encode() if content else Path(geometry.source).read_bytes()
     except (OSError, TypeError, ValueError):
         return None
-    identity = json.dumps([__version__, geometry.name, sorted(geometry.values.items()), cells]).encode()
+    identity = json.dumps([__version__, SOLVER_VERSION, geometry.name, sorted(geometry.values.items()), cells]).encode()
     digest = hashlib.sha256(identity + b"\0" + source).hexdigest()[:32]
     folder = os.environ.get("MESHGEN_CACHE_DIR") or Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "meshgen"
     return Path(folder) / "layouts" / f"{geometry.name}-{digest}.npz"

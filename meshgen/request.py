@@ -345,16 +345,20 @@ def _warnings_to(warn):
     if warn is None:
         yield
         return
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", MeshgenWarning)
-        try:
-            yield
-        finally:
-            for item in caught:
-                if issubclass(item.category, MeshgenWarning):
-                    warn(str(item.message))
-                else:
-                    warnings.warn_explicit(item.message, item.category, item.filename, item.lineno)
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as recorded:
+            warnings.simplefilter("always", MeshgenWarning)
+            try:
+                yield
+            finally:
+                caught = list(recorded)
+    finally:  # outside the recording: a warning passed on here is shown, not recorded again
+        for item in caught:
+            if issubclass(item.category, MeshgenWarning):
+                warn(str(item.message))
+            else:
+                warnings.warn_explicit(item.message, item.category, item.filename, item.lineno)
 
 
 def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:

@@ -71,6 +71,7 @@ LAYERS = [
         "meshgen.winslow",
         "meshgen.winslow_compiled",
         "meshgen.anderson",
+        "meshgen.layout_start",
         "meshgen.orthogonal",
         "meshgen.patches",
         "meshgen.surface",

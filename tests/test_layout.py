@@ -13,7 +13,7 @@ from meshgen.cube import face_named
 from meshgen.elliptic import elliptic
 from meshgen.errors import GeometryError
 from meshgen.geometry import check_boundary, load_geometry
-from meshgen.layout import RESOLUTION, interpolate_1d, interpolate_2d, layout_of, smoothed, with_layout
+from meshgen.layout import RESOLUTION, coons_start, interpolate_1d, interpolate_2d, layout_of, smoothed, with_layout
 from meshgen.quality import quality_report
 from meshgen.tfi import tfi
 
@@ -221,3 +221,85 @@ def test_every_section_of_the_semicylinder_is_gmshs_smoothed_transfinite_mesh(tm
     angle = quality_report(X, semicylinder)["metrics"]["min_angle"]["mean"]
     assert angle == pytest.approx(gmsh_angle, abs=1e-4)
     assert angle == pytest.approx({30: 74.42, 100: 74.79}[cells], abs=0.005)  # gmsh's own figures
+
+
+def _flower_radius_error(points, radius, amplitude, length, twist):
+    """Largest distance (radially) of side-wall points (N, 3) from the twisted flower's closed-form
+    surface: unturn each point by twist * z / length, then r must be radius (1 + a cos 5 theta)."""
+    turn = -np.radians(twist) * points[:, 2] / length
+    x = np.cos(turn) * points[:, 0] - np.sin(turn) * points[:, 1]
+    y = np.sin(turn) * points[:, 0] + np.cos(turn) * points[:, 1]
+    theta = np.arctan2(y, x)
+    return np.abs(np.hypot(x, y) - radius * (1 + amplitude * np.cos(5 * theta))).max()
+
+
+def _corner_jacobians(X):
+    """Determinants of the three edge vectors at each of the 8 corners of every hexahedron of the
+    node array X (n1+1, n2+1, n3+1, 3): (8, cells); all positive for a cell that is not inverted."""
+    dets = []
+    for ci in (0, 1):
+        for cj in (0, 1):
+            for ck in (0, 1):
+                corner = X[ci : X.shape[0] - 1 + ci, cj : X.shape[1] - 1 + cj, ck : X.shape[2] - 1 + ck]
+                sign = (1 - 2 * ci) * (1 - 2 * cj) * (1 - 2 * ck)
+                edges_ = [
+                    X[1 - ci : X.shape[0] - ci, cj : X.shape[1] - 1 + cj, ck : X.shape[2] - 1 + ck] - corner,
+                    X[ci : X.shape[0] - 1 + ci, 1 - cj : X.shape[1] - cj, ck : X.shape[2] - 1 + ck] - corner,
+                    X[ci : X.shape[0] - 1 + ci, cj : X.shape[1] - 1 + cj, 1 - ck : X.shape[2] - ck] - corner,
+                ]
+                dets.append(sign * np.einsum("...i,...i->...", edges_[0], np.cross(edges_[1], edges_[2])).ravel())
+    return np.array(dets)
+
+
+FLOWER_LAYOUT_CELLS = 16  # a coarse fine grid: the same equations and faces, a quicker test
+
+
+def test_strongly_twisted_flower_layout_converges_on_the_surface_without_inverting_tfi():
+    """twist=180 (the top of its range) with the lowest amplitude: every face's Newton solve
+    converges, the smoothed wall nodes lie on the flower's closed-form surface, and the TFI mesh on
+    the layout has no inverted cell (corner Jacobians computed here)."""
+    values = {"radius": 1.0, "amplitude": 0.1, "length": 2.0, "twist": 180.0}
+    plain = load_geometry("flower", values)
+    layout = layout_of(plain, FLOWER_LAYOUT_CELLS)
+    assert all(info["converged"] and info["final_update"] < 1e-8 for info in layout.face_info.values())
+    for name in ("xi0", "xi1", "eta0", "eta1"):
+        grid = _face_grid(plain, name, FLOWER_LAYOUT_CELLS).reshape(-1, 3)
+        assert _flower_radius_error(grid, **values) < 1e-9
+    # the solve moved the wall's nodes away from their start, the Coons patch of the edges' values
+    t = np.linspace(0.0, 1.0, FLOWER_LAYOUT_CELLS + 1)
+    wall = layout.face_values[(0, 1)]
+    start = coons_start((wall[0, :, 1], wall[-1, :, 1], wall[:, 0, 0], wall[:, -1, 0]), (t, t))
+    assert np.abs(wall - start).max() > 1e-3
+    X = tfi(smoothed(plain, FLOWER_LAYOUT_CELLS), (6, 6, 10))
+    assert _corner_jacobians(X).min() > 0
+
+
+def test_an_unconverged_layout_raises_one_line_naming_geometry_face_and_update():
+    """Capping the Newton steps at one leaves the twisted flower's faces unsolved: compute_layout
+    must raise (never return the unsolved layout), in one line that says what to do."""
+    from meshgen.layout import compute_layout
+
+    geometry = load_geometry("flower", {"twist": 180.0, "amplitude": 0.3})
+    with pytest.raises(GeometryError) as caught:
+        compute_layout(geometry, cells=8, max_iter=1)
+    message = str(caught.value)
+    assert "\n" not in message
+    assert "'flower'" in message and "twist=180" in message and "face " in message and "update" in message
+    assert "--boundary-layout fixed" in message and "boundary_layout=fixed" in message
+
+
+def test_lobed_flower_caps_solve_on_their_planes_inside_the_section():
+    """amplitude=0.3 (the top of its range): the caps' face map, the Coons patch of the lobed
+    section, is nearly singular near the long edge; the caps' grids must converge anyway, lie on
+    the cap planes inside the closed-form section. (No inversion check here: at this amplitude
+    even the fixed layout's TFI section has a slightly inverted cell at 8 x 8, a limit of the
+    geometry's map, not of the layout.)"""
+    values = {"radius": 1.0, "amplitude": 0.3, "length": 2.0, "twist": 0.0}
+    plain = load_geometry("flower", values)
+    layout = layout_of(plain, FLOWER_LAYOUT_CELLS)
+    assert all(info["converged"] and info["final_update"] < 1e-8 for info in layout.face_info.values())
+    for name, height in (("zeta0", 0.0), ("zeta1", values["length"])):
+        cap = _face_grid(plain, name, FLOWER_LAYOUT_CELLS).reshape(-1, 3)
+        assert np.abs(cap[:, 2] - height).max() < 1e-12
+        theta = np.arctan2(cap[:, 1], cap[:, 0])
+        assert np.all(np.hypot(cap[:, 0], cap[:, 1]) <= values["radius"] * (1 + values["amplitude"] * np.cos(5 * theta)) + 1e-12)
