@@ -1,14 +1,13 @@
 """Per-cell metrics of a structured node array (n1+1, n2+1[, n3+1], dim): the compiled kernels of
 ``meshgen.quality.compiled`` read corners and face neighbours straight from the array.
 
-Small meshes in a process that has not loaded numba take the NumPy kernels of
-``meshgen.quality.numpy_kernels`` instead (``kernels="auto"``): importing numba and loading the
-compiled kernels from its cache costs about a second, NumPy needs less than that for
-``NUMPY_CELLS`` cells. Both agree to 1e-12 (tested)."""
+Small meshes take the NumPy kernels of ``meshgen.quality.numpy_kernels`` instead
+(``kernels="auto"``): importing numba and loading the compiled kernels from its cache costs about
+a second, NumPy needs less than that for ``NUMPY_CELLS`` cells. Both agree to 1e-12 (tested); the
+choice depends on the mesh's size alone, never on what the process loaded before, so one mesh
+always gets the same report, to the last bit."""
 
 from __future__ import annotations
-
-import sys
 
 import numpy as np
 
@@ -28,16 +27,16 @@ __all__ = [
     "use_compiled",
 ]
 
-NUMPY_CELLS = 500_000  # below: the NumPy kernels, unless numba is loaded already (break-even about 9e5)
+NUMPY_CELLS = 500_000  # below: the NumPy kernels (break-even with a fresh numba import about 9e5)
 
 
 def use_compiled(cells: int, kernels: str = "auto") -> bool:
     """Whether ``cells`` cells take the compiled kernels: ``kernels`` "compiled", "numpy", or "auto"
-    (compiled when numba is loaded already or there are at least ``NUMPY_CELLS`` cells)."""
+    (compiled from ``NUMPY_CELLS`` cells up)."""
     if kernels not in ("auto", "compiled", "numpy"):
         raise ValueError(f"kernels must be auto, compiled or numpy, not {kernels!r}")
     if kernels == "auto":
-        return "numba" in sys.modules or cells >= NUMPY_CELLS
+        return cells >= NUMPY_CELLS
     return kernels == "compiled"
 
 
