@@ -48,7 +48,7 @@ import numpy as np
 from meshgen import __version__
 from meshgen.atomic import atomic_path
 from meshgen.cube import edges, faces
-from meshgen.errors import GeometryError
+from meshgen.errors import GeometryError, MeshgenWarning
 from meshgen.layout_start import harmonic_start, lift
 from meshgen.winslow import stencils, winslow_operator
 
@@ -358,8 +358,9 @@ def surface_grid(boundary, axis: int, side: int, U: np.ndarray, coords, tol: flo
     return U, {"iterations": iterations, "final_update": update, "converged": converged}
 
 
-class LayoutWarning(UserWarning):
-    """A face of the smoothed layout was not solved again at the mesh's resolution."""
+class LayoutWarning(MeshgenWarning):
+    """A face of the smoothed layout was not solved again at the mesh's resolution (the command
+    line prints it as one warning line)."""
 
 
 def _require_converged(geometry, face_name: str, info: dict, where: str) -> None:
