@@ -9,17 +9,21 @@ computation of the residual of TFI + b N from the boundary map.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
+from neural_helpers import Recorder, tiny_config
 
 from meshgen.geometry import load_geometry
 from meshgen.layout import RESOLUTION, with_layout
-from meshgen.neural.config import ConfigError, resolve_config
+from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.config import ConfigError, from_dict, resolve_config
 from meshgen.neural.derivatives import grid_derivatives, grid_points, lattice_grid_from_draws, training_grid
-from meshgen.neural.model import MLP, bubble, normalisation, normalised_boundary
-from meshgen.neural.problem import Problem, grid_residual, lattice_blocks, sample_pde_points
+from meshgen.neural.model import MLP, bubble, mesh_from_checkpoint, normalisation, normalised_boundary
+from meshgen.neural.problem import Problem, grid_residual, lattice_blocks, lbfgs_points, sample_pde_points
+from meshgen.neural.train import train
 from meshgen.neural.winslow import winslow_residual
-from meshgen.tfi import transfinite
+from meshgen.tfi import parametric_grid, transfinite
 
 
 @pytest.fixture(scope="module")
@@ -84,6 +88,67 @@ def test_split_residual_equals_the_float64_residual_of_tfi_plus_bubble_network(p
     error = float((ours.double() - reference).abs().max())
     assert error < 1e-2 * float(reference.abs().max())
     assert error < 0.01 * float((plain.double() - reference).abs().max())  # float32 alone: above the residual itself
+
+
+def float64_reference(network, problem, axes, spacing):
+    """The Winslow residual of TFI + b N at the interior nodes of the grid ``axes``, float64 from
+    the boundary map: TFI evaluated directly, the differences of the whole map."""
+    nodes = grid_points(axes)
+    flat = nodes.reshape(-1, 3)
+    tfi = torch.from_numpy(transfinite(problem.boundary, list(flat.numpy().T)))
+    values = tfi + bubble(flat)[:, None] * network.double()(flat)
+    _, first, second = grid_derivatives(values.reshape(nodes.shape), spacing)
+    return winslow_residual(first, second)
+
+
+def test_lbfgs_float64_points_give_the_float64_residual(problem):
+    torch.manual_seed(0)
+    network = MLP(3, [8, 8])
+    with torch.no_grad():
+        for tensor in network.layers[-1].parameters():
+            tensor.mul_(1e-4)
+    config = resolve_config("exact")
+    assert config.lbfgs.float64
+    axes, spacing, tfi_derivatives = lbfgs_points(problem, config)["pde"]
+    assert all(t.dtype == torch.float64 for t in tfi_derivatives)
+    with torch.no_grad():
+        network.double()
+        ours = grid_residual(network, problem, axes, spacing, tfi_derivatives)
+        reference = float64_reference(network, problem, axes, spacing)
+    assert ours.dtype == torch.float64 and float(reference.abs().max()) > 1e-5
+    # float64 round-off of second differences over h^2 = 1/64^2 (float32: 1e-2 of the residual, above)
+    assert float((ours - reference).abs().max()) < 1e-8 * float(reference.abs().max())
+
+
+@pytest.mark.parametrize("stop_after", [None, 13])  # the whole run, and stopped inside the float64 L-BFGS stage
+def test_lbfgs_float64_run_keeps_float64_weights_meshes_and_resumes_exactly(tmp_path, semidisk, stop_after):
+    config = tiny_config(preset="exact")  # 2 pretrain, 10 Adam and 2 L-BFGS steps
+    assert config.lbfgs.float64
+    (tmp_path / "straight").mkdir()
+    straight = train(config, semidisk, tmp_path / "straight", summary=False)
+    weights = straight.checkpoint["model"]["state_dict"]
+    assert all(tensor.dtype == torch.float64 for tensor in weights.values())
+    if stop_after is None:
+        # the mesh path rounds the weights to float32: the map moves by far less than a solver sees
+        coords = parametric_grid([6, 5])
+        X = mesh_from_checkpoint(straight.checkpoint, coords, semidisk)
+        model = straight.checkpoint["model"]
+        network = MLP(2, model["widths"]).double()
+        network.load_state_dict(model["state_dict"])
+        xi = torch.stack(torch.meshgrid(*[torch.from_numpy(c) for c in coords], indexing="ij"), -1).reshape(-1, 2)
+        with torch.no_grad():
+            move = (bubble(xi)[:, None] * network(xi)).numpy().reshape(X.shape) * model["scale"]
+        tfi = transfinite(with_layout(semidisk, "smoothed").boundary, np.meshgrid(*coords, indexing="ij"))
+        np.testing.assert_allclose(X, tfi + move, rtol=0, atol=1e-6 * np.abs(move).max() + 1e-15)
+        return
+    (tmp_path / "resumed").mkdir()
+    recorder = Recorder(stop_after=stop_after)
+    first = train(config, semidisk, tmp_path / "resumed", reporter=recorder, stop=recorder.should_stop, summary=False)
+    saved = load_checkpoint(first.checkpoint_path)
+    assert saved["stage"] == "lbfgs" and saved["model"]["state_dict"]["layers.0.weight"].dtype == torch.float64
+    second = train(from_dict(saved["config"]), semidisk, tmp_path / "resumed", resume=saved, summary=False)
+    for key, tensor in weights.items():
+        assert torch.equal(tensor, second.checkpoint["model"]["state_dict"][key]), key
 
 
 def test_lattice_needs_finite_differences():

@@ -109,6 +109,9 @@ class LbfgsConfig:
     max_iter: int = 20  # iterations per step
     history_size: int = 50
     lr: float = 1.0
+    # the network and its residual in float64 for this stage (float32 otherwise): in float32 the
+    # finite-difference residual's round-off stops L-BFGS well above what the network can reach
+    float64: bool = False
 
 
 @dataclass

@@ -87,6 +87,7 @@ FAMILY_UNUSED_KEYS = {
     "pretrain.lr": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "pretrain.points": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "adam.weights_lr": "a family has one loss, with a fixed weight",
+    "lbfgs.float64": "a family's L-BFGS stage runs in float32",
     "test.interior": f"a family's test loss is the residual of {TEST_MEMBERS} fixed members on the unshifted grid",
     "test.boundary": f"a family's test loss is the residual of {TEST_MEMBERS} fixed members on the unshifted grid",
 }

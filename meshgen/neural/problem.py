@@ -49,6 +49,7 @@ __all__ = [
     "grid_tfi_derivatives",
     "lbfgs_points",
     "make_test_set",
+    "network_dtype",
     "pde_term",
     "points_residual",
     "pretrain_pool",
@@ -75,9 +76,9 @@ class Problem:
     device: torch.device
 
 
-def grid_tfi_derivatives(problem: Problem, axes, spacing) -> tuple[torch.Tensor, torch.Tensor]:
+def grid_tfi_derivatives(problem: Problem, axes, spacing, dtype=torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
     """TFI's central differences (``grid_derivatives``) at the interior nodes of the grid ``axes``,
-    computed in float64 and returned as float32 on the CPU: first ([B,] m1, .., md, d, d), second
+    computed in float64 and returned as ``dtype`` (the network's) on the CPU: first ([B,] m1, .., md, d, d), second
     ([B,] m1, .., md, d, d, d). The exact-boundary form's residual adds them to the differences of
     b N alone: in float32 the differences of TFI itself (values ~1, second differences over h^2)
     leave a round-off residual (about 1e-4 at h = 1/64) that no network can remove; b N is small,
@@ -87,7 +88,7 @@ def grid_tfi_derivatives(problem: Problem, axes, spacing) -> tuple[torch.Tensor,
     broadcast = [a.cpu().reshape(batch + [-1 if d == i else 1 for d in range(dim)]).numpy() for i, a in enumerate(axes)]
     values = torch.from_numpy(transfinite(problem.boundary, broadcast))
     _, first, second = grid_derivatives(values, [float(h) for h in spacing])
-    return first.float(), second.float()
+    return first.to(dtype), second.to(dtype)
 
 
 def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=None) -> torch.Tensor:
@@ -98,26 +99,32 @@ def apply_map(network: MLP, problem: Problem, points: torch.Tensor, tfi_values=N
     return tfi_values + bubble(points)[:, None] * output
 
 
+def network_dtype(network) -> torch.dtype:
+    """The floating-point type of the network's weights (float32; float64 in an ``lbfgs.float64`` stage)."""
+    return next(network.parameters()).dtype
+
+
 def grid_residual(network: MLP, problem: Problem, axes, spacing, tfi_derivatives=None) -> torch.Tensor:
     """Winslow residual at the interior nodes of the grid ``axes`` (1D float64 tensors, halo
     included; or (B, n_i) tensors, a batch of B grids) by finite differences: ([B,] m1, ..., md, d).
     The exact-boundary form needs TFI's differences at the interior nodes: ``tfi_derivatives``
     ((first, second) on the device, :func:`grid_tfi_derivatives`), computed here when not given."""
     nodes = grid_points(axes)
-    flat = nodes.reshape(-1, problem.dim).float().to(problem.device)
+    flat = nodes.reshape(-1, problem.dim).to(problem.device, network_dtype(network))
     if not problem.exact:
         _, first, second = grid_derivatives(network(flat).reshape(*nodes.shape), spacing)
         return winslow_residual(first, second)
     if tfi_derivatives is None:
-        tfi_derivatives = tuple(t.to(problem.device) for t in grid_tfi_derivatives(problem, axes, spacing))
-    # the differences of TFI + b N: TFI's (float64, given) plus those of b N (float32)
+        tfi_derivatives = grid_tfi_derivatives(problem, axes, spacing)
+    # the differences of TFI + b N: TFI's (computed in float64) plus those of b N (in the network's type)
     _, first, second = grid_derivatives((bubble(flat)[:, None] * network(flat)).reshape(*nodes.shape), spacing)
-    return winslow_residual(first + tfi_derivatives[0], second + tfi_derivatives[1])
+    tfi_first, tfi_second = (t.to(problem.device, flat.dtype) for t in tfi_derivatives)
+    return winslow_residual(first + tfi_first, second + tfi_second)
 
 
 def points_residual(network: MLP, problem: Problem, points: torch.Tensor) -> torch.Tensor:
     """Winslow residual at ``points`` (N, d) with autograd derivatives: (N, d)."""
-    _, first, second = autograd_derivatives(network, points.to(problem.device))
+    _, first, second = autograd_derivatives(network, points.to(problem.device, network_dtype(network)))
     return winslow_residual(first, second)
 
 
@@ -252,7 +259,9 @@ def boundary_term(network, problem, config, sample) -> torch.Tensor:
     if problem.exact:
         return torch.zeros((), device=problem.device)
     points, targets, size = sample
-    return boundary_loss(network(points), targets, config.method.point_weights, size)[0]
+    dtype = network_dtype(network)
+    size = size.to(dtype) if size is not None else None
+    return boundary_loss(network(points.to(dtype)), targets.to(dtype), config.method.point_weights, size)[0]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -303,12 +312,14 @@ def pretrain_pool(problem: Problem, config: TrainConfig) -> dict:
 
 def lbfgs_points(problem: Problem, config: TrainConfig) -> dict:
     """Fixed points of the L-BFGS stage: the unshifted training grid (fd) or random points, and
-    fresh boundary points, drawn from their own seed so that a resumed run gets the same ones."""
+    fresh boundary points, drawn from their own seed so that a resumed run gets the same ones.
+    The exact-boundary form's TFI differences in float64 with ``lbfgs.float64``, else float32."""
     generator = torch.Generator().manual_seed(config.seed + 2)
     pde = sample_pde_points(config, problem.dim, generator, random=False)
     if problem.exact and config.method.derivatives == "fd":  # TFI at the fixed grid once, not per iteration
         axes, spacing = pde
-        pde = (axes, spacing, tuple(t.to(problem.device) for t in grid_tfi_derivatives(problem, axes, spacing)))
+        dtype = torch.float64 if config.lbfgs.float64 else torch.float32
+        pde = (axes, spacing, tuple(t.to(problem.device) for t in grid_tfi_derivatives(problem, axes, spacing, dtype)))
     if problem.exact:
         return {"pde": pde, "boundary": None}
     rows = boundary_draw(problem, config, generator)["boundary"].to(problem.device)

@@ -86,6 +86,14 @@ def adam_steps(training: Training) -> AdamSteps:
     )
 
 
+def lbfgs_optimizer(training: Training):
+    """The L-BFGS stage's optimiser, the network first moved to float64 with ``lbfgs.float64`` (its
+    residual then follows: ``meshgen.neural.problem.network_dtype``)."""
+    if training.config.lbfgs.float64:
+        training.network.double()
+    return make_optimizer("lbfgs", training.network, training.weights, training.config)
+
+
 STAGE_TABLE = (
     Stage(
         "pretrain",
@@ -103,7 +111,7 @@ STAGE_TABLE = (
     ),
     Stage(
         "lbfgs",
-        optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
+        optimizer=lbfgs_optimizer,
         points=lambda t, state: lbfgs_points(t.problem, t.config),
         step=lambda t, optimizer, scheduler, fixed: lbfgs_step(t, optimizer, fixed),
     ),
@@ -179,6 +187,8 @@ def start_training(config: TrainConfig, geometry, device: torch.device, resume: 
     generator = torch.Generator().manual_seed(config.seed)
     state = TrainState(STAGES[0])
     if resume is not None:
+        if resume["model"]["state_dict"]["layers.0.weight"].dtype == torch.float64:  # stopped in an lbfgs.float64 stage
+            network.double()
         network.load_state_dict(resume["model"]["state_dict"])
         weights.load_state_dict(resume["reweighting"])
         generator.set_state(resume["rng"]["sampler"])
