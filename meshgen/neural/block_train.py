@@ -30,10 +30,10 @@ from meshgen.neural.block_problem import (
 )
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.model import INPUT_MAP
-from meshgen.neural.pcgrad import assign, flatten, project_conflicting
+from meshgen.neural.pcgrad import assign, flatten
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
-from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, make_optimizer
+from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, combined_gradients, make_optimizer
 from meshgen.quality import quality_report, write_json
 
 __all__ = ["BLOCK_STAGES", "SUMMARY_DIMS", "block_gradients", "block_stage_table", "describe_blocks", "train_blocks"]
@@ -90,19 +90,7 @@ def block_gradients(training: Training, inputs: dict, pool: dict) -> dict:
     pde_sample, boundary_sample = block_samples(config, training.problem, inputs)
     factors = weights.factors().detach()
     pde, boundary, g1, g2 = _terms(training, pool, pde_sample, boundary_sample, factors)
-    finite = torch.isfinite(pde) & torch.isfinite(boundary)
-    update, conflict = project_conflicting(g1, g2) if config.method.pcgrad else (g1 + g2, (g1 @ g2) < 0)
-    total = weights.objective(pde.detach(), boundary.detach())
-    gradients = {
-        "update": torch.where(finite, update, torch.zeros_like(update)),
-        "L1": pde.detach(),
-        "L2": boundary.detach(),
-        "total": torch.where(finite, total.detach(), torch.nan),
-        "conflict": conflict.int(),
-    }
-    if weights.learned:
-        (gradients["a_gradient"],) = torch.autograd.grad(total, weights.log_a)
-    return gradients
+    return combined_gradients(weights, config.method.pcgrad, pde, boundary, g1, g2)
 
 
 def _pretrain_step(training: Training, optimizer, pools) -> dict:

@@ -23,6 +23,7 @@ from meshgen.neural.problem import boundary_term, pde_term, step_samples
 from meshgen.neural.reweighting import UncertaintyWeights
 
 __all__ = [
+    "combined_gradients",
     "DEVICE_BLOCK",
     "AdamSteps",
     "TermRunner",
@@ -126,11 +127,15 @@ def adam_gradients(training: Training, inputs: dict, pool=None) -> dict:
     pde_sample, boundary_points = step_samples(config, training.problem, inputs, pool)
     factors = weights.factors().detach()
     pde, boundary, g1, g2 = term_gradients(training, pde_sample, boundary_points, factors)
+    return combined_gradients(weights, config.method.pcgrad, pde, boundary, g1, g2)
+
+
+def combined_gradients(weights, pcgrad: bool, pde, boundary, g1, g2) -> dict:
+    """The step's update from the two terms' flat gradients ``g1``, ``g2`` (PCGrad when ``pcgrad``),
+    zero where a loss is not finite, with the losses, the conflict flag and (learned weights) the
+    weights' own gradient: the dict :func:`apply_adam` takes."""
     finite = torch.isfinite(pde) & torch.isfinite(boundary)
-    if config.method.pcgrad:
-        update, conflict = project_conflicting(g1, g2)
-    else:
-        update, conflict = g1 + g2, (g1 @ g2) < 0
+    update, conflict = project_conflicting(g1, g2) if pcgrad else (g1 + g2, (g1 @ g2) < 0)
     total = weights.objective(pde.detach(), boundary.detach())
     gradients = {
         "update": torch.where(finite, update, torch.zeros_like(update)),
