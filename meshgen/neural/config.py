@@ -20,6 +20,7 @@ from meshgen.geometry import builtin_dir
 from meshgen.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = [
+    "dotted_items",
     "ConfigError",
     "ModelConfig",
     "MethodConfig",
@@ -460,3 +461,15 @@ def _check_bounds(config: TrainConfig) -> None:
         for number in values:
             if number is not None and not low <= number <= high:
                 raise ConfigError(f"configuration key '{key}' must lie in [{low:g}, {high:g}], got {excerpt(repr(number))}")
+
+
+def dotted_items(mapping: dict, prefix: str = "") -> dict:
+    """A nested configuration mapping (``to_dict``'s, or a checkpoint's ``config``) as
+    {dotted key: value}, e.g. {"adam.steps": 12000}."""
+    items = {}
+    for name, value in mapping.items():
+        if isinstance(value, dict):
+            items.update(dotted_items(value, f"{prefix}{name}."))
+        else:
+            items[f"{prefix}{name}"] = value
+    return items

@@ -24,7 +24,7 @@ from meshgen.geometry import load_geometry
 from meshgen.layout import trained_layout, with_layout
 from meshgen.neural.block_inference import check_block_model, is_block_model
 from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
-from meshgen.neural.config import ConfigError, preset_paths, resolve_config, schema, to_dict
+from meshgen.neural.config import ConfigError, dotted_items, preset_paths, resolve_config, schema, to_dict
 from meshgen.neural.network_map import mesh_from_model
 from meshgen.polish import polish as polish_mesh
 
@@ -127,20 +127,11 @@ def preset_of(checkpoint: dict) -> str:
         return checkpoint["preset"]
     config = checkpoint.get("config") or {}
 
-    def flat(data, prefix=""):
-        items = {}
-        for key, value in data.items():
-            if isinstance(value, dict):
-                items.update(flat(value, f"{prefix}{key}."))
-            else:
-                items[f"{prefix}{key}"] = value
-        return items
-
-    recorded = flat(config)
+    recorded = dotted_items(config)
     described = None
     for name in preset_paths():
         try:
-            preset = flat(to_dict(resolve_config(name)))
+            preset = dotted_items(to_dict(resolve_config(name)))
         except ConfigError:
             continue
         differing = sorted(key for key in schema() if recorded.get(key) != preset.get(key))

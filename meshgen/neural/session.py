@@ -15,7 +15,7 @@ from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
-from meshgen.neural.config import ConfigError, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.config import ConfigError, dotted_items, from_dict, parse_override, resolve_config, set_key, to_dict, validate
 from meshgen.neural.device import inference_device
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
@@ -191,17 +191,6 @@ def prepare_run(
     )  # fmt: skip
 
 
-def _flat(mapping: dict, prefix: str = "") -> dict:
-    """A nested configuration mapping as {dotted key: value}."""
-    flat = {}
-    for name, value in mapping.items():
-        if isinstance(value, dict):
-            flat.update(_flat(value, f"{prefix}{name}."))
-        else:
-            flat[f"{prefix}{name}"] = value
-    return flat
-
-
 def _refuse_family_keys(config, preset, overrides) -> None:
     """A family refuses the keys it cannot use (``family_train.FAMILY_UNUSED_KEYS``) when the user
     sets them: every such ``--set`` key, and such a key of ``--config FILE`` whose value differs from
@@ -209,7 +198,7 @@ def _refuse_family_keys(config, preset, overrides) -> None:
     from meshgen.neural.family_train import check_family_keys
 
     given = [parse_override(text)[0] for text in overrides]
-    chosen, preset_only = _flat(to_dict(config)), _flat(to_dict(resolve_config(preset or "family")))
+    chosen, preset_only = dotted_items(to_dict(config)), dotted_items(to_dict(resolve_config(preset or "family")))
     changed = [key for key in chosen if key not in given and chosen[key] != preset_only.get(key)]
     check_family_keys(given)
     check_family_keys(changed, "config_file")
