@@ -42,7 +42,7 @@ import warnings
 import numpy as np
 
 from meshgen.anderson import ANDERSON_DEPTH, AndersonMixing
-from meshgen.errors import ParameterError
+from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.layout import DEFAULT_LAYOUT, relax_faces, with_layout
 from meshgen.orthogonal import inner_block, parse_walls, straighten_first_layer
 from meshgen.tfi import check_axes, parametric_grid, tfi
@@ -388,7 +388,7 @@ def solve_winslow(
     return node_array(R), info
 
 
-class ConvergenceWarning(UserWarning):
+class ConvergenceWarning(MeshgenWarning):
     """The elliptic solver stopped before its tolerance was met."""
 
 
