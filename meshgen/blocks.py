@@ -1,5 +1,5 @@
 """Block sets: a geometry made of several structured blocks that meet face to face (design notes
-§11, docs/design-blocks.md). The one module that knows about blocks; methods and writers take a
+§11, §20). The one module that knows about blocks; methods and writers take a
 ``BlockSet`` and a list of node arrays (one per block) and ask it for faces, interfaces and the
 merged node numbering.
 

@@ -1,5 +1,5 @@
 """Elliptic (Winslow) meshes of block sets: the interface nodes are solved as interior nodes of the
-whole mesh (design notes §11, docs/design-blocks.md), starting from the multi-block TFI.
+whole mesh (design notes §11, §20), starting from the multi-block TFI.
 
 Method: Schwarz sweeps over the interfaces. For each interface, its two blocks are glued along it
 into one structured block (the second block's node array turned into the first one's index frame

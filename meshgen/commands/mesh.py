@@ -65,7 +65,7 @@ METHOD_HELP = (
     help="neural: after the correction, solve the discrete Winslow equations from the network's mesh (faces "
     "relaxed, multigrid cycles), which a flow solver needs (a raw network mesh gives potentialFoam errors "
     "thousands of times the elliptic mesh's); --no-polish keeps the corrected network mesh. Not with --chunked "
-    "[default: --polish; block sets: --no-polish, docs/design-multiblock-neural.md].",
+    "[default: --polish; block sets: --no-polish, docs/design.md §20].",
 )
 @click.option(
     "--correct/--no-correct",

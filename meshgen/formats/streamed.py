@@ -8,7 +8,7 @@ streams them into a scratch CGNS file (random-access hyperslab writes), then a f
 axis (i) for the formats in C order (OpenFOAM, .su2, .msh: k fastest), slabs of the last axis (k)
 for those in Fortran order (.vts, Plot3D: i fastest). Connectivity (cells, faces, owners) is
 label arithmetic on a slab's index range, so nothing of the whole mesh's size is ever held: memory
-is a few slabs (design notes §21; ``docs/design-streaming.md``).
+is a few slabs (design notes §21).
 
 What needs the whole mesh before the first byte (a map's orientation, which sets the faces'
 winding; the bounding box a .msh lists first; a 2D mesh's area, its OpenFOAM extrusion's

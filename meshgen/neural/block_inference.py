@@ -1,6 +1,5 @@
 """Meshing a block set with its trained model (``meshgen.neural.block_train``): every block's
-network on its own tensor grid, then one conforming correction of all blocks (design notes §20,
-docs/design-multiblock-neural.md).
+network on its own tensor grid, then one conforming correction of all blocks (design notes §20).
 
 The correction first settles one position per mesh node that lies on a block face: a node on an
 interface takes the mean of the images of all blocks that hold it; a node on a curved patch (or on

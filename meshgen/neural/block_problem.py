@@ -1,4 +1,4 @@
-"""What a block set's networks are trained on (design notes §20, docs/design-multiblock-neural.md):
+"""What a block set's networks are trained on (design notes §20):
 one MLP per block, all in normalised units of the whole set, and the loss terms that make them one
 mesh.
 

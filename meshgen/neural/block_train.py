@@ -1,4 +1,4 @@
-"""Training one model for a block set (design notes §20, docs/design-multiblock-neural.md): one MLP
+"""Training one model for a block set (design notes §20): one MLP
 per block, trained together by the stage runner (``meshgen.neural.stages.run_stages``) on the
 terms of ``meshgen.neural.block_problem``: a fit of every block to its TFI, then Adam (PCGrad and
 the learned reweighting of L1 and L2, as for one shape), then L-BFGS on fixed points.
