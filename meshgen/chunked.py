@@ -47,12 +47,13 @@ from meshgen.patches import geometry_patches
 from meshgen.publish import publishing, reason, remove_path, temporary_path
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
-from meshgen.resources import available_memory, check_free_space
+from meshgen.resources import available_memory, blocks_in_flight, check_free_space
 from meshgen.scheduler import compute_in_order_of_completion
 from meshgen.tfi import add_face_terms, face_terms, face_values
 
 __all__ = [
     "CHUNKED_METHODS",
+    "MESH_BYTES_PER_BLOCK_NODE",
     "mesh_block_nodes",
     "network_map_block",
     "neural_array",
@@ -75,8 +76,7 @@ def mesh_block_nodes() -> int:
     """Nodes per block of a mesh computed in blocks, for the memory available now: the blocks in
     flight (two per worker thread, as ``meshgen.scheduler`` computes them) take at most a quarter
     of it; at most ``BLOCK_NODES`` (larger blocks gain no speed and cost memory)."""
-    in_flight = 2 * (os.cpu_count() or 1)
-    fitting = available_memory() // (4 * in_flight * MESH_BYTES_PER_BLOCK_NODE)
+    fitting = available_memory() // (4 * blocks_in_flight() * MESH_BYTES_PER_BLOCK_NODE)
     return int(max(MIN_BLOCK_NODES, min(BLOCK_NODES, fitting)))
 
 
@@ -208,6 +208,7 @@ def write_chunked_mesh(
     evaluate: bool = True,
     patches=None,
     format: str | None = None,
+    block_nodes: int | None = None,
     **options,
 ) -> tuple[dict | None, dict]:
     """Compute the dask node array ``X`` block by block and write it to ``path`` (in the format
@@ -222,7 +223,8 @@ def write_chunked_mesh(
     afterwards. ``options``: the format's (OpenFOAM: ``binary``).
 
     ``patches``: the boundary patches (``meshgen.patches.Patch``; default the ``geometry``'s, else
-    one per face). ``progress(done, total, phase)`` hears about every block. Returns (the report or None,
+    one per face). ``progress(done, total, phase)`` hears about every block. ``block_nodes``: nodes per
+    slab read back and per quality block (default from the available memory). Returns (the report or None,
     {"write_seconds", "quality_seconds"}).
     """
     fmt = streaming_writer(path, format, X.shape[:-1])
@@ -242,12 +244,14 @@ def write_chunked_mesh(
         with publishing(path) as publication:  # the mesh and its sidecar together, or neither
             if fmt.streams:
                 with atomic_path(path) as temporary:
-                    report = _stream_and_evaluate(temporary, X, geometry, metadata, patches, client, progress, evaluate, timings)
+                    report = _stream_and_evaluate(
+                        temporary, X, geometry, metadata, patches, client, progress, evaluate, timings, block_nodes
+                    )
             else:
                 with scratch_path(path) as scratch:
-                    report = _stream_and_evaluate(scratch, X, geometry, {}, (), client, progress, evaluate, timings)
+                    report = _stream_and_evaluate(scratch, X, geometry, {}, (), client, progress, evaluate, timings, block_nodes)
                     start = time.perf_counter()
-                    nodes = NodeFile(scratch, tuple(int(n) for n in node_shape), mesh_block_nodes())
+                    nodes = NodeFile(scratch, tuple(int(n) for n in node_shape), block_nodes or mesh_block_nodes())
                     if fmt.folder:
                         write_streamed(path, nodes, fmt.name, metadata or {}, patches, **options)
                     else:
@@ -274,7 +278,7 @@ def scratch_path(path):
         remove_path(scratch)
 
 
-def _stream_and_evaluate(target, X, geometry, metadata, patches, client, progress, evaluate, timings) -> dict | None:
+def _stream_and_evaluate(target, X, geometry, metadata, patches, client, progress, evaluate, timings, block_nodes) -> dict | None:
     """Stream the blocks of ``X`` into the CGNS file ``target`` as they complete; its quality
     report read back from it block-wise (None unless ``evaluate``); ``timings`` filled."""
     from dask.array.core import slices_from_chunks
@@ -293,6 +297,6 @@ def _stream_and_evaluate(target, X, geometry, metadata, patches, client, progres
     if not evaluate:
         return None
     start = time.perf_counter()
-    report = chunked_report(target, geometry, client=client, progress=progress)
+    report = chunked_report(target, geometry, client=client, progress=progress, block_nodes=block_nodes)
     timings["quality_seconds"] = report["quality_seconds"] = time.perf_counter() - start
     return report

@@ -19,7 +19,15 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshgen.chunked import CHUNKED_METHODS, neural_array, run_fraction, single_threaded_torch, tfi_array, write_chunked_mesh
+from meshgen.chunked import (
+    CHUNKED_METHODS,
+    MESH_BYTES_PER_BLOCK_NODE,
+    neural_array,
+    run_fraction,
+    single_threaded_torch,
+    tfi_array,
+    write_chunked_mesh,
+)
 from meshgen.clustering import node_coordinates
 from meshgen.errors import MeshgenError, MeshgenWarning, ParameterError
 from meshgen.formats import FORMATS, check_output_path, check_patches, format_for, streaming_writer
@@ -32,7 +40,7 @@ from meshgen.methods import get_method, make_mesh
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
-from meshgen.resources import check_free_space, needs_chunking
+from meshgen.resources import check_block_nodes, check_free_space, needs_chunking
 from meshgen.scheduler import connect, scheduler_address
 from meshgen.tfi import check_axes
 
@@ -60,7 +68,8 @@ class MeshRequest:
     ``patches``: ``FACE=NAME[:TYPE]`` overrides of the geometry's patches; ``ascii``: OpenFOAM
     ASCII. ``chunked``: True (blocks on Dask streamed into the file), False (in memory), None
     (chunked when in memory would need more than half the available memory); ``scheduler``: a
-    dask.distributed address. ``quality``: measure the mesh (report, sidecar, per-cell arrays).
+    dask.distributed address; ``block_nodes``: nodes per block of the chunked path (default from the
+    available memory; refused when the blocks in flight would not fit). ``quality``: measure the mesh (report, sidecar, per-cell arrays).
     ``timing_repeats``: mesh this many times, the time being the median.
     """
 
@@ -84,6 +93,7 @@ class MeshRequest:
     ascii: bool = False
     chunked: bool | None = None
     scheduler: str | None = None
+    block_nodes: int | None = None
     quality: bool = True
     timing_repeats: int = 1
 
@@ -235,8 +245,11 @@ def _plan(request: MeshRequest, say, warn) -> _Plan:
         if request.polish:
             raise ParameterError("polish", "{name} solves the whole mesh at once: it does not apply to a chunked mesh")
         streaming_writer(output, output_format.name, [n + 1 for n in dims])  # a format that cannot stream fails before any work
+        check_block_nodes(request.block_nodes, node_count, MESH_BYTES_PER_BLOCK_NODE)
     elif address is not None:
         raise ParameterError("scheduler", "{name} runs the chunked path; leave out --in-memory")
+    elif request.block_nodes is not None:
+        raise ParameterError("block_nodes", "{name} sets the blocks of the chunked path; add --chunked")
     check_mesh_memory(dims, chunked)  # memory first: its message names the chunked path
     patches = []
     if output is not None:
@@ -415,12 +428,16 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
         start = time.perf_counter()
         info = {}
         if plan.method == "tfi":
-            X = tfi_array(with_layout(plan.geometry, request.boundary_layout or "fixed"), plan.coords)
+            X = tfi_array(with_layout(plan.geometry, request.boundary_layout or "fixed"), plan.coords, request.block_nodes)
         else:
             model = plan.model
             trained_on = with_layout(plan.geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
             X, correction = neural_array(
-                model.checkpoint["model"], trained_on, plan.coords, correct_boundary=request.correct is not False
+                model.checkpoint["model"],
+                trained_on,
+                plan.coords,
+                correct_boundary=request.correct is not False,
+                block_nodes=request.block_nodes,
             )
             info = {"model": model.metadata(), "correction": correction}
         info["chunked"] = {
@@ -456,6 +473,7 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
                     evaluate=request.quality,
                     patches=plan.patches,
                     format=plan.output_format.name,
+                    block_nodes=request.block_nodes,
                     **({"binary": not request.ascii} if plan.output_format.folder else {}),
                 )
     finally:

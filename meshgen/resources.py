@@ -11,9 +11,16 @@ import os
 import shutil
 from pathlib import Path
 
-from meshgen.errors import MeshgenError
+from meshgen.errors import MeshgenError, ParameterError
 
-__all__ = ["IN_MEMORY_BYTES_PER_NODE", "available_memory", "check_free_space", "needs_chunking"]
+__all__ = [
+    "IN_MEMORY_BYTES_PER_NODE",
+    "available_memory",
+    "blocks_in_flight",
+    "check_block_nodes",
+    "check_free_space",
+    "needs_chunking",
+]
 
 IN_MEMORY_BYTES_PER_NODE = 300  # measured: 200^3 in-memory mesh command peaks at about 2.2 GB
 
@@ -31,6 +38,29 @@ def available_memory() -> int:
 def needs_chunking(node_count: int, bytes_per_node: int = IN_MEMORY_BYTES_PER_NODE) -> bool:
     """True when the in-memory path would likely need more than half of the available memory."""
     return node_count * bytes_per_node > available_memory() // 2
+
+
+def blocks_in_flight() -> int:
+    """Blocks held at once by the chunked paths: two per worker thread (one computed, one queued)."""
+    return 2 * (os.cpu_count() or 1)
+
+
+def check_block_nodes(block_nodes: int | None, node_count: int, bytes_per_node: int) -> None:
+    """ParameterError when a block size the user set cannot fit: the blocks in flight, each
+    ``min(block_nodes, node_count)`` nodes of ``bytes_per_node`` bytes, would need more than the
+    memory available now. None (the size chosen from the memory) always fits."""
+    if block_nodes is None:
+        return
+    in_flight = blocks_in_flight()
+    needed = in_flight * min(int(block_nodes), int(node_count)) * bytes_per_node
+    available = available_memory()
+    if needed > available:
+        most = available // (in_flight * bytes_per_node)
+        raise ParameterError(
+            "block_nodes",
+            f"{{name}} {block_nodes} needs about {needed / 1e9:.3g} GB for the {in_flight} blocks in flight but "
+            f"{available / 1e9:.3g} GB of memory is available; give at most {most} or leave it out",
+        )
 
 
 def check_free_space(path, needed_bytes: int) -> None:

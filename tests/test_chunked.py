@@ -273,3 +273,37 @@ def test_no_quality_writes_the_mesh_alone(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.vtu", "b.cgns"]  # no .quality.json
     assert meshio.read(tmp_path / "a.vtu").cell_data == {}
     assert read_whole(tmp_path / "b.cgns").shape == (5, 4, 6, 3)
+
+
+def test_mesh_block_nodes_sets_the_blocks_and_not_the_mesh(tmp_path):
+    """``meshgen mesh --block-nodes``: more, smaller blocks; the same coordinates bit for bit and the
+    same report (means to rounding) as the size chosen from the memory."""
+    runner = CliRunner()
+    paths = {name: str(tmp_path / f"{name}.cgns") for name in ("default", "small")}
+    base = ["mesh", "-m", "tfi", "--dims", "12", "10", "9", "--chunked", "-q"]
+    assert runner.invoke(cli, [*base, "-o", paths["default"]]).exit_code == 0
+    result = runner.invoke(cli, [*base, "--block-nodes", "1024", "-o", paths["small"]])
+    assert result.exit_code == 0, result.output
+    sidecars = {name: json.loads(open(path + ".quality.json").read()) for name, path in paths.items()}
+    assert sidecars["default"]["method_info"]["chunked"]["blocks"] == 1
+    assert sidecars["small"]["method_info"]["chunked"]["blocks"] == 2  # 10 k planes of 143 nodes, 7 planes per block
+    assert np.array_equal(read_whole(paths["default"]), read_whole(paths["small"]))
+    X = read_whole(paths["default"])
+    from meshgen.quality import cell_metrics
+
+    assert_reports_agree(sidecars["default"], sidecars["small"], cell_metrics(X))
+
+
+@pytest.mark.parametrize(
+    "options, expected",
+    [
+        (["--dims", "4", "4", "4", "--block-nodes", "2048"], "--block-nodes sets the blocks of the chunked path; add --chunked"),
+        (["--dims", "400", "400", "400", "--chunked", "--block-nodes", str(10**12)], "memory is available; give at most"),
+    ],
+)
+def test_mesh_block_nodes_that_cannot_apply_or_fit_are_refused(tmp_path, options, expected):
+    result = CliRunner().invoke(cli, ["mesh", "-m", "tfi", *options, "-o", str(tmp_path / "x.cgns")])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0], result.output
+    assert list(tmp_path.iterdir()) == []

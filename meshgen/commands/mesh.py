@@ -126,8 +126,16 @@ METHOD_HELP = (
 @click.option(
     "--chunked/--in-memory",
     default=None,
-    help="Compute the mesh in blocks on Dask and stream it into the file (tfi, neural; .cgns), for meshes "
-    "larger than memory [default: chunked when the in-memory path would need more than half of the available memory].",
+    help="Compute the mesh in blocks on Dask and stream it into the file (tfi, neural; .cgns, .vts, .pvts, .su2, .msh, "
+    "Plot3D, OpenFOAM), for meshes larger than memory [default: chunked when the in-memory path would need more than "
+    "half of the available memory].",
+)
+@click.option(
+    "--block-nodes",
+    type=click.IntRange(min=1024),
+    default=None,
+    metavar="N",
+    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 1048576].",
 )
 @click.option(
     "--scheduler",
@@ -165,6 +173,7 @@ def mesh(
     orthogonal,
     chunked,
     scheduler,
+    block_nodes,
     quality,
     quiet,
 ):
@@ -207,6 +216,7 @@ def mesh(
         ascii=ascii_files,
         chunked=chunked,
         scheduler=scheduler,
+        block_nodes=block_nodes,
         quality=quality,
     )
     interactive = not quiet and sys.stdout.isatty()

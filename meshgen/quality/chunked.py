@@ -31,7 +31,7 @@ from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 from meshgen.quality.report import assemble_report
 from meshgen.quality.structured import structured_metrics
-from meshgen.resources import available_memory
+from meshgen.resources import available_memory, blocks_in_flight, check_block_nodes
 from meshgen.scheduler import compute_in_order_of_completion
 
 # Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
@@ -46,8 +46,7 @@ MIN_BLOCK_NODES = 1 << 16
 def evaluate_block_nodes() -> int:
     """Nodes per block for the available memory: the blocks in flight (two per worker thread) take
     at most a quarter of it, and a block has at most ``EVALUATE_BLOCK_NODES`` nodes."""
-    in_flight = 2 * (os.cpu_count() or 1)
-    fitting = available_memory() // (4 * in_flight * EVALUATE_BYTES_PER_BLOCK_NODE)
+    fitting = available_memory() // (4 * blocks_in_flight() * EVALUATE_BYTES_PER_BLOCK_NODE)
     return int(max(MIN_BLOCK_NODES, min(EVALUATE_BLOCK_NODES, fitting)))
 
 
@@ -164,6 +163,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
         raise MeshgenError(
             f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}"
         )
+    check_block_nodes(block_nodes, int(np.prod(node_shape)), EVALUATE_BYTES_PER_BLOCK_NODE)
     per_axis = block_slices(node_shape, block_nodes or evaluate_block_nodes())
     blocks = [tuple(p) for p in itertools.product(*per_axis)]
     total = 2 * len(blocks)
