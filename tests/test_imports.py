@@ -97,6 +97,7 @@ LAYERS = [
         "meshgen.quality.numpy_kernels",
         "meshgen.quality.structured",
         "meshgen.quality.faces",
+        "meshgen.quality.faces_compiled",
         "meshgen.quality.faces_openfoam",
         "meshgen.quality.smoothness",
         "meshgen.quality.report",

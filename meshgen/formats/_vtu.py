@@ -87,8 +87,11 @@ FILE_HEAD = (
 
 def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_bytes=BLOCK_BYTES):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vtu, with ``cell_data``
-    (name -> (cells,) float64 array in C order of the cells) and ``metadata`` (JSON-serialisable
-    dict; none stored when empty). ``level``, ``rle_above``: see ``compress_block``;
+    (name -> (cells,) float64 array in C order of the cells, or a callable returning that mapping:
+    called in this thread once the metadata, points and cells are handed to the compressing
+    threads, so that computing the cell data overlaps compressing them; the file is the same
+    either way) and ``metadata`` (JSON-serialisable dict; none stored when empty). ``level``,
+    ``rle_above``: see ``compress_block``;
     ``block_bytes``: uncompressed bytes per block, a multiple of 8 (meshio decodes each block
     into whole values)."""
     node_shape = X.shape[:-1]
@@ -113,6 +116,8 @@ def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_
         add("Cells", "connectivity", {}, connectivity)
         add("Cells", "offsets", {}, np.arange(1, cell_count + 1, dtype=np.int64) * corner_count)
         add("Cells", "types", {}, np.full(cell_count, VTK_HEXAHEDRON if len(node_shape) == 3 else VTK_QUAD, dtype=np.uint8))
+        if callable(cell_data):
+            cell_data = cell_data()
         for name, values in cell_data.items():
             add("CellData", name, {}, values)
 
