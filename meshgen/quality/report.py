@@ -13,9 +13,18 @@ from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
 from meshgen.quality.smoothness import DEFINITIONS as SMOOTHNESS_DEFINITIONS
 from meshgen.quality.smoothness import smoothness_figures
-from meshgen.quality.structured import check_node_array, structured_metrics
+from meshgen.quality.structured import check_node_array, structured_metrics, use_compiled
 
-__all__ = ["assemble_report", "assess", "build_report", "quality_report", "summarize"]
+__all__ = [
+    "assemble_report",
+    "assess",
+    "build_report",
+    "load_kernels",
+    "node_array_deviation",
+    "quality_report",
+    "report_in_parallel",
+    "summarize",
+]
 
 
 def summarize(values: np.ndarray) -> dict:
@@ -59,12 +68,58 @@ def _assess_quietly(X_or_mesh):
     return metrics, degenerate, info
 
 
+def load_kernels(node_shape) -> bool:
+    """Load the compiled kernels that the report of a node array of ``node_shape`` (n1+1, n2+1[,
+    n3+1]) will take: numba's import and its cached code, about a second of one core, which a
+    caller may spend on another thread while it makes the mesh. Runs the per-cell metrics and the
+    face geometry on a small grid of the same dimension with the compiled kernels, so the same
+    compiled signatures are loaded. Returns False, loading nothing, for a mesh small enough for
+    the NumPy kernels."""
+    node_shape = tuple(int(n) for n in node_shape)
+    if not use_compiled(int(np.prod([n - 1 for n in node_shape]))):
+        return False
+    grid = np.stack(np.meshgrid(*[np.arange(3.0)] * len(node_shape), indexing="ij"), axis=-1)
+    structured_metrics(grid, kernels="compiled")
+    non_orthogonality(grid, kernels="compiled")
+    return True
+
+
 def solver_figures(X: np.ndarray) -> dict:
     """The figures of a node array that predict a flow solver's error, JSON-ready: expansion ratio
     and grid smoothness (``meshgen.quality.smoothness``, with worst cells), and checkMesh's
     internal-face non-orthogonality with the boundary-face figure beside it
     (``meshgen.quality.faces_openfoam``, with worst faces)."""
     return {**smoothness_figures(X), **non_orthogonality(X)}
+
+
+def node_array_deviation(X: np.ndarray, geometry) -> dict:
+    """The boundary deviation (``meshgen.deviation.boundary_deviation``) of the boundary nodes of
+    node array ``X`` from ``geometry``, as the report gives it."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        boundary_points, guesses = grid_boundary_nodes(X)
+        return boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
+
+
+def _quietly(function, *arguments):
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # per thread
+        return function(*arguments)
+
+
+def report_in_parallel(X: np.ndarray, geometry, pool):
+    """The quality report of node array ``X`` (as :func:`quality_report` gives it) in parts on the
+    threads of ``pool`` (a ``concurrent.futures`` executor with at least four workers): the
+    smoothness figures, the face non-orthogonality and the boundary deviation start at once; the
+    per-cell metrics are computed on the calling thread. Returns (metrics, report): the seven
+    per-cell arrays, for a writer to start on, and a future of the report."""
+    X = check_node_array(X)
+    smoothness = pool.submit(_quietly, smoothness_figures, X)
+    faces = pool.submit(_quietly, non_orthogonality, X)
+    deviation = pool.submit(node_array_deviation, X, geometry) if geometry is not None else None
+    metrics, degenerate, info = assess(X)
+    info["solver_figures"] = lambda: {**smoothness.result(), **faces.result()}
+    if deviation is not None:
+        info["boundary_deviation"] = deviation.result
+    return metrics, pool.submit(build_report, metrics, degenerate, info, geometry)
 
 
 def quality_report(X_or_mesh, geometry=None) -> dict:
@@ -99,7 +154,7 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
     """The report from the metric ``summaries`` ({name: {mean, min, max, p01, p99}}), ``counts``
     (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
     ``boundary()`` -> (boundary points, parametric guesses), or ``boundary_deviation`` measured
-    already); shared by the whole-mesh and the
+    already or a callable returning it); shared by the whole-mesh and the
     block-wise (``meshgen.quality.chunked``) paths."""
     dim = int(info["dim"])
     n_cells = counts["cells"]
@@ -142,8 +197,9 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
                 f"geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D: "
                 "boundary deviation needs a geometry of the mesh's dimension"
             )
-        if "boundary_deviation" in info:  # measured in parts (block by block)
+        if "boundary_deviation" in info:  # measured in parts (block by block), or on another thread (a callable)
             deviation = info["boundary_deviation"]
+            deviation = deviation() if callable(deviation) else deviation
         else:
             boundary_points, guesses = info["boundary"]()
             deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
