@@ -103,8 +103,9 @@ def row(geometry: str, dims, method: str, label: str, **options) -> dict:
     for name in ("expansion_ratio", "grid_smoothness", "non_orthogonality_internal"):
         result[f"{name}_max"] = figures[name]["max"]
     result["zeta_line_smoothness_max"] = figures["grid_smoothness"]["max_by_axis"][2]
-    polish = mesh.info.get("polish")
-    if polish:
+    polish = mesh.info.get("polish") or {}
+    result["polished"] = bool(polish.get("polished", False))
+    if result["polished"]:
         result["polish_cycles"] = polish["cycles"]
     return result
 
