@@ -42,53 +42,68 @@ for _axis, (_first, _second) in enumerate([(1, 2), (2, 0), (0, 1)]):
         _CORNERS[_axis, _m, _second] = _b
 
 
+@njit(inline="always", **_JIT)
+def _triangle(p0, p1, p2, q0, q1, q2, e0, e1, e2):
+    """The triangle (p, q, estimate e) of a face's decomposition: its normal n = (q - p) x (e - p)
+    (three components), |n|, and the weighted centre sum's term |n| (p + q + e)."""
+    a0, a1, a2 = q0 - p0, q1 - p1, q2 - p2
+    f0, f1, f2 = e0 - p0, e1 - p1, e2 - p2
+    n0 = a1 * f2 - a2 * f1
+    n1 = a2 * f0 - a0 * f2
+    n2 = a0 * f1 - a1 * f0
+    a = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    return n0, n1, n2, a, a * (p0 + q0 + e0), a * (p1 + q1 + e1), a * (p2 + q2 + e2)
+
+
 @njit(parallel=True, **_JIT)
 def _faces(X, corners, centres, areas):
     """Centres and area vectors of the faces whose corner offsets are ``corners`` (4, 3), into
     ``centres`` and ``areas`` (face grid + (3,))."""
     n0, n1, n2 = centres.shape[0], centres.shape[1], centres.shape[2]
     for i in prange(n0):
-        p = np.empty((4, 3))
-        estimate = np.empty(3)
-        sum_n = np.empty(3)
-        sum_ac = np.empty(3)
         for j in range(n1):
             for k in range(n2):
+                pa = X[i + corners[0, 0], j + corners[0, 1], k + corners[0, 2]]
+                pb = X[i + corners[1, 0], j + corners[1, 1], k + corners[1, 2]]
+                pc = X[i + corners[2, 0], j + corners[2, 1], k + corners[2, 2]]
+                pd = X[i + corners[3, 0], j + corners[3, 1], k + corners[3, 2]]
+                a0, a1, a2 = pa[0], pa[1], pa[2]
+                b0, b1, b2 = pb[0], pb[1], pb[2]
+                c0, c1, c2 = pc[0], pc[1], pc[2]
+                d0, d1, d2 = pd[0], pd[1], pd[2]
+                e0 = 0.25 * (a0 + b0 + c0 + d0)
+                e1 = 0.25 * (a1 + b1 + c1 + d1)
+                e2 = 0.25 * (a2 + b2 + c2 + d2)
+                # The four triangles in order (sums from zero, as the NumPy definition adds them).
+                s0, s1, s2, sa, t0, t1, t2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
                 for m in range(4):
-                    for c in range(3):
-                        p[m, c] = X[i + corners[m, 0], j + corners[m, 1], k + corners[m, 2], c]
-                for c in range(3):
-                    estimate[c] = 0.25 * (p[0, c] + p[1, c] + p[2, c] + p[3, c])
-                    sum_n[c] = 0.0
-                    sum_ac[c] = 0.0
-                sum_a = 0.0
-                for m in range(4):
-                    following = (m + 1) % 4
-                    e0 = p[following, 0] - p[m, 0]
-                    e1 = p[following, 1] - p[m, 1]
-                    e2 = p[following, 2] - p[m, 2]
-                    f0 = estimate[0] - p[m, 0]
-                    f1 = estimate[1] - p[m, 1]
-                    f2 = estimate[2] - p[m, 2]
-                    n0_ = e1 * f2 - e2 * f1
-                    n1_ = e2 * f0 - e0 * f2
-                    n2_ = e0 * f1 - e1 * f0
-                    a = math.sqrt(n0_ * n0_ + n1_ * n1_ + n2_ * n2_)
-                    sum_a += a
-                    sum_n[0] += n0_
-                    sum_n[1] += n1_
-                    sum_n[2] += n2_
-                    for c in range(3):
-                        sum_ac[c] += a * (p[m, c] + p[following, c] + estimate[c])
-                if sum_a > 0:
-                    scale = 1.0 / (3.0 * sum_a)
-                    for c in range(3):
-                        centres[i, j, k, c] = sum_ac[c] * scale
+                    if m == 0:
+                        r = _triangle(a0, a1, a2, b0, b1, b2, e0, e1, e2)
+                    elif m == 1:
+                        r = _triangle(b0, b1, b2, c0, c1, c2, e0, e1, e2)
+                    elif m == 2:
+                        r = _triangle(c0, c1, c2, d0, d1, d2, e0, e1, e2)
+                    else:
+                        r = _triangle(d0, d1, d2, a0, a1, a2, e0, e1, e2)
+                    sa += r[3]
+                    s0 += r[0]
+                    s1 += r[1]
+                    s2 += r[2]
+                    t0 += r[4]
+                    t1 += r[5]
+                    t2 += r[6]
+                if sa > 0:
+                    scale = 1.0 / (3.0 * sa)
+                    centres[i, j, k, 0] = t0 * scale
+                    centres[i, j, k, 1] = t1 * scale
+                    centres[i, j, k, 2] = t2 * scale
                 else:
-                    for c in range(3):
-                        centres[i, j, k, c] = estimate[c]
-                for c in range(3):
-                    areas[i, j, k, c] = 0.5 * sum_n[c]
+                    centres[i, j, k, 0] = e0
+                    centres[i, j, k, 1] = e1
+                    centres[i, j, k, 2] = e2
+                areas[i, j, k, 0] = 0.5 * s0
+                areas[i, j, k, 1] = 0.5 * s1
+                areas[i, j, k, 2] = 0.5 * s2
 
 
 def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
