@@ -82,6 +82,7 @@ def test_bundled_model_meshes_30_cubed_with_no_inverted_cell(run_cli, tmp_path):
     assert result.returncode == 0, result.stderr
     first = result.stdout.splitlines()[0]
     assert first.startswith("model: ") and str(BUNDLED) in first and "bundled" in first and "exact" in first
+    assert f"not polished ({NOT_POLISHED_REASON}; --polish" in result.stdout  # the summary says so
     sidecar = json.loads((tmp_path / "m.vtu.quality.json").read_text())
     assert sidecar["method"] == "neural" and sidecar["geometry"] == "semicylinder"
     model = sidecar["method_info"]["model"]
