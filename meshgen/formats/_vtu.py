@@ -178,11 +178,19 @@ def _little_endian(values: np.ndarray) -> np.ndarray:
 
 
 def _write_data_array(file, name: str, more: dict, dtype, header: bytes, streams: list) -> None:
-    """One DataArray element: the base64 of the header, then that of the streams joined."""
+    """One DataArray element: the base64 of the header, then that of the streams joined, encoded
+    stream by stream (base64 of a whole number of 3-byte groups needs no padding, so the pieces
+    join to the base64 of the whole without the whole ever being in memory)."""
     attributes = "".join(f' {key}="{value}"' for key, value in more.items())
     file.write(f'<DataArray type="{VTK_TYPES[dtype]}" Name={quoteattr(name)}{attributes} format="binary">\n'.encode())
     file.write(base64.b64encode(header))
-    file.write(base64.b64encode(b"".join(streams)))
+    pending = b""
+    for stream in streams:
+        data = pending + stream
+        whole = len(data) - len(data) % 3
+        file.write(base64.b64encode(memoryview(data)[:whole]))
+        pending = data[whole:]
+    file.write(base64.b64encode(pending))
     file.write(b"\n</DataArray>\n")
 
 
