@@ -141,7 +141,8 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
 def build_report(metrics, degenerate, info, geometry) -> dict:
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
-    summaries = {name: summarize(metrics[name][shaped]) for name in METRICS}
+    every = bool(shaped.all())  # then the arrays themselves, not copies of them
+    summaries = {name: summarize(metrics[name] if every else metrics[name][shaped]) for name in METRICS}
     counts = {
         "cells": int(len(degenerate)),
         "inverted": int(np.count_nonzero(inverted)),
