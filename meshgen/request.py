@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import contextlib
 import statistics
-import threading
 import time
 import warnings
 from dataclasses import dataclass
@@ -32,7 +31,7 @@ from meshgen.meshing_blocks import block_spec, checkpoint_block_spec, mesh_block
 from meshgen.methods import get_method, make_mesh
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.patches import geometry_patches, parse_patch_options
-from meshgen.quality import load_kernels, quality_report, write_mesh_alone, write_mesh_with_quality
+from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
 from meshgen.resources import check_free_space, needs_chunking
 from meshgen.scheduler import connect, scheduler_address
 from meshgen.tfi import check_axes
@@ -375,26 +374,6 @@ def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
     }
     iterative = "progress" in get_method(plan.method).options
     timings = []
-    loading = None
-    if request.quality:  # the quality's compiled kernels load on another thread while the mesh is made
-        loading = threading.Thread(target=_load_kernels, args=([n + 1 for n in request.dims],), name="meshgen-kernels")
-        loading.start()
-    try:
-        return _make_and_write(request, plan, progress, options, iterative, timings)
-    finally:
-        if loading is not None:
-            loading.join()
-
-
-def _load_kernels(node_shape) -> None:
-    """``meshgen.quality.load_kernels``, silent: a failure to load shows where the kernels are used."""
-    try:
-        load_kernels(node_shape)
-    except Exception:  # noqa: BLE001 - the quality's own call reports it, on the calling thread
-        pass
-
-
-def _make_and_write(request: MeshRequest, plan: _Plan, progress, options: dict, iterative: bool, timings: list) -> Mesh:
     with progress(f"{plan.method} mesh", iterative) as callback:
         if callback is not None and iterative:
             options["progress"] = callback

@@ -1,21 +1,19 @@
 """The quality report computed in parts on threads (``meshgen.quality.report.report_in_parallel``,
 what ``write_mesh_with_quality`` and so ``meshgen mesh`` use) is the report of the serial path
-(``quality_report``); the kernels loaded ahead (``load_kernels``) are the compiled ones, and only
-for meshes that take them."""
+(``quality_report``)."""
 
 from __future__ import annotations
 
 import json
-import sys
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
 
 from meshgen.geometry import load_geometry
-from meshgen.quality import load_kernels, quality_report, write_mesh_with_quality
+from meshgen.quality import quality_report, write_mesh_with_quality
 from meshgen.quality.report import report_in_parallel
-from meshgen.quality.structured import NUMPY_CELLS, structured_metrics
+from meshgen.quality.structured import structured_metrics
 from meshgen.tfi import tfi
 
 
@@ -49,10 +47,3 @@ def test_the_sidecar_of_a_written_mesh_is_the_serial_report(tmp_path):
     assert report.pop("quality_seconds") > 0 and sidecar.pop("quality_seconds") > 0
     assert {k: v for k, v in sidecar.items() if k not in ("mesh", "method")} == expected
     assert sidecar["mesh"] == "m.vtu" and sidecar["method"] == "tfi"
-
-
-def test_kernels_are_loaded_ahead_only_for_meshes_that_take_them():
-    side = int(round(NUMPY_CELLS ** (1 / 3)))
-    assert not load_kernels((10, 10, 10)) and not load_kernels((side, side, side))  # (side - 1)^3 cells: NumPy
-    assert load_kernels((side + 2,) * 3) and load_kernels((1001, 1001))  # a few hundred cells meshed, not the shape
-    assert "meshgen.quality.compiled" in sys.modules and "meshgen.quality.faces_compiled" in sys.modules

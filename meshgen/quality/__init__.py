@@ -43,7 +43,7 @@ from meshgen.quality.kernels import (
     VALID_RULE,
     WORST,
 )
-from meshgen.quality.report import load_kernels, quality_report, summarize
+from meshgen.quality.report import quality_report, summarize
 from meshgen.quality.structured import cell_metrics
 from meshgen.quality.text import summary_lines
 
@@ -69,7 +69,6 @@ __all__ = [
     "cells_for_quality",
     "evaluate_file",
     "json_ready",
-    "load_kernels",
     "match_faces",
     "quality_report",
     "recorded_metadata",

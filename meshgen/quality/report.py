@@ -13,13 +13,12 @@ from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
 from meshgen.quality.smoothness import DEFINITIONS as SMOOTHNESS_DEFINITIONS
 from meshgen.quality.smoothness import smoothness_figures
-from meshgen.quality.structured import check_node_array, structured_metrics, use_compiled
+from meshgen.quality.structured import check_node_array, structured_metrics
 
 __all__ = [
     "assemble_report",
     "assess",
     "build_report",
-    "load_kernels",
     "node_array_deviation",
     "quality_report",
     "report_in_parallel",
@@ -68,22 +67,6 @@ def _assess_quietly(X_or_mesh):
     return metrics, degenerate, info
 
 
-def load_kernels(node_shape) -> bool:
-    """Load the compiled kernels that the report of a node array of ``node_shape`` (n1+1, n2+1[,
-    n3+1]) will take: numba's import and its cached code, about a second of one core, which a
-    caller may spend on another thread while it makes the mesh. Runs the per-cell metrics and the
-    face geometry on a small grid of the same dimension with the compiled kernels, so the same
-    compiled signatures are loaded. Returns False, loading nothing, for a mesh small enough for
-    the NumPy kernels."""
-    node_shape = tuple(int(n) for n in node_shape)
-    if not use_compiled(int(np.prod([n - 1 for n in node_shape]))):
-        return False
-    grid = np.stack(np.meshgrid(*[np.arange(3.0)] * len(node_shape), indexing="ij"), axis=-1)
-    structured_metrics(grid, kernels="compiled")
-    non_orthogonality(grid, kernels="compiled")
-    return True
-
-
 def solver_figures(X: np.ndarray) -> dict:
     """The figures of a node array that predict a flow solver's error, JSON-ready: expansion ratio
     and grid smoothness (``meshgen.quality.smoothness``, with worst cells), and checkMesh's
@@ -109,8 +92,9 @@ def report_in_parallel(X: np.ndarray, geometry, pool):
     """The quality report of node array ``X`` (as :func:`quality_report` gives it) in parts on the
     threads of ``pool`` (a ``concurrent.futures`` executor with at least four workers): the
     smoothness figures, the face non-orthogonality and the boundary deviation start at once; the
-    per-cell metrics are computed on the calling thread. Returns (metrics, report): the seven
-    per-cell arrays, for a writer to start on, and a future of the report."""
+    per-cell metrics are computed on the calling thread (their first call in a process imports
+    numba and loads the compiled kernels, which the face kernels wait for). Returns (metrics,
+    report): the seven per-cell arrays, for a writer to start on, and a future of the report."""
     X = check_node_array(X)
     smoothness = pool.submit(_quietly, smoothness_figures, X)
     faces = pool.submit(_quietly, non_orthogonality, X)
