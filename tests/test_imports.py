@@ -99,6 +99,7 @@ LAYERS = [
         "meshgen.quality.faces",
         "meshgen.quality.faces_compiled",
         "meshgen.quality.faces_openfoam",
+        "meshgen.quality.smoothness_compiled",
         "meshgen.quality.smoothness",
         "meshgen.quality.report",
         "meshgen.quality.text",
