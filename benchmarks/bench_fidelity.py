@@ -5,8 +5,10 @@ non-orthogonality).
 
 Rows: ``tfi``, ``elliptic``, the bundled model, and freshly trained ``default`` and ``exact`` runs
 (``meshgen train -g semicylinder --preset P --seed 0``, checkpoints kept in ``--checkpoints``,
-default /tmp/meshgen-fidelity), each neural row as meshed (polished) and raw (``polish=False``: the
-network's corrected mesh alone). Semicylinder (exact: U = (0, 0, 1)) at 20x20x40 and 60x60x120;
+default /tmp/meshgen-fidelity), each neural row polished (``polish=True``) and raw (``polish=False``:
+the network's corrected mesh alone); the one ``meshgen mesh`` gives by default
+(``meshgen.polish.polishes_by_default``: raw for the bundled and ``exact`` networks, polished for
+``default``) is marked ``default`` and judged as the mesh a user gets. Semicylinder (exact: U = (0, 0, 1)) at 20x20x40 and 60x60x120;
 canal (exact: the potential vortex about its bend's axis) at 20x20x40 for tfi and elliptic (no
 bundled model; --canal-neural trains ``default`` there too). Each row gives the error of the U that
 potentialFoam writes and of the velocity reconstructed from its face fluxes
@@ -62,6 +64,17 @@ def trained(geometry: str, preset: str, folder: Path) -> Path:
     return checkpoint
 
 
+def default_polish(checkpoint: Path | None) -> bool:
+    """Whether ``meshgen mesh`` polishes the semicylinder mesh of ``checkpoint`` (None: the
+    bundled model) when not told."""
+    from meshgen.neural.models import find_model
+    from meshgen.polish import polishes_by_default
+
+    return polishes_by_default(
+        find_model(None if checkpoint is None else str(checkpoint), geometry_name="semicylinder").checkpoint
+    )
+
+
 def row(geometry: str, dims, method: str, label: str, **options) -> dict:
     import meshgen
     from meshgen.fidelity import potential_flow_error
@@ -90,8 +103,9 @@ def row(geometry: str, dims, method: str, label: str, **options) -> dict:
     for name in ("expansion_ratio", "grid_smoothness", "non_orthogonality_internal"):
         result[f"{name}_max"] = figures[name]["max"]
     result["zeta_line_smoothness_max"] = figures["grid_smoothness"]["max_by_axis"][2]
-    polish = mesh.info.get("polish")
-    if polish:
+    polish = mesh.info.get("polish") or {}
+    result["polished"] = bool(polish.get("polished", False))
+    if result["polished"]:
         result["polish_cycles"] = polish["cycles"]
     return result
 
@@ -111,9 +125,10 @@ def print_row(result: dict, reference: float | None) -> None:
 
 
 def run(quick: bool = False, checkpoints: Path | None = None, canal_neural: bool = False) -> dict:
-    """The table: {"rows": [...], "all_within_target": every polished neural row within
-    ``TARGET_FACTOR`` of the elliptic mesh's error, "raw_within_target": the same of the raw rows
-    (the networks' own meshes, no polish), "skipped": reason or None}."""
+    """The table: {"rows": [...], "all_within_target": every neural row of the mesh ``meshgen
+    mesh`` gives by default (``default``) within ``TARGET_FACTOR`` of the elliptic mesh's error,
+    "polished_within_target" and "raw_within_target": the same of the polished rows and of the raw
+    rows (the networks' own meshes, no polish), "skipped": reason or None}."""
     from meshgen.fidelity import missing_openfoam
 
     reason = missing_openfoam()
@@ -135,8 +150,10 @@ def run(quick: bool = False, checkpoints: Path | None = None, canal_neural: bool
             print_row(rows[-1], reference if method == "elliptic" else None)
         for label, checkpoint in networks:
             options = {} if checkpoint is None else {"model": str(checkpoint)}
+            by_default = default_polish(checkpoint)
             for polish in (False, True):
                 rows.append(row("semicylinder", dims, "neural", label + ("" if polish else ", raw"), polish=polish, **options))
+                rows[-1]["default"] = polish == by_default
                 rows[-1]["elliptic_error"] = reference
                 rows[-1]["within_target"] = rows[-1]["max_velocity_error"] <= TARGET_FACTOR * reference
                 print_row(rows[-1], reference)
@@ -157,7 +174,8 @@ def run(quick: bool = False, checkpoints: Path | None = None, canal_neural: bool
     raw = [r for r in rows if r["method"].endswith("raw") and r["geometry"] == "semicylinder"]
     return {
         "rows": rows,
-        "all_within_target": all(r["within_target"] for r in polished),
+        "all_within_target": all(r["within_target"] for r in rows if r.get("default")),
+        "polished_within_target": all(r["within_target"] for r in polished),
         "raw_within_target": all(r["within_target"] for r in raw),
         "skipped": None,
     }

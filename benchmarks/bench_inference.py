@@ -108,7 +108,8 @@ def mesh_command(cells: int, folder: Path, environment: dict | None = None, opti
     default this process's, and this checkout first on PYTHONPATH) by a wrapper process whose only
     child it is. Returns its wall and CPU seconds from start to exit (``import torch``, meshing,
     quality, writing), its peak resident memory (ru_maxrss of the wrapper's RUSAGE_CHILDREN: this
-    process's would mix in earlier children) and the size of the file written."""
+    process's would mix in earlier children), the size of the file written and whether the mesh
+    was polished (its sidecar's record)."""
     environment = dict(os.environ if environment is None else environment)
     environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
     command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q", *options]
@@ -121,7 +122,13 @@ def mesh_command(cells: int, folder: Path, environment: dict | None = None, opti
         "cpu_seconds": figures["cpu_seconds"],
         "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,  # ru_maxrss is in KiB on Linux
         "megabytes_written": (Path(folder) / "out.vtu").stat().st_size / 1e6,
+        "polished": bool(_sidecar_polish(Path(folder) / "out.vtu.quality.json").get("polished", False)),
     }
+
+
+def _sidecar_polish(sidecar: Path) -> dict:
+    """The ``method_info.polish`` record of a quality sidecar ({} where there is none)."""
+    return json.loads(sidecar.read_text()).get("method_info", {}).get("polish", {}) if sidecar.is_file() else {}
 
 
 def run_mesh(cells: int, folder: Path) -> float:

@@ -82,13 +82,17 @@ def multilinear(corner_values: np.ndarray, coords, block=None) -> np.ndarray:
     dim = len(coords)
     block = tuple(block) if block is not None else (slice(None),) * dim
     axes = [np.asarray(c, dtype=float)[b] for c, b in zip(coords, block)]
-    result = np.zeros(tuple(len(a) for a in axes) + corner_values.shape[1:])
-    for corner, value in zip(cube.corners(dim), corner_values):  # 2^d terms
-        weight = np.ones([1] * dim)
-        for axis, (t, side) in enumerate(zip(axes, corner)):
-            weight = weight * blending(t, int(side)).reshape([-1 if d == axis else 1 for d in range(dim)])
-        result += weight[..., None] * value
-    return result
+    # Axis by axis, last first: the corner values (2, .., 2, c) become (2, .., n_d, .., n_last, c),
+    # each step one blend of two arrays, so only the last step (axis 0) is of the grid's size. Every
+    # node's value is the same sequence of operations on the 1D blending values of its own
+    # coordinates, whatever the block.
+    values = np.asarray(corner_values, dtype=float).reshape((2,) * dim + corner_values.shape[1:])
+    for axis in reversed(range(dim)):
+        shape = (-1,) + (1,) * (dim - axis)  # along the grid axis, broadcast over the later axes and the components
+        low, high = (blending(axes[axis], side).reshape(shape) for side in (0, 1))
+        before = (slice(None),) * axis
+        values = low * values[before + (0, None)] + high * values[before + (1, None)]
+    return values
 
 
 def correction_terms(errors, coords) -> tuple:

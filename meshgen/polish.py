@@ -15,6 +15,14 @@ So the polish does what the elliptic method does after its start: relax the face
 layout), then multigrid cycles of ``meshgen.elliptic.solve_winslow`` from the network's nodes until
 no node moves by more than ``tol`` of the characteristic length. The result is the elliptic mesh
 to within that tolerance; the network supplies the starting mesh.
+
+Whether ``meshgen mesh`` polishes by default depends on how the network was trained
+(``polishes_by_default``): a network trained with the exact boundary on the smoothed layout's fine
+lattice (``model.exact_boundary``, ``points.lattice``, ``boundary_layout: smoothed``; the ``exact``
+preset, the bundled model) has faces that solve the discrete Winslow equations and an interior
+that is their extrusion, and its own mesh meets the solver-fidelity target (potentialFoam within
+10x of the elliptic mesh's error); it is not polished unless asked. Every other network (the soft
+boundary, the fixed layout, off the lattice, families) is polished unless ``--no-polish``.
 """
 
 from __future__ import annotations
@@ -24,7 +32,11 @@ import numpy as np
 from meshgen.elliptic import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
 from meshgen.layout import relax_faces
 
-__all__ = ["polish"]
+__all__ = ["NOT_POLISHED_REASON", "polish", "polishes_by_default"]
+
+NOT_POLISHED_REASON = (
+    "the network was trained with the exact boundary on the smoothed layout's lattice: its own mesh is solver-ready"
+)
 
 
 def polish(X: np.ndarray, geometry, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER) -> dict:
@@ -50,3 +62,17 @@ def polish(X: np.ndarray, geometry, coords, tol: float = DEFAULT_TOL, max_iter: 
         "converged": bool(info["converged"]),
         "largest_move_rel": moved,
     }
+
+
+def polishes_by_default(checkpoint: dict) -> bool:
+    """Whether a mesh of the network of ``checkpoint`` (a checkpoint dict: ``model``, ``config``) is
+    polished when the user does not say (module docstring): False only for a network trained with
+    the exact boundary on the smoothed layout's lattice; True for every other, and for a checkpoint
+    that does not record its training configuration."""
+    config = checkpoint.get("config") if isinstance(checkpoint.get("config"), dict) else {}
+    points = config.get("points") if isinstance(config.get("points"), dict) else {}
+    model = checkpoint.get("model") if isinstance(checkpoint.get("model"), dict) else {}
+    lattice_exact = (
+        model.get("exact_boundary") is True and points.get("lattice") is True and config.get("boundary_layout") == "smoothed"
+    )
+    return not lattice_exact

@@ -296,7 +296,7 @@ def _neural_model(request: MeshRequest, dims, warn, fallback: bool):
 
         # A family checkpoint: the parameters pick the member (inside the trained ranges).
         named = None if spec is None else spec.name if isinstance(spec, Geometry) else load_geometry(spec).name
-        polished = request.polish is not False and request.correct is not False  # the mesh the user gets
+        polished = False if request.correct is False else request.polish  # the mesh the user gets (None: the model's default)
         member = load_family_member(checkpoint, given_params, named, warn=warn, polished=polished)
         if member is not None:
             return _check_model_dims(*member, dims)
@@ -439,7 +439,7 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
                 correct_boundary=request.correct is not False,
                 block_nodes=request.block_nodes,
             )
-            info = {"model": model.metadata(), "correction": correction}
+            info = {"model": model.metadata(), "correction": correction, "polish": {"polished": False, "reason": "chunked"}}
         info["chunked"] = {
             "blocks": int(X.npartitions),
             "block_shape": [int(c[0]) for c in X.chunks[:-1]],

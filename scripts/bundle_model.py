@@ -50,8 +50,9 @@ def figures(X, geometry) -> dict:
 
 
 def neural_figures(model, geometry, cells: int) -> dict:
-    """Figures of the network's own mesh (--no-correct), of the corrected one (--no-polish) and of
-    the corrected and polished one (the default: ``meshgen.polish``)."""
+    """Figures of the network's own mesh (--no-correct), of the corrected one (what ``meshgen mesh``
+    gives by default for a network trained with the exact boundary on the smoothed layout's lattice,
+    ``meshgen.polish.polishes_by_default``) and of the corrected and polished one (--polish)."""
     from meshgen.correction import correct_boundary
     from meshgen.layout import trained_layout, with_layout
     from meshgen.neural.network_map import mesh_from_model

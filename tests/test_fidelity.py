@@ -8,6 +8,7 @@ import pytest
 import meshgen
 from meshgen.fidelity import exact_velocity, missing_openfoam, potential_flow_error
 from meshgen.geometry import load_geometry
+from meshgen.polish import NOT_POLISHED_REASON
 
 needs_potential_foam = pytest.mark.skipif(missing_openfoam() is not None, reason=missing_openfoam() or "")
 DIMS = (8, 8, 16)
@@ -40,13 +41,14 @@ def test_elliptic_and_neural_meshes_polished_or_raw_reproduce_uniform_flow(tmp_p
     assert reference < 1e-3
     tfi = meshgen.mesh("semicylinder", DIMS, method="tfi")  # an extruded mesh: exact to the solver's tolerance
     assert potential_flow_error(tfi.X, tfi.geometry, tmp_path / "tfi")["max"] < 1e-3
-    polished = meshgen.mesh("semicylinder", DIMS, method="neural")
-    assert polished.info["polish"]["converged"]
+    polished = meshgen.mesh("semicylinder", DIMS, method="neural", polish=True)
+    assert polished.info["polish"]["polished"] and polished.info["polish"]["converged"]
     assert potential_flow_error(polished.X, polished.geometry, tmp_path / "neural")["max"] <= 10 * max(reference, 1e-6)
-    # The network's own mesh (no polish): trained on the smoothed layout's lattice, where the faces
-    # solve the discrete equations, it is the extrusion the solver needs to within 10x too.
-    raw = meshgen.mesh("semicylinder", DIMS, method="neural", polish=False)
-    assert "polish" not in raw.info
+    # The mesh meshgen gives by default: the bundled network's own (not polished). Trained on the
+    # smoothed layout's lattice, where the faces solve the discrete equations, it is the extrusion
+    # the solver needs to within 10x too.
+    raw = meshgen.mesh("semicylinder", DIMS, method="neural")
+    assert raw.info["polish"] == {"polished": False, "reason": NOT_POLISHED_REASON}
     assert potential_flow_error(raw.X, raw.geometry, tmp_path / "raw")["max"] <= 10 * max(reference, 1e-6)
 
 

@@ -1,6 +1,7 @@
 """meshgen mesh from trained models: the bundled model, --checkpoint, the boundary correction, clustering, the
 choice of model, and the inputs that must fail without running code or writing anything."""
 
+import copy
 import hashlib
 import json
 import os
@@ -15,11 +16,14 @@ from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cl
 from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
 from meshgen.geometry import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.checkpoint_data import read_plain_checkpoint
+from meshgen.neural.config import resolve_config, to_dict
 from meshgen.neural.inference import evaluate_on_grid
 from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.network_map import mesh_from_model
 from meshgen.neural.train import train
+from meshgen.polish import NOT_POLISHED_REASON, polishes_by_default
 from meshgen.quality import quality_report
 from meshgen.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
 
@@ -78,6 +82,7 @@ def test_bundled_model_meshes_30_cubed_with_no_inverted_cell(run_cli, tmp_path):
     assert result.returncode == 0, result.stderr
     first = result.stdout.splitlines()[0]
     assert first.startswith("model: ") and str(BUNDLED) in first and "bundled" in first and "exact" in first
+    assert f"not polished ({NOT_POLISHED_REASON}; --polish" in result.stdout  # the summary says so
     sidecar = json.loads((tmp_path / "m.vtu.quality.json").read_text())
     assert sidecar["method"] == "neural" and sidecar["geometry"] == "semicylinder"
     model = sidecar["method_info"]["model"]
@@ -94,14 +99,39 @@ def test_bundled_model_meshes_30_cubed_with_no_inverted_cell(run_cli, tmp_path):
     jacobian = vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality"))
     assert len(jacobian) == 27000 and jacobian.min() > 0
     assert sidecar["inverted"]["count"] == 0 and sidecar["boundary_deviation"]["max_rel"] < 1e-12
-    # The figures recorded beside the model are those of this mesh.
+    # The bundled network (exact boundary, smoothed layout's lattice) is not polished by default: the
+    # figures recorded beside the model for its corrected mesh are those of this mesh.
+    assert sidecar["method_info"]["polish"] == {"polished": False, "reason": NOT_POLISHED_REASON}
     record = json.loads((BUNDLED.parent / "model.json").read_text())
-    assert record["preset"] == "exact" and record["quality"]["neural_30"]["polished"]["inverted"] == 0
-    assert record["quality"]["neural_30"]["polished"]["min_angle_mean"] == pytest.approx(
+    assert record["preset"] == "exact" and record["quality"]["neural_30"]["corrected"]["inverted"] == 0
+    assert record["quality"]["neural_30"]["corrected"]["min_angle_mean"] == pytest.approx(
         sidecar["metrics"]["min_angle"]["mean"], rel=1e-6
     )
-    assert record["quality"]["neural_100"]["polished"]["inverted"] == 0
+    assert record["quality"]["neural_30"]["corrected"]["min_angle_mean"] != pytest.approx(
+        record["quality"]["neural_30"]["polished"]["min_angle_mean"], rel=1e-6
+    )  # the comparison above tells the two apart
+    assert (
+        record["quality"]["neural_100"]["corrected"]["inverted"] == record["quality"]["neural_100"]["polished"]["inverted"] == 0
+    )
     assert BUNDLED.stat().st_size < 1 << 20 and record["sha256"] == model["sha256"]
+
+
+def test_only_a_lattice_trained_exact_boundary_network_is_left_unpolished_by_default():
+    bundled = read_plain_checkpoint(BUNDLED)
+    assert bundled["config"]["points"]["lattice"] and bundled["model"]["exact_boundary"]
+    assert not polishes_by_default(bundled)
+    # Each of the three conditions alone makes the default the polish again.
+    changes = [("model", "exact_boundary", False), ("points", "lattice", False), (None, "boundary_layout", "fixed")]
+    for section, key, value in changes:
+        changed = copy.deepcopy({k: bundled[k] for k in ("model", "config")})
+        where = changed["model"] if section == "model" else changed["config"] if section is None else changed["config"][section]
+        where[key] = value
+        assert polishes_by_default(changed), key
+    assert polishes_by_default({"model": bundled["model"]})  # no recorded configuration: polished
+    for preset in ("default", "family", "exact"):  # the presets as a run records them
+        config = to_dict(resolve_config(preset, None, []))
+        expected = preset != "exact"
+        assert polishes_by_default({"model": {"exact_boundary": config["model"]["exact_boundary"]}, "config": config}) == expected
 
 
 def test_bundled_model_loads_with_weights_only_and_is_the_recorded_run(semicylinder):

@@ -230,3 +230,42 @@ def test_compression_failing_in_a_worker_keeps_the_old_file(tmp_path, monkeypatc
     assert len(calls) >= 3
     assert path.read_bytes() == before and metadata_of(path) == {"run": 1}
     assert os.listdir(tmp_path) == [path.name]
+
+
+def test_cell_data_computed_while_the_nodes_compress_gives_the_same_bytes(tmp_path, monkeypatch):
+    """``write_mesh_with_quality`` hands the writer a callable: the metadata, points and cells are
+    submitted for compression before it is called, and the file is byte for byte the one written
+    from the finished arrays (``write_mesh`` with the metrics as a mapping)."""
+    from meshgen.quality import write_mesh_with_quality
+    from meshgen.quality.structured import structured_metrics
+
+    X = tfi(load_geometry("semicylinder"), (9, 8, 7))
+    X[3, 4, 2] += 0.05  # cells of every quality, not a regular grid only
+    submitted = []
+    original = _vtu.compress_blocks
+
+    def compress_blocks(pool, array, *rest):
+        submitted.append(array.nbytes)
+        return original(pool, array, *rest)
+
+    monkeypatch.setattr(_vtu, "compress_blocks", compress_blocks)
+    deferred = tmp_path / "deferred.vtu"
+    report = write_mesh_with_quality(deferred, X, metadata=METADATA)
+    assert report["cells"] == 9 * 8 * 7 and len(submitted) == 5 + 7  # metadata, points, 3 cell arrays, 7 metrics
+
+    heard = []
+
+    def metrics():
+        heard.append(len(submitted))  # arrays already under way when the cell data are asked for
+        return structured_metrics(X)[0]
+
+    submitted.clear()
+    direct = write_mesh(tmp_path / "direct.vtu", X, cell_data=structured_metrics(X)[0], metadata=METADATA)
+    called = write_mesh(tmp_path / "called.vtu", X, cell_data=metrics, metadata=METADATA)
+    assert heard == [12 + 5]  # the direct file's 12 arrays, then the called one's first five
+    assert deferred.read_bytes() == direct.read_bytes() == called.read_bytes()
+    # A format that cannot defer calls it before writing, and gets the same arrays.
+    heard.clear()
+    submitted.clear()
+    cgns = write_mesh(tmp_path / "m.cgns", X, cell_data=metrics, metadata=METADATA)
+    assert heard == [0] and set(read_mesh(cgns).cell_data) == set(structured_metrics(X)[0])

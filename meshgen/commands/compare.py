@@ -130,7 +130,9 @@ def _methods_help() -> str:
     "polish",
     default=None,
     help="Neural methods: polish each network's mesh to the discrete Winslow equations, as 'meshgen mesh' does "
-    "[default: --polish]; --no-polish compares the networks' own meshes (the ablations differ only there).",
+    "[default: as 'meshgen mesh' decides for each model: not for a network trained with the exact boundary on the "
+    "smoothed layout's lattice, else --polish]; --no-polish compares the networks' own meshes (the ablations differ "
+    "only there).",
 )
 @click.option("--mesh-format", default=".vtu", show_default=True, metavar="EXT", help="Format of the meshes written with --out.")
 @click.option("--quiet", "-q", is_flag=True, help="Print only the table and errors.")

@@ -63,9 +63,11 @@ METHOD_HELP = (
     "polish",
     default=None,
     help="neural: after the correction, solve the discrete Winslow equations from the network's mesh (faces "
-    "relaxed, multigrid cycles), which a flow solver needs (a raw network mesh gives potentialFoam errors "
-    "thousands of times the elliptic mesh's); --no-polish keeps the corrected network mesh. Not with --chunked "
-    "[default: --polish; block sets: --no-polish, docs/design.md §20].",
+    "relaxed, multigrid cycles), which a flow solver needs from most networks (a soft-boundary network's own mesh "
+    "gives potentialFoam errors thousands of times the elliptic mesh's); --no-polish keeps the corrected network mesh. Not with --chunked "
+    "[default: --polish, but --no-polish for a network trained on the smoothed layout's lattice with the exact "
+    "boundary (the bundled models, whose own mesh meets the solver-fidelity target) and for block sets, "
+    "docs/design.md §18, §20].",
 )
 @click.option(
     "--correct/--no-correct",
@@ -278,10 +280,14 @@ def _print_result(made, output_format, quiet):
         echo(_correction_line(info["correction"]))
     if "polish" in info:
         polished = info["polish"]
-        echo(
-            f"polished: {polished['cycles']} Winslow cycles, nodes moved up to "
-            f"{polished['largest_move_rel']:.2g} of L (--no-polish keeps the network's mesh)"
-        )
+        if polished.get("polished", True):
+            echo(
+                f"polished: {polished['cycles']} Winslow cycles, nodes moved up to "
+                f"{polished['largest_move_rel']:.2g} of L (--no-polish keeps the network's mesh)"
+            )
+        else:
+            hint = "" if polished["reason"].startswith("--") else "; --polish solves the discrete Winslow equations from it"
+            echo(f"not polished ({polished['reason']}{hint})")
     if "chunked" in info:
         blocks = info["chunked"]
         line = f"computed in {blocks['blocks']} blocks on {blocks['scheduler']}: written in {blocks['write_seconds']:.1f} s"

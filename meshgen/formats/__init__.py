@@ -76,6 +76,9 @@ class Format:
     # The module whose ``write_streamed`` writes it slab by slab from a node file
     # (``meshgen.formats.streamed``): meshes larger than memory, through a scratch CGNS file.
     streamed: str = ""
+    # Its writer takes ``cell_data`` as a callable too, called once the nodes and cells are under
+    # way (compressing on other threads): what computes the cell data runs meanwhile.
+    deferred_cell_data: bool = False
 
     @property
     def label(self) -> str:
@@ -90,7 +93,7 @@ def register_format(name: str, extensions, module: str, description: str, **opti
     FORMATS.append(Format(name, tuple(extensions), module, description, **options))
 
 
-register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)")
+register_format("vtu", [".vtu"], "meshgen.formats._vtu", "VTK XML unstructured grid (zlib-compressed)", deferred_cell_data=True)
 register_format(
     "vts",
     [".vts"],
@@ -263,14 +266,17 @@ def check_patches(patches, dim: int, path=None, format_name: str | None = None):
 def write_mesh(
     path,
     X: np.ndarray,
-    cell_data: dict | None = None,
+    cell_data=None,
     metadata: dict | None = None,
     patches=None,
     format: str | None = None,
     **options,
 ) -> Path:
     """Write node array ``X`` to ``path`` atomically in the format ``format`` names (default: the
-    one of the extension). ``patches``: the boundary patches (``meshgen.patches.Patch`` or
+    one of the extension). ``cell_data``: name -> per-cell array, or a callable returning that
+    mapping, called once: by a format with ``deferred_cell_data`` (``.vtu``) after its nodes and
+    cells are under way, so that computing the cell data overlaps writing them; by any other
+    before the write. ``patches``: the boundary patches (``meshgen.patches.Patch`` or
     ``{"name", "type", "faces"}`` records covering every cube face once; None: one per face, named
     after it), written by the formats that carry them. ``options``: format options (OpenFOAM:
     ``binary``). Returns the path written (an OpenFOAM case: its folder)."""
@@ -280,8 +286,17 @@ def write_mesh(
     fmt = format_for(path, format)
     path = check_output_path(path, format, X.shape[-1])
     patches = check_patches(patches, X.shape[-1], path, fmt.name)
-    cell_data = {name: _cell_array(name, values, X.shape[:-1]) for name, values in (cell_data or {}).items()}
     metadata_json(metadata or {})  # fail before anything is written
+    node_shape = X.shape[:-1]
+    if callable(cell_data) and fmt.deferred_cell_data:
+        compute = cell_data
+
+        def cell_data():
+            return {name: _cell_array(name, values, node_shape) for name, values in (compute() or {}).items()}
+
+    else:
+        given = cell_data() if callable(cell_data) else cell_data
+        cell_data = {name: _cell_array(name, values, node_shape) for name, values in (given or {}).items()}
     writer = importlib.import_module(fmt.module)
     arguments = (X, cell_data, dict(metadata or {})) + ((patches,) if fmt.patches else ())
     if not fmt.folder and options:

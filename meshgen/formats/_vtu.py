@@ -87,8 +87,11 @@ FILE_HEAD = (
 
 def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_bytes=BLOCK_BYTES):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vtu, with ``cell_data``
-    (name -> (cells,) float64 array in C order of the cells) and ``metadata`` (JSON-serialisable
-    dict; none stored when empty). ``level``, ``rle_above``: see ``compress_block``;
+    (name -> (cells,) float64 array in C order of the cells, or a callable returning that mapping:
+    called in this thread once the metadata, points and cells are handed to the compressing
+    threads, so that computing the cell data overlaps compressing them; the file is the same
+    either way) and ``metadata`` (JSON-serialisable dict; none stored when empty). ``level``,
+    ``rle_above``: see ``compress_block``;
     ``block_bytes``: uncompressed bytes per block, a multiple of 8 (meshio decodes each block
     into whole values)."""
     node_shape = X.shape[:-1]
@@ -113,6 +116,8 @@ def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_
         add("Cells", "connectivity", {}, connectivity)
         add("Cells", "offsets", {}, np.arange(1, cell_count + 1, dtype=np.int64) * corner_count)
         add("Cells", "types", {}, np.full(cell_count, VTK_HEXAHEDRON if len(node_shape) == 3 else VTK_QUAD, dtype=np.uint8))
+        if callable(cell_data):
+            cell_data = cell_data()
         for name, values in cell_data.items():
             add("CellData", name, {}, values)
 
@@ -173,11 +178,19 @@ def _little_endian(values: np.ndarray) -> np.ndarray:
 
 
 def _write_data_array(file, name: str, more: dict, dtype, header: bytes, streams: list) -> None:
-    """One DataArray element: the base64 of the header, then that of the streams joined."""
+    """One DataArray element: the base64 of the header, then that of the streams joined, encoded
+    stream by stream (base64 of a whole number of 3-byte groups needs no padding, so the pieces
+    join to the base64 of the whole without the whole ever being in memory)."""
     attributes = "".join(f' {key}="{value}"' for key, value in more.items())
     file.write(f'<DataArray type="{VTK_TYPES[dtype]}" Name={quoteattr(name)}{attributes} format="binary">\n'.encode())
     file.write(base64.b64encode(header))
-    file.write(base64.b64encode(b"".join(streams)))
+    pending = b""
+    for stream in streams:
+        data = pending + stream
+        whole = len(data) - len(data) % 3
+        file.write(base64.b64encode(memoryview(data)[:whole]))
+        pending = data[whole:]
+    file.write(base64.b64encode(pending))
     file.write(b"\n</DataArray>\n")
 
 

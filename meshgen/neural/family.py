@@ -45,6 +45,7 @@ from meshgen.neural.derivatives import grid_points
 from meshgen.neural.model import INPUT_MAP, bubble
 from meshgen.neural.models import TrainedModel, display_path
 from meshgen.neural.network_map import mesh_from_model
+from meshgen.polish import polishes_by_default
 from meshgen.tfi import parametric_grid, transfinite_on_grid
 
 __all__ = [
@@ -325,12 +326,13 @@ def mesh_member(checkpoint: dict, values: dict, coords) -> np.ndarray:
     return mesh_from_model(member_model(checkpoint["model"], family.normalised(values)), coords, family.member(values))
 
 
-def load_family_member(path, values: dict, geometry_name: str | None = None, warn=None, polished: bool = True):
+def load_family_member(path, values: dict, geometry_name: str | None = None, warn=None, polished: bool | None = True):
     """The member of the family checkpoint at ``path`` with the parameters ``values`` given on the
     command line, as a ``meshgen.neural.models.TrainedModel`` whose model is the member's plain
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
     ``warn`` (a callable taking one line; else Python's ``warnings``) hears :func:`validation_note`'s
-    line when there is one (``polished``: whether the mesh will be polished).
+    line when there is one (``polished``: whether the mesh will be polished; None: as
+    ``meshgen.polish.polishes_by_default`` decides for the checkpoint).
     Returns None when ``path`` is no family checkpoint."""
     path = Path(path)
     checkpoint = checkpoints.load_checkpoint(path)
@@ -343,6 +345,8 @@ def load_family_member(path, values: dict, geometry_name: str | None = None, war
             f"leave out --geometry (the checkpoint sets it)"
         )
     values = family.check_values(values, f" of {display_path(path)}")
+    if polished is None:
+        polished = polishes_by_default(checkpoint)
     note = validation_note(checkpoint, values, polished)
     if note is not None:
         warn(note) if warn is not None else warnings.warn(note, stacklevel=2)

@@ -26,6 +26,7 @@ from meshgen.neural.block_inference import check_block_model, is_block_model
 from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
 from meshgen.neural.config import ConfigError, dotted_items, preset_paths, resolve_config, schema, to_dict
 from meshgen.neural.network_map import mesh_from_model
+from meshgen.polish import NOT_POLISHED_REASON, polishes_by_default
 from meshgen.polish import polish as polish_mesh
 
 __all__ = [
@@ -247,15 +248,18 @@ def _default_params(name: str) -> dict:
 # the method
 
 
-def build_neural(geometry, coords, model=None, correct=True, device="auto", polish=True):
+def build_neural(geometry, coords, model=None, correct=True, device="auto", polish=None):
     """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
     a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
     ``coords``, evaluated on ``device`` ("cpu", "cuda" or "auto"), then corrected to
     X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False, then (``polish``, with
     ``correct``) polished: faces and interior brought to the discrete Winslow equations at the
-    mesh's resolution (``meshgen.polish``), which is what a flow solver needs. Returns (X, info) with info {"model", "correction",
-    "warnings"}; ``info["correction"]["error_before"]`` is the network's boundary error, reported
-    the same way whether or not the mesh is corrected."""
+    mesh's resolution (``meshgen.polish``), which is what a flow solver needs. ``polish`` None: the
+    model's default (``meshgen.polish.polishes_by_default``: not for a network trained on the
+    smoothed layout's lattice with the exact boundary). Returns (X, info) with info {"model",
+    "correction", "polish", "warnings"}; ``info["polish"]["polished"]`` says whether the mesh was
+    polished (with the reason when it was not); ``info["correction"]["error_before"]`` is the
+    network's boundary error, reported the same way whether or not the mesh is corrected."""
     if model is None:
         model = find_model(geometry_name=geometry.name, params=dict(geometry.values))
     elif not isinstance(model, TrainedModel):
@@ -272,6 +276,13 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto", poli
         info["correction"] = correct_boundary(X, geometry, coords)
     else:
         info["correction"] = {"corrected": False, "error_before": error_figures(boundary_errors(X, geometry, coords), geometry)}
+    by_default = polish is None
+    if by_default:
+        polish = polishes_by_default(model.checkpoint)
     if correct and polish:
         info["polish"] = polish_mesh(X, geometry, coords)
+    elif not correct:
+        info["polish"] = {"polished": False, "reason": "not corrected (--no-correct)"}
+    else:
+        info["polish"] = {"polished": False, "reason": NOT_POLISHED_REASON if by_default else "--no-polish"}
     return X, info

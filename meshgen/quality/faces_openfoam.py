@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshgen.quality.structured import use_compiled
+
 __all__ = ["DEFINITIONS", "cell_centres", "face_centres_and_areas", "non_orthogonality"]
 
 DEFINITIONS = {
@@ -133,15 +135,22 @@ def _angles(d: np.ndarray, S: np.ndarray) -> np.ndarray:
     return dot / (lengths + ROOT_VSMALL)
 
 
-def non_orthogonality(X: np.ndarray) -> dict:
+def non_orthogonality(X: np.ndarray, kernels: str = "auto") -> dict:
     """checkMesh's internal-face non-orthogonality and the boundary-face figure (module docstring)
     of node array ``X`` (3D, or 2D measured extruded). JSON-ready:
     {"non_orthogonality_internal": {"max", "average", "worst_face", "faces"},
     "non_orthogonality_boundary": {"max", "average", "worst_face", "faces"}}, angles in degrees;
-    ``worst_face`` {"axis", "index": node layer along the axis and cells along the others}."""
+    ``worst_face`` {"axis", "index": node layer along the axis and cells along the others}.
+
+    ``kernels``: "numpy" (this module's arithmetic), "compiled" (the same per face and per cell in
+    ``meshgen.quality.faces_compiled``, agreeing to round-off) or "auto": compiled from
+    ``meshgen.quality.structured.NUMPY_CELLS`` cells up, as the per-cell metrics choose (the mesh's
+    size alone decides)."""
     X = np.asarray(X, dtype=float)
     two_d = X.shape[-1] == 2
     X3 = _extruded(X) if two_d else X
+    if use_compiled(int(np.prod([n - 1 for n in X3.shape[:-1]])), kernels):
+        return _non_orthogonality_compiled(X3, two_d)
     faces = [face_centres_and_areas(X3, axis) for axis in range(3)]
     sign = _orientation(faces)
     C = cell_centres(X3, faces, sign)
@@ -156,6 +165,27 @@ def non_orthogonality(X: np.ndarray) -> dict:
         for side, outward, cell in ((0, -1.0, 0), (last, 1.0, -1)):
             cos = _angles(np.take(centres, side, axis) - np.take(C, cell, axis), outward * np.take(S, side, axis))
             boundary.append((np.expand_dims(cos, axis), axis, side))
+    return {
+        "non_orthogonality_internal": _summary(internal),
+        "non_orthogonality_boundary": _summary(boundary),
+    }
+
+
+def _non_orthogonality_compiled(X3: np.ndarray, two_d: bool) -> dict:
+    """:func:`non_orthogonality` of the 3D node array ``X3`` with the compiled kernels (``two_d``:
+    the front and back faces of an extruded 2D mesh left out)."""
+    from meshgen.quality import faces_compiled  # numba
+
+    X3 = np.ascontiguousarray(X3, dtype=np.float64)
+    faces = [faces_compiled.face_centres_and_areas(X3, axis) for axis in range(3)]
+    sign = _orientation(faces)
+    C = faces_compiled.cell_centres(faces, sign)
+    internal, boundary = [], []  # (cosines, axis, index offset along axis)
+    for axis in range(2 if two_d else 3):
+        inside, sides = faces_compiled.face_cosines(C, faces[axis], axis, sign)
+        internal.append((inside, axis, 1))
+        last = faces[axis][0].shape[axis] - 1
+        boundary += [(np.expand_dims(cos, axis), axis, side) for cos, side in zip(sides, (0, last))]
     return {
         "non_orthogonality_internal": _summary(internal),
         "non_orthogonality_boundary": _summary(boundary),

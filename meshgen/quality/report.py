@@ -15,7 +15,15 @@ from meshgen.quality.smoothness import DEFINITIONS as SMOOTHNESS_DEFINITIONS
 from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import check_node_array, structured_metrics
 
-__all__ = ["assemble_report", "assess", "build_report", "quality_report", "summarize"]
+__all__ = [
+    "assemble_report",
+    "assess",
+    "build_report",
+    "node_array_deviation",
+    "quality_report",
+    "report_in_parallel",
+    "summarize",
+]
 
 
 def summarize(values: np.ndarray) -> dict:
@@ -67,6 +75,37 @@ def solver_figures(X: np.ndarray) -> dict:
     return {**smoothness_figures(X), **non_orthogonality(X)}
 
 
+def node_array_deviation(X: np.ndarray, geometry) -> dict:
+    """The boundary deviation (``meshgen.deviation.boundary_deviation``) of the boundary nodes of
+    node array ``X`` from ``geometry``, as the report gives it."""
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        boundary_points, guesses = grid_boundary_nodes(X)
+        return boundary_deviation(boundary_points, geometry, parametric_guess=guesses)
+
+
+def _quietly(function, *arguments):
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):  # per thread
+        return function(*arguments)
+
+
+def report_in_parallel(X: np.ndarray, geometry, pool):
+    """The quality report of node array ``X`` (as :func:`quality_report` gives it) in parts on the
+    threads of ``pool`` (a ``concurrent.futures`` executor with at least four workers): the
+    smoothness figures, the face non-orthogonality and the boundary deviation start at once; the
+    per-cell metrics are computed on the calling thread (their first call in a process imports
+    numba and loads the compiled kernels, which the face kernels wait for). Returns (metrics,
+    report): the seven per-cell arrays, for a writer to start on, and a future of the report."""
+    X = check_node_array(X)
+    smoothness = pool.submit(_quietly, smoothness_figures, X)
+    faces = pool.submit(_quietly, non_orthogonality, X)
+    deviation = pool.submit(node_array_deviation, X, geometry) if geometry is not None else None
+    metrics, degenerate, info = assess(X)
+    info["solver_figures"] = lambda: {**smoothness.result(), **faces.result()}
+    if deviation is not None:
+        info["boundary_deviation"] = deviation.result
+    return metrics, pool.submit(build_report, metrics, degenerate, info, geometry)
+
+
 def quality_report(X_or_mesh, geometry=None) -> dict:
     """JSON-ready quality report of a mesh (the ``meshgen evaluate --json`` schema).
 
@@ -86,7 +125,8 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
 def build_report(metrics, degenerate, info, geometry) -> dict:
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
-    summaries = {name: summarize(metrics[name][shaped]) for name in METRICS}
+    every = bool(shaped.all())  # then the arrays themselves, not copies of them
+    summaries = {name: summarize(metrics[name] if every else metrics[name][shaped]) for name in METRICS}
     counts = {
         "cells": int(len(degenerate)),
         "inverted": int(np.count_nonzero(inverted)),
@@ -99,7 +139,7 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
     """The report from the metric ``summaries`` ({name: {mean, min, max, p01, p99}}), ``counts``
     (cells, inverted, degenerate) and ``info`` (dim, nonfinite_nodes, nonmanifold_faces, skipped,
     ``boundary()`` -> (boundary points, parametric guesses), or ``boundary_deviation`` measured
-    already); shared by the whole-mesh and the
+    already or a callable returning it); shared by the whole-mesh and the
     block-wise (``meshgen.quality.chunked``) paths."""
     dim = int(info["dim"])
     n_cells = counts["cells"]
@@ -142,8 +182,9 @@ def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict
                 f"geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D: "
                 "boundary deviation needs a geometry of the mesh's dimension"
             )
-        if "boundary_deviation" in info:  # measured in parts (block by block)
+        if "boundary_deviation" in info:  # measured in parts (block by block), or on another thread (a callable)
             deviation = info["boundary_deviation"]
+            deviation = deviation() if callable(deviation) else deviation
         else:
             boundary_points, guesses = info["boundary"]()
             deviation = boundary_deviation(boundary_points, geometry, parametric_guess=guesses)

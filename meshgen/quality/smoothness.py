@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from meshgen.quality.structured import use_compiled
+
 __all__ = ["DEFINITIONS", "expansion_ratio", "grid_smoothness", "smoothness_figures"]
 
 DEFINITIONS = {
@@ -139,14 +141,26 @@ def _summary(values: np.ndarray) -> dict:
     }
 
 
-def smoothness_figures(X: np.ndarray) -> dict:
+def smoothness_figures(X: np.ndarray, kernels: str = "auto") -> dict:
     """{"expansion_ratio": {...}, "grid_smoothness": {...}} of node array ``X``, each with mean,
     max, p99 and ``worst_cell`` (the (i, j[, k]) of the max); the smoothness also with
     ``max_by_axis`` (along the xi, eta[, zeta] grid lines alone: a wall's curvature shows on the
     lines along the wall, a kink between layers on the lines across them). JSON-ready. One pass
-    over each axis's edges serves both figures."""
+    over each axis's edges serves both figures.
+
+    ``kernels``: "numpy" (this module's arithmetic), "compiled" (3D only: the same per edge, cell
+    and node in ``meshgen.quality.smoothness_compiled``, agreeing to round-off) or "auto":
+    compiled for 3D meshes from ``meshgen.quality.structured.NUMPY_CELLS`` cells up, as the
+    per-cell metrics choose (the mesh's size alone decides)."""
     X = np.asarray(X, dtype=float)
     dim = X.ndim - 1
+    if dim == 3 and use_compiled(int(np.prod([n - 1 for n in X.shape[:-1]])), kernels):
+        from meshgen.quality.smoothness_compiled import cell_figures  # numba
+
+        ratio, cell_smoothness, by_axis = cell_figures(X)
+        smoothness = _summary(cell_smoothness)
+        smoothness["max_by_axis"] = by_axis
+        return {"expansion_ratio": _summary(ratio), "grid_smoothness": smoothness}
     ratio = np.ones(tuple(n - 1 for n in X.shape[:-1]))
     nodes = np.zeros(X.shape[:-1])
     by_axis = []
