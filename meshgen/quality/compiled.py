@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 
 import llvmlite.binding as llvm
 import numba
@@ -45,6 +46,13 @@ QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
 # vectorised, never the arithmetic of one).
 llvm.set_option("", "-runtime-memory-check-threshold=1024")
 llvm.set_option("", "-vectorize-memory-check-threshold=1024")
+
+# Planes of cells are handed to threads in runs of consecutive planes, this many runs per thread
+# (each run computes two planes of centroids beyond its own, so few runs; more than one, so that a
+# thread the OS delays holds up less).
+PLANE_RUNS_PER_THREAD = 4
+# Columns (cells) per task of ``finish_hex_angles``: seven rows of them stay in L2.
+FINISH_COLUMNS = 1 << 14
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 
@@ -292,6 +300,57 @@ def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
 
 
 # ---------------------------------------------------------------------------------------------
+# angles from cosines
+
+
+def _finish_columns(out, first, last):
+    """``finish_hex_angles`` of the cells ``first <= c < last``: the NumPy definition's arithmetic
+    (``numpy_kernels._finish``), so that equal cosines give equal angles."""
+    largest, max_cosine, reflex, face = (out[row, first:last] for row in (0, 1, 2, 5))
+    for cosine in (largest, max_cosine, face):
+        np.clip(cosine, -1.0, 1.0, out=cosine)
+        np.arccos(cosine, out=cosine)
+        np.multiply(cosine, _DEGREES, out=cosine)
+    np.subtract(360.0, max_cosine, out=max_cosine, where=reflex != 0.0)
+    np.subtract(max_cosine, 90.0, out=reflex)
+    np.divide(reflex, 90.0, out=reflex)
+    low = np.subtract(90.0, largest)
+    np.divide(low, 90.0, out=low)
+    np.maximum(reflex, low, out=reflex)
+
+
+def finish_hex_angles(out):
+    """Angles in degrees from the cosines the hexahedron kernels leave in ``out`` (7, m): row 0 the
+    largest corner cosine (-> min angle), row 1 the max-angle cosine (-> max angle, 360 minus it
+    where row 2 flags a reflex corner), row 2 (-> equiangle skewness), row 5 the face-alignment
+    cosine (-> non-orthogonality). NumPy's vectorised ``arccos`` (the scalar ``acos`` a compiled
+    loop calls costs more than the rest of the cell), in column runs that stay in cache, spread
+    over threads (NumPy releases the GIL)."""
+    cells = out.shape[1]
+    runs = [(first, min(cells, first + FINISH_COLUMNS)) for first in range(0, cells, FINISH_COLUMNS)]
+    if len(runs) <= 2:
+        for first, last in runs:
+            _finish_columns(out, first, last)
+        return
+    for _ in _finish_pool().map(lambda run: _finish_columns(out, *run), runs):
+        pass
+
+
+_POOL = []
+_POOL_LOCK = threading.Lock()
+
+
+def _finish_pool():
+    """The process's thread pool for ``finish_hex_angles`` (one per process, made on first use)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with _POOL_LOCK:
+        if not _POOL:
+            _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="meshgen-angles"))
+    return _POOL[0]
+
+
+# ---------------------------------------------------------------------------------------------
 # drivers
 
 
@@ -301,45 +360,50 @@ def _node(X, i, j, k):
 
 
 @njit(**_JIT)
-def _hex_row(X, centroid, i, j, k0, k1, tolerance, out, degenerate, c0):
-    """Cells (i, j, k0 <= k < k1) into ``out[:, c0 + k - k0]`` as ``_store_hex`` leaves them.
+def _hex_row(nodes, centroid, a0, a1, cp, cc, cn, j, k0, k1, tolerance, out, degenerate, c0):
+    """Cells (i, j, k0 <= k < k1) of one plane of cells i into ``out[:, c0 + k - k0]`` as
+    ``_store_hex`` leaves them.
 
-    ``X`` (3, ni, n2+1, n3+1) node coordinates by component; ``centroid`` (3, ni+1, n2+2, n3+2)
-    the centroids of the cells with a layer of NaN around them (cell (i, j, k) at [:, i+1, j+1,
-    k+1]), so that a missing face neighbour is NaN without a branch (``_slab`` makes both). Unsigned indices and unit strides along k let
-    LLVM vectorise this loop over cells: numba wraps negative signed indices, and a runtime stride
-    makes LLVM version the loop on it being 1."""
-    i, j, c0 = uint64(i), uint64(j), uint64(c0)
+    ``nodes`` (3, 3, n2+1, n3+1) a ring of node planes by component, planes i and i+1 at slots
+    ``a0``, ``a1``; ``centroid`` (3, 3, n2+2, n3+2) a ring of cell centroid planes with a layer of
+    NaN around them, the cells i-1, i, i+1 at slots ``cp``, ``cc``, ``cn`` (cell (i, j, k) at
+    [:, cc, j+1, k+1]), so that a missing face neighbour is NaN without a branch (``_node_plane``,
+    ``_centroid_plane`` fill them). Unsigned indices and unit strides along k let LLVM vectorise
+    this loop over cells: numba wraps negative signed indices, and a runtime stride makes LLVM
+    version the loop on it being 1."""
+    a0, a1, cp, cc, cn = uint64(a0), uint64(a1), uint64(cp), uint64(cc), uint64(cn)
+    j, c0 = uint64(j), uint64(c0)
     one = uint64(1)
-    i1, j1, two = i + one, j + one, one + one
+    j1, two = j + one, one + one
     for kk in range(uint64(k1 - k0)):
         k = kk + uint64(k0)
         P = (
-            _node(X, i, j, k),
-            _node(X, i1, j, k),
-            _node(X, i, j1, k),
-            _node(X, i1, j1, k),
-            _node(X, i, j, k + one),
-            _node(X, i1, j, k + one),
-            _node(X, i, j1, k + one),
-            _node(X, i1, j1, k + one),
+            _node(nodes, a0, j, k),
+            _node(nodes, a1, j, k),
+            _node(nodes, a0, j1, k),
+            _node(nodes, a1, j1, k),
+            _node(nodes, a0, j, k + one),
+            _node(nodes, a1, j, k + one),
+            _node(nodes, a0, j1, k + one),
+            _node(nodes, a1, j1, k + one),
         )
-        kc = k + uint64(1)
-        G = _node(centroid, i1, j1, kc)
+        kc = k + one
+        G = _node(centroid, cc, j1, kc)
         N = (
-            _node(centroid, i, j1, kc),
-            _node(centroid, i + two, j1, kc),
-            _node(centroid, i1, j, kc),
-            _node(centroid, i1, j + two, kc),
-            _node(centroid, i1, j1, k),
-            _node(centroid, i1, j1, kc + uint64(1)),
+            _node(centroid, cp, j1, kc),
+            _node(centroid, cn, j1, kc),
+            _node(centroid, cc, j, kc),
+            _node(centroid, cc, j + two, kc),
+            _node(centroid, cc, j1, k),
+            _node(centroid, cc, j1, kc + one),
         )
         _store_hex(_hex_cell(P, G, N, tolerance), out, degenerate, c0 + kk)
 
 
 @njit(inline="always", **_JIT)
 def _store_hex(r, out, degenerate, c):
-    """``_hex_cell``'s cosines and metrics into ``out[:, c]``; ``_angles`` turns the cosines into angles."""
+    """``_hex_cell``'s cosines and metrics into ``out[:, c]``; ``finish_hex_angles`` turns the
+    cosines into angles."""
     out[0, c] = r[0]
     out[1, c] = r[1]
     out[2, c] = 1.0 if r[2] else 0.0
@@ -351,68 +415,83 @@ def _store_hex(r, out, degenerate, c):
 
 
 @njit(**_JIT)
-def _angles(out, first, last):
-    """Angles of cells ``first <= c < last`` from the cosines ``_store_hex`` left in ``out``: row 0
-    the largest corner cosine, row 1 the max-angle cosine, row 2 whether it is a reflex corner's,
-    row 5 the face-alignment cosine."""
-    for c in range(first, last):
-        min_angle = _degrees_of_cosine(out[0, c])
-        max_angle = 360.0 - _degrees_of_cosine(out[1, c]) if out[2, c] != 0.0 else _degrees_of_cosine(out[1, c])
-        out[0, c] = min_angle
-        out[1, c] = max_angle
-        out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
-        out[5, c] = _degrees_of_cosine(out[5, c])
-
-
-@njit(parallel=True, **_JIT)
-def structured_hex(X, first, last, tolerance, out, degenerate):
-    """Metrics of the cells first[d] <= index < last[d] of node array ``X`` (n1+1, n2+1, n3+1, 3)
-    (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
-    number of those cells, in C order. Rows of cells along k, each a vectorised loop (``_hex_row``),
-    then a scalar pass for the ``acos`` of the row (no vector ``acos`` in LLVM without a vector
-    math library)."""
-    n2, n3 = X.shape[1] - 1, X.shape[2] - 1
-    m2, m3 = last[1] - first[1], last[2] - first[2]
-    for i in prange(first[0], last[0]):
-        nodes = np.empty((3, 2, n2 + 1, n3 + 1))
-        centroid = np.empty((3, 3, n2 + 2, n3 + 2))
-        _slab(X, i, nodes, centroid)
-        for j in range(first[1], last[1]):
-            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
-            _hex_row(nodes, centroid, 0, j, first[2], last[2], tolerance, out, degenerate, c0)
-            _angles(out, c0, c0 + m3)
+def _node_plane(X, i, nodes, slot):
+    """Node plane i of ``X`` (n1+1, n2+1, n3+1, 3) into ``nodes[:, slot]`` (by component)."""
+    for j in range(X.shape[1]):
+        for k in range(X.shape[2]):
+            for d in range(3):
+                nodes[d, slot, j, k] = X[i, j, k, d]
 
 
 @njit(**_JIT)
-def _slab(X, i, nodes, centroid):
-    """What the cells (i, :, :) of node array ``X`` (n1+1, n2+1, n3+1, 3) need, for ``_hex_row``:
-    ``nodes`` (3, 2, n2+1, n3+1) the node planes i and i+1 by component; ``centroid`` (3, 3, n2+2,
-    n3+2) the centroids of the cells i-1, i, i+1 (summed in VTK corner order) with a layer of NaN
-    around them, NaN where there is no such cell. Per plane of cells, so that the extra memory is a
-    few planes per thread, not a copy of the mesh."""
+def _centroid_plane(nodes, a0, a1, present, centroid, slot):
+    """Centroids of a plane of cells into the interior of ``centroid[:, slot]`` (its NaN layer
+    kept), from its node planes at slots ``a0``, ``a1`` of ``nodes``, summed in VTK corner order;
+    NaN where the plane is not ``present`` (beyond the mesh)."""
+    n2, n3 = nodes.shape[2] - 1, nodes.shape[3] - 1
+    a0, a1, slot = uint64(a0), uint64(a1), uint64(slot)
+    one = uint64(1)
+    for d in range(3):
+        for j in range(uint64(n2)):
+            for k in range(uint64(n3)):
+                s = nodes[d, a0, j, k]
+                s = s + nodes[d, a1, j, k]
+                s = s + nodes[d, a1, j + one, k]
+                s = s + nodes[d, a0, j + one, k]
+                s = s + nodes[d, a0, j, k + one]
+                s = s + nodes[d, a1, j, k + one]
+                s = s + nodes[d, a1, j + one, k + one]
+                s = s + nodes[d, a0, j + one, k + one]
+                centroid[d, slot, j + one, k + one] = s * 0.125 if present else np.nan
+
+
+@njit(**_JIT)
+def _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate):
+    """Cells of the planes i0 <= i < i1 of ``structured_hex``, in order, each node plane copied
+    by component and each centroid plane summed once (rings of three planes: the cells i-1, i, i+1
+    and the node planes i, i+1, i+2)."""
     n1, n2, n3 = X.shape[0] - 1, X.shape[1] - 1, X.shape[2] - 1
-    for a in range(2):
-        for j in range(n2 + 1):
-            for k in range(n3 + 1):
-                for d in range(3):
-                    nodes[d, a, j, k] = X[i + a, j, k, d]
-    centroid[:] = np.nan
-    for a in range(3):
-        ii = i - 1 + a
-        if ii < 0 or ii >= n1:
-            continue
-        for j in range(n2):
-            for k in range(n3):
-                for d in range(3):
-                    s = X[ii, j, k, d]
-                    s = s + X[ii + 1, j, k, d]
-                    s = s + X[ii + 1, j + 1, k, d]
-                    s = s + X[ii, j + 1, k, d]
-                    s = s + X[ii, j, k + 1, d]
-                    s = s + X[ii + 1, j, k + 1, d]
-                    s = s + X[ii + 1, j + 1, k + 1, d]
-                    s = s + X[ii, j + 1, k + 1, d]
-                    centroid[d, a, j + 1, k + 1] = s * 0.125
+    m2, m3 = last[1] - first[1], last[2] - first[2]
+    nodes = np.empty((3, 3, n2 + 1, n3 + 1))
+    centroid = np.full((3, 3, n2 + 2, n3 + 2), np.nan)
+    # node plane p at slot p % 3; cell plane c (c >= -1) at slot (c + 1) % 3
+    if i0 >= 1:
+        _node_plane(X, i0 - 1, nodes, (i0 - 1) % 3)
+    _node_plane(X, i0, nodes, i0 % 3)
+    _centroid_plane(nodes, (i0 - 1) % 3, i0 % 3, i0 >= 1, centroid, i0 % 3)
+    _node_plane(X, i0 + 1, nodes, (i0 + 1) % 3)
+    _centroid_plane(nodes, i0 % 3, (i0 + 1) % 3, True, centroid, (i0 + 1) % 3)
+    for i in range(i0, i1):
+        if i + 2 <= n1:
+            _node_plane(X, i + 2, nodes, (i + 2) % 3)
+        _centroid_plane(nodes, (i + 1) % 3, (i + 2) % 3, i + 1 < n1, centroid, (i + 2) % 3)
+        for j in range(first[1], last[1]):
+            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
+            _hex_row(nodes, centroid, i % 3, (i + 1) % 3, i % 3, (i + 1) % 3, (i + 2) % 3, j, first[2], last[2],
+                     tolerance, out, degenerate, c0)  # fmt: skip
+
+
+@njit(parallel=True, **_JIT)
+def _structured_hex_cosines(X, first, last, tolerance, out, degenerate, chunks):
+    """``structured_hex`` with the angles still as cosines (``_store_hex``), the planes of cells
+    cut into ``chunks`` runs of consecutive planes, one run per task."""
+    planes = last[0] - first[0]
+    for chunk in prange(chunks):
+        i0 = first[0] + planes * chunk // chunks
+        i1 = first[0] + planes * (chunk + 1) // chunks
+        if i1 > i0:
+            _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate)
+
+
+def structured_hex(X, first, last, tolerance, out, degenerate):
+    """Metrics of the cells first[d] <= index < last[d] of node array ``X`` (n1+1, n2+1, n3+1, 3)
+    (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
+    number of those cells, in C order. Runs of planes of cells in parallel, rows of cells along k
+    each a vectorised loop (``_hex_row``), then the angles from the cosines (``finish_hex_angles``)."""
+    planes = int(last[0]) - int(first[0])
+    chunks = max(1, min(planes, PLANE_RUNS_PER_THREAD * numba.get_num_threads()))
+    _structured_hex_cosines(X, tuple(first), tuple(last), tolerance, out, degenerate, chunks)
+    finish_hex_angles(out)
 
 
 @njit(parallel=True, **_JIT)
@@ -487,13 +566,19 @@ def _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, f
              _neighbour_centroid(centroid, neighbour, 2, c), _neighbour_centroid(centroid, neighbour, 3, c),
              _neighbour_centroid(centroid, neighbour, 4, c), _neighbour_centroid(centroid, neighbour, 5, c))  # fmt: skip
         _store_hex(_hex_cell(P, (centroid[c, 0], centroid[c, 1], centroid[c, 2]), N, tolerance), out, degenerate, c)
-    _angles(out, first, last)
+
+
+def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
+    """Metrics of hexahedra ``cells`` (M, 8) (VTK corner order) on ``points`` (N, 3) into ``out``
+    (7, M) and ``degenerate`` (M,); ``neighbour`` (6, M): the cell across each face (row 2 axis +
+    side), -1 for none."""
+    _unstructured_hex_cosines(points, cells, neighbour, tolerance, out, degenerate)
+    finish_hex_angles(out)
 
 
 @njit(parallel=True, **_JIT)
-def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
-    """Metrics of hexahedra ``cells`` (M, 8) (VTK corner order) on ``points`` (N, 3); ``neighbour``
-    (6, M): the cell across each face (row 2 axis + side), -1 for none."""
+def _unstructured_hex_cosines(points, cells, neighbour, tolerance, out, degenerate):
+    """``unstructured_hex`` with the angles still as cosines (``_store_hex``)."""
     centroid = _centroids(points, cells)
     n = cells.shape[0]
     chunk = 1024
