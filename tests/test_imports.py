@@ -93,6 +93,8 @@ LAYERS = [
     ],
     [
         "meshgen.quality.kernels",
+        "meshgen.quality.pool",
+        "meshgen.quality.angles",
         "meshgen.quality.compiled",
         "meshgen.quality.numpy_kernels",
         "meshgen.quality.structured",
@@ -102,6 +104,7 @@ LAYERS = [
         "meshgen.quality.report",
         "meshgen.quality.text",
         "meshgen.quality.sketch",
+        "meshgen.quality.summary",
     ],
     ["meshgen.formats"],
     ["meshgen.quality", "meshgen.correction"],

@@ -31,6 +31,7 @@ from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 from meshgen.quality.report import assemble_report
 from meshgen.quality.structured import structured_metrics
+from meshgen.quality.summary import block_summaries
 from meshgen.resources import available_memory
 from meshgen.scheduler import compute_in_order_of_completion
 
@@ -103,20 +104,12 @@ def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientati
         mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             values, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
-        shaped = ~degenerate
         summary["cells"] = int(degenerate.size)
         summary["degenerate"] = int(np.count_nonzero(degenerate))
         summary["inverted"] = int(np.count_nonzero(degenerate | ~(values["scaled_jacobian"] > 0.0)))
-        for name in METRICS:
-            kept = values[name][shaped] if summary["degenerate"] else values[name]
-            if kept.size:
-                summary["metrics"][name] = {
-                    "count": int(kept.size),
-                    "sum": float(np.sum(kept)),
-                    "min": float(np.min(kept)),
-                    "max": float(np.max(kept)),
-                    "sketch": sketches.sketch_of(kept),
-                }
+        summary["metrics"] = block_summaries(
+            {name: values[name] for name in METRICS}, ~degenerate if summary["degenerate"] else None
+        )
     # Boundary nodes owned by this block (each node once), as meshgen.deviation.grid_boundary_nodes.
     owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
     on_boundary = np.zeros(tuple(s.stop - s.start for s in block), dtype=bool)

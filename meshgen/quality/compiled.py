@@ -21,12 +21,13 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 
 import llvmlite.binding as llvm
 import numba
 import numpy as np
 from numba import njit, prange, uint64
+
+from meshgen.quality.angles import finish_hex_angles
 
 # Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
 # on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.
@@ -51,8 +52,6 @@ llvm.set_option("", "-vectorize-memory-check-threshold=1024")
 # (each run computes two planes of centroids beyond its own, so few runs; more than one, so that a
 # thread the OS delays holds up less).
 PLANE_RUNS_PER_THREAD = 4
-# Columns (cells) per task of ``finish_hex_angles``: seven rows of them stay in L2.
-FINISH_COLUMNS = 1 << 14
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 
@@ -297,57 +296,6 @@ def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
     reflex_cosine = smallest_cosine if reflex else -2.0
     _finish(largest_cosine, smallest_cosine, reflex_cosine, reflex, aspect_ratio, centroid_alignment, face_alignment,
             scaled_jacobian, out, c)  # fmt: skip
-
-
-# ---------------------------------------------------------------------------------------------
-# angles from cosines
-
-
-def _finish_columns(out, first, last):
-    """``finish_hex_angles`` of the cells ``first <= c < last``: the NumPy definition's arithmetic
-    (``numpy_kernels._finish``), so that equal cosines give equal angles."""
-    largest, max_cosine, reflex, face = (out[row, first:last] for row in (0, 1, 2, 5))
-    for cosine in (largest, max_cosine, face):
-        np.clip(cosine, -1.0, 1.0, out=cosine)
-        np.arccos(cosine, out=cosine)
-        np.multiply(cosine, _DEGREES, out=cosine)
-    np.subtract(360.0, max_cosine, out=max_cosine, where=reflex != 0.0)
-    np.subtract(max_cosine, 90.0, out=reflex)
-    np.divide(reflex, 90.0, out=reflex)
-    low = np.subtract(90.0, largest)
-    np.divide(low, 90.0, out=low)
-    np.maximum(reflex, low, out=reflex)
-
-
-def finish_hex_angles(out):
-    """Angles in degrees from the cosines the hexahedron kernels leave in ``out`` (7, m): row 0 the
-    largest corner cosine (-> min angle), row 1 the max-angle cosine (-> max angle, 360 minus it
-    where row 2 flags a reflex corner), row 2 (-> equiangle skewness), row 5 the face-alignment
-    cosine (-> non-orthogonality). NumPy's vectorised ``arccos`` (the scalar ``acos`` a compiled
-    loop calls costs more than the rest of the cell), in column runs that stay in cache, spread
-    over threads (NumPy releases the GIL)."""
-    cells = out.shape[1]
-    runs = [(first, min(cells, first + FINISH_COLUMNS)) for first in range(0, cells, FINISH_COLUMNS)]
-    if len(runs) <= 2:
-        for first, last in runs:
-            _finish_columns(out, first, last)
-        return
-    for _ in _finish_pool().map(lambda run: _finish_columns(out, *run), runs):
-        pass
-
-
-_POOL = []
-_POOL_LOCK = threading.Lock()
-
-
-def _finish_pool():
-    """The process's thread pool for ``finish_hex_angles`` (one per process, made on first use)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    with _POOL_LOCK:
-        if not _POOL:
-            _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="meshgen-angles"))
-    return _POOL[0]
 
 
 # ---------------------------------------------------------------------------------------------
