@@ -96,6 +96,7 @@ LAYERS = [
         "meshgen.quality.pool",
         "meshgen.quality.angles",
         "meshgen.quality.compiled",
+        "meshgen.quality.compiled_quad",
         "meshgen.quality.numpy_kernels",
         "meshgen.quality.structured",
         "meshgen.quality.faces",

@@ -34,12 +34,10 @@ from meshgen.quality.angles import finish_hex_angles
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["finite_extent", "structured_hex", "structured_quad", "unstructured_hex", "unstructured_quad"]
+__all__ = ["finite_extent", "structured_hex", "structured_hex_file_order", "unstructured_hex"]
 
-_DEGREES = 180.0 / math.pi
-# VTK corner order of a hexahedron / quad, as corner q (centroids are summed in this order).
+# VTK corner order of a hexahedron, as corner q (centroids are summed in this order).
 HEX_Q_OF_VTK = np.array([0, 1, 3, 2, 4, 5, 7, 6])
-QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
 
 # The row loop over cells (``_hex_row``) reads 2 arrays and writes 8 rows: LLVM checks at run time
 # that they do not overlap, more checks than its default limits (8 and 128) allow, without which
@@ -54,11 +52,6 @@ llvm.set_option("", "-vectorize-memory-check-threshold=1024")
 PLANE_RUNS_PER_THREAD = 4
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
-
-
-@njit(inline="always", **_JIT)
-def _degrees_of_cosine(cosine):
-    return math.acos(min(max(cosine, -1.0), 1.0)) * _DEGREES
 
 
 @njit(inline="always", **_JIT)
@@ -78,13 +71,6 @@ def _unit3(x, y, z):
     length = math.sqrt(x * x + y * y + z * z)
     inverse = 1.0 / (length if length > 0.0 else 1.0)
     return x * inverse, y * inverse, z * inverse, length
-
-
-@njit(inline="always", **_JIT)
-def _unit2(x, y):
-    length = math.sqrt(x * x + y * y)
-    inverse = 1.0 / (length if length > 0.0 else 1.0)
-    return x * inverse, y * inverse, length
 
 
 @njit(inline="always", **_JIT)
@@ -214,88 +200,6 @@ def _hex_cell(P, G, N, tolerance):
         scaled_jacobian,
         degenerate,
     )
-
-
-@njit(inline="always", **_JIT)
-def _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment,
-            scaled_jacobian, out, c):  # fmt: skip
-    min_angle = _degrees_of_cosine(largest_cosine)
-    max_angle = 360.0 - _degrees_of_cosine(reflex_cosine) if any_reflex else _degrees_of_cosine(smallest_cosine)
-    out[0, c] = min_angle
-    out[1, c] = max_angle
-    out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
-    out[3, c] = aspect_ratio
-    out[4, c] = 1.0 - centroid_alignment
-    out[5, c] = _degrees_of_cosine(face_alignment)
-    out[6, c] = scaled_jacobian
-
-
-@njit(**_JIT)
-def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
-    """Metrics of one quadrilateral (see ``_hex_cell``); ``P`` (4, 2), ``N`` (4, 2); ``S`` (4, 2, 2)
-    scratch; ``orientation`` +1 or -1, the sign of the mesh's total area."""
-    # unit edges (ux, uy)[axis, t]: axis 0 from (0,t) to (1,t), axis 1 from (t,0) to (t,1)
-    ux, uy, principal, mean = S[0], S[1], S[2], S[3, 0]
-    short = False
-    for axis in range(2):
-        step = 1 << axis
-        sx = sy = total = 0.0
-        for t in range(2):
-            low = t << (1 - axis)
-            ex, ey = P[low + step, 0] - P[low, 0], P[low + step, 1] - P[low, 1]
-            x, y, length = _unit2(ex, ey)
-            ux[axis, t], uy[axis, t] = x, y
-            if _short(length, tolerance):
-                short = True
-            if t == 0:
-                sx, sy, total = ex, ey, length
-            else:
-                sx, sy, total = sx + ex, sy + ey, total + length
-        mean[axis] = total * 0.5
-        px, py, _ = _unit2(sx, sy)
-        principal[axis, 0], principal[axis, 1] = px, py
-    degenerate[c] = short
-    longest, shortest = max(mean[0], mean[1]), min(mean[0], mean[1])
-    aspect_ratio = longest / shortest if shortest > 0.0 else np.inf
-
-    def dot(t0, t1):
-        return ux[0, t0] * ux[1, t1] + uy[0, t0] * uy[1, t1]
-
-    def cross(t0, t1):
-        return ux[0, t0] * uy[1, t1] - uy[0, t0] * ux[1, t1]
-
-    c0, c1, c2, c3 = dot(0, 0), -dot(0, 1), dot(1, 1), -dot(1, 0)
-    a0, a1, a2, a3 = cross(0, 0), cross(0, 1), cross(1, 1), cross(1, 0)
-    largest_cosine = max(max(c0, c1), max(c2, c3))
-    smallest_cosine = min(min(c0, c1), min(c2, c3))
-    smallest_area = _nanmin(_nanmin(a0, a1), _nanmin(a2, a3))
-    largest_area = -_nanmin(_nanmin(-a0, -a1), _nanmin(-a2, -a3))
-    d1x, d1y = P[3, 0] - P[0, 0], P[3, 1] - P[0, 1]
-    d2x, d2y = P[2, 0] - P[1, 0], P[2, 1] - P[1, 1]
-    centre_area = d1x * d2y - d1y * d2x
-    reflex = smallest_area < 0.0 if centre_area >= 0.0 else largest_area > 0.0
-    scaled_jacobian = smallest_area if orientation > 0 else -largest_area
-
-    centroid_alignment = face_alignment = 0.0
-    for face in range(4):
-        axis, side = face >> 1, face & 1
-        other = 1 - axis
-        ax, ay = ux[other, side], uy[other, side]  # the face is the edge across the normal axis
-        px, py = principal[axis, 0], principal[axis, 1]
-        centroid_cosine = abs(ax * py - ay * px)
-        dx, dy = N[face, 0] - G[0], N[face, 1] - G[1]
-        if not math.isfinite(dx + dy):
-            dx, dy = px, py
-        tx, ty, _ = _unit2(dx, dy)
-        face_cosine = abs(ax * ty - ay * tx)
-        if face == 0:
-            centroid_alignment, face_alignment = centroid_cosine, face_cosine
-        else:
-            centroid_alignment = min(centroid_alignment, centroid_cosine)
-            face_alignment = min(face_alignment, face_cosine)
-    reflex_cosine = smallest_cosine if reflex else -2.0
-    _finish(largest_cosine, smallest_cosine, reflex_cosine, reflex, aspect_ratio, centroid_alignment, face_alignment,
-            scaled_jacobian, out, c)  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------------
@@ -442,36 +346,104 @@ def structured_hex(X, first, last, tolerance, out, degenerate):
     finish_hex_angles(out)
 
 
-@njit(parallel=True, **_JIT)
-def structured_quad(X, first, last, tolerance, orientation, out, degenerate):
-    """``structured_hex`` for a 2D node array (n1+1, n2+1, 2)."""
-    n1, n2 = X.shape[0] - 1, X.shape[1] - 1
-    centroid = np.empty((n1, n2, 2))
-    for i in prange(n1):
-        for j in range(n2):
-            for d in range(2):
-                s = X[i, j, d]
-                s = s + X[i + 1, j, d]
-                s = s + X[i + 1, j + 1, d]
-                s = s + X[i, j + 1, d]
-                centroid[i, j, d] = s * 0.25
-    m2 = last[1] - first[1]
-    for i in prange(first[0], last[0]):
-        P = np.empty((4, 2))
-        N = np.empty((4, 2))
-        S = np.empty((4, 2, 2))
+@njit(**_JIT)
+def _file_centroid_plane(F, k, present, centroid, slot):
+    """Centroids of the plane of cells k of ``F`` (3, n3+1, n2+1, n1+1) (coordinate d of node (i, j, k)
+    at [d, k, j, i]) into the interior of ``centroid[:, slot]`` (cell (i, j) at [:, slot, j+1, i+1]),
+    summed in VTK corner order; NaN where the plane is not ``present`` (beyond the mesh)."""
+    if not present:
+        centroid[:, slot, 1:-1, 1:-1] = np.nan
+        return
+    n2, n1 = F.shape[2] - 1, F.shape[3] - 1
+    k, slot = uint64(k), uint64(slot)
+    one = uint64(1)
+    for d in range(3):
+        for j in range(uint64(n2)):
+            for i in range(uint64(n1)):
+                s = F[d, k, j, i]
+                s = s + F[d, k, j, i + one]
+                s = s + F[d, k, j + one, i + one]
+                s = s + F[d, k, j + one, i]
+                s = s + F[d, k + one, j, i]
+                s = s + F[d, k + one, j, i + one]
+                s = s + F[d, k + one, j + one, i + one]
+                s = s + F[d, k + one, j + one, i]
+                centroid[d, slot, j + one, i + one] = s * 0.125
+
+
+@njit(**_JIT)
+def _file_hex_row(F, centroid, k, cp, cc, cn, j, i0, i1, tolerance, out, degenerate, c0):
+    """``_hex_row`` of the cells (i0 <= i < i1, j, k) of ``F`` (``_file_centroid_plane``): the loop
+    runs along i, unit stride in the file's order; the centroids of the cell planes k-1, k, k+1 at
+    slots ``cp``, ``cc``, ``cn``."""
+    k, cp, cc, cn, j, c0 = uint64(k), uint64(cp), uint64(cc), uint64(cn), uint64(j), uint64(c0)
+    one = uint64(1)
+    k1, j1, two = k + one, j + one, one + one
+    for ii in range(uint64(i1 - i0)):
+        i = ii + uint64(i0)
+        P = (
+            _node(F, k, j, i),
+            _node(F, k, j, i + one),
+            _node(F, k, j1, i),
+            _node(F, k, j1, i + one),
+            _node(F, k1, j, i),
+            _node(F, k1, j, i + one),
+            _node(F, k1, j1, i),
+            _node(F, k1, j1, i + one),
+        )
+        ic = i + one
+        G = _node(centroid, cc, j1, ic)
+        N = (
+            _node(centroid, cc, j1, i),
+            _node(centroid, cc, j1, ic + one),
+            _node(centroid, cc, j, ic),
+            _node(centroid, cc, j + two, ic),
+            _node(centroid, cp, j1, ic),
+            _node(centroid, cn, j1, ic),
+        )
+        _store_hex(_hex_cell(P, G, N, tolerance), out, degenerate, c0 + ii)
+
+
+@njit(**_JIT)
+def _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate):
+    """Cells of the planes k0 <= k < k1 of ``structured_hex_file_order``, in order, each plane of
+    centroids summed once (a ring of three: the cells k-1, k, k+1)."""
+    n3, n2, n1 = F.shape[1] - 1, F.shape[2] - 1, F.shape[3] - 1
+    m1, m2 = last[0] - first[0], last[1] - first[1]
+    centroid = np.full((3, 3, n2 + 2, n1 + 2), np.nan)
+    # cell plane c (c >= -1) at slot (c + 1) % 3
+    _file_centroid_plane(F, k0 - 1, k0 >= 1, centroid, k0 % 3)
+    _file_centroid_plane(F, k0, True, centroid, (k0 + 1) % 3)
+    for k in range(k0, k1):
+        _file_centroid_plane(F, k + 1, k + 1 < n3, centroid, (k + 2) % 3)
         for j in range(first[1], last[1]):
-            for q in range(4):
-                for d in range(2):
-                    P[q, d] = X[i + (q & 1), j + (q >> 1), d]
-            for face in range(4):
-                axis, side = face >> 1, face & 1
-                delta = 1 if side else -1
-                ni, nj = (i + delta, j) if axis == 0 else (i, j + delta)
-                inside = 0 <= ni < n1 and 0 <= nj < n2
-                for d in range(2):
-                    N[face, d] = centroid[ni, nj, d] if inside else np.nan
-            _quad_cell(P, centroid[i, j], N, S, tolerance, orientation, out, degenerate, (i - first[0]) * m2 + (j - first[1]))
+            c0 = ((k - first[2]) * m2 + (j - first[1])) * m1
+            _file_hex_row(F, centroid, k, k % 3, (k + 1) % 3, (k + 2) % 3, j, first[0], last[0], tolerance, out,
+                          degenerate, c0)  # fmt: skip
+
+
+@njit(parallel=True, **_JIT)
+def _file_hex_cosines(F, first, last, tolerance, out, degenerate, chunks):
+    """``structured_hex_file_order`` with the angles still as cosines, the planes of cells (k) cut
+    into ``chunks`` runs of consecutive planes, one run per task."""
+    planes = last[2] - first[2]
+    for chunk in prange(chunks):
+        k0 = first[2] + planes * chunk // chunks
+        k1 = first[2] + planes * (chunk + 1) // chunks
+        if k1 > k0:
+            _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate)
+
+
+def structured_hex_file_order(F, first, last, tolerance, out, degenerate):
+    """``structured_hex`` of nodes by component in a CGNS file's order: ``F`` (3, n3+1, n2+1, n1+1),
+    coordinate d of node (i, j, k) at [d, k, j, i] (what HDF5 reads without a transpose). Cells
+    ``first[d] <= (i, j, k)[d] < last[d]``, written to ``out`` (7, m) and ``degenerate`` (m,) in the
+    file's order (i fastest). Each cell's arithmetic is ``structured_hex``'s, so its values are the
+    same to the bit; only their order differs."""
+    planes = int(last[2]) - int(first[2])
+    chunks = max(1, min(planes, PLANE_RUNS_PER_THREAD * numba.get_num_threads()))
+    _file_hex_cosines(F, tuple(first), tuple(last), tolerance, out, degenerate, chunks)
+    finish_hex_angles(out)
 
 
 @njit(parallel=True, **_JIT)
@@ -532,27 +504,6 @@ def _unstructured_hex_cosines(points, cells, neighbour, tolerance, out, degenera
     chunk = 1024
     for block in prange((n + chunk - 1) // chunk):
         _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, block * chunk, min(n, (block + 1) * chunk))
-
-
-@njit(parallel=True, **_JIT)
-def unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate):
-    """``unstructured_hex`` for quads ``cells`` (M, 4) on ``points`` (N, 2); ``neighbour`` (4, M)."""
-    centroid = _centroids(points, cells)
-    n = cells.shape[0]
-    chunk = 1024
-    for block in prange((n + chunk - 1) // chunk):
-        P = np.empty((4, 2))
-        N = np.empty((4, 2))
-        S = np.empty((4, 2, 2))
-        for c in range(block * chunk, min(n, (block + 1) * chunk)):
-            for k in range(4):
-                for d in range(2):
-                    P[QUAD_Q_OF_VTK[k], d] = points[cells[c, k], d]
-            for face in range(4):
-                other = neighbour[face, c]
-                for d in range(2):
-                    N[face, d] = centroid[other, d] if other >= 0 else np.nan
-            _quad_cell(P, centroid[c], N, S, tolerance, orientation, out, degenerate, c)
 
 
 @njit(parallel=True, **_JIT)
