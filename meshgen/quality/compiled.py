@@ -1,20 +1,26 @@
-"""The per-cell metrics (definitions in ``meshgen.quality.kernels``) as compiled numba kernels.
+"""The per-cell metrics of hexahedra (definitions in ``meshgen.quality.kernels``) as compiled numba
+kernels (quadrilaterals: ``meshgen.quality.compiled_quad``).
 
-One function per cell kind (``_hex_cell``, ``_quad_cell``) holds the arithmetic; four
-drivers feed it corner coordinates and the centroids of the face neighbours, in parallel over
-cells (``prange``): structured node arrays (``structured_hex``, ``structured_quad``; neighbours
-are the cells at index +-1) and points + connectivity (``unstructured_hex``, ``unstructured_quad``;
-neighbours from face matching). Centroids come first in a pass of their own, summed in the VTK
-corner order. The arithmetic follows the vectorised NumPy definition operation by operation, in
-IEEE double precision (``fastmath=False``), so the kernels agree with it to round-off of the
-library ``acos`` (tested to 1e-12).
+One function (``_hex_cell``) holds a cell's arithmetic; drivers feed it corner coordinates and
+the centroids of the face neighbours, in parallel: structured node arrays in C order
+(``structured_hex``), nodes by component in a CGNS file's order (``structured_hex_file_order``,
+the block-wise evaluation of a file; no transpose), and points + connectivity
+(``unstructured_hex``; neighbours from face matching). Centroids are summed in the VTK corner
+order. The arithmetic follows the vectorised NumPy definition operation by operation, in IEEE
+double precision (``fastmath=False``), and the angles come from the cosines through NumPy's own
+``arccos`` (``meshgen.quality.angles``), so the kernels agree with the NumPy definition to
+round-off (tested to 1e-12).
 
-The structured hexahedra run as loops over rows of cells along k that LLVM vectorises (AVX-512:
-8 cells per instruction; ``_hex_row``), the ``acos`` of the angles in a scalar pass after each row.
+The structured drivers hand runs of consecutive planes of cells to threads; each run keeps rings
+of three planes (node planes by component, centroid planes with a NaN layer), so each plane of
+centroids is summed once, and loops over rows of cells that LLVM vectorises (AVX-512: 8 cells per
+instruction; ``_hex_row``, ``_file_hex_row``).
 
-A cell is written as corners ``P[q]``, q = s0 + 2 s1 (+ 4 s2) for the corner at offsets
-(s0, s1[, s2]) from the cell's first node. Compiled code is cached on disk (``cache=True``): the
-first call in a fresh installation compiles for some seconds, later processes load it.
+A cell is written as corners ``P[q]``, q = s0 + 2 s1 + 4 s2 for the corner at offsets
+(s0, s1, s2) from the cell's first node. Compiled code is cached on disk (``cache=True``): the
+first call in a fresh installation compiles for some seconds, later processes load it. numba's
+cache notices changes to a function's own file only, so the functions that call one another stay
+in this file.
 """
 
 from __future__ import annotations
