@@ -34,13 +34,14 @@ import numpy as np
 from numba import njit, prange, uint64
 
 from meshgen.quality.angles import finish_hex_angles
+from meshgen.quality.pool import map_in_threads, threads
 
 # Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
 # on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["finite_extent", "structured_hex", "structured_hex_file_order", "unstructured_hex"]
+__all__ = ["finite_extent", "for_runs_of_planes", "structured_hex", "structured_hex_file_order", "unstructured_hex"]
 
 # VTK corner order of a hexahedron, as corner q (centroids are summed in this order).
 HEX_Q_OF_VTK = np.array([0, 1, 3, 2, 4, 5, 7, 6])
@@ -329,16 +330,15 @@ def _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate):
                      tolerance, out, degenerate, c0)  # fmt: skip
 
 
-@njit(parallel=True, **_JIT)
-def _structured_hex_cosines(X, first, last, tolerance, out, degenerate, chunks):
-    """``structured_hex`` with the angles still as cosines (``_store_hex``), the planes of cells
-    cut into ``chunks`` runs of consecutive planes, one run per task."""
-    planes = last[0] - first[0]
-    for chunk in prange(chunks):
-        i0 = first[0] + planes * chunk // chunks
-        i1 = first[0] + planes * (chunk + 1) // chunks
-        if i1 > i0:
-            _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate)
+def for_runs_of_planes(kernel, begin: int, end: int) -> None:
+    """``kernel(p0, p1)`` over runs of consecutive planes covering [begin, end), the runs spread
+    over the CPUs (``meshgen.quality.pool``; the kernels release the GIL). Threads rather than
+    ``prange``: numba compiles a parallel loop around the inlined cell arithmetic in minutes, the
+    serial kernel in seconds."""
+    planes = end - begin
+    runs = max(1, min(planes, PLANE_RUNS_PER_THREAD * threads()))
+    bounds = [begin + planes * r // runs for r in range(runs + 1)]
+    map_in_threads(lambda run: kernel(*run), [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a])
 
 
 def structured_hex(X, first, last, tolerance, out, degenerate):
@@ -346,9 +346,8 @@ def structured_hex(X, first, last, tolerance, out, degenerate):
     (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
     number of those cells, in C order. Runs of planes of cells in parallel, rows of cells along k
     each a vectorised loop (``_hex_row``), then the angles from the cosines (``finish_hex_angles``)."""
-    planes = int(last[0]) - int(first[0])
-    chunks = max(1, min(planes, PLANE_RUNS_PER_THREAD * numba.get_num_threads()))
-    _structured_hex_cosines(X, tuple(first), tuple(last), tolerance, out, degenerate, chunks)
+    first, last = tuple(int(v) for v in first), tuple(int(v) for v in last)
+    for_runs_of_planes(lambda i0, i1: _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate), first[0], last[0])
     finish_hex_angles(out)
 
 
@@ -428,27 +427,14 @@ def _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate):
                           degenerate, c0)  # fmt: skip
 
 
-@njit(parallel=True, **_JIT)
-def _file_hex_cosines(F, first, last, tolerance, out, degenerate, chunks):
-    """``structured_hex_file_order`` with the angles still as cosines, the planes of cells (k) cut
-    into ``chunks`` runs of consecutive planes, one run per task."""
-    planes = last[2] - first[2]
-    for chunk in prange(chunks):
-        k0 = first[2] + planes * chunk // chunks
-        k1 = first[2] + planes * (chunk + 1) // chunks
-        if k1 > k0:
-            _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate)
-
-
 def structured_hex_file_order(F, first, last, tolerance, out, degenerate):
     """``structured_hex`` of nodes by component in a CGNS file's order: ``F`` (3, n3+1, n2+1, n1+1),
     coordinate d of node (i, j, k) at [d, k, j, i] (what HDF5 reads without a transpose). Cells
     ``first[d] <= (i, j, k)[d] < last[d]``, written to ``out`` (7, m) and ``degenerate`` (m,) in the
     file's order (i fastest). Each cell's arithmetic is ``structured_hex``'s, so its values are the
     same to the bit; only their order differs."""
-    planes = int(last[2]) - int(first[2])
-    chunks = max(1, min(planes, PLANE_RUNS_PER_THREAD * numba.get_num_threads()))
-    _file_hex_cosines(F, tuple(first), tuple(last), tolerance, out, degenerate, chunks)
+    first, last = tuple(int(v) for v in first), tuple(int(v) for v in last)
+    for_runs_of_planes(lambda k0, k1: _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate), first[2], last[2])
     finish_hex_angles(out)
 
 
