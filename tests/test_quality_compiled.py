@@ -123,3 +123,16 @@ def test_the_file_order_kernel_gives_each_cell_the_c_order_kernels_values(tmp_pa
         assert np.array_equal(degenerate.reshape(shape[::-1]).T.reshape(-1), expected_degenerate)
         if cells == int(np.prod(dims)):
             assert expected_degenerate.any() and np.isnan(expected).any() and (expected[6] < 0).any()
+
+
+def test_the_thread_pool_keeps_order_and_runs_nested_calls_in_its_own_thread():
+    import threading
+
+    from meshgen.quality.pool import map_in_threads
+
+    def inner(x):
+        return [(x * y, threading.current_thread().name) for y in range(3)]
+
+    results = map_in_threads(inner, range(5))
+    assert [[v for v, _ in row] for row in results] == [[x * y for y in range(3)] for x in range(5)]
+    assert all(len({name for _, name in row}) == 1 for row in results)  # a pool task's calls stay in its thread
