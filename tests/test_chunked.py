@@ -100,7 +100,7 @@ def test_a_block_summary_is_numpys_count_sum_extremes_and_sketch():
 
     rng = np.random.default_rng(1)
     values = np.concatenate([rng.normal(0.3, 1.0, 20000), np.zeros(50), rng.lognormal(0.0, 3.0, 5000), [1e-13, -1e-13]])
-    for part in (values, -values, np.zeros(3), np.array([2.5])):
+    for part in (values, -values, np.zeros(3), np.array([2.5]), np.abs(values) + 1e-3, rng.uniform(0.5, 179.5, 100000)):
         summary, expected = metric_summary(part), sketches.sketch_of(part)
         assert (summary["count"], summary["sum"], summary["min"], summary["max"]) == (
             part.size,

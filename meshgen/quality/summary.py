@@ -60,25 +60,37 @@ def _bucket_counts(values, logs, smallest, log_gamma):
     return zeros, first_p, positive, first_n, negative
 
 
+@njit(**_JIT)
+def _positive_counts(logs, first, size, log_gamma):
+    """Counts of the keys ``first`` .. ``first + size - 1`` of values all at least ``SMALLEST``,
+    ``logs`` their natural logarithms (``_bucket_counts`` without its first pass)."""
+    counts = np.zeros(size, dtype=np.int64)
+    for c in range(logs.size):
+        counts[np.int64(math.ceil(logs[c] / log_gamma)) - first] += 1
+    return counts
+
+
 def metric_summary(values: np.ndarray) -> dict:
     """Count, sum, min, max and quantile sketch of ``values`` (m,) float64, m >= 1, finite (NaN
     counts as zero in the sketch, as in ``sketch_of``)."""
     values = np.ascontiguousarray(values, dtype=float)
+    low, high = float(np.min(values)), float(np.max(values))
     logs = np.abs(values)
     with np.errstate(divide="ignore", invalid="ignore"):
         np.log(logs, out=logs)  # in place: a new array from np.log took several times longer
-    zeros, positive_offset, positive, negative_offset, negative = _bucket_counts(
-        values, logs, sketches.SMALLEST, sketches.LOG_GAMMA
-    )
-    return {
-        "count": int(values.size),
-        "sum": float(np.sum(values)),
-        "min": float(np.min(values)),
-        "max": float(np.max(values)),
-        "sketch": sketches.QuantileSketch(
+    if low >= sketches.SMALLEST and high < np.inf:  # all positive (most metrics): the key range from NumPy's extremes
+        first = math.ceil(float(np.min(logs)) / sketches.LOG_GAMMA)
+        size = math.ceil(float(np.max(logs)) / sketches.LOG_GAMMA) - first + 1
+        counts = _positive_counts(logs, first, size, sketches.LOG_GAMMA)
+        sketch = sketches.QuantileSketch(sketches.Buckets(int(first), counts), sketches.Buckets(), 0)
+    else:
+        zeros, positive_offset, positive, negative_offset, negative = _bucket_counts(
+            values, logs, sketches.SMALLEST, sketches.LOG_GAMMA
+        )
+        sketch = sketches.QuantileSketch(
             sketches.Buckets(int(positive_offset), positive), sketches.Buckets(int(negative_offset), negative), int(zeros)
-        ),
-    }
+        )
+    return {"count": int(values.size), "sum": float(np.sum(values)), "min": low, "max": high, "sketch": sketch}
 
 
 def block_summaries(metrics: dict, kept: np.ndarray | None = None) -> dict:
