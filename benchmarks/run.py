@@ -603,7 +603,12 @@ def family(quick: bool) -> dict:
 def evaluate(quick: bool) -> dict:
     import bench_quality
 
-    cases = [("unstructured", bench_quality.REPORT), ("chunked", bench_quality.CHUNKED_FILE)] if quick else bench_quality.CASES
+    quick_cases = [
+        ("structured", "cell_metrics"),
+        ("unstructured", bench_quality.REPORT),
+        ("chunked", bench_quality.CHUNKED_FILE),
+    ]
+    cases = quick_cases if quick else bench_quality.CASES
     data = bench_quality.measure((100, 100, 100), 2 if quick else 5, cases)
     data["first_call"] = bench_quality.first_call()
     bench_quality.print_table(data)

@@ -95,6 +95,52 @@ def test_the_sketch_merges_exactly_and_keeps_its_relative_accuracy():
         assert abs(sketches.quantile(merged, q) - exact) <= bound * (1 + 1e-9)
 
 
+def test_a_block_summary_is_numpys_count_sum_extremes_and_sketch():
+    from meshgen.quality.summary import block_summaries, metric_summary
+
+    rng = np.random.default_rng(1)
+    values = np.concatenate([rng.normal(0.3, 1.0, 20000), np.zeros(50), rng.lognormal(0.0, 3.0, 5000), [1e-13, -1e-13]])
+    for part in (values, -values, np.zeros(3), np.array([2.5]), np.abs(values) + 1e-3, rng.uniform(0.5, 179.5, 100000)):
+        summary, expected = metric_summary(part), sketches.sketch_of(part)
+        assert (summary["count"], summary["sum"], summary["min"], summary["max"]) == (
+            part.size,
+            np.sum(part),
+            np.min(part),
+            np.max(part),
+        )
+        sketch = summary["sketch"]
+        assert sketch.zeros == expected.zeros
+        for mine, theirs in ((sketch.positive, expected.positive), (sketch.negative, expected.negative)):
+            assert mine.offset == theirs.offset and np.array_equal(mine.counts, theirs.counts)
+    kept = rng.random(values.size) > 0.3
+    summaries = block_summaries({"a": values, "b": values * 2.0, "none": values}, kept)
+    assert summaries["b"]["count"] == np.count_nonzero(kept) and summaries["b"]["max"] == 2.0 * values[kept].max()
+    assert block_summaries({"a": values}, np.zeros(values.size, dtype=bool)) == {}
+
+
+def test_a_cgns_file_in_blocks_gives_the_node_arrays_report(tmp_path, semicylinder):
+    """The file path (nodes by component in the file's order, buffers reused) against the node
+    array's block-wise report: counts, extremes and percentiles equal, means to rounding."""
+    from meshgen.formats import write_mesh
+
+    rng = np.random.default_rng(4)
+    X = tfi(semicylinder, (9, 8, 7))
+    X = X + rng.normal(0.0, 0.3 / 9, X.shape)
+    X[1, 1] = X[1, 2]  # degenerate cells
+    write_mesh(tmp_path / "m.cgns", X)
+    from_array = chunked_report(X, semicylinder, block_nodes=60)
+    for block_nodes in (60, None):
+        from_file = chunked_report(str(tmp_path / "m.cgns"), semicylinder, block_nodes=block_nodes)
+        assert from_file["cells"] == from_array["cells"] and from_file["inverted"] == from_array["inverted"]
+        assert from_array["inverted"]["degenerate"] > 0 and from_array["inverted"]["count"] > from_array["inverted"]["degenerate"]
+        for name in METRICS:
+            a, b = from_array["metrics"][name], from_file["metrics"][name]
+            assert [b[k] for k in ("min", "max", "p01", "p99")] == [a[k] for k in ("min", "max", "p01", "p99")], name
+            assert b["mean"] == pytest.approx(a["mean"], rel=1e-12, abs=1e-14), name
+        for key in ("max", "mean", "nodes"):
+            assert from_file["boundary_deviation"][key] == pytest.approx(from_array["boundary_deviation"][key], rel=1e-12)
+
+
 def soft_model(rng):
     """A random soft-boundary network (no training needed: the correction's arithmetic is tested)."""
     import torch

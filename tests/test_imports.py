@@ -93,7 +93,10 @@ LAYERS = [
     ],
     [
         "meshgen.quality.kernels",
+        "meshgen.quality.pool",
+        "meshgen.quality.angles",
         "meshgen.quality.compiled",
+        "meshgen.quality.compiled_quad",
         "meshgen.quality.numpy_kernels",
         "meshgen.quality.structured",
         "meshgen.quality.faces",
@@ -104,6 +107,7 @@ LAYERS = [
         "meshgen.quality.report",
         "meshgen.quality.text",
         "meshgen.quality.sketch",
+        "meshgen.quality.summary",
     ],
     ["meshgen.formats"],
     ["meshgen.quality", "meshgen.correction"],

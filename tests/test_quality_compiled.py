@@ -93,3 +93,46 @@ def test_small_meshes_take_the_numpy_kernels_without_loading_numba(tmp_path):
     assert done.stdout.strip() == "False"
     compiled, _, _ = structured_metrics(X, kernels="compiled")
     np.testing.assert_allclose(np.load(tmp_path / "m.npy"), np.stack([compiled[k] for k in METRICS]), rtol=0, atol=1e-12)
+
+
+def test_the_file_order_kernel_gives_each_cell_the_c_order_kernels_values(tmp_path):
+    """Nodes by component in a CGNS file's order (what ``read_node_components`` returns): every
+    cell gets ``structured_hex``'s values to the bit, whole mesh and a block of cells, with
+    degenerate, non-finite and inverted cells; only the order of cells differs (i fastest)."""
+    from meshgen.formats import read_node_components, write_mesh
+    from meshgen.quality import compiled
+
+    dims = (9, 8, 7)
+    X = distorted(dims, 0.4, seed=4)
+    X[1, 1] = X[1, 2]
+    X[2, 0] = np.nan
+    X[-2, 2] = X[-3, 2] + (X[-3, 2] - X[-2, 2])
+    write_mesh(tmp_path / "m.cgns", X)
+    F = read_node_components(tmp_path / "m.cgns", tuple(slice(0, n + 1) for n in dims))
+    assert np.array_equal(F, np.moveaxis(X, -1, 0).transpose(0, 3, 2, 1), equal_nan=True)
+    for first, last in (((0, 0, 0), dims), ((1, 2, 1), (8, 7, 5))):
+        shape = tuple(b - a for a, b in zip(first, last))
+        cells = int(np.prod(shape))
+        expected, expected_degenerate = np.empty((7, cells)), np.empty(cells, dtype=bool)
+        values, degenerate = np.empty((7, cells)), np.empty(cells, dtype=bool)
+        with np.errstate(invalid="ignore"):
+            compiled.structured_hex(X, first, last, 1e-9, expected, expected_degenerate)
+            compiled.structured_hex_file_order(F, first, last, 1e-9, values, degenerate)
+        in_c_order = values.reshape((7,) + shape[::-1]).transpose(0, 3, 2, 1).reshape(7, -1)
+        assert np.array_equal(in_c_order, expected, equal_nan=True)
+        assert np.array_equal(degenerate.reshape(shape[::-1]).T.reshape(-1), expected_degenerate)
+        if cells == int(np.prod(dims)):
+            assert expected_degenerate.any() and np.isnan(expected).any() and (expected[6] < 0).any()
+
+
+def test_the_thread_pool_keeps_order_and_runs_nested_calls_in_its_own_thread():
+    import threading
+
+    from meshgen.quality.pool import map_in_threads
+
+    def inner(x):
+        return [(x * y, threading.current_thread().name) for y in range(3)]
+
+    results = map_in_threads(inner, range(5))
+    assert [[v for v, _ in row] for row in results] == [[x * y for y in range(3)] for x in range(5)]
+    assert all(len({name for _, name in row}) == 1 for row in results)  # a pool task's calls stay in its thread

@@ -56,6 +56,7 @@ __all__ = [
     "read_header",
     "read_mesh",
     "read_node_block",
+    "read_node_components",
     "read_patches",
     "register_format",
     "streaming_writer",
@@ -245,6 +246,13 @@ def read_node_block(path, block) -> np.ndarray:
     """The nodes ``block`` (one slice per index axis) of a structured mesh file that can be read
     block by block (CGNS): an array of the block's shape + (dim,), C order, float64."""
     return block_reader(path).read_node_block(path, block)
+
+
+def read_node_components(path, block, out=None) -> np.ndarray:
+    """The nodes ``block`` of a structured mesh file that can be read block by block (CGNS), by
+    component in the file's order (``_cgns.read_node_components``): (dim, block shape reversed),
+    float64, read into ``out`` when it has that shape."""
+    return block_reader(path).read_node_components(path, block, out)
 
 
 def check_patches(patches, dim: int, path=None, format_name: str | None = None):

@@ -73,6 +73,7 @@ __all__ = [
     "check_patch_name",
     "read",
     "read_node_block",
+    "read_node_components",
     "read_patches",
     "stream",
     "write",
@@ -423,6 +424,25 @@ def read_node_block(path, block) -> np.ndarray:
         for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
             X[..., axis] = array[hyperslab].T
     return X
+
+
+def read_node_components(path, block, out=None) -> np.ndarray:
+    """The nodes ``block`` (one slice per index axis) of the first zone's coordinates by component
+    in the file's order, read without a transpose: an array (dim, block shape reversed), float64,
+    coordinate d of node (i, j[, k]) at [d, (k,) j, i]. One hyperslab read per coordinate, into
+    ``out`` when it is a C-contiguous float64 array of that shape (a buffer reused from block to
+    block), else into a new array."""
+    import h5py
+
+    shape = (len(block),) + tuple(s.stop - s.start for s in block[::-1])
+    if out is None or out.shape != shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+        out = np.empty(shape)
+    with h5py.File(path, "r") as root:
+        _, zone, _ = _structured_zone(root, path)
+        hyperslab = tuple(block[::-1])
+        for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
+            array.read_direct(out[axis], source_sel=hyperslab)
+    return out
 
 
 def _structured_zone(root, path):

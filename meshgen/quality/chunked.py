@@ -15,22 +15,27 @@ Merging is exact for the counts, min and max, exact up to the order of floating-
 the means, and within the sketch's relative accuracy (1e-4) for the percentiles p01 and p99. The
 boundary deviation is measured on each block's boundary nodes as its summary arrives (the mean of
 the distances up to the order of addition). Memory is a few blocks per worker.
+
+A 3D CGNS file on the local threads is read by component in the file's own order (i fastest) into
+buffers that the blocks reuse, and evaluated in that order (``structured_hex_file_order``: each
+cell's values are the same; design notes §21).
 """
 
 from __future__ import annotations
 
 import os
+import queue
 
 import numpy as np
 
 from meshgen.deviation import deviation_figures, distance_to_boundary
 from meshgen.errors import MeshgenError
-from meshgen.formats import read_header, read_node_block
+from meshgen.formats import read_header, read_node_block, read_node_components
 from meshgen.grid import block_slices
 from meshgen.quality import sketch as sketches
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
 from meshgen.quality.report import assemble_report
-from meshgen.quality.structured import structured_metrics
+from meshgen.quality.structured import apply_degenerate, structured_metrics
 from meshgen.resources import available_memory, blocks_in_flight, check_block_nodes
 from meshgen.scheduler import compute_in_order_of_completion
 
@@ -91,33 +96,21 @@ def _extent_of_block(nodes, block, read_block, node_shape):
     return low, high, int(nonfinite), area
 
 
-def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientation):
-    """Pass 2 of one block: the summaries of its owned cells (those whose first node is in
-    ``block``) and its owned boundary nodes with their parametric positions."""
+def _summary_of_cells(values: dict, degenerate: np.ndarray) -> dict:
+    """A block's counts and per-metric summaries of its cells' ``values`` (name -> (m,)) and
+    ``degenerate`` mask (m,); degenerate cells are counted, not summarised."""
+    from meshgen.quality.summary import block_summaries  # numba: only where blocks are evaluated
 
+    summary = {"cells": int(degenerate.size), "degenerate": int(np.count_nonzero(degenerate))}
+    summary["inverted"] = int(np.count_nonzero(degenerate | ~(values["scaled_jacobian"] > 0.0)))
+    summary["metrics"] = block_summaries({name: values[name] for name in METRICS}, ~degenerate if summary["degenerate"] else None)
+    return summary
+
+
+def _owned_boundary(block, node_shape) -> tuple:
+    """Index arrays (one per axis, relative to ``block``) of the mesh's boundary nodes in ``block``,
+    each node once, as ``meshgen.deviation.grid_boundary_nodes``."""
     dim = len(node_shape)
-    owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
-    summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
-    if all(s.stop > s.start for s in owned_cells):
-        mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
-        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            values, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
-        shaped = ~degenerate
-        summary["cells"] = int(degenerate.size)
-        summary["degenerate"] = int(np.count_nonzero(degenerate))
-        summary["inverted"] = int(np.count_nonzero(degenerate | ~(values["scaled_jacobian"] > 0.0)))
-        for name in METRICS:
-            kept = values[name][shaped] if summary["degenerate"] else values[name]
-            if kept.size:
-                summary["metrics"][name] = {
-                    "count": int(kept.size),
-                    "sum": float(np.sum(kept)),
-                    "min": float(np.min(kept)),
-                    "max": float(np.max(kept)),
-                    "sketch": sketches.sketch_of(kept),
-                }
-    # Boundary nodes owned by this block (each node once), as meshgen.deviation.grid_boundary_nodes.
-    owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
     on_boundary = np.zeros(tuple(s.stop - s.start for s in block), dtype=bool)
     for axis in range(dim):
         for end in (0, node_shape[axis] - 1):
@@ -126,10 +119,92 @@ def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientati
                 index = [slice(None)] * dim
                 index[axis] = position
                 on_boundary[tuple(index)] = True
-    local = np.nonzero(on_boundary)
-    points = nodes[owned][local]
-    positions = np.stack([(i + s.start) / (n - 1) for i, s, n in zip(local, block, node_shape)], axis=1)
-    summary["boundary"] = (points, positions)
+    return np.nonzero(on_boundary)
+
+
+def _positions(local, block, node_shape) -> np.ndarray:
+    """Parametric positions (m, dim) of the nodes ``local`` (index arrays relative to ``block``)."""
+    return np.stack([(i + s.start) / (n - 1) for i, s, n in zip(local, block, node_shape)], axis=1)
+
+
+def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientation):
+    """Pass 2 of one block: the summaries of its owned cells (those whose first node is in
+    ``block``) and its owned boundary nodes with their parametric positions."""
+    owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
+    summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
+    if all(s.stop > s.start for s in owned_cells):
+        mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            values, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
+        summary = _summary_of_cells(values, degenerate)
+    owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
+    local = _owned_boundary(block, node_shape)
+    summary["boundary"] = (nodes[owned][local], _positions(local, block, node_shape))
+    return summary
+
+
+# --- 3D CGNS files on the local threads: nodes by component, in the file's order -------------
+
+
+def _reused(buffers: dict, name: str, shape, dtype=float) -> np.ndarray:
+    """A C-contiguous array of ``shape`` on the buffer ``name`` of ``buffers``, grown when too small."""
+    size = int(np.prod(shape))
+    flat = buffers.get(name)
+    if flat is None or flat.size < size or flat.dtype != dtype:
+        buffers[name] = flat = np.empty(size, dtype=dtype)
+    return flat[:size].reshape(shape)
+
+
+def _file_block(path, block, spare: queue.SimpleQueue):
+    """(buffers, nodes) of ``block`` of the CGNS file ``path``: a set of buffers taken from
+    ``spare`` (the caller gives it back), nodes by component in the file's order read into one."""
+    try:
+        buffers = spare.get_nowait()
+    except queue.Empty:
+        buffers = {}
+    shape = (len(block),) + tuple(s.stop - s.start for s in block[::-1])
+    return buffers, read_node_components(path, block, _reused(buffers, "nodes", shape))
+
+
+def _file_extent_of_block(path, block, spare):
+    """``_extent_of_block`` of a 3D file's block, read by component (the block alone: no overlap)."""
+    from meshgen.quality.compiled import finite_extent
+
+    buffers, nodes = _file_block(path, block, spare)
+    try:
+        block_low, block_high, nonfinite = finite_extent(nodes.reshape(len(block), -1).T)
+    finally:
+        spare.put(buffers)
+    return [float(v) for v in block_low], [float(v) for v in block_high], int(nonfinite), 0.0
+
+
+def _file_quality_of_block(path, block, read_block, node_shape, tolerance, spare):
+    """``_quality_of_block`` of a 3D file's block: the nodes by component in the file's order
+    (``read_node_components``: no transpose), the metrics in that order
+    (``structured_hex_file_order``: the same values), buffers reused from block to block."""
+    from meshgen.quality.compiled import structured_hex_file_order
+
+    owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
+    summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
+    buffers, nodes = _file_block(path, read_block, spare)
+    try:
+        if all(s.stop > s.start for s in owned_cells):
+            first = tuple(s.start - r.start for s, r in zip(owned_cells, read_block))
+            last = tuple(s.stop - r.start for s, r in zip(owned_cells, read_block))
+            cells = int(np.prod([b - a for a, b in zip(first, last)]))
+            out = _reused(buffers, "metrics", (len(METRICS), cells))
+            degenerate = _reused(buffers, "degenerate", (cells,), bool)
+            with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                structured_hex_file_order(nodes, first, last, float(tolerance), out, degenerate)
+                values = dict(zip(METRICS, out))
+                apply_degenerate(values, degenerate)
+            summary = _summary_of_cells(values, degenerate)
+        local = _owned_boundary(block, node_shape)
+        offset = [s.start - r.start for s, r in zip(block, read_block)]
+        points = np.ascontiguousarray(nodes[(slice(None),) + tuple(i + o for i, o in zip(local[::-1], offset[::-1]))].T)
+        summary["boundary"] = (points, _positions(local, block, node_shape))
+    finally:
+        spare.put(buffers)
     return summary
 
 
@@ -169,8 +244,15 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     total = 2 * len(blocks)
     done = 0
 
+    # A 3D file on the local threads: each task reads its block by component into buffers that
+    # the next task reuses (``spare``), and the kernels take the file's order as it is.
+    by_component = client is None and dim == 3 and isinstance(source, (str, os.PathLike))
+    spare = queue.SimpleQueue()
     extent_tasks = []
     for block in blocks:
+        if by_component:
+            extent_tasks.append(dask.delayed(_file_extent_of_block, pure=False)(str(source), block, spare))
+            continue
         read_block = _grown(block, node_shape, 0, 1)
         extent_tasks.append(dask.delayed(_extent_of_block, pure=False)(read(read_block), block, read_block, node_shape))
     low, high = [np.inf] * dim, [-np.inf] * dim
@@ -191,6 +273,10 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     quality_tasks = []
     for block in blocks:
         read_block = _grown(block, node_shape, 1, 2)
+        if by_component:
+            quality = dask.delayed(_file_quality_of_block, pure=False)
+            quality_tasks.append(quality(str(source), block, read_block, node_shape, tolerance, spare))
+            continue
         quality_tasks.append(
             dask.delayed(_quality_of_block, pure=False)(read(read_block), block, read_block, node_shape, tolerance, orientation)
         )

@@ -1,20 +1,26 @@
-"""The per-cell metrics (definitions in ``meshgen.quality.kernels``) as compiled numba kernels.
+"""The per-cell metrics of hexahedra (definitions in ``meshgen.quality.kernels``) as compiled numba
+kernels (quadrilaterals: ``meshgen.quality.compiled_quad``).
 
-One function per cell kind (``_hex_cell``, ``_quad_cell``) holds the arithmetic; four
-drivers feed it corner coordinates and the centroids of the face neighbours, in parallel over
-cells (``prange``): structured node arrays (``structured_hex``, ``structured_quad``; neighbours
-are the cells at index +-1) and points + connectivity (``unstructured_hex``, ``unstructured_quad``;
-neighbours from face matching). Centroids come first in a pass of their own, summed in the VTK
-corner order. The arithmetic follows the vectorised NumPy definition operation by operation, in
-IEEE double precision (``fastmath=False``), so the kernels agree with it to round-off of the
-library ``acos`` (tested to 1e-12).
+One function (``_hex_cell``) holds a cell's arithmetic; drivers feed it corner coordinates and
+the centroids of the face neighbours, in parallel: structured node arrays in C order
+(``structured_hex``), nodes by component in a CGNS file's order (``structured_hex_file_order``,
+the block-wise evaluation of a file; no transpose), and points + connectivity
+(``unstructured_hex``; neighbours from face matching). Centroids are summed in the VTK corner
+order. The arithmetic follows the vectorised NumPy definition operation by operation, in IEEE
+double precision (``fastmath=False``), and the angles come from the cosines through NumPy's own
+``arccos`` (``meshgen.quality.angles``), so the kernels agree with the NumPy definition to
+round-off (tested to 1e-12).
 
-The structured hexahedra run as loops over rows of cells along k that LLVM vectorises (AVX-512:
-8 cells per instruction; ``_hex_row``), the ``acos`` of the angles in a scalar pass after each row.
+The structured drivers hand runs of consecutive planes of cells to threads; each run keeps rings
+of three planes (node planes by component, centroid planes with a NaN layer), so each plane of
+centroids is summed once, and loops over rows of cells that LLVM vectorises (AVX-512: 8 cells per
+instruction; ``_hex_row``, ``_file_hex_row``).
 
-A cell is written as corners ``P[q]``, q = s0 + 2 s1 (+ 4 s2) for the corner at offsets
-(s0, s1[, s2]) from the cell's first node. Compiled code is cached on disk (``cache=True``): the
-first call in a fresh installation compiles for some seconds, later processes load it.
+A cell is written as corners ``P[q]``, q = s0 + 2 s1 + 4 s2 for the corner at offsets
+(s0, s1, s2) from the cell's first node. Compiled code is cached on disk (``cache=True``): the
+first call in a fresh installation compiles for some seconds, later processes load it. numba's
+cache notices changes to a function's own file only, so the functions that call one another stay
+in this file.
 """
 
 from __future__ import annotations
@@ -27,17 +33,18 @@ import numba
 import numpy as np
 from numba import njit, prange, uint64
 
+from meshgen.quality.angles import finish_hex_angles
+from meshgen.quality.pool import map_in_threads, threads
+
 # Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
 # on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["finite_extent", "structured_hex", "structured_quad", "unstructured_hex", "unstructured_quad"]
+__all__ = ["finite_extent", "for_runs_of_planes", "structured_hex", "structured_hex_file_order", "unstructured_hex"]
 
-_DEGREES = 180.0 / math.pi
-# VTK corner order of a hexahedron / quad, as corner q (centroids are summed in this order).
+# VTK corner order of a hexahedron, as corner q (centroids are summed in this order).
 HEX_Q_OF_VTK = np.array([0, 1, 3, 2, 4, 5, 7, 6])
-QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
 
 # The row loop over cells (``_hex_row``) reads 2 arrays and writes 8 rows: LLVM checks at run time
 # that they do not overlap, more checks than its default limits (8 and 128) allow, without which
@@ -46,12 +53,12 @@ QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
 llvm.set_option("", "-runtime-memory-check-threshold=1024")
 llvm.set_option("", "-vectorize-memory-check-threshold=1024")
 
+# Planes of cells are handed to threads in runs of consecutive planes, this many runs per thread
+# (each run computes two planes of centroids beyond its own, so few runs; more than one, so that a
+# thread the OS delays holds up less).
+PLANE_RUNS_PER_THREAD = 4
+
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
-
-
-@njit(inline="always", **_JIT)
-def _degrees_of_cosine(cosine):
-    return math.acos(min(max(cosine, -1.0), 1.0)) * _DEGREES
 
 
 @njit(inline="always", **_JIT)
@@ -71,13 +78,6 @@ def _unit3(x, y, z):
     length = math.sqrt(x * x + y * y + z * z)
     inverse = 1.0 / (length if length > 0.0 else 1.0)
     return x * inverse, y * inverse, z * inverse, length
-
-
-@njit(inline="always", **_JIT)
-def _unit2(x, y):
-    length = math.sqrt(x * x + y * y)
-    inverse = 1.0 / (length if length > 0.0 else 1.0)
-    return x * inverse, y * inverse, length
 
 
 @njit(inline="always", **_JIT)
@@ -209,88 +209,6 @@ def _hex_cell(P, G, N, tolerance):
     )
 
 
-@njit(inline="always", **_JIT)
-def _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment,
-            scaled_jacobian, out, c):  # fmt: skip
-    min_angle = _degrees_of_cosine(largest_cosine)
-    max_angle = 360.0 - _degrees_of_cosine(reflex_cosine) if any_reflex else _degrees_of_cosine(smallest_cosine)
-    out[0, c] = min_angle
-    out[1, c] = max_angle
-    out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
-    out[3, c] = aspect_ratio
-    out[4, c] = 1.0 - centroid_alignment
-    out[5, c] = _degrees_of_cosine(face_alignment)
-    out[6, c] = scaled_jacobian
-
-
-@njit(**_JIT)
-def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
-    """Metrics of one quadrilateral (see ``_hex_cell``); ``P`` (4, 2), ``N`` (4, 2); ``S`` (4, 2, 2)
-    scratch; ``orientation`` +1 or -1, the sign of the mesh's total area."""
-    # unit edges (ux, uy)[axis, t]: axis 0 from (0,t) to (1,t), axis 1 from (t,0) to (t,1)
-    ux, uy, principal, mean = S[0], S[1], S[2], S[3, 0]
-    short = False
-    for axis in range(2):
-        step = 1 << axis
-        sx = sy = total = 0.0
-        for t in range(2):
-            low = t << (1 - axis)
-            ex, ey = P[low + step, 0] - P[low, 0], P[low + step, 1] - P[low, 1]
-            x, y, length = _unit2(ex, ey)
-            ux[axis, t], uy[axis, t] = x, y
-            if _short(length, tolerance):
-                short = True
-            if t == 0:
-                sx, sy, total = ex, ey, length
-            else:
-                sx, sy, total = sx + ex, sy + ey, total + length
-        mean[axis] = total * 0.5
-        px, py, _ = _unit2(sx, sy)
-        principal[axis, 0], principal[axis, 1] = px, py
-    degenerate[c] = short
-    longest, shortest = max(mean[0], mean[1]), min(mean[0], mean[1])
-    aspect_ratio = longest / shortest if shortest > 0.0 else np.inf
-
-    def dot(t0, t1):
-        return ux[0, t0] * ux[1, t1] + uy[0, t0] * uy[1, t1]
-
-    def cross(t0, t1):
-        return ux[0, t0] * uy[1, t1] - uy[0, t0] * ux[1, t1]
-
-    c0, c1, c2, c3 = dot(0, 0), -dot(0, 1), dot(1, 1), -dot(1, 0)
-    a0, a1, a2, a3 = cross(0, 0), cross(0, 1), cross(1, 1), cross(1, 0)
-    largest_cosine = max(max(c0, c1), max(c2, c3))
-    smallest_cosine = min(min(c0, c1), min(c2, c3))
-    smallest_area = _nanmin(_nanmin(a0, a1), _nanmin(a2, a3))
-    largest_area = -_nanmin(_nanmin(-a0, -a1), _nanmin(-a2, -a3))
-    d1x, d1y = P[3, 0] - P[0, 0], P[3, 1] - P[0, 1]
-    d2x, d2y = P[2, 0] - P[1, 0], P[2, 1] - P[1, 1]
-    centre_area = d1x * d2y - d1y * d2x
-    reflex = smallest_area < 0.0 if centre_area >= 0.0 else largest_area > 0.0
-    scaled_jacobian = smallest_area if orientation > 0 else -largest_area
-
-    centroid_alignment = face_alignment = 0.0
-    for face in range(4):
-        axis, side = face >> 1, face & 1
-        other = 1 - axis
-        ax, ay = ux[other, side], uy[other, side]  # the face is the edge across the normal axis
-        px, py = principal[axis, 0], principal[axis, 1]
-        centroid_cosine = abs(ax * py - ay * px)
-        dx, dy = N[face, 0] - G[0], N[face, 1] - G[1]
-        if not math.isfinite(dx + dy):
-            dx, dy = px, py
-        tx, ty, _ = _unit2(dx, dy)
-        face_cosine = abs(ax * ty - ay * tx)
-        if face == 0:
-            centroid_alignment, face_alignment = centroid_cosine, face_cosine
-        else:
-            centroid_alignment = min(centroid_alignment, centroid_cosine)
-            face_alignment = min(face_alignment, face_cosine)
-    reflex_cosine = smallest_cosine if reflex else -2.0
-    _finish(largest_cosine, smallest_cosine, reflex_cosine, reflex, aspect_ratio, centroid_alignment, face_alignment,
-            scaled_jacobian, out, c)  # fmt: skip
-
-
 # ---------------------------------------------------------------------------------------------
 # drivers
 
@@ -301,45 +219,50 @@ def _node(X, i, j, k):
 
 
 @njit(**_JIT)
-def _hex_row(X, centroid, i, j, k0, k1, tolerance, out, degenerate, c0):
-    """Cells (i, j, k0 <= k < k1) into ``out[:, c0 + k - k0]`` as ``_store_hex`` leaves them.
+def _hex_row(nodes, centroid, a0, a1, cp, cc, cn, j, k0, k1, tolerance, out, degenerate, c0):
+    """Cells (i, j, k0 <= k < k1) of one plane of cells i into ``out[:, c0 + k - k0]`` as
+    ``_store_hex`` leaves them.
 
-    ``X`` (3, ni, n2+1, n3+1) node coordinates by component; ``centroid`` (3, ni+1, n2+2, n3+2)
-    the centroids of the cells with a layer of NaN around them (cell (i, j, k) at [:, i+1, j+1,
-    k+1]), so that a missing face neighbour is NaN without a branch (``_slab`` makes both). Unsigned indices and unit strides along k let
-    LLVM vectorise this loop over cells: numba wraps negative signed indices, and a runtime stride
-    makes LLVM version the loop on it being 1."""
-    i, j, c0 = uint64(i), uint64(j), uint64(c0)
+    ``nodes`` (3, 3, n2+1, n3+1) a ring of node planes by component, planes i and i+1 at slots
+    ``a0``, ``a1``; ``centroid`` (3, 3, n2+2, n3+2) a ring of cell centroid planes with a layer of
+    NaN around them, the cells i-1, i, i+1 at slots ``cp``, ``cc``, ``cn`` (cell (i, j, k) at
+    [:, cc, j+1, k+1]), so that a missing face neighbour is NaN without a branch (``_node_plane``,
+    ``_centroid_plane`` fill them). Unsigned indices and unit strides along k let LLVM vectorise
+    this loop over cells: numba wraps negative signed indices, and a runtime stride makes LLVM
+    version the loop on it being 1."""
+    a0, a1, cp, cc, cn = uint64(a0), uint64(a1), uint64(cp), uint64(cc), uint64(cn)
+    j, c0 = uint64(j), uint64(c0)
     one = uint64(1)
-    i1, j1, two = i + one, j + one, one + one
+    j1, two = j + one, one + one
     for kk in range(uint64(k1 - k0)):
         k = kk + uint64(k0)
         P = (
-            _node(X, i, j, k),
-            _node(X, i1, j, k),
-            _node(X, i, j1, k),
-            _node(X, i1, j1, k),
-            _node(X, i, j, k + one),
-            _node(X, i1, j, k + one),
-            _node(X, i, j1, k + one),
-            _node(X, i1, j1, k + one),
+            _node(nodes, a0, j, k),
+            _node(nodes, a1, j, k),
+            _node(nodes, a0, j1, k),
+            _node(nodes, a1, j1, k),
+            _node(nodes, a0, j, k + one),
+            _node(nodes, a1, j, k + one),
+            _node(nodes, a0, j1, k + one),
+            _node(nodes, a1, j1, k + one),
         )
-        kc = k + uint64(1)
-        G = _node(centroid, i1, j1, kc)
+        kc = k + one
+        G = _node(centroid, cc, j1, kc)
         N = (
-            _node(centroid, i, j1, kc),
-            _node(centroid, i + two, j1, kc),
-            _node(centroid, i1, j, kc),
-            _node(centroid, i1, j + two, kc),
-            _node(centroid, i1, j1, k),
-            _node(centroid, i1, j1, kc + uint64(1)),
+            _node(centroid, cp, j1, kc),
+            _node(centroid, cn, j1, kc),
+            _node(centroid, cc, j, kc),
+            _node(centroid, cc, j + two, kc),
+            _node(centroid, cc, j1, k),
+            _node(centroid, cc, j1, kc + one),
         )
         _store_hex(_hex_cell(P, G, N, tolerance), out, degenerate, c0 + kk)
 
 
 @njit(inline="always", **_JIT)
 def _store_hex(r, out, degenerate, c):
-    """``_hex_cell``'s cosines and metrics into ``out[:, c]``; ``_angles`` turns the cosines into angles."""
+    """``_hex_cell``'s cosines and metrics into ``out[:, c]``; ``finish_hex_angles`` turns the
+    cosines into angles."""
     out[0, c] = r[0]
     out[1, c] = r[1]
     out[2, c] = 1.0 if r[2] else 0.0
@@ -351,100 +274,168 @@ def _store_hex(r, out, degenerate, c):
 
 
 @njit(**_JIT)
-def _angles(out, first, last):
-    """Angles of cells ``first <= c < last`` from the cosines ``_store_hex`` left in ``out``: row 0
-    the largest corner cosine, row 1 the max-angle cosine, row 2 whether it is a reflex corner's,
-    row 5 the face-alignment cosine."""
-    for c in range(first, last):
-        min_angle = _degrees_of_cosine(out[0, c])
-        max_angle = 360.0 - _degrees_of_cosine(out[1, c]) if out[2, c] != 0.0 else _degrees_of_cosine(out[1, c])
-        out[0, c] = min_angle
-        out[1, c] = max_angle
-        out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
-        out[5, c] = _degrees_of_cosine(out[5, c])
-
-
-@njit(parallel=True, **_JIT)
-def structured_hex(X, first, last, tolerance, out, degenerate):
-    """Metrics of the cells first[d] <= index < last[d] of node array ``X`` (n1+1, n2+1, n3+1, 3)
-    (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
-    number of those cells, in C order. Rows of cells along k, each a vectorised loop (``_hex_row``),
-    then a scalar pass for the ``acos`` of the row (no vector ``acos`` in LLVM without a vector
-    math library)."""
-    n2, n3 = X.shape[1] - 1, X.shape[2] - 1
-    m2, m3 = last[1] - first[1], last[2] - first[2]
-    for i in prange(first[0], last[0]):
-        nodes = np.empty((3, 2, n2 + 1, n3 + 1))
-        centroid = np.empty((3, 3, n2 + 2, n3 + 2))
-        _slab(X, i, nodes, centroid)
-        for j in range(first[1], last[1]):
-            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
-            _hex_row(nodes, centroid, 0, j, first[2], last[2], tolerance, out, degenerate, c0)
-            _angles(out, c0, c0 + m3)
+def _node_plane(X, i, nodes, slot):
+    """Node plane i of ``X`` (n1+1, n2+1, n3+1, 3) into ``nodes[:, slot]`` (by component)."""
+    for j in range(X.shape[1]):
+        for k in range(X.shape[2]):
+            for d in range(3):
+                nodes[d, slot, j, k] = X[i, j, k, d]
 
 
 @njit(**_JIT)
-def _slab(X, i, nodes, centroid):
-    """What the cells (i, :, :) of node array ``X`` (n1+1, n2+1, n3+1, 3) need, for ``_hex_row``:
-    ``nodes`` (3, 2, n2+1, n3+1) the node planes i and i+1 by component; ``centroid`` (3, 3, n2+2,
-    n3+2) the centroids of the cells i-1, i, i+1 (summed in VTK corner order) with a layer of NaN
-    around them, NaN where there is no such cell. Per plane of cells, so that the extra memory is a
-    few planes per thread, not a copy of the mesh."""
+def _centroid_plane(nodes, a0, a1, present, centroid, slot):
+    """Centroids of a plane of cells into the interior of ``centroid[:, slot]`` (its NaN layer
+    kept), from its node planes at slots ``a0``, ``a1`` of ``nodes``, summed in VTK corner order;
+    NaN where the plane is not ``present`` (beyond the mesh)."""
+    n2, n3 = nodes.shape[2] - 1, nodes.shape[3] - 1
+    a0, a1, slot = uint64(a0), uint64(a1), uint64(slot)
+    one = uint64(1)
+    for d in range(3):
+        for j in range(uint64(n2)):
+            for k in range(uint64(n3)):
+                s = nodes[d, a0, j, k]
+                s = s + nodes[d, a1, j, k]
+                s = s + nodes[d, a1, j + one, k]
+                s = s + nodes[d, a0, j + one, k]
+                s = s + nodes[d, a0, j, k + one]
+                s = s + nodes[d, a1, j, k + one]
+                s = s + nodes[d, a1, j + one, k + one]
+                s = s + nodes[d, a0, j + one, k + one]
+                centroid[d, slot, j + one, k + one] = s * 0.125 if present else np.nan
+
+
+@njit(**_JIT)
+def _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate):
+    """Cells of the planes i0 <= i < i1 of ``structured_hex``, in order, each node plane copied
+    by component and each centroid plane summed once (rings of three planes: the cells i-1, i, i+1
+    and the node planes i, i+1, i+2)."""
     n1, n2, n3 = X.shape[0] - 1, X.shape[1] - 1, X.shape[2] - 1
-    for a in range(2):
-        for j in range(n2 + 1):
-            for k in range(n3 + 1):
-                for d in range(3):
-                    nodes[d, a, j, k] = X[i + a, j, k, d]
-    centroid[:] = np.nan
-    for a in range(3):
-        ii = i - 1 + a
-        if ii < 0 or ii >= n1:
-            continue
-        for j in range(n2):
-            for k in range(n3):
-                for d in range(3):
-                    s = X[ii, j, k, d]
-                    s = s + X[ii + 1, j, k, d]
-                    s = s + X[ii + 1, j + 1, k, d]
-                    s = s + X[ii, j + 1, k, d]
-                    s = s + X[ii, j, k + 1, d]
-                    s = s + X[ii + 1, j, k + 1, d]
-                    s = s + X[ii + 1, j + 1, k + 1, d]
-                    s = s + X[ii, j + 1, k + 1, d]
-                    centroid[d, a, j + 1, k + 1] = s * 0.125
-
-
-@njit(parallel=True, **_JIT)
-def structured_quad(X, first, last, tolerance, orientation, out, degenerate):
-    """``structured_hex`` for a 2D node array (n1+1, n2+1, 2)."""
-    n1, n2 = X.shape[0] - 1, X.shape[1] - 1
-    centroid = np.empty((n1, n2, 2))
-    for i in prange(n1):
-        for j in range(n2):
-            for d in range(2):
-                s = X[i, j, d]
-                s = s + X[i + 1, j, d]
-                s = s + X[i + 1, j + 1, d]
-                s = s + X[i, j + 1, d]
-                centroid[i, j, d] = s * 0.25
-    m2 = last[1] - first[1]
-    for i in prange(first[0], last[0]):
-        P = np.empty((4, 2))
-        N = np.empty((4, 2))
-        S = np.empty((4, 2, 2))
+    m2, m3 = last[1] - first[1], last[2] - first[2]
+    nodes = np.empty((3, 3, n2 + 1, n3 + 1))
+    centroid = np.full((3, 3, n2 + 2, n3 + 2), np.nan)
+    # node plane p at slot p % 3; cell plane c (c >= -1) at slot (c + 1) % 3
+    if i0 >= 1:
+        _node_plane(X, i0 - 1, nodes, (i0 - 1) % 3)
+    _node_plane(X, i0, nodes, i0 % 3)
+    _centroid_plane(nodes, (i0 - 1) % 3, i0 % 3, i0 >= 1, centroid, i0 % 3)
+    _node_plane(X, i0 + 1, nodes, (i0 + 1) % 3)
+    _centroid_plane(nodes, i0 % 3, (i0 + 1) % 3, True, centroid, (i0 + 1) % 3)
+    for i in range(i0, i1):
+        if i + 2 <= n1:
+            _node_plane(X, i + 2, nodes, (i + 2) % 3)
+        _centroid_plane(nodes, (i + 1) % 3, (i + 2) % 3, i + 1 < n1, centroid, (i + 2) % 3)
         for j in range(first[1], last[1]):
-            for q in range(4):
-                for d in range(2):
-                    P[q, d] = X[i + (q & 1), j + (q >> 1), d]
-            for face in range(4):
-                axis, side = face >> 1, face & 1
-                delta = 1 if side else -1
-                ni, nj = (i + delta, j) if axis == 0 else (i, j + delta)
-                inside = 0 <= ni < n1 and 0 <= nj < n2
-                for d in range(2):
-                    N[face, d] = centroid[ni, nj, d] if inside else np.nan
-            _quad_cell(P, centroid[i, j], N, S, tolerance, orientation, out, degenerate, (i - first[0]) * m2 + (j - first[1]))
+            c0 = ((i - first[0]) * m2 + (j - first[1])) * m3
+            _hex_row(nodes, centroid, i % 3, (i + 1) % 3, i % 3, (i + 1) % 3, (i + 2) % 3, j, first[2], last[2],
+                     tolerance, out, degenerate, c0)  # fmt: skip
+
+
+def for_runs_of_planes(kernel, begin: int, end: int) -> None:
+    """``kernel(p0, p1)`` over runs of consecutive planes covering [begin, end), the runs spread
+    over the CPUs (``meshgen.quality.pool``; the kernels release the GIL). Threads rather than
+    ``prange``: numba compiles a parallel loop around the inlined cell arithmetic in minutes, the
+    serial kernel in seconds."""
+    planes = end - begin
+    runs = max(1, min(planes, PLANE_RUNS_PER_THREAD * threads()))
+    bounds = [begin + planes * r // runs for r in range(runs + 1)]
+    map_in_threads(lambda run: kernel(*run), [(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a])
+
+
+def structured_hex(X, first, last, tolerance, out, degenerate):
+    """Metrics of the cells first[d] <= index < last[d] of node array ``X`` (n1+1, n2+1, n3+1, 3)
+    (the other cells serve as face neighbours) into ``out`` (7, m) and ``degenerate`` (m,), m the
+    number of those cells, in C order. Runs of planes of cells in parallel, rows of cells along k
+    each a vectorised loop (``_hex_row``), then the angles from the cosines (``finish_hex_angles``)."""
+    first, last = tuple(int(v) for v in first), tuple(int(v) for v in last)
+    for_runs_of_planes(lambda i0, i1: _hex_planes(X, i0, i1, first, last, tolerance, out, degenerate), first[0], last[0])
+    finish_hex_angles(out)
+
+
+@njit(**_JIT)
+def _file_centroid_plane(F, k, present, centroid, slot):
+    """Centroids of the plane of cells k of ``F`` (3, n3+1, n2+1, n1+1) (coordinate d of node (i, j, k)
+    at [d, k, j, i]) into the interior of ``centroid[:, slot]`` (cell (i, j) at [:, slot, j+1, i+1]),
+    summed in VTK corner order; NaN where the plane is not ``present`` (beyond the mesh)."""
+    if not present:
+        centroid[:, slot, 1:-1, 1:-1] = np.nan
+        return
+    n2, n1 = F.shape[2] - 1, F.shape[3] - 1
+    k, slot = uint64(k), uint64(slot)
+    one = uint64(1)
+    for d in range(3):
+        for j in range(uint64(n2)):
+            for i in range(uint64(n1)):
+                s = F[d, k, j, i]
+                s = s + F[d, k, j, i + one]
+                s = s + F[d, k, j + one, i + one]
+                s = s + F[d, k, j + one, i]
+                s = s + F[d, k + one, j, i]
+                s = s + F[d, k + one, j, i + one]
+                s = s + F[d, k + one, j + one, i + one]
+                s = s + F[d, k + one, j + one, i]
+                centroid[d, slot, j + one, i + one] = s * 0.125
+
+
+@njit(**_JIT)
+def _file_hex_row(F, centroid, k, cp, cc, cn, j, i0, i1, tolerance, out, degenerate, c0):
+    """``_hex_row`` of the cells (i0 <= i < i1, j, k) of ``F`` (``_file_centroid_plane``): the loop
+    runs along i, unit stride in the file's order; the centroids of the cell planes k-1, k, k+1 at
+    slots ``cp``, ``cc``, ``cn``."""
+    k, cp, cc, cn, j, c0 = uint64(k), uint64(cp), uint64(cc), uint64(cn), uint64(j), uint64(c0)
+    one = uint64(1)
+    k1, j1, two = k + one, j + one, one + one
+    for ii in range(uint64(i1 - i0)):
+        i = ii + uint64(i0)
+        P = (
+            _node(F, k, j, i),
+            _node(F, k, j, i + one),
+            _node(F, k, j1, i),
+            _node(F, k, j1, i + one),
+            _node(F, k1, j, i),
+            _node(F, k1, j, i + one),
+            _node(F, k1, j1, i),
+            _node(F, k1, j1, i + one),
+        )
+        ic = i + one
+        G = _node(centroid, cc, j1, ic)
+        N = (
+            _node(centroid, cc, j1, i),
+            _node(centroid, cc, j1, ic + one),
+            _node(centroid, cc, j, ic),
+            _node(centroid, cc, j + two, ic),
+            _node(centroid, cp, j1, ic),
+            _node(centroid, cn, j1, ic),
+        )
+        _store_hex(_hex_cell(P, G, N, tolerance), out, degenerate, c0 + ii)
+
+
+@njit(**_JIT)
+def _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate):
+    """Cells of the planes k0 <= k < k1 of ``structured_hex_file_order``, in order, each plane of
+    centroids summed once (a ring of three: the cells k-1, k, k+1)."""
+    n3, n2, n1 = F.shape[1] - 1, F.shape[2] - 1, F.shape[3] - 1
+    m1, m2 = last[0] - first[0], last[1] - first[1]
+    centroid = np.full((3, 3, n2 + 2, n1 + 2), np.nan)
+    # cell plane c (c >= -1) at slot (c + 1) % 3
+    _file_centroid_plane(F, k0 - 1, k0 >= 1, centroid, k0 % 3)
+    _file_centroid_plane(F, k0, True, centroid, (k0 + 1) % 3)
+    for k in range(k0, k1):
+        _file_centroid_plane(F, k + 1, k + 1 < n3, centroid, (k + 2) % 3)
+        for j in range(first[1], last[1]):
+            c0 = ((k - first[2]) * m2 + (j - first[1])) * m1
+            _file_hex_row(F, centroid, k, k % 3, (k + 1) % 3, (k + 2) % 3, j, first[0], last[0], tolerance, out,
+                          degenerate, c0)  # fmt: skip
+
+
+def structured_hex_file_order(F, first, last, tolerance, out, degenerate):
+    """``structured_hex`` of nodes by component in a CGNS file's order: ``F`` (3, n3+1, n2+1, n1+1),
+    coordinate d of node (i, j, k) at [d, k, j, i] (what HDF5 reads without a transpose). Cells
+    ``first[d] <= (i, j, k)[d] < last[d]``, written to ``out`` (7, m) and ``degenerate`` (m,) in the
+    file's order (i fastest). Each cell's arithmetic is ``structured_hex``'s, so its values are the
+    same to the bit; only their order differs."""
+    first, last = tuple(int(v) for v in first), tuple(int(v) for v in last)
+    for_runs_of_planes(lambda k0, k1: _file_hex_planes(F, k0, k1, first, last, tolerance, out, degenerate), first[2], last[2])
+    finish_hex_angles(out)
 
 
 @njit(parallel=True, **_JIT)
@@ -487,39 +478,24 @@ def _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, f
              _neighbour_centroid(centroid, neighbour, 2, c), _neighbour_centroid(centroid, neighbour, 3, c),
              _neighbour_centroid(centroid, neighbour, 4, c), _neighbour_centroid(centroid, neighbour, 5, c))  # fmt: skip
         _store_hex(_hex_cell(P, (centroid[c, 0], centroid[c, 1], centroid[c, 2]), N, tolerance), out, degenerate, c)
-    _angles(out, first, last)
+
+
+def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
+    """Metrics of hexahedra ``cells`` (M, 8) (VTK corner order) on ``points`` (N, 3) into ``out``
+    (7, M) and ``degenerate`` (M,); ``neighbour`` (6, M): the cell across each face (row 2 axis +
+    side), -1 for none."""
+    _unstructured_hex_cosines(points, cells, neighbour, tolerance, out, degenerate)
+    finish_hex_angles(out)
 
 
 @njit(parallel=True, **_JIT)
-def unstructured_hex(points, cells, neighbour, tolerance, out, degenerate):
-    """Metrics of hexahedra ``cells`` (M, 8) (VTK corner order) on ``points`` (N, 3); ``neighbour``
-    (6, M): the cell across each face (row 2 axis + side), -1 for none."""
+def _unstructured_hex_cosines(points, cells, neighbour, tolerance, out, degenerate):
+    """``unstructured_hex`` with the angles still as cosines (``_store_hex``)."""
     centroid = _centroids(points, cells)
     n = cells.shape[0]
     chunk = 1024
     for block in prange((n + chunk - 1) // chunk):
         _hex_cells(points, cells, neighbour, centroid, tolerance, out, degenerate, block * chunk, min(n, (block + 1) * chunk))
-
-
-@njit(parallel=True, **_JIT)
-def unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate):
-    """``unstructured_hex`` for quads ``cells`` (M, 4) on ``points`` (N, 2); ``neighbour`` (4, M)."""
-    centroid = _centroids(points, cells)
-    n = cells.shape[0]
-    chunk = 1024
-    for block in prange((n + chunk - 1) // chunk):
-        P = np.empty((4, 2))
-        N = np.empty((4, 2))
-        S = np.empty((4, 2, 2))
-        for c in range(block * chunk, min(n, (block + 1) * chunk)):
-            for k in range(4):
-                for d in range(2):
-                    P[QUAD_Q_OF_VTK[k], d] = points[cells[c, k], d]
-            for face in range(4):
-                other = neighbour[face, c]
-                for d in range(2):
-                    N[face, d] = centroid[other, d] if other >= 0 else np.nan
-            _quad_cell(P, centroid[c], N, S, tolerance, orientation, out, degenerate, c)
 
 
 @njit(parallel=True, **_JIT)

@@ -142,7 +142,7 @@ def unstructured_metrics(points, cells):
     points, cells, dim = _check_cells(points, cells)
     if len(cells) == 0:
         raise MeshgenError("no cells to evaluate")
-    from meshgen.quality import compiled
+    from meshgen.quality import compiled, compiled_quad
 
     used = _used(cells, len(points))
     points = np.ascontiguousarray(points)
@@ -170,7 +170,7 @@ def unstructured_metrics(points, cells):
         d1 = points[cells[:, 2]] - points[cells[:, 0]]
         d2 = points[cells[:, 3]] - points[cells[:, 1]]
         orientation = 1.0 if float(np.nansum(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0])) >= 0.0 else -1.0
-        compiled.unstructured_quad(points, cells, neighbour_cell, float(tolerance), orientation, out, degenerate)
+        compiled_quad.unstructured_quad(points, cells, neighbour_cell, float(tolerance), orientation, out, degenerate)
     metrics = dict(zip(METRICS, out))
     apply_degenerate(metrics, degenerate)
     info = {"dim": dim, "nonfinite_nodes": nonfinite, "nonmanifold_faces": nonmanifold, "boundary_nodes": boundary_nodes}

@@ -103,7 +103,7 @@ def structured_metrics(X, tolerance=None, orientation=None, cells=None, kernels:
             orientation = orientation_2d(X)
         metrics, degenerate = numpy_kernels.numpy_cell_metrics(X, tolerance, orientation)
         return metrics, degenerate, {"nonfinite_nodes": nonfinite}
-    from meshgen.quality import compiled
+    from meshgen.quality import compiled, compiled_quad
 
     if tolerance is None:
         tolerance, nonfinite = degenerate_tolerance(X.reshape(-1, dim), kernels="compiled")
@@ -121,7 +121,7 @@ def structured_metrics(X, tolerance=None, orientation=None, cells=None, kernels:
         else:
             if orientation is None:
                 orientation = orientation_2d(X)
-            compiled.structured_quad(X, first, last, float(tolerance), float(orientation), out, degenerate)
+            compiled_quad.structured_quad(X, first, last, float(tolerance), float(orientation), out, degenerate)
     metrics = dict(zip(METRICS, out))
     apply_degenerate(metrics, degenerate)
     return metrics, degenerate, {"nonfinite_nodes": nonfinite}
