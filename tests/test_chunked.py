@@ -353,3 +353,22 @@ def test_mesh_block_nodes_that_cannot_apply_or_fit_are_refused(tmp_path, options
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and expected in lines[0], result.output
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("node_shape", [(301, 301, 301), (1001, 1001, 17), (1001, 1001, 1001), (2001, 2001), (41, 11, 9)])
+def test_evaluation_blocks_with_their_halo_stay_near_the_block_size(node_shape):
+    """Every node is owned by one block, and a block with the planes read around it holds at most
+    the block size (plus one halo row of the first axis where planes are split)."""
+    import itertools
+
+    from meshgen.quality.chunked import READ_HALO, evaluation_slices
+
+    block_nodes = 1 << 20
+    per_axis = evaluation_slices(node_shape, block_nodes)
+    for axis, slices in zip(node_shape, per_axis):
+        assert [s.start for s in slices] == [0] + [s.stop for s in slices[:-1]] and slices[-1].stop == axis
+    rest = int(np.prod(node_shape[1:-1]))
+    for block in itertools.product(*per_axis):
+        read = [min(s.stop + 2, n) - max(s.start - 1, 0) for s, n in zip(block, node_shape)]
+        allowance = READ_HALO * rest * (1 + READ_HALO) if len(per_axis[0]) > 1 else 0
+        assert int(np.prod(read)) <= block_nodes + allowance, (block, read)

@@ -41,7 +41,7 @@ from meshgen.scheduler import compute_in_order_of_completion
 
 # Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
 # sketch's temporaries take about EVALUATE_BYTES_PER_BLOCK_NODE bytes per node.
-__all__ = ["EVALUATE_BLOCK_NODES", "chunked_report", "evaluate_block_nodes"]
+__all__ = ["EVALUATE_BLOCK_NODES", "chunked_report", "evaluate_block_nodes", "evaluation_slices"]
 
 EVALUATE_BLOCK_NODES = 1 << 20
 EVALUATE_BYTES_PER_BLOCK_NODE = 160
@@ -65,6 +65,21 @@ def _reader(source):
         return node_shape, len(node_shape), lambda block: read(str(source), block)
     shape = tuple(source.shape)
     return shape[:-1], shape[-1], lambda block: source[block + (slice(None),)]
+
+
+READ_HALO = 3  # node planes a block reads beyond its own: one before, two after (``_grown(block, ..., 1, 2)``)
+
+
+def evaluation_slices(node_shape, block_nodes: int) -> list[list[slice]]:
+    """``meshgen.grid.block_slices`` for evaluation, with the halo counted: a block and the
+    ``READ_HALO`` planes it reads around it hold about ``block_nodes`` nodes. Slabs of the last
+    axis while a slab of 1 + READ_HALO planes fits; beyond that (planes of about 2.6e5 nodes and
+    more at the default size), split along the first axis too, else a 1000^2 plane would be read as
+    four planes of 1e6 nodes each, four such blocks in flight."""
+    plane = int(np.prod(node_shape[:-1]))
+    if plane * (1 + READ_HALO) <= block_nodes:
+        return block_slices(node_shape, block_nodes - READ_HALO * plane)
+    return block_slices(node_shape, block_nodes // (1 + READ_HALO))
 
 
 def _grown(block, node_shape, before: int, after: int):
@@ -239,7 +254,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
             f"node array must have shape (n1+1, n2+1[, n3+1], dim) with >= 2 nodes per axis, got {node_shape + (dim,)}"
         )
     check_block_nodes(block_nodes, int(np.prod(node_shape)), EVALUATE_BYTES_PER_BLOCK_NODE)
-    per_axis = block_slices(node_shape, block_nodes or evaluate_block_nodes())
+    per_axis = evaluation_slices(node_shape, block_nodes or evaluate_block_nodes())
     blocks = [tuple(p) for p in itertools.product(*per_axis)]
     total = 2 * len(blocks)
     done = 0
