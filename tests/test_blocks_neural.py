@@ -121,3 +121,67 @@ def test_neural_without_a_model_is_one_clear_error(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no runs/ here
     with pytest.raises(MeshgenError, match="no trained model for pipe"):
         meshgen.mesh("pipe", (4, 2, 3), method="neural")
+
+
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["--preset", "exact"], "model.exact_boundary=True, points.lattice=True"),
+        (["--set", "points.lattice=true", "--set", "adam.lr=1e-3"], "points.lattice=True"),
+        (["--set", "method.derivatives=autograd"], "method.derivatives=autograd"),
+        (["--set", "points.boundary_pool=0"], "points.boundary_pool=0"),
+    ],
+)
+def test_configuration_keys_a_block_set_cannot_use_are_a_one_line_error(tmp_path, capsys, args, named):
+    from meshgen.cli import cli
+
+    out = tmp_path / "run"
+    with pytest.raises(SystemExit) as stopped:
+        cli.main(["train", "-g", "pipe", *args, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and not out.exists()  # refused before any training or folder
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"block set 'pipe' cannot use {named} (" in lines[0], err
+    assert "adam.lr" not in lines[0]  # a key the block set uses is not named
+
+
+def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_float32(tmp_path):
+    """lbfgs.float64: the networks (and so the checkpoint's weights) go to float64 for the L-BFGS
+    stage; the terms computed in float64 agree with the float32 ones to float32's precision."""
+    import torch
+
+    from meshgen.neural.block_problem import (
+        BlockNetworks,
+        block_boundary_term,
+        block_pde_term,
+        block_problem,
+        block_samples,
+        fixed_block_points,
+        patch_pool,
+    )
+
+    config = tiny_config(*TINY_BLOCKS, "adam.steps=2", "pretrain.steps=3", "lbfgs.float64=true")
+    block_set = load_block_set("pipe", None, (4, 2, 4))
+    result = train_blocks(config, block_set, tmp_path, summary=False, geometry_spec="pipe")
+    checkpoint = load_checkpoint(result.checkpoint_path)
+    weights = checkpoint["model"]["state_dict"]
+    assert {value.dtype for value in weights.values()} == {torch.float64}
+    made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(result.checkpoint_path))  # float64 weights load
+    assert all(np.isfinite(X).all() for X in made.blocks)
+
+    problem = block_problem(block_set, torch.device("cpu"), checkpoint["model"]["center"], checkpoint["model"]["scale"])
+    networks = BlockNetworks(3, [16, 16], 5)
+    networks.load_state_dict(weights)
+    pool = patch_pool(problem, 64, 1)
+    pde_sample, boundary_sample = block_samples(config, problem, fixed_block_points(problem, config, 64, 2), random=False)
+    terms = {}
+    for dtype in (torch.float64, torch.float32):
+        nets = networks.to(dtype).networks
+        with torch.no_grad():
+            terms[dtype] = (
+                block_pde_term(nets, problem, pde_sample),
+                block_boundary_term(nets, problem, config, pool, boundary_sample),
+            )
+    assert all(value.dtype == torch.float64 for value in terms[torch.float64])
+    for high, low in zip(terms[torch.float64], terms[torch.float32]):
+        assert float(high) > 0 and float(low) == pytest.approx(float(high), rel=1e-2)

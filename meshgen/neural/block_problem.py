@@ -47,7 +47,6 @@ __all__ = [
 ]
 
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
-POOL_STEPS = 16  # boundary pool: this many steps' worth of patch points per face
 
 
 class BlockNetworks(torch.nn.Module):
@@ -213,6 +212,14 @@ def block_samples(config, problem: BlockProblem, inputs: dict, random: bool = Tr
 # the terms
 
 
+def _dtype(network) -> torch.dtype:
+    """The floating-point type of ``network``'s weights (float64 in an ``lbfgs.float64`` stage);
+    float32 for a plain function (the tests' closed-form maps)."""
+    if isinstance(network, torch.nn.Module):
+        return next(network.parameters()).dtype
+    return torch.float32
+
+
 def _to_b(points_a: torch.Tensor, face_a: cube.Face, face_b: cube.Face, transform) -> torch.Tensor:
     """Block b's parametric points of block a's points ``points_a`` (..., d) near the interface
     face: tangents by the Transform, the normal coordinate mirrored across the shared face."""
@@ -235,7 +242,8 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     u = 0 the mean of the two images."""
     a, face_a, b, face_b, transform, ratio = interface
     dim, h = problem.dim, INTERFACE_STEP
-    offsets = torch.tensor([-1.0, 0.0, 1.0], device=tangent.device)
+    tangent = tangent.to(_dtype(networks[a]))
+    offsets = torch.tensor([-1.0, 0.0, 1.0], dtype=tangent.dtype, device=tangent.device)
     m = tangent.shape[0]
     grids = torch.meshgrid(*([offsets] * (dim - 1)), indexing="ij")
     shifts = torch.stack([g.reshape(-1) for g in grids], -1) * h  # (3^(d-1), d-1)
@@ -243,7 +251,7 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     inward = 1.0 if face_a.side == 0 else -1.0
 
     def on_a(depth):  # block a's points at parametric distance ``depth`` from the face
-        points = torch.empty((*base.shape[:2], dim), device=tangent.device)
+        points = torch.empty((*base.shape[:2], dim), dtype=tangent.dtype, device=tangent.device)
         points[..., list(face_a.tangent_axes)] = base
         points[..., face_a.axis] = face_a.side + inward * depth
         return points
@@ -271,7 +279,7 @@ def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
     residuals = []
     for net, (axes, spacing) in zip(networks, grids):
         nodes = grid_points(axes)
-        values = net(nodes.reshape(-1, problem.dim).float()).reshape(*nodes.shape)
+        values = net(nodes.reshape(-1, problem.dim).to(_dtype(net))).reshape(*nodes.shape)
         _, first, second = grid_derivatives(values, spacing)
         residuals.append(winslow_residual(first, second).reshape(-1, problem.dim))
     for interface, tangent in zip(problem.interfaces, tangents):
@@ -283,22 +291,23 @@ def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sam
     """L2: patch faces fitted (normal distance only on flat ones), interfaces' images agreeing;
     errors relative to the local size of the boundary where ``method.boundary_error`` says so."""
     index, tangents = sample
+    dtype = _dtype(networks[0])
     predicted, targets, sizes = [], [], []
     for number, (block, _, plane) in enumerate(problem.patch_faces):
         rows = index[number]
-        points = pool["points"][number].index_select(0, rows)
-        image = pool["images"][number].index_select(0, rows)
+        points = pool["points"][number].index_select(0, rows).to(dtype)
+        image = pool["images"][number].index_select(0, rows).to(dtype)
         value = networks[block](points)
         if plane is not None:  # only the distance from the plane: nodes slide in a flat patch
-            normal = pool["normal"][number]
+            normal = pool["normal"][number].to(dtype)
             value = image + ((value - image) @ normal)[:, None] * normal
         predicted.append(value)
         targets.append(image)
-        sizes.append(pool["size"][number].index_select(0, rows))
+        sizes.append(pool["size"][number].index_select(0, rows).to(dtype))
     for number, (interface, tangent) in enumerate(zip(problem.interfaces, tangents)):
         _, value_a, value_b = interface_stencil(networks, problem, interface, tangent)
         predicted.append(value_a)
         targets.append(value_b)
-        sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), device=value_a.device))
+        sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), dtype=dtype, device=value_a.device))
     size = torch.cat(sizes) if config.method.boundary_error == "relative" else None
     return boundary_loss(torch.cat(predicted), torch.cat(targets), config.method.point_weights, size)[0]
