@@ -185,3 +185,28 @@ def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_floa
     assert all(value.dtype == torch.float64 for value in terms[torch.float64])
     for high, low in zip(terms[torch.float64], terms[torch.float32]):
         assert float(high) > 0 and float(low) == pytest.approx(float(high), rel=1e-2)
+
+
+def test_junction_edges_of_the_pipe_and_their_weights():
+    """The pipe's junction edges are the core's four long edges (three blocks around each): on a
+    core face, both ends of its tangent across the section; on a face between two wall blocks, the
+    end at the core (xi = 0), not the one on the wall. Weights: (d / margin)^2, capped at 1."""
+    import torch
+
+    from meshgen.neural.block_problem import JUNCTION_MARGIN, block_problem, junction_weights
+
+    block_set = load_block_set("pipe", None, (4, 2, 4))
+    problem = block_problem(block_set, torch.device("cpu"))
+    for (a, face_a, *_), ends in zip(problem.interfaces, problem.junctions):
+        across = face_a.tangent_axes.index(1 if face_a.axis == 0 else 0)  # the tangent in the section
+        if problem.names[a] == "core":
+            assert sorted(ends) == [(across, 0), (across, 1)]
+        else:
+            assert ends == [(0, 0)] and face_a.tangent_axes[0] == 0  # xi = 0: the core's corner
+    tangent = torch.tensor([[0.0, 0.5], [0.1, 0.3], [0.5, 0.01], [0.9, 0.9], [1.0, 0.0]], dtype=torch.float64)
+    d = np.array([0.0, 0.1, 0.5, 0.1, 0.0])  # distance from the tangent-0 ends (both junctions)
+    expected = np.minimum(d / JUNCTION_MARGIN, 1.0) ** 2
+    np.testing.assert_allclose(junction_weights(tangent, [(0, 0), (0, 1)]).numpy(), expected, rtol=1e-12)
+    one_end = np.minimum(tangent[:, 0].numpy() / JUNCTION_MARGIN, 1.0) ** 2
+    np.testing.assert_allclose(junction_weights(tangent, [(0, 0)]).numpy(), one_end, rtol=1e-12)
+    assert torch.all(junction_weights(tangent, []) == 1.0)

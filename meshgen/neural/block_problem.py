@@ -17,7 +17,7 @@ uninterrupted one); boundary-map values are computed once into fixed pools.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -33,6 +33,7 @@ from meshgen.tfi import tfi, transfinite
 
 __all__ = [
     "INTERFACE_STEP",
+    "JUNCTION_MARGIN",
     "BlockNetworks",
     "BlockProblem",
     "block_boundary_term",
@@ -42,11 +43,17 @@ __all__ = [
     "block_samples",
     "fixed_block_points",
     "interface_stencil",
+    "junction_weights",
     "patch_pool",
     "pretrain_block_pool",
 ]
 
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
+# Interface stencils within this parametric distance of a junction edge (where the face meets
+# another interface: three or more blocks around the edge) are weighted down by (d / margin)^2:
+# no map that is smooth in every block is C1 across all the interfaces at a junction, so the
+# residual there measures the junction, not the map (``junction_weights``).
+JUNCTION_MARGIN = 0.25
 
 
 class BlockNetworks(torch.nn.Module):
@@ -75,6 +82,8 @@ class BlockProblem:
     scale: float
     device: torch.device
     exact: bool = False  # the networks are soft-boundary maps; the mesh is corrected to the faces
+    # per interface: (tangent number, side) of block a's face edges that are junction edges
+    junctions: list = field(default_factory=list)
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
@@ -112,13 +121,21 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
         face = cube.face_named(face_name, dim)
         plane = face_plane(boundaries[block](face_points(face, grid)), 1.0)
         patch_faces.append((block, face, plane))
-    interfaces = []
+    interfaces, junctions = [], []
+    shared = {(i.a, i.face_a.name) for i in block_set.interfaces} | {(i.b, i.face_b.name) for i in block_set.interfaces}
     for i in block_set.interfaces:
+        ends = [
+            (number, side)
+            for number, axis in enumerate(i.face_a.tangent_axes)
+            for side in (0, 1)
+            if (i.a, f"{cube.AXIS_NAMES[axis]}{side}") in shared
+        ]
+        junctions.append(ends)
         ratio = _mean_length(block_set.geometries[i.a], i.face_a.axis, dim) / _mean_length(
             block_set.geometries[i.b], i.face_b.axis, dim
         )
         interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
-    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device)
+    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -273,6 +290,16 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     return winslow_residual(first[squeeze], second[squeeze]), value_a[1][:, middle], value_b[0][:, middle]
 
 
+def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
+    """Weights (M,) of an interface's stencils at ``tangent`` (M, d-1): (d / JUNCTION_MARGIN)^2 up
+    to 1, d the parametric distance to the nearest junction edge of the face (``ends``: (tangent
+    number, side) pairs); 1 everywhere without junction edges."""
+    distance = torch.full(tangent.shape[:1], JUNCTION_MARGIN, dtype=tangent.dtype, device=tangent.device)
+    for number, side in ends:
+        distance = torch.minimum(distance, (tangent[:, number] - side).abs())
+    return (distance / JUNCTION_MARGIN).square()
+
+
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
     """L1: the mean squared Winslow residual over every block's grid and every interface's stencils."""
     grids, tangents = sample
@@ -282,8 +309,12 @@ def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
         values = net(nodes.reshape(-1, problem.dim).to(_dtype(net))).reshape(*nodes.shape)
         _, first, second = grid_derivatives(values, spacing)
         residuals.append(winslow_residual(first, second).reshape(-1, problem.dim))
-    for interface, tangent in zip(problem.interfaces, tangents):
-        residuals.append(interface_stencil(networks, problem, interface, tangent)[0])
+    junctions = problem.junctions or [[]] * len(problem.interfaces)
+    for interface, tangent, ends in zip(problem.interfaces, tangents, junctions):
+        residual = interface_stencil(networks, problem, interface, tangent)[0]
+        if ends and JUNCTION_MARGIN > 0:
+            residual = residual * junction_weights(tangent.to(residual.dtype), ends).sqrt()[:, None]
+        residuals.append(residual)
     return pde_loss(torch.cat(residuals))
 
 
