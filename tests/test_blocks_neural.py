@@ -210,3 +210,40 @@ def test_junction_edges_of_the_pipe_and_their_weights():
     one_end = np.minimum(tangent[:, 0].numpy() / JUNCTION_MARGIN, 1.0) ** 2
     np.testing.assert_allclose(junction_weights(tangent, [(0, 0)]).numpy(), one_end, rtol=1e-12)
     assert torch.all(junction_weights(tangent, []) == 1.0)
+
+
+def test_the_pull_towards_the_tfi_adds_its_weighted_distance_to_l1():
+    """L1 with the problem's pool of TFI points is L1 without it plus TFI_ANCHOR times the mean over
+    blocks of the mean squared distance of each network from the pool's targets (NumPy here)."""
+    import torch
+
+    from meshgen.neural.block_problem import (
+        TFI_ANCHOR,
+        BlockNetworks,
+        block_pde_term,
+        block_problem,
+        block_samples,
+        fixed_block_points,
+        tfi_anchor_pool,
+    )
+    from meshgen.tfi import transfinite
+
+    config = tiny_config(*TINY_BLOCKS)
+    problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))
+    torch.manual_seed(0)
+    networks = BlockNetworks(3, [8], 5).double().networks
+    sample, _ = block_samples(config, problem, fixed_block_points(problem, config, 32, 1), random=False)
+    pools = tfi_anchor_pool(problem, 40, 7)
+    for boundary, pool in zip(problem.boundaries, pools):  # the targets: each block's TFI at the points
+        points = pool["points"].double().numpy()
+        np.testing.assert_allclose(pool["targets"].numpy(), transfinite(boundary, list(points.T)), atol=1e-7)
+    with torch.no_grad():
+        plain = float(block_pde_term(networks, problem, sample))
+        problem.anchor = pools
+        anchored = float(block_pde_term(networks, problem, sample))
+        distances = [
+            np.mean(np.sum((net(p["points"].double()).numpy() - p["targets"].double().numpy()) ** 2, axis=1))
+            for net, p in zip(networks, pools)
+        ]
+    assert anchored - plain == pytest.approx(TFI_ANCHOR * np.mean(distances), rel=1e-9)
+    assert anchored > plain

@@ -36,6 +36,9 @@ __all__ = [
     "JUNCTION_MARGIN",
     "BlockNetworks",
     "BlockProblem",
+    "ANCHOR_POINTS",
+    "TFI_ANCHOR",
+    "anchor_term",
     "block_boundary_term",
     "block_pde_term",
     "block_problem",
@@ -46,6 +49,7 @@ __all__ = [
     "junction_weights",
     "patch_pool",
     "pretrain_block_pool",
+    "tfi_anchor_pool",
 ]
 
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
@@ -54,6 +58,14 @@ INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal
 # no map that is smooth in every block is C1 across all the interfaces at a junction, so the
 # residual there measures the junction, not the map (``junction_weights``).
 JUNCTION_MARGIN = 0.25
+# Weight of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
+# normalised units, of every block's network from its TFI at fixed interior points. Winslow's
+# equations barely resist some motions of a block set (an O-grid's core turned about its axis
+# against the wall, the ring between sheared into a spiral: the ring's map stays a Winslow solution);
+# the pull picks, among such nearly equal solutions, the one nearest the TFI, as the elliptic
+# solver does by starting from it.
+TFI_ANCHOR = 1.0
+ANCHOR_POINTS = 500  # fixed interior points per block of the pull towards the TFI
 
 
 class BlockNetworks(torch.nn.Module):
@@ -84,6 +96,8 @@ class BlockProblem:
     exact: bool = False  # the networks are soft-boundary maps; the mesh is corrected to the faces
     # per interface: (tangent number, side) of block a's face edges that are junction edges
     junctions: list = field(default_factory=list)
+    # per block: {"points" (K, d), "targets" (K, d)}, the TFI at fixed interior points (``tfi_anchor_pool``)
+    anchor: list = field(default_factory=list)
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
@@ -178,6 +192,18 @@ def pretrain_block_pool(problem: BlockProblem, count: int, seed: int) -> list[di
     pools = []
     for boundary in problem.boundaries:
         points = torch.cat([sample_interior(count, problem.dim, generator), sample_boundary(count, problem.dim, generator)])
+        targets = torch.from_numpy(transfinite(boundary, list(points.double().numpy().T)))
+        pools.append({"points": points.to(problem.device), "targets": targets.float().to(problem.device)})
+    return pools
+
+
+def tfi_anchor_pool(problem: BlockProblem, count: int, seed: int) -> list[dict]:
+    """Per block, ``count`` fixed interior points and the block's TFI there (normalised units, on
+    the device): what L1's pull towards the TFI (``TFI_ANCHOR``) measures the networks against."""
+    generator = torch.Generator().manual_seed(seed)
+    pools = []
+    for boundary in problem.boundaries:
+        points = sample_interior(count, problem.dim, generator)
         targets = torch.from_numpy(transfinite(boundary, list(points.double().numpy().T)))
         pools.append({"points": points.to(problem.device), "targets": targets.float().to(problem.device)})
     return pools
@@ -301,7 +327,9 @@ def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
 
 
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
-    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils."""
+    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils
+    (those near junction edges weighted down: ``junction_weights``), plus ``TFI_ANCHOR`` times the
+    pull towards the TFI (``anchor_term``) when the problem holds its pool."""
     grids, tangents = sample
     residuals = []
     for net, (axes, spacing) in zip(networks, grids):
@@ -315,7 +343,18 @@ def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
         if ends and JUNCTION_MARGIN > 0:
             residual = residual * junction_weights(tangent.to(residual.dtype), ends).sqrt()[:, None]
         residuals.append(residual)
-    return pde_loss(torch.cat(residuals))
+    value = pde_loss(torch.cat(residuals))
+    if problem.anchor and TFI_ANCHOR > 0:
+        value = value + TFI_ANCHOR * anchor_term(networks, problem.anchor)
+    return value
+
+
+def anchor_term(networks, pools) -> torch.Tensor:
+    """Mean over blocks of the mean squared distance of each network from its TFI at the pool's points."""
+    dtype = _dtype(networks[0])
+    return torch.stack(
+        [(net(p["points"].to(dtype)) - p["targets"].to(dtype)).square().sum(-1).mean() for net, p in zip(networks, pools)]
+    ).mean()
 
 
 def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sample) -> torch.Tensor:

@@ -18,6 +18,7 @@ import torch
 from meshgen.blocks import BlockSet, merged_mesh, tfi_blocks
 from meshgen.neural.block_inference import network_blocks, neural_blocks
 from meshgen.neural.block_problem import (
+    ANCHOR_POINTS,
     BlockNetworks,
     block_boundary_term,
     block_pde_term,
@@ -27,6 +28,7 @@ from meshgen.neural.block_problem import (
     fixed_block_points,
     patch_pool,
     pretrain_block_pool,
+    tfi_anchor_pool,
 )
 from meshgen.neural.config import ConfigError, TrainConfig, dotted_items, to_dict
 from meshgen.neural.history import TrainState, state_from_checkpoint
@@ -251,6 +253,7 @@ def train_blocks(
     if resume is not None:
         center, scale = resume["model"]["center"], resume["model"]["scale"]
     problem = block_problem(block_set, device, center, scale)
+    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6)
     torch.manual_seed(config.seed)
     network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
