@@ -160,7 +160,7 @@ def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_floa
         patch_pool,
     )
 
-    config = tiny_config(*TINY_BLOCKS, "adam.steps=2", "pretrain.steps=3", "lbfgs.float64=true")
+    config = tiny_config(*TINY_BLOCKS, "adam.steps=2", "pretrain.steps=2", "lbfgs.max_iter=3", "lbfgs.float64=true")
     block_set = load_block_set("pipe", None, (4, 2, 4))
     result = train_blocks(config, block_set, tmp_path, summary=False, geometry_spec="pipe")
     checkpoint = load_checkpoint(result.checkpoint_path)
