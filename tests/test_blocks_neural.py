@@ -121,3 +121,129 @@ def test_neural_without_a_model_is_one_clear_error(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # no runs/ here
     with pytest.raises(MeshgenError, match="no trained model for pipe"):
         meshgen.mesh("pipe", (4, 2, 3), method="neural")
+
+
+@pytest.mark.parametrize(
+    "args, named",
+    [
+        (["--preset", "exact"], "model.exact_boundary=True, points.lattice=True"),
+        (["--set", "points.lattice=true", "--set", "adam.lr=1e-3"], "points.lattice=True"),
+        (["--set", "method.derivatives=autograd"], "method.derivatives=autograd"),
+        (["--set", "points.boundary_pool=0"], "points.boundary_pool=0"),
+    ],
+)
+def test_configuration_keys_a_block_set_cannot_use_are_a_one_line_error(tmp_path, capsys, args, named):
+    from meshgen.cli import cli
+
+    out = tmp_path / "run"
+    with pytest.raises(SystemExit) as stopped:
+        cli.main(["train", "-g", "pipe", *args, "--out", str(out)])
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and not out.exists()  # refused before any training or folder
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and f"block set 'pipe' cannot use {named} (" in lines[0], err
+    assert "adam.lr" not in lines[0]  # a key the block set uses is not named
+
+
+def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_float32(tmp_path):
+    """lbfgs.float64: the networks (and so the checkpoint's weights) go to float64 for the L-BFGS
+    stage; the terms computed in float64 agree with the float32 ones to float32's precision."""
+    import torch
+
+    from meshgen.neural.block_problem import (
+        BlockNetworks,
+        block_boundary_term,
+        block_pde_term,
+        block_problem,
+        block_samples,
+        fixed_block_points,
+        patch_pool,
+    )
+
+    config = tiny_config(*TINY_BLOCKS, "adam.steps=2", "pretrain.steps=2", "lbfgs.max_iter=3", "lbfgs.float64=true")
+    block_set = load_block_set("pipe", None, (4, 2, 4))
+    result = train_blocks(config, block_set, tmp_path, summary=False, geometry_spec="pipe")
+    checkpoint = load_checkpoint(result.checkpoint_path)
+    weights = checkpoint["model"]["state_dict"]
+    assert {value.dtype for value in weights.values()} == {torch.float64}
+    made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(result.checkpoint_path))  # float64 weights load
+    assert all(np.isfinite(X).all() for X in made.blocks)
+
+    problem = block_problem(block_set, torch.device("cpu"), checkpoint["model"]["center"], checkpoint["model"]["scale"])
+    networks = BlockNetworks(3, [16, 16], 5)
+    networks.load_state_dict(weights)
+    pool = patch_pool(problem, 64, 1)
+    pde_sample, boundary_sample = block_samples(config, problem, fixed_block_points(problem, config, 64, 2), random=False)
+    terms = {}
+    for dtype in (torch.float64, torch.float32):
+        nets = networks.to(dtype).networks
+        with torch.no_grad():
+            terms[dtype] = (
+                block_pde_term(nets, problem, pde_sample),
+                block_boundary_term(nets, problem, config, pool, boundary_sample),
+            )
+    assert all(value.dtype == torch.float64 for value in terms[torch.float64])
+    for high, low in zip(terms[torch.float64], terms[torch.float32]):
+        assert float(high) > 0 and float(low) == pytest.approx(float(high), rel=1e-2)
+
+
+def test_junction_edges_of_the_pipe_and_their_weights():
+    """The pipe's junction edges are the core's four long edges (three blocks around each): on a
+    core face, both ends of its tangent across the section; on a face between two wall blocks, the
+    end at the core (xi = 0), not the one on the wall. Weights: (d / margin)^2, capped at 1."""
+    import torch
+
+    from meshgen.neural.block_problem import JUNCTION_MARGIN, block_problem, junction_weights
+
+    block_set = load_block_set("pipe", None, (4, 2, 4))
+    problem = block_problem(block_set, torch.device("cpu"))
+    for (a, face_a, *_), ends in zip(problem.interfaces, problem.junctions):
+        across = face_a.tangent_axes.index(1 if face_a.axis == 0 else 0)  # the tangent in the section
+        if problem.names[a] == "core":
+            assert sorted(ends) == [(across, 0), (across, 1)]
+        else:
+            assert ends == [(0, 0)] and face_a.tangent_axes[0] == 0  # xi = 0: the core's corner
+    tangent = torch.tensor([[0.0, 0.5], [0.1, 0.3], [0.5, 0.01], [0.9, 0.9], [1.0, 0.0]], dtype=torch.float64)
+    d = np.array([0.0, 0.1, 0.5, 0.1, 0.0])  # distance from the tangent-0 ends (both junctions)
+    expected = np.minimum(d / JUNCTION_MARGIN, 1.0) ** 2
+    np.testing.assert_allclose(junction_weights(tangent, [(0, 0), (0, 1)]).numpy(), expected, rtol=1e-12)
+    one_end = np.minimum(tangent[:, 0].numpy() / JUNCTION_MARGIN, 1.0) ** 2
+    np.testing.assert_allclose(junction_weights(tangent, [(0, 0)]).numpy(), one_end, rtol=1e-12)
+    assert torch.all(junction_weights(tangent, []) == 1.0)
+
+
+def test_the_pull_towards_the_tfi_adds_its_weighted_distance_to_l1():
+    """L1 with the problem's pool of TFI points is L1 without it plus TFI_ANCHOR times the mean over
+    blocks of the mean squared distance of each network from the pool's targets (NumPy here)."""
+    import torch
+
+    from meshgen.neural.block_problem import (
+        TFI_ANCHOR,
+        BlockNetworks,
+        block_pde_term,
+        block_problem,
+        block_samples,
+        fixed_block_points,
+        tfi_anchor_pool,
+    )
+    from meshgen.tfi import transfinite
+
+    config = tiny_config(*TINY_BLOCKS)
+    problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))
+    torch.manual_seed(0)
+    networks = BlockNetworks(3, [8], 5).double().networks
+    sample, _ = block_samples(config, problem, fixed_block_points(problem, config, 32, 1), random=False)
+    pools = tfi_anchor_pool(problem, 40, 7)
+    for boundary, pool in zip(problem.boundaries, pools):  # the targets: each block's TFI at the points
+        points = pool["points"].double().numpy()
+        np.testing.assert_allclose(pool["targets"].numpy(), transfinite(boundary, list(points.T)), atol=1e-7)
+    with torch.no_grad():
+        plain = float(block_pde_term(networks, problem, sample))
+        problem.anchor = pools
+        anchored = float(block_pde_term(networks, problem, sample))
+        distances = [
+            np.mean(np.sum((net(p["points"].double()).numpy() - p["targets"].double().numpy()) ** 2, axis=1))
+            for net, p in zip(networks, pools)
+        ]
+    assert anchored - plain == pytest.approx(TFI_ANCHOR * np.mean(distances), rel=1e-9)
+    assert anchored > plain

@@ -17,7 +17,7 @@ uninterrupted one); boundary-map values are computed once into fixed pools.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -33,8 +33,12 @@ from meshgen.tfi import tfi, transfinite
 
 __all__ = [
     "INTERFACE_STEP",
+    "JUNCTION_MARGIN",
     "BlockNetworks",
     "BlockProblem",
+    "ANCHOR_POINTS",
+    "TFI_ANCHOR",
+    "anchor_term",
     "block_boundary_term",
     "block_pde_term",
     "block_problem",
@@ -42,12 +46,26 @@ __all__ = [
     "block_samples",
     "fixed_block_points",
     "interface_stencil",
+    "junction_weights",
     "patch_pool",
     "pretrain_block_pool",
+    "tfi_anchor_pool",
 ]
 
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
-POOL_STEPS = 16  # boundary pool: this many steps' worth of patch points per face
+# Interface stencils within this parametric distance of a junction edge (where the face meets
+# another interface: three or more blocks around the edge) are weighted down by (d / margin)^2:
+# no map that is smooth in every block is C1 across all the interfaces at a junction, so the
+# residual there measures the junction, not the map (``junction_weights``).
+JUNCTION_MARGIN = 0.25
+# Weight of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
+# normalised units, of every block's network from its TFI at fixed interior points. Winslow's
+# equations barely resist some motions of a block set (an O-grid's core turned about its axis
+# against the wall, the ring between sheared into a spiral: the ring's map stays a Winslow solution);
+# the pull picks, among such nearly equal solutions, the one nearest the TFI, as the elliptic
+# solver does by starting from it.
+TFI_ANCHOR = 1.0
+ANCHOR_POINTS = 500  # fixed interior points per block of the pull towards the TFI
 
 
 class BlockNetworks(torch.nn.Module):
@@ -76,6 +94,10 @@ class BlockProblem:
     scale: float
     device: torch.device
     exact: bool = False  # the networks are soft-boundary maps; the mesh is corrected to the faces
+    # per interface: (tangent number, side) of block a's face edges that are junction edges
+    junctions: list = field(default_factory=list)
+    # per block: {"points" (K, d), "targets" (K, d)}, the TFI at fixed interior points (``tfi_anchor_pool``)
+    anchor: list = field(default_factory=list)
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
@@ -113,13 +135,21 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
         face = cube.face_named(face_name, dim)
         plane = face_plane(boundaries[block](face_points(face, grid)), 1.0)
         patch_faces.append((block, face, plane))
-    interfaces = []
+    interfaces, junctions = [], []
+    shared = {(i.a, i.face_a.name) for i in block_set.interfaces} | {(i.b, i.face_b.name) for i in block_set.interfaces}
     for i in block_set.interfaces:
+        ends = [
+            (number, side)
+            for number, axis in enumerate(i.face_a.tangent_axes)
+            for side in (0, 1)
+            if (i.a, f"{cube.AXIS_NAMES[axis]}{side}") in shared
+        ]
+        junctions.append(ends)
         ratio = _mean_length(block_set.geometries[i.a], i.face_a.axis, dim) / _mean_length(
             block_set.geometries[i.b], i.face_b.axis, dim
         )
         interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
-    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device)
+    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -162,6 +192,18 @@ def pretrain_block_pool(problem: BlockProblem, count: int, seed: int) -> list[di
     pools = []
     for boundary in problem.boundaries:
         points = torch.cat([sample_interior(count, problem.dim, generator), sample_boundary(count, problem.dim, generator)])
+        targets = torch.from_numpy(transfinite(boundary, list(points.double().numpy().T)))
+        pools.append({"points": points.to(problem.device), "targets": targets.float().to(problem.device)})
+    return pools
+
+
+def tfi_anchor_pool(problem: BlockProblem, count: int, seed: int) -> list[dict]:
+    """Per block, ``count`` fixed interior points and the block's TFI there (normalised units, on
+    the device): what L1's pull towards the TFI (``TFI_ANCHOR``) measures the networks against."""
+    generator = torch.Generator().manual_seed(seed)
+    pools = []
+    for boundary in problem.boundaries:
+        points = sample_interior(count, problem.dim, generator)
         targets = torch.from_numpy(transfinite(boundary, list(points.double().numpy().T)))
         pools.append({"points": points.to(problem.device), "targets": targets.float().to(problem.device)})
     return pools
@@ -213,6 +255,14 @@ def block_samples(config, problem: BlockProblem, inputs: dict, random: bool = Tr
 # the terms
 
 
+def _dtype(network) -> torch.dtype:
+    """The floating-point type of ``network``'s weights (float64 in an ``lbfgs.float64`` stage);
+    float32 for a plain function (the tests' closed-form maps)."""
+    if isinstance(network, torch.nn.Module):
+        return next(network.parameters()).dtype
+    return torch.float32
+
+
 def _to_b(points_a: torch.Tensor, face_a: cube.Face, face_b: cube.Face, transform) -> torch.Tensor:
     """Block b's parametric points of block a's points ``points_a`` (..., d) near the interface
     face: tangents by the Transform, the normal coordinate mirrored across the shared face."""
@@ -235,7 +285,8 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     u = 0 the mean of the two images."""
     a, face_a, b, face_b, transform, ratio = interface
     dim, h = problem.dim, INTERFACE_STEP
-    offsets = torch.tensor([-1.0, 0.0, 1.0], device=tangent.device)
+    tangent = tangent.to(_dtype(networks[a]))
+    offsets = torch.tensor([-1.0, 0.0, 1.0], dtype=tangent.dtype, device=tangent.device)
     m = tangent.shape[0]
     grids = torch.meshgrid(*([offsets] * (dim - 1)), indexing="ij")
     shifts = torch.stack([g.reshape(-1) for g in grids], -1) * h  # (3^(d-1), d-1)
@@ -243,7 +294,7 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     inward = 1.0 if face_a.side == 0 else -1.0
 
     def on_a(depth):  # block a's points at parametric distance ``depth`` from the face
-        points = torch.empty((*base.shape[:2], dim), device=tangent.device)
+        points = torch.empty((*base.shape[:2], dim), dtype=tangent.dtype, device=tangent.device)
         points[..., list(face_a.tangent_axes)] = base
         points[..., face_a.axis] = face_a.side + inward * depth
         return points
@@ -265,40 +316,68 @@ def interface_stencil(networks, problem: BlockProblem, interface, tangent: torch
     return winslow_residual(first[squeeze], second[squeeze]), value_a[1][:, middle], value_b[0][:, middle]
 
 
+def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
+    """Weights (M,) of an interface's stencils at ``tangent`` (M, d-1): (d / JUNCTION_MARGIN)^2 up
+    to 1, d the parametric distance to the nearest junction edge of the face (``ends``: (tangent
+    number, side) pairs); 1 everywhere without junction edges."""
+    distance = torch.full(tangent.shape[:1], JUNCTION_MARGIN, dtype=tangent.dtype, device=tangent.device)
+    for number, side in ends:
+        distance = torch.minimum(distance, (tangent[:, number] - side).abs())
+    return (distance / JUNCTION_MARGIN).square()
+
+
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
-    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils."""
+    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils
+    (those near junction edges weighted down: ``junction_weights``), plus ``TFI_ANCHOR`` times the
+    pull towards the TFI (``anchor_term``) when the problem holds its pool."""
     grids, tangents = sample
     residuals = []
     for net, (axes, spacing) in zip(networks, grids):
         nodes = grid_points(axes)
-        values = net(nodes.reshape(-1, problem.dim).float()).reshape(*nodes.shape)
+        values = net(nodes.reshape(-1, problem.dim).to(_dtype(net))).reshape(*nodes.shape)
         _, first, second = grid_derivatives(values, spacing)
         residuals.append(winslow_residual(first, second).reshape(-1, problem.dim))
-    for interface, tangent in zip(problem.interfaces, tangents):
-        residuals.append(interface_stencil(networks, problem, interface, tangent)[0])
-    return pde_loss(torch.cat(residuals))
+    junctions = problem.junctions or [[]] * len(problem.interfaces)
+    for interface, tangent, ends in zip(problem.interfaces, tangents, junctions):
+        residual = interface_stencil(networks, problem, interface, tangent)[0]
+        if ends and JUNCTION_MARGIN > 0:
+            residual = residual * junction_weights(tangent.to(residual.dtype), ends).sqrt()[:, None]
+        residuals.append(residual)
+    value = pde_loss(torch.cat(residuals))
+    if problem.anchor and TFI_ANCHOR > 0:
+        value = value + TFI_ANCHOR * anchor_term(networks, problem.anchor)
+    return value
+
+
+def anchor_term(networks, pools) -> torch.Tensor:
+    """Mean over blocks of the mean squared distance of each network from its TFI at the pool's points."""
+    dtype = _dtype(networks[0])
+    return torch.stack(
+        [(net(p["points"].to(dtype)) - p["targets"].to(dtype)).square().sum(-1).mean() for net, p in zip(networks, pools)]
+    ).mean()
 
 
 def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sample) -> torch.Tensor:
     """L2: patch faces fitted (normal distance only on flat ones), interfaces' images agreeing;
     errors relative to the local size of the boundary where ``method.boundary_error`` says so."""
     index, tangents = sample
+    dtype = _dtype(networks[0])
     predicted, targets, sizes = [], [], []
     for number, (block, _, plane) in enumerate(problem.patch_faces):
         rows = index[number]
-        points = pool["points"][number].index_select(0, rows)
-        image = pool["images"][number].index_select(0, rows)
+        points = pool["points"][number].index_select(0, rows).to(dtype)
+        image = pool["images"][number].index_select(0, rows).to(dtype)
         value = networks[block](points)
         if plane is not None:  # only the distance from the plane: nodes slide in a flat patch
-            normal = pool["normal"][number]
+            normal = pool["normal"][number].to(dtype)
             value = image + ((value - image) @ normal)[:, None] * normal
         predicted.append(value)
         targets.append(image)
-        sizes.append(pool["size"][number].index_select(0, rows))
+        sizes.append(pool["size"][number].index_select(0, rows).to(dtype))
     for number, (interface, tangent) in enumerate(zip(problem.interfaces, tangents)):
         _, value_a, value_b = interface_stencil(networks, problem, interface, tangent)
         predicted.append(value_a)
         targets.append(value_b)
-        sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), device=value_a.device))
+        sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), dtype=dtype, device=value_a.device))
     size = torch.cat(sizes) if config.method.boundary_error == "relative" else None
     return boundary_loss(torch.cat(predicted), torch.cat(targets), config.method.point_weights, size)[0]

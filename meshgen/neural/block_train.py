@@ -10,6 +10,7 @@ adds ``blocks`` (the block names, in the set's order) and holds every block's we
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import torch
@@ -17,7 +18,7 @@ import torch
 from meshgen.blocks import BlockSet, merged_mesh, tfi_blocks
 from meshgen.neural.block_inference import network_blocks, neural_blocks
 from meshgen.neural.block_problem import (
-    POOL_STEPS,
+    ANCHOR_POINTS,
     BlockNetworks,
     block_boundary_term,
     block_pde_term,
@@ -27,7 +28,9 @@ from meshgen.neural.block_problem import (
     fixed_block_points,
     patch_pool,
     pretrain_block_pool,
+    tfi_anchor_pool,
 )
+from meshgen.neural.config import ConfigError, TrainConfig, dotted_items, to_dict
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.model import INPUT_MAP
 from meshgen.neural.pcgrad import assign, flatten
@@ -36,10 +39,42 @@ from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stag
 from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, combined_gradients, make_optimizer
 from meshgen.quality import quality_report, write_json
 
-__all__ = ["BLOCK_STAGES", "SUMMARY_DIMS", "block_gradients", "block_stage_table", "describe_blocks", "train_blocks"]
+__all__ = [
+    "BLOCK_STAGES",
+    "BLOCK_UNUSED_KEYS",
+    "SUMMARY_DIMS",
+    "block_gradients",
+    "block_stage_table",
+    "check_block_keys",
+    "describe_blocks",
+    "train_blocks",
+]
 
 SUMMARY_DIMS = 8  # the final summary and the training's block set: 8 per --dims number
 BLOCK_STAGES = ("pretrain", "adam", "lbfgs")
+
+# Configuration keys a block set has no use for, with why: refused unless they hold the default
+# (``check_block_keys``), so that no setting is silently ignored. ``boundary_layout`` is not
+# among them: either value describes what a block set does (each block's own map is learned).
+BLOCK_UNUSED_KEYS = {
+    "model.exact_boundary": "a block set's networks are soft-boundary maps, corrected to their faces and interfaces when meshing",
+    "method.derivatives": "a block set takes finite differences (a grid in each block, stencils across its interfaces)",
+    "points.lattice": "a block set has no smoothed layout, so no lattice on which its faces solve the discrete equations",
+}
+
+
+def check_block_keys(config, name: str = "block set") -> None:
+    """ConfigError (one line) naming every key of ``BLOCK_UNUSED_KEYS`` that ``config`` sets away
+    from its default, with why a block set cannot use it; ``points.boundary_pool`` 0 (fresh patch
+    points every step) too: a block set draws them from a fixed pool."""
+    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
+    unused = {key: reason for key, reason in BLOCK_UNUSED_KEYS.items() if chosen[key] != default[key]}
+    if config.points.boundary_pool == 0:
+        unused["points.boundary_pool"] = "a block set draws its patch points from a fixed pool (1 or more steps' worth)"
+    if unused:
+        keys = ", ".join(f"{key}={chosen[key]}" for key in unused)
+        reasons = "; ".join(unused.values())
+        raise ConfigError(f"{name} cannot use {keys} (leave {'it' if len(unused) == 1 else 'them'} at the default): {reasons}")
 
 
 def describe_blocks(training: Training, names) -> dict:
@@ -111,8 +146,24 @@ def _pretrain_step(training: Training, optimizer, pools) -> dict:
         return {"total": loss()}
 
 
-def _fixed_losses(training: Training, pool, fixed) -> tuple:
-    pde_sample, boundary_sample = block_samples(training.config, training.problem, fixed, random=False)
+def _lbfgs_optimizer(training: Training):
+    """The L-BFGS stage's optimiser, the networks first moved to float64 with ``lbfgs.float64`` (the
+    terms follow the networks' type): in float32 the finite-difference residual's round-off stops
+    L-BFGS above what the networks can reach (design notes §18)."""
+    if training.config.lbfgs.float64:
+        training.network.double()
+    return make_optimizer("lbfgs", training.network, training.weights, training.config)
+
+
+def _held_out_config(config):
+    """``config`` with the held-out draw's sizes (``test.interior``, ``test.boundary``) as its points'."""
+    points = dataclasses.replace(config.points, interior=config.test.interior, boundary=config.test.boundary)
+    return dataclasses.replace(config, points=points)
+
+
+def _fixed_losses(training: Training, pool, fixed, config=None) -> tuple:
+    """(L1, L2) at the fixed draw ``fixed`` (made with ``config``'s sizes: the training's by default)."""
+    pde_sample, boundary_sample = block_samples(config or training.config, training.problem, fixed, random=False)
     with torch.no_grad():
         pde = block_pde_term(training.network.networks, training.problem, pde_sample)
         boundary = block_boundary_term(training.network.networks, training.problem, training.config, pool, boundary_sample)
@@ -174,7 +225,7 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
         ),
         Stage(
             "lbfgs",
-            optimizer=lambda t: make_optimizer("lbfgs", t.network, t.weights, t.config),
+            optimizer=_lbfgs_optimizer,
             points=lambda t, state: fixed_block_points(t.problem, t.config, pool_count, t.config.seed + 2),
             step=lambda t, optimizer, scheduler, fixed: _lbfgs_step(t, optimizer, pool, fixed),
         ),
@@ -202,6 +253,7 @@ def train_blocks(
     if resume is not None:
         center, scale = resume["model"]["center"], resume["model"]["scale"]
     problem = block_problem(block_set, device, center, scale)
+    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6)
     torch.manual_seed(config.seed)
     network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
@@ -209,18 +261,21 @@ def train_blocks(
     generator = torch.Generator().manual_seed(config.seed)
     state = TrainState(BLOCK_STAGES[0])
     if resume is not None:
+        if next(iter(resume["model"]["state_dict"].values())).dtype == torch.float64:  # stopped in an lbfgs.float64 stage
+            network.double()
         network.load_state_dict(resume["model"]["state_dict"])
         weights.load_state_dict(resume["reweighting"])
         generator.set_state(resume["rng"]["sampler"])
         state = state_from_checkpoint(resume)
     parallel = device.type == "cpu" and torch.get_num_threads() >= 2
     training = Training(network, weights, problem, config, generator, TermRunner(parallel))
-    pool_count = _per_face(training) * POOL_STEPS
+    pool_count = _per_face(training) * config.points.boundary_pool
     pool = patch_pool(problem, pool_count, config.seed + 3)
-    test_points = fixed_block_points(problem, config, pool_count, config.seed + 5)
+    held_out = _held_out_config(config)
+    test_points = fixed_block_points(problem, held_out, pool_count, config.seed + 5)
 
     def describe_run() -> dict:
-        pde, boundary = _fixed_losses(training, pool, test_points)
+        pde, boundary = _fixed_losses(training, pool, test_points, held_out)
         return {
             "model": describe_blocks(training, block_set.names),
             "geometry": {

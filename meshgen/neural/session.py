@@ -162,6 +162,10 @@ def prepare_run(
         geometry_object = load_geometry(geometry, parse_params(params), check=not blocks)
         if vary and blocks:
             raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
+        if blocks:  # keys a block set cannot use are refused, not ignored
+            from meshgen.neural.block_train import check_block_keys
+
+            check_block_keys(config, f"block set '{geometry_object.name}'")
         if vary:
             _refuse_family_keys(config, preset, overrides)
             family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
