@@ -330,7 +330,7 @@ def test_plot3d_binary_layout(tmp_path):
 @pytest.mark.parametrize(
     ("extension", "target", "failing_call"),
     [
-        (".cgns", "meshgen.formats._cgns._fortran", 2),  # after CoordinateX is written
+        (".cgns", "meshgen.formats._cgns.fortran", 2),  # after CoordinateX is written
         (".vtu", "meshgen.formats._vtu._write_data_array", 2),  # after the first array
         (".xyz", "meshgen.formats._plot3d._write_record", 2),  # after the first record
     ],

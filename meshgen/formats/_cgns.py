@@ -56,7 +56,24 @@ import numpy as np
 
 from meshgen import cube
 from meshgen.errors import FormatError
-from meshgen.formats.metadata import METADATA_KEY, metadata_json
+from meshgen.formats._cgns_nodes import (
+    BASE_NAME,
+    CGNS_VERSION,
+    NAME_LENGTH,
+    c_order,
+    chars,
+    check_name,
+    child_with_label,
+    children_with_label,
+    file_base,
+    fortran,
+    new_node,
+    node_data,
+    node_label,
+    node_name,
+    node_text,
+)
+from meshgen.formats.metadata import METADATA_KEY
 from meshgen.grid import cell_connectivity, flat_points
 from meshgen.patches import Patch, flow_role
 
@@ -83,12 +100,9 @@ __all__ = [
     "zone_header",
 ]
 
-CGNS_VERSION = 3.4  # the layout below is the one CGNS 3.x and 4.x libraries both read and write
-NAME_LENGTH = 32  # longest CGNS node name or label
 COORDINATE_NAMES = ("CoordinateX", "CoordinateY", "CoordinateZ")
 # Exponents of mass, length, time, temperature and angle.
 LENGTH_EXPONENTS = np.array([0.0, 1.0, 0.0, 0.0, 0.0], dtype="<f4")
-BASE_NAME = "Base"
 ZONE_NAME = "Zone"
 SOLUTION_NAME = "FlowSolution"
 ZONE_BC_NAME = "ZoneBC"
@@ -116,29 +130,29 @@ def stream(path, node_shape, dim, metadata, cell_names=(), patches=()):
     import h5py
 
     for name in cell_names:
-        _check_name(name, "cell data")
+        check_name(name, "cell data")
     node_shape = tuple(int(n) for n in node_shape)
     cell_shape = tuple(n - 1 for n in node_shape)
 
     # libver (earliest, v108): files the HDF5 1.8 and 1.10 libraries of CGNS builds can open.
     with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
-        base = _file_base(root, dim, metadata)
+        base = file_base(root, dim, metadata)
 
         # Zone_t data is int[3][IndexDimension] in C terms: rows vertex, cell, boundary-vertex sizes.
         sizes = np.array([node_shape, cell_shape, [0] * dim], dtype="<i4")
-        zone = _node(base, ZONE_NAME, "Zone_t", sizes)
-        _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
-        coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        zone = new_node(base, ZONE_NAME, "Zone_t", sizes)
+        new_node(zone, "ZoneType", "ZoneType_t", chars("Structured"))
+        coordinates = new_node(zone, "GridCoordinates", "GridCoordinates_t")
         datasets = {"coordinates": [], "cells": {}}
         for axis in range(dim):
-            coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", shape=node_shape[::-1])
-            _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
+            coordinate = new_node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", shape=node_shape[::-1])
+            new_node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
             datasets["coordinates"].append(coordinate[" data"])
         if cell_names:
-            solution = _node(zone, SOLUTION_NAME, "FlowSolution_t")
-            _node(solution, "GridLocation", "GridLocation_t", _chars("CellCenter"))
+            solution = new_node(zone, SOLUTION_NAME, "FlowSolution_t")
+            new_node(solution, "GridLocation", "GridLocation_t", chars("CellCenter"))
             for name in cell_names:
-                datasets["cells"][name] = _node(solution, name, "DataArray_t", shape=cell_shape[::-1])[" data"]
+                datasets["cells"][name] = new_node(solution, name, "DataArray_t", shape=cell_shape[::-1])[" data"]
         if patches:
             write_zone_bc(base, zone, node_shape, patches)
         yield datasets
@@ -158,7 +172,7 @@ def write_zone_bc(base, zone, node_shape, patches) -> None:
     """The ZoneBC of ``zone`` (one BC_t with a PointRange per patch face) and a Family_t per patch
     under ``base``. ``node_shape``: the zone's vertex counts (ni, nj[, nk])."""
     dim = len(node_shape)
-    zone_bc = _node(zone, ZONE_BC_NAME, "ZoneBC_t")
+    zone_bc = new_node(zone, ZONE_BC_NAME, "ZoneBC_t")
     for patch in patches:
         kind = bc_type(patch)
         for face_name in patch.faces:
@@ -167,20 +181,20 @@ def write_zone_bc(base, zone, node_shape, patches) -> None:
             last = list(node_shape)
             first[face.axis] = last[face.axis] = node_shape[face.axis] if face.side else 1
             name = patch.name if len(patch.faces) == 1 else f"{patch.name}_{face_name}"
-            bc = _node(zone_bc, name, "BC_t", _chars("FamilySpecified"))
-            _node(bc, "PointRange", "IndexRange_t", np.array([first, last], dtype="<i4"))
-            _node(bc, "FamilyName", "FamilyName_t", _chars(patch.name))
+            bc = new_node(zone_bc, name, "BC_t", chars("FamilySpecified"))
+            new_node(bc, "PointRange", "IndexRange_t", np.array([first, last], dtype="<i4"))
+            new_node(bc, "FamilyName", "FamilyName_t", chars(patch.name))
         if patch.name not in base:  # one Family per patch, however many zones share it
-            family = _node(base, patch.name, "Family_t")
-            _node(family, "FamilyBC", "FamilyBC_t", _chars(kind))
-            _node(family, "PatchType", "Descriptor_t", _chars(patch.type))
+            family = new_node(base, patch.name, "Family_t")
+            new_node(family, "FamilyBC", "FamilyBC_t", chars(kind))
+            new_node(family, "PatchType", "Descriptor_t", chars(patch.type))
 
 
 def check_patch_name(name: str) -> None:
     """Patch names become node names (up to 32 characters; the ``_<face>`` suffix included)."""
     if len(name) + len("_zeta0") > NAME_LENGTH:
         raise FormatError(f"patch name '{name}' is too long for CGNS (at most {NAME_LENGTH - len('_zeta0')} characters)")
-    _check_name(name, "patch")
+    check_name(name, "patch")
 
 
 def read_patches(path) -> list:
@@ -192,21 +206,21 @@ def read_patches(path) -> list:
     types = {"BCWall": "wall", "BCSymmetryPlane": "symmetry"}
     faces_of, type_of = {}, {}
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        zone = _child_with_label(base, "Zone_t", path)
-        node_shape = tuple(int(n) for n in _data(zone)[0])
+        base = child_with_label(root, "CGNSBase_t", path)
+        zone = child_with_label(base, "Zone_t", path)
+        node_shape = tuple(int(n) for n in node_data(zone)[0])
         dim = len(node_shape)
-        families = {_name(f): f for f in _children_with_label(base, "Family_t")}
-        for zone_bc in _children_with_label(zone, "ZoneBC_t"):
-            for bc in _children_with_label(zone_bc, "BC_t"):
-                family_nodes = _children_with_label(bc, "FamilyName_t")
-                name = _text(family_nodes[0]) if family_nodes else _name(bc)
-                first, last = np.asarray(_data(_child_with_label(bc, "IndexRange_t", path)), dtype=int)
+        families = {node_name(f): f for f in children_with_label(base, "Family_t")}
+        for zone_bc in children_with_label(zone, "ZoneBC_t"):
+            for bc in children_with_label(zone_bc, "BC_t"):
+                family_nodes = children_with_label(bc, "FamilyName_t")
+                name = node_text(family_nodes[0]) if family_nodes else node_name(bc)
+                first, last = np.asarray(node_data(child_with_label(bc, "IndexRange_t", path)), dtype=int)
                 face = _face_of_range(first, last, node_shape, cube.faces(dim))
                 if face is None:
-                    raise FormatError(f"{path}: BC '{_name(bc)}' does not cover a whole face of the zone")
+                    raise FormatError(f"{path}: BC '{node_name(bc)}' does not cover a whole face of the zone")
                 descriptor = families.get(name, {}).get("PatchType") if name in families else None
-                kind = _text(descriptor) if descriptor is not None else types.get(_text(bc), "patch")
+                kind = node_text(descriptor) if descriptor is not None else types.get(node_text(bc), "patch")
                 faces_of.setdefault(name, []).append(face.name)
                 type_of[name] = kind
     return [Patch(name, type_of[name], tuple(faces)) for name, faces in faces_of.items()]
@@ -227,12 +241,12 @@ def write_node_block(zone: dict, X_block: np.ndarray, block) -> None:
     opened from ``X_block`` (block shape + (dim,)): one hyperslab per coordinate."""
     hyperslab = tuple(block[::-1])
     for axis, dataset in enumerate(zone["coordinates"]):
-        dataset[hyperslab] = _fortran(X_block[..., axis])
+        dataset[hyperslab] = fortran(X_block[..., axis])
 
 
 def write_cell_block(zone: dict, name: str, values: np.ndarray, block) -> None:
     """Write cell-data array ``name`` on the cells ``block`` (slices per axis) from ``values``."""
-    zone["cells"][name][tuple(block[::-1])] = _fortran(values)
+    zone["cells"][name][tuple(block[::-1])] = fortran(values)
 
 
 def read(path):
@@ -247,22 +261,20 @@ def read(path):
     with h5py.File(path, "r") as root:
         base, zone, node_shape = _structured_zone(root, path)
         cell_shape = tuple(n - 1 for n in node_shape)
-        X = np.stack(
-            [_c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1
-        )
+        X = np.stack([c_order(array[()], node_shape, path) for array in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
 
         point_data, cell_data = {}, {}
-        for solution in _children_with_label(zone, "FlowSolution_t"):
-            location = _text(solution["GridLocation"]) if "GridLocation" in solution else "Vertex"
+        for solution in children_with_label(zone, "FlowSolution_t"):
+            location = node_text(solution["GridLocation"]) if "GridLocation" in solution else "Vertex"
             if location not in ("Vertex", "CellCenter"):
                 continue
             target, shape = (cell_data, cell_shape) if location == "CellCenter" else (point_data, node_shape)
-            for array in _children_with_label(solution, "DataArray_t"):
-                target[_name(array)] = _c_order(_data(array), shape, path).reshape(-1)
+            for array in children_with_label(solution, "DataArray_t"):
+                target[node_name(array)] = c_order(node_data(array), shape, path).reshape(-1)
 
         field_data = {}
-        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
-            field_data[METADATA_KEY] = np.asarray(_data(base[METADATA_KEY])).view(np.uint8)
+        if METADATA_KEY in base and node_label(base[METADATA_KEY]) == "Descriptor_t":
+            field_data[METADATA_KEY] = np.asarray(node_data(base[METADATA_KEY])).view(np.uint8)
 
     cell_type = "hexahedron" if len(node_shape) == 3 else "quad"
     return meshio.Mesh(
@@ -272,121 +284,6 @@ def read(path):
         cell_data={name: [values] for name, values in cell_data.items()},
         field_data=field_data,
     )
-
-
-# --- writing nodes -------------------------------------------------------------------------
-
-
-def _node(parent, name: str, label: str, data: np.ndarray | None = None, shape=None):
-    """Create the CGNS node ``name`` under ``parent`` (an h5py group); ``data`` in its HDF5 layout,
-    or, with ``shape`` (HDF5 order), an unfilled float64 array to be written in blocks."""
-    group = parent.create_group(name, track_order=True)
-    if shape is not None:
-        data_type = "R8"
-    else:
-        data_type = "MT" if data is None else _DATA_TYPES[np.dtype(data.dtype).str]
-    _set_node_attributes(group, name, label, data_type)
-    if shape is not None:
-        group.create_dataset(" data", shape=tuple(shape), dtype="<f8")
-    elif data is not None:
-        group.create_dataset(" data", data=data)
-    return group
-
-
-# NumPy dtype (explicitly little-endian, as " format" says) -> CGNS data type.
-_DATA_TYPES = {"|i1": "C1", "<i4": "I4", "<i8": "I8", "<f4": "R4", "<f8": "R8"}
-
-
-def _set_node_attributes(group, name: str, label: str, data_type: str, flags: bool = True) -> None:
-    _string_attribute(group, "name", name, NAME_LENGTH + 1)
-    _string_attribute(group, "label", label, NAME_LENGTH + 1)
-    _string_attribute(group, "type", data_type, 3)
-    if flags:
-        group.attrs.create("flags", np.array([1], dtype="<i4"))
-
-
-def _string_attribute(group, name: str, value: str, size: int) -> None:
-    """Scalar fixed-size C string attribute (H5T_C_S1, null-terminated), as the CGNS library
-    writes them; h5py's own fixed strings are null-padded."""
-    import h5py
-
-    string_type = h5py.h5t.C_S1.copy()
-    string_type.set_size(size)
-    string_type.set_strpad(h5py.h5t.STR_NULLTERM)
-    attribute = h5py.h5a.create(group.id, name.encode(), string_type, h5py.h5s.create(h5py.h5s.SCALAR))
-    attribute.write(np.array(value.encode("ascii"), dtype=f"S{size}"), mtype=string_type)
-
-
-def _root_string(root, name: str, value: str, size: int) -> None:
-    """A character dataset of the root node, zero-padded to ``size`` bytes."""
-    text = value.encode("ascii")[: size - 1]
-    root.create_dataset(name, data=np.frombuffer(text.ljust(size, b"\0"), dtype=np.int8))
-
-
-def _chars(text: str) -> np.ndarray:
-    return np.frombuffer(text.encode("ascii"), dtype=np.int8)
-
-
-def _fortran(values: np.ndarray) -> np.ndarray:
-    """A C-order (i, j[, k]) array as the HDF5 dataset of a CGNS array: reversed shape, float64 LE."""
-    return np.ascontiguousarray(np.asarray(values).T, dtype="<f8")
-
-
-def _check_name(name: str, what: str) -> None:
-    if not name or len(name) > NAME_LENGTH or "/" in name or name != name.strip() or not name.isascii():
-        raise FormatError(
-            f"{what} name '{name}' is not a valid CGNS node name (1 to {NAME_LENGTH} ASCII characters, "
-            "no '/', no leading or trailing spaces)"
-        )
-
-
-# --- reading nodes -------------------------------------------------------------------------
-
-
-def _attribute_text(group, name: str) -> str:
-    value = group.attrs.get(name, b"")
-    return (value.tobytes() if isinstance(value, np.ndarray) else bytes(value)).split(b"\0")[0].decode().strip()
-
-
-def _name(group) -> str:
-    return _attribute_text(group, "name")
-
-
-def _label(group) -> str:
-    return _attribute_text(group, "label")
-
-
-def _data(group) -> np.ndarray:
-    return group[" data"][()]
-
-
-def _text(group) -> str:
-    return np.asarray(_data(group)).view(np.uint8).tobytes().split(b"\0")[0].decode().strip()
-
-
-def _children_with_label(group, label: str) -> list:
-    import h5py
-
-    return [
-        child
-        for key, child in group.items()
-        if not key.startswith(" ") and isinstance(child, h5py.Group) and _label(child) == label
-    ]
-
-
-def _child_with_label(group, label: str, path):
-    children = _children_with_label(group, label)
-    if not children:
-        raise FormatError(f"{path}: no {label} node under {group.name}")
-    return children[0]
-
-
-def _c_order(data: np.ndarray, shape: tuple, path) -> np.ndarray:
-    """HDF5 dataset of a CGNS array (reversed shape) -> float64 array of C-order ``shape``."""
-    array = np.asarray(data, dtype=float).T
-    if array.shape != shape:
-        raise FormatError(f"{path}: array of shape {array.shape} where {shape} was expected (rind planes are not read)")
-    return array
 
 
 # --- reading in blocks (meshes larger than memory) ----------------------------------------
@@ -404,9 +301,9 @@ def zone_header(path) -> tuple[tuple[int, ...], dict]:
     with root:
         base, _, node_shape = _structured_zone(root, path)
         metadata = {}
-        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
+        if METADATA_KEY in base and node_label(base[METADATA_KEY]) == "Descriptor_t":
             try:
-                metadata = json.loads(np.asarray(_data(base[METADATA_KEY])).view(np.uint8).tobytes().decode())
+                metadata = json.loads(np.asarray(node_data(base[METADATA_KEY])).view(np.uint8).tobytes().decode())
             except (ValueError, UnicodeDecodeError):
                 metadata = {}
     return node_shape, metadata if isinstance(metadata, dict) else {}
@@ -447,11 +344,11 @@ def read_node_components(path, block, out=None) -> np.ndarray:
 
 def _structured_zone(root, path):
     """(base, zone, node shape) of the first zone of the first base; FormatError unless structured."""
-    base = _child_with_label(root, "CGNSBase_t", path)
-    zone = _child_with_label(base, "Zone_t", path)
-    zone_type = _text(zone["ZoneType"]) if "ZoneType" in zone else ""
+    base = child_with_label(root, "CGNSBase_t", path)
+    zone = child_with_label(base, "Zone_t", path)
+    zone_type = node_text(zone["ZoneType"]) if "ZoneType" in zone else ""
     if zone_type != "Structured":
-        raise FormatError(f"{path}: zone '{_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
+        raise FormatError(f"{path}: zone '{node_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
     return base, zone, _checked_node_shape(zone, path)
 
 
@@ -459,21 +356,21 @@ def _checked_node_shape(zone, path) -> tuple[int, ...]:
     """The zone's node shape, verified against what the file holds before anything is allocated:
     2 or 3 counts of at least 2, coordinate arrays of that shape, and (uncompressed arrays) the
     bytes stored for them. A header is data: it may claim more nodes than the file carries."""
-    sizes = np.asarray(_data(zone))
+    sizes = np.asarray(node_data(zone))
     if sizes.ndim != 2 or sizes.shape[0] < 1 or sizes.shape[1] not in (2, 3) or sizes.dtype.kind not in "iu":
-        raise FormatError(f"{path}: zone '{_name(zone)}' has a malformed size header (shape {sizes.shape})")
+        raise FormatError(f"{path}: zone '{node_name(zone)}' has a malformed size header (shape {sizes.shape})")
     node_shape = tuple(int(n) for n in sizes[0])
     if min(node_shape) < 2:
-        raise FormatError(f"{path}: zone '{_name(zone)}' claims {node_shape} nodes: each count must be at least 2")
+        raise FormatError(f"{path}: zone '{node_name(zone)}' claims {node_shape} nodes: each count must be at least 2")
     for array in _coordinate_arrays(zone, len(node_shape), path):
         if array.shape != node_shape[::-1]:
             raise FormatError(
-                f"{path}: zone '{_name(zone)}' claims {node_shape} nodes but a coordinate array holds {array.shape[::-1]}"
+                f"{path}: zone '{node_name(zone)}' claims {node_shape} nodes but a coordinate array holds {array.shape[::-1]}"
             )
         claimed = int(np.prod(node_shape, dtype=np.int64)) * array.dtype.itemsize
         if array.id.get_create_plist().get_nfilters() == 0 and array.id.get_storage_size() < claimed:
             raise FormatError(
-                f"{path}: zone '{_name(zone)}' claims {node_shape} nodes ({claimed / 1e9:.3g} GB of coordinates) "
+                f"{path}: zone '{node_name(zone)}' claims {node_shape} nodes ({claimed / 1e9:.3g} GB of coordinates) "
                 f"but the file stores {array.id.get_storage_size() / 1e9:.3g} GB of them: truncated or not a mesh"
             )
     return node_shape
@@ -481,7 +378,7 @@ def _checked_node_shape(zone, path) -> tuple[int, ...]:
 
 def _coordinate_arrays(zone, dim: int, path) -> list:
     """The HDF5 datasets of CoordinateX, Y[, Z] of ``zone`` (not read); FormatError if one is missing."""
-    grid = _child_with_label(zone, "GridCoordinates_t", path)
+    grid = child_with_label(zone, "GridCoordinates_t", path)
     names = COORDINATE_NAMES[:dim]
     missing = [name for name in names if name not in grid]
     if missing:
@@ -501,26 +398,26 @@ def write_zones(path, zones, metadata, connections) -> None:
 
     dim = zones[0][1].shape[-1]
     with h5py.File(path, "w", libver=("earliest", "v108"), track_order=True) as root:
-        base = _file_base(root, dim, metadata)
+        base = file_base(root, dim, metadata)
         for (name, X, patches), records in zip(zones, connections):
-            _check_name(name, "zone")
+            check_name(name, "zone")
             node_shape = X.shape[:-1]
             sizes = np.array([node_shape, [n - 1 for n in node_shape], [0] * dim], dtype="<i4")
-            zone = _node(base, name, "Zone_t", sizes)
-            _node(zone, "ZoneType", "ZoneType_t", _chars("Structured"))
-            coordinates = _node(zone, "GridCoordinates", "GridCoordinates_t")
+            zone = new_node(base, name, "Zone_t", sizes)
+            new_node(zone, "ZoneType", "ZoneType_t", chars("Structured"))
+            coordinates = new_node(zone, "GridCoordinates", "GridCoordinates_t")
             for axis in range(dim):
-                coordinate = _node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", _fortran(X[..., axis]))
-                _node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
+                coordinate = new_node(coordinates, COORDINATE_NAMES[axis], "DataArray_t", fortran(X[..., axis]))
+                new_node(coordinate, "DimensionalExponents", "DimensionalExponents_t", LENGTH_EXPONENTS)
             if patches:
                 write_zone_bc(base, zone, node_shape, patches)
             if records:
-                connectivity = _node(zone, "ZoneGridConnectivity", "ZoneGridConnectivity_t")
+                connectivity = new_node(zone, "ZoneGridConnectivity", "ZoneGridConnectivity_t")
                 for record, donor, point_range, donor_range, transform in records:
-                    link = _node(connectivity, record, "GridConnectivity1to1_t", _chars(donor))
-                    _node(link, "Transform", '"int[IndexDimension]"', np.asarray(transform, dtype="<i4"))
-                    _node(link, "PointRange", "IndexRange_t", np.asarray(point_range, dtype="<i4"))
-                    _node(link, "PointRangeDonor", "IndexRange_t", np.asarray(donor_range, dtype="<i4"))
+                    link = new_node(connectivity, record, "GridConnectivity1to1_t", chars(donor))
+                    new_node(link, "Transform", '"int[IndexDimension]"', np.asarray(transform, dtype="<i4"))
+                    new_node(link, "PointRange", "IndexRange_t", np.asarray(point_range, dtype="<i4"))
+                    new_node(link, "PointRangeDonor", "IndexRange_t", np.asarray(donor_range, dtype="<i4"))
 
 
 def read_zones(path) -> list[dict]:
@@ -530,23 +427,23 @@ def read_zones(path) -> list[dict]:
 
     zones = []
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        for zone in _children_with_label(base, "Zone_t"):
-            node_shape = tuple(int(n) for n in _data(zone)[0])
-            X = np.stack([_c_order(a[()], node_shape, path) for a in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
+        base = child_with_label(root, "CGNSBase_t", path)
+        for zone in children_with_label(base, "Zone_t"):
+            node_shape = tuple(int(n) for n in node_data(zone)[0])
+            X = np.stack([c_order(a[()], node_shape, path) for a in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
             connections = []
-            for connectivity in _children_with_label(zone, "ZoneGridConnectivity_t"):
-                for link in _children_with_label(connectivity, "GridConnectivity1to1_t"):
+            for connectivity in children_with_label(zone, "ZoneGridConnectivity_t"):
+                for link in children_with_label(connectivity, "GridConnectivity1to1_t"):
                     connections.append(
                         {
-                            "name": _name(link),
-                            "donor": _text(link),
-                            "range": np.asarray(_data(link["PointRange"]), dtype=int),
-                            "donor_range": np.asarray(_data(link["PointRangeDonor"]), dtype=int),
-                            "transform": tuple(int(t) for t in _data(link["Transform"])),
+                            "name": node_name(link),
+                            "donor": node_text(link),
+                            "range": np.asarray(node_data(link["PointRange"]), dtype=int),
+                            "donor_range": np.asarray(node_data(link["PointRangeDonor"]), dtype=int),
+                            "transform": tuple(int(t) for t in node_data(link["Transform"])),
                         }
                     )
-            zones.append({"name": _name(zone), "X": X, "connections": connections})
+            zones.append({"name": node_name(zone), "X": X, "connections": connections})
     return zones
 
 
@@ -555,7 +452,7 @@ def zone_count(path) -> int:
     import h5py
 
     with h5py.File(path, "r") as root:
-        return len(_children_with_label(_child_with_label(root, "CGNSBase_t", path), "Zone_t"))
+        return len(children_with_label(child_with_label(root, "CGNSBase_t", path), "Zone_t"))
 
 
 def read_merged(path):
@@ -578,27 +475,11 @@ def read_merged(path):
         offset += zone["X"][..., 0].size
     field_data = {}
     with h5py.File(path, "r") as root:
-        base = _child_with_label(root, "CGNSBase_t", path)
-        if METADATA_KEY in base and _label(base[METADATA_KEY]) == "Descriptor_t":
-            field_data[METADATA_KEY] = np.asarray(_data(base[METADATA_KEY])).view(np.uint8)
+        base = child_with_label(root, "CGNSBase_t", path)
+        if METADATA_KEY in base and node_label(base[METADATA_KEY]) == "Descriptor_t":
+            field_data[METADATA_KEY] = np.asarray(node_data(base[METADATA_KEY])).view(np.uint8)
     padded = np.hstack([unique, np.zeros((len(unique), 3 - dim))]) if dim < 3 else unique
     cell_type = "hexahedron" if dim == 3 else "quad"
     return meshio.Mesh(
         padded, [(cell_type, np.concatenate(cells))], cell_data={"block": [np.concatenate(owner)]}, field_data=field_data
     )
-
-
-def _file_base(root, dim: int, metadata: dict | None):
-    """The root node attributes, the library version and the one CGNSBase_t of a new file (with
-    ``metadata`` as a Descriptor_t when given). Returns the base node."""
-    import h5py
-
-    _set_node_attributes(root, "HDF5 MotherNode", "Root Node of HDF5 File", "MT", flags=False)
-    _root_string(root, " format", "IEEE_LITTLE_32", len("IEEE_LITTLE_32") + 1)
-    _root_string(root, " hdf5version", f"HDF5 Version {h5py.version.hdf5_version}", NAME_LENGTH + 1)
-    _node(root, "CGNSLibraryVersion", "CGNSLibraryVersion_t", np.array([CGNS_VERSION], dtype="<f4"))
-    base = _node(root, BASE_NAME, "CGNSBase_t", np.array([dim, dim], dtype="<i4"))
-    _node(base, "DataClass", "DataClass_t", _chars("NormalizedByUnknownDimensional"))
-    if metadata:
-        _node(base, METADATA_KEY, "Descriptor_t", _chars(metadata_json(metadata)))
-    return base
