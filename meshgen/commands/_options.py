@@ -10,7 +10,7 @@ from meshgen.errors import GeometryError
 from meshgen.geometry import load_geometry, parse_params
 from meshgen.meshing_blocks import block_spec
 
-__all__ = ["DimsCommand", "dims_option", "geometry_options", "load_selected_geometry", "parse_dims"]
+__all__ = ["DimsCommand", "block_nodes_option", "dims_option", "geometry_options", "load_selected_geometry", "parse_dims"]
 
 _DIM_VALUE = re.compile(r"^(-?\d.*|[^-].*)$")  # anything but an option (negative numbers included)
 _NUMBER = re.compile(r"^[-+]?[\d.]+([eE][-+]?\d+)?$")
@@ -61,6 +61,18 @@ def parse_dims(ctx, param, value):
 
 def dims_option(required=True, help_text="Cells per axis: two numbers (2D) or three (3D), e.g. --dims 30 30 30."):
     return click.option("--dims", callback=parse_dims, required=required, metavar="N N [N]", help=help_text)
+
+
+def block_nodes_option():
+    """``--block-nodes N``: nodes per block of the chunked paths (``meshgen mesh``, ``meshgen evaluate``)."""
+    return click.option(
+        "--block-nodes",
+        type=click.IntRange(min=1024),
+        default=None,
+        metavar="N",
+        help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at "
+        "most 1048576].",
+    )
 
 
 def geometry_options(default="semicylinder"):

@@ -12,7 +12,7 @@ import sys
 import click
 
 from meshgen.atomic import atomic_write, check_output_file
-from meshgen.commands._options import geometry_options
+from meshgen.commands._options import block_nodes_option, geometry_options
 from meshgen.commands._progress import progress_display
 from meshgen.gates import GateError, check_gates, parse_gate
 from meshgen.geometry import load_geometry, parse_params
@@ -161,13 +161,7 @@ Exit status: 0 no gate tripped, 1 a gate tripped, 2 usage error or a file that c
     "[default: $DASK_SCHEDULER_ADDRESS, else Dask's local threads].",
 )
 @click.option("--per-block", is_flag=True, help="Multi-zone .cgns files (block sets): also report each zone (block) on its own.")
-@click.option(
-    "--block-nodes",
-    type=click.IntRange(min=1024),
-    default=None,
-    metavar="N",
-    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 1048576].",
-)
+@block_nodes_option()
 @click.option("--quiet", "-q", is_flag=True, help="Print only tripped gates and errors.")
 def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked, scheduler, per_block, block_nodes, quiet):
     """Measure the quality of hexahedral or quadrilateral meshes (any file meshio reads, meshgen's

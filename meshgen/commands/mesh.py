@@ -6,7 +6,7 @@ import sys
 
 import click
 
-from meshgen.commands._options import DimsCommand, dims_option, geometry_options
+from meshgen.commands._options import DimsCommand, block_nodes_option, dims_option, geometry_options
 from meshgen.commands._progress import progress_display
 from meshgen.commands._text import echo
 from meshgen.errors import did_you_mean
@@ -132,13 +132,7 @@ METHOD_HELP = (
     "Plot3D, OpenFOAM), for meshes larger than memory [default: chunked when the in-memory path would need more than "
     "half of the available memory].",
 )
-@click.option(
-    "--block-nodes",
-    type=click.IntRange(min=1024),
-    default=None,
-    metavar="N",
-    help="Nodes per block of the chunked path; peak memory grows with it [default: from the available memory, at most 1048576].",
-)
+@block_nodes_option()
 @click.option(
     "--scheduler",
     metavar="ADDRESS",
