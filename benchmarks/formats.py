@@ -11,16 +11,17 @@ quotes.
 .vtu table: the mesh as ``meshgen mesh`` writes it (the seven quality arrays of
 ``meshgen.quality`` and the metadata), written by meshio at zlib's default level (meshio's
 own writer, without the metadata, which meshio's writer drops) and by ``meshgen.formats._vtu`` at
-zlib levels 1, 3 and 6; wall and process CPU time (all threads) of the write, median of
+ISA-L levels 0-3 (``isal.isal_zlib``, the writer's deflate); wall and process CPU time (all threads) of the write, median of
 ``--vtu-repeat``, file size, and read time by meshio (what ``meshgen evaluate`` uses) and by VTK.
 Then the compression alone of the same arrays in 1 MiB blocks on the same thread pool, for the
-stdlib codecs VTK reads (zlib levels and strategies, and stored blocks as the no-compression
-bound). On a shared machine the CPU time is the steadier figure.
+zlib streams VTK reads: the stdlib's zlib levels and strategies (stored blocks, level 0, as the
+no-compression bound) and ISA-L's levels. On a shared machine the CPU time is the steadier figure.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import statistics
@@ -145,12 +146,11 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
     writers = [("meshio, level 6 (old)", lambda path: meshio.vtu.write(path, meshio_mesh, binary=True, compression="zlib"))]
     writers += [
         (
-            f"meshgen, level {level}",
-            lambda path, level=level: _vtu.write(path, X, cell_data, metadata, level=level, rle_above=None),
+            f"meshgen, ISA-L level {level}" + (" *" if level == _vtu.LEVEL else ""),
+            lambda path, level=level: _vtu.write(path, X, cell_data, metadata, level=level),
         )
-        for level in (1, 3, 6)
+        for level in (0, 1, 2, 3)
     ]
-    writers += [(f"meshgen, level {_vtu.LEVEL} + RLE*", lambda path: _vtu.write(path, X, cell_data, metadata))]
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "mesh.vtu"
@@ -179,16 +179,20 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
             f"{row['writer']:<24}{row['write_s']:>10.2f}{row['write_cpu_s']:>9.2f}{row['size_mb']:>11.1f}"
             f"{row['meshio_read_s']:>17.2f}{row['vtk_read_s']:>14.2f}"
         )
-    print(
-        f"  * the default: level {_vtu.LEVEL}, Z_RLE for blocks whose first {_vtu.PROBE_BYTES // 1024} KiB keep more than {_vtu.RLE_ABOVE} of their size at level {_vtu.LEVEL}"
-    )
+    print(f"  * the default (ISA-L level {_vtu.LEVEL})")
 
     # The codecs alone: the same arrays, the writer's blocks and thread pool.
     arrays = [flat_points(X), cell_connectivity(X.shape[:-1]), *cell_data.values()]
     raw_mb = sum(array.nbytes for array in arrays) / 1e6
     codecs = [(f"zlib level {level}", _zlib_codec(level, zlib.Z_DEFAULT_STRATEGY)) for level in (0, 1, 2, 3, 6)]
     codecs += [("zlib Z_RLE", _zlib_codec(1, zlib.Z_RLE)), ("zlib Huffman only", _zlib_codec(1, zlib.Z_HUFFMAN_ONLY))]
-    codecs += [(f"level {_vtu.LEVEL} + RLE* (default)", _vtu.compress_block)]
+    codecs += [
+        (
+            f"ISA-L level {level}" + (" (default)" if level == _vtu.LEVEL else ""),
+            functools.partial(_vtu.compress_block, level=level),
+        )
+        for level in range(4)
+    ]
     codec_rows = []
     for label, codec in codecs:
         wall, cpu = median_times(lambda: compress_blocks(arrays, codec), repeat)

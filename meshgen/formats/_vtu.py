@@ -3,11 +3,11 @@ metadata, zlib-compressed in blocks on all cores.
 
 meshio's writer deflates at zlib's default level (6) on one thread: about 3 s of a 1e6-cell mesh
 with its seven quality arrays. Here each array is cut into blocks of ``BLOCK_BYTES`` that a
-thread pool deflates at ``LEVEL`` (zlib releases the GIL) as soon as the array exists, while the
-calling thread builds the next array or encodes and writes the finished ones; blocks where string
-matches find little are deflated with run-length matches only (``compress_block``). Measured on
-2 cores (benchmarks/formats.py): 0.5 s instead of 3.6 s for the TFI semicylinder at 100^3,
-0.9 s instead of 4.4 s with its nodes perturbed. Reading stays with meshio (``read``).
+thread pool deflates as soon as the array exists, while the calling thread builds the next array
+or encodes and writes the finished ones. The deflate is ISA-L's (``isal.isal_zlib``, which
+releases the GIL): its streams are ordinary zlib streams that VTK's ``vtkZLibDataCompressor`` and
+meshio inflate, made at about a fifth of zlib's CPU time for the same size (level 1 of each;
+design notes §21, benchmarks/formats.py). Reading stays with meshio (``read``).
 
 The file, VTK's XML format version 1.0 as VTK writes it in its "binary" data mode::
 
@@ -40,11 +40,11 @@ import base64
 import functools
 import itertools
 import os
-import zlib
 from concurrent.futures import ThreadPoolExecutor
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+from isal import isal_zlib
 
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
@@ -54,8 +54,6 @@ __all__ = [
     "FILE_HEAD",
     "HEADER_TYPE",
     "LEVEL",
-    "PROBE_BYTES",
-    "RLE_ABOVE",
     "VTK_TYPES",
     "compress_block",
     "compress_blocks",
@@ -65,15 +63,10 @@ __all__ = [
     "write",
 ]
 
-# zlib level 1: at 1e6 hexahedra with seven quality arrays 3% larger than level 3 and 13% larger
-# than level 6 (meshio's), at 3/4 and 1/3 of their compression time (benchmarks/formats.py).
+# ISA-L's level 1 (of 0-3): on the 1e6-hexahedron mesh with its seven quality arrays as small as
+# zlib's level 1 (its float64 arrays the same to 1%) at a fifth of its CPU time; level 0 is 20%
+# larger and no faster (benchmarks/formats.py, design notes §21).
 LEVEL = 1
-# Where a block's first PROBE_BYTES keep more than RLE_ABOVE of their size at LEVEL, string
-# matches find little (the low bits of computed float64 values): the block is then deflated with
-# run-length matches only (Z_RLE), 1.6-2.3x faster on such data and 5-10% larger. The probe costs
-# about 5% where it does not pay (regular meshes).
-PROBE_BYTES = 1 << 16
-RLE_ABOVE = 0.8
 BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: enough blocks to share out, few Python calls
 HEADER_TYPE = np.dtype("<u8")
 VTK_TYPES = {np.dtype("<f8"): "Float64", np.dtype("<i8"): "Int64", np.dtype("u1"): "UInt8"}
@@ -85,18 +78,18 @@ FILE_HEAD = (
 )
 
 
-def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_bytes=BLOCK_BYTES):
+def write(path, X, cell_data, metadata, level=LEVEL, block_bytes=BLOCK_BYTES):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vtu, with ``cell_data``
     (name -> (cells,) float64 array in C order of the cells, or a callable returning that mapping:
     called in this thread once the metadata, points and cells are handed to the compressing
     threads, so that computing the cell data overlaps compressing them; the file is the same
-    either way) and ``metadata`` (JSON-serialisable dict; none stored when empty). ``level``,
-    ``rle_above``: see ``compress_block``;
+    either way) and ``metadata`` (JSON-serialisable dict; none stored when empty). ``level``: see
+    ``compress_block``;
     ``block_bytes``: uncompressed bytes per block, a multiple of 8 (meshio decodes each block
     into whole values)."""
     node_shape = X.shape[:-1]
     cell_count = int(np.prod([n - 1 for n in node_shape]))
-    compress = functools.partial(compress_block, level=level, rle_above=rle_above)
+    compress = functools.partial(compress_block, level=level)
     pool = ThreadPoolExecutor(max_workers=cpu_count())
     arrays = []  # (element, name, further attributes, type, bytes, compressed blocks) in file order
 
@@ -136,15 +129,10 @@ def write(path, X, cell_data, metadata, level=LEVEL, rle_above=RLE_ABOVE, block_
         pool.shutdown(cancel_futures=True)  # after a failure (or Ctrl-C), drop the blocks not yet started
 
 
-def compress_block(block, level: int = LEVEL, rle_above: float | None = RLE_ABOVE) -> bytes:
-    """One zlib stream of ``block`` (bytes-like): deflate at ``level``; but where its first
-    ``PROBE_BYTES`` deflated at ``level`` keep more than ``rle_above`` of their size (None: never),
-    deflate with run-length matches only (Z_RLE). Any zlib reader inflates either."""
-    probe = zlib.compress(block[:PROBE_BYTES], level)
-    if rle_above is not None and len(probe) > rle_above * min(len(block), PROBE_BYTES):
-        compressor = zlib.compressobj(level, zlib.DEFLATED, zlib.MAX_WBITS, 8, zlib.Z_RLE)
-        return compressor.compress(block) + compressor.flush()
-    return probe if len(block) <= PROBE_BYTES else zlib.compress(block, level)
+def compress_block(block, level: int = LEVEL) -> bytes:
+    """One zlib stream of ``block`` (bytes-like), deflated by ISA-L at ``level`` (0-3); any zlib
+    reader inflates it."""
+    return isal_zlib.compress(block, level)
 
 
 def compress_blocks(pool, array: np.ndarray, compress=compress_block, block_bytes: int = BLOCK_BYTES) -> list:
