@@ -105,6 +105,7 @@ LAYERS = [
         "meshgen.quality.smoothness_compiled",
         "meshgen.quality.smoothness",
         "meshgen.quality.report",
+        "meshgen.quality.worker",
         "meshgen.quality.text",
         "meshgen.quality.sketch",
         "meshgen.quality.summary",

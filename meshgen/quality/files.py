@@ -92,24 +92,32 @@ def json_ready(data):
     return data
 
 
-def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None, **write_options) -> dict:
+def write_mesh_with_quality(path, X, geometry=None, metadata: dict | None = None, worker=None, **write_options) -> dict:
     """Write node array ``X`` to ``path`` with the seven per-cell metrics as cell data (formats
     that carry cell data keep them), and the report plus ``metadata`` (geometry, params, method,
     ...) to ``<path>.quality.json``. ``write_options`` go to ``meshgen.formats.write_mesh``
     (``patches``, default the ``geometry``'s; ``format``; ``binary``). The report is computed in
-    parts on threads while the writer starts (``meshgen.quality.report.report_in_parallel``).
-    Returns the report (with ``quality_seconds``: wall seconds from the start of the quality to its
-    report, overlapping the write)."""
+    parts on threads while the writer starts (``meshgen.quality.report.report_in_parallel``), or by
+    ``worker`` (a ``meshgen.quality.worker.QualityWorker`` made for this mesh, which the caller
+    closes) in its own process; if the worker fails, here. Returns the report (with
+    ``quality_seconds``: wall seconds from the start of the quality to its report, overlapping the
+    write)."""
     if geometry is not None and "patches" not in write_options:
         write_options["patches"] = geometry_patches(geometry)
     X = check_node_array(X)
     start = time.perf_counter()
+    if worker is not None and not worker.submit(X):
+        worker = None
     with ThreadPoolExecutor(max_workers=4, thread_name_prefix="meshgen-quality") as pool:
         measured = []
 
         def metrics_then_report():
             # The per-cell metrics, for the writer to compress (a .vtu compresses the nodes and
             # cells meanwhile), while the rest of the report is computed on other threads.
+            metrics = worker.metrics() if worker is not None else None
+            if metrics is not None:
+                measured.append(pool.submit(lambda: worker.report() or quality_report(X, geometry)))
+                return metrics
             metrics, report = report_in_parallel(X, geometry, pool)
             measured.append(report)
             return metrics

@@ -1,0 +1,184 @@
+"""The quality report of a large in-memory mesh computed in a forked process that loads numba while
+the parent makes the mesh (design notes §21, "The quality in a forked process").
+
+Importing numba and loading the compiled kernels costs a process about a second of Python that
+holds the GIL; in the same process it can only run after the mesh (the forward pass's many short
+NumPy calls on worker threads stall behind a thread running Python). A process forked before the
+mesh is made loads them on the other core meanwhile, then computes the report of the nodes the
+parent hands it:
+
+- the parent allocates, before forking, anonymous shared memory for the nodes ``(node_shape, dim)``
+  float64 and the seven per-cell metrics ``(7, cells)`` float64;
+- the child loads the kernels (``load_compiled_kernels``) and waits on a pipe;
+- ``submit(X)`` copies the nodes in and wakes the child, which computes ``report_in_parallel``
+  (the same functions on the same values: the report and the metric arrays are those of the
+  parent's own path to the bit), copies the metrics into the shared memory, says so, then sends
+  the report;
+- ``metrics()`` and ``report()`` wait for those.
+
+The child ignores Ctrl-C and the termination signals' handlers (the parent handles them and kills
+the child), never runs the parent's cleanup (``os._exit``), and ends when its pipe closes (the
+parent gone). Whatever goes wrong in the child (it died, a kernel raised), ``metrics()`` returns
+None and the caller computes the report in its own process: the worker only changes where the same
+work runs.
+
+Used only where it pays and is safe: on Linux (fork), where numba is not loaded yet in this
+process (forking a process whose numba threads run is unsafe, and a loaded numba costs nothing
+more), and for meshes that take the compiled kernels (``NUMPY_CELLS`` cells and more).
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+import signal
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from meshgen.quality.faces_openfoam import non_orthogonality
+from meshgen.quality.kernels import METRICS
+from meshgen.quality.report import report_in_parallel
+from meshgen.quality.smoothness import smoothness_figures
+from meshgen.quality.structured import structured_metrics, use_compiled
+from meshgen.signals import TERMINATING_SIGNALS
+
+__all__ = ["QualityWorker", "load_compiled_kernels", "start_quality_worker", "worker_fits"]
+
+
+def worker_fits(node_shape) -> bool:
+    """Whether a mesh of ``node_shape`` nodes (its dimension's tuple, without the coordinate axis)
+    gets its report from a forked worker in this process: Linux, numba not loaded here yet, and
+    enough cells for the compiled kernels."""
+    cells = int(np.prod([int(n) - 1 for n in node_shape]))
+    return sys.platform.startswith("linux") and "numba" not in sys.modules and use_compiled(cells)
+
+
+def load_compiled_kernels(dim: int) -> None:
+    """Import numba and load every compiled kernel the in-memory report of a ``dim``-D node array
+    calls (per-cell metrics, smoothness, face non-orthogonality), by running them on a small grid
+    of the same array types."""
+    rng = np.random.default_rng(0)
+    axes = np.meshgrid(*[np.linspace(0.0, 1.0, 4)] * dim, indexing="ij")
+    X = np.ascontiguousarray(np.stack(axes, axis=-1) + 0.01 * rng.standard_normal((4,) * dim + (dim,)))
+    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+        structured_metrics(X, kernels="compiled")
+        smoothness_figures(X, kernels="compiled")
+        non_orthogonality(X, kernels="compiled")
+
+
+def _shared(count: int) -> np.ndarray:
+    """``count`` float64 zeros in anonymous memory that a forked child shares with this process."""
+    buffer = mmap.mmap(-1, max(8, 8 * count))
+    return np.frombuffer(buffer, dtype=np.float64, count=count)
+
+
+class QualityWorker:
+    """A forked process computing the quality report of one node array (see the module text)."""
+
+    def __init__(self, node_shape, dim: int, geometry=None):
+        import multiprocessing
+
+        self.node_shape = tuple(int(n) for n in node_shape)
+        self.dim = int(dim)
+        cells = int(np.prod([n - 1 for n in self.node_shape]))
+        self._nodes = _shared(int(np.prod(self.node_shape)) * self.dim).reshape(*self.node_shape, self.dim)
+        self._metrics = _shared(len(METRICS) * cells).reshape(len(METRICS), cells)
+        context = multiprocessing.get_context("fork")
+        self._connection, child_end = context.Pipe()
+        self._process = context.Process(
+            target=_serve, args=(child_end, self._nodes, self._metrics, geometry), name="meshgen-quality", daemon=True
+        )
+        self._process.start()
+        child_end.close()
+        self._failed = False
+        self._report = None
+
+    def submit(self, X: np.ndarray) -> bool:
+        """Hand node array ``X`` to the child; False (and the worker closed) when its shape is not
+        the one the worker was made for or the child is gone."""
+        if X.shape != self._nodes.shape:
+            self.close()
+            return False
+        np.copyto(self._nodes, X)
+        return self._send("go")
+
+    def metrics(self) -> dict | None:
+        """The seven per-cell arrays (views of the shared memory), once the child has them; None
+        when it failed."""
+        if self._receive("metrics") is None:
+            return None
+        return {name: self._metrics[index] for index, name in enumerate(METRICS)}
+
+    def report(self) -> dict | None:
+        """The report (``quality_report``'s), once the child sent it; None when it failed."""
+        return self._receive("report")
+
+    def close(self) -> None:
+        """End the child (at once if it still works) and release the pipe."""
+        if self._process.is_alive():
+            self._process.kill()
+        self._process.join()
+        self._connection.close()
+
+    def _send(self, message) -> bool:
+        try:
+            self._connection.send(message)
+            return True
+        except (OSError, ValueError):
+            self._failed = True
+            return False
+
+    def _receive(self, expected: str):
+        if self._failed:
+            return None
+        try:
+            kind, value = self._connection.recv()
+        except (EOFError, OSError, ValueError):
+            kind, value = "failed", None
+        if kind != expected:
+            self._failed = True
+            return None
+        return True if value is None else value
+
+
+def start_quality_worker(node_shape, dim: int, geometry=None) -> QualityWorker | None:
+    """A ``QualityWorker`` for a mesh of ``node_shape`` nodes when ``worker_fits``, else None (also
+    when the process cannot be forked)."""
+    if not worker_fits(node_shape):
+        return None
+    try:
+        return QualityWorker(node_shape, dim, geometry)
+    except OSError:
+        return None
+
+
+def _serve(connection, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
+    """The child: load the kernels, wait for the nodes, send ("metrics", None) once the metric
+    arrays are in shared memory, then ("report", report); ("error", text) if anything fails."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in TERMINATING_SIGNALS:
+        signal.signal(signum, signal.SIG_DFL)
+    status = 0
+    try:
+        load_compiled_kernels(nodes.shape[-1])
+        if connection.recv() == "go":
+            with ThreadPoolExecutor(max_workers=4, thread_name_prefix="meshgen-quality") as pool:
+                computed, report = report_in_parallel(nodes, geometry, pool)
+                for index, name in enumerate(METRICS):
+                    metrics[index] = computed[name]
+                connection.send(("metrics", None))
+                connection.send(("report", report.result()))
+    except EOFError:  # the parent is gone
+        status = 1
+    except BaseException as error:  # noqa: BLE001 - reported to the parent, which computes the report itself
+        status = 1
+        try:
+            connection.send(("error", f"{type(error).__name__}: {error}"))
+        except (OSError, ValueError):
+            pass
+    finally:
+        connection.close()
+        sys.stdout.flush()
+        os._exit(status)  # never the parent's cleanup (atexit, publications in flight)

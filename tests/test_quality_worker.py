@@ -1,0 +1,94 @@
+"""The quality report of a large mesh computed by a forked worker (``meshgen.quality.worker``) is
+the in-process report, to the bit; a worker that fails or dies leaves the command's result
+unchanged. Each run is a new interpreter (``meshgen mesh`` in a subprocess), where numba is not
+loaded yet: the only case the worker is used in."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+from meshgen.geometry import load_geometry
+from meshgen.quality import quality_report
+from meshgen.quality.kernels import METRICS
+from meshgen.quality.structured import NUMPY_CELLS, structured_metrics
+from meshgen.quality.worker import worker_fits
+from meshgen.tfi import tfi
+
+DIMS = (80, 80, 80)  # 512,000 cells: the compiled kernels' size (NUMPY_CELLS), so the worker's
+
+# Runs ``meshgen mesh`` in this interpreter after ``PATCH``; says on stderr which process computed
+# the metrics ("worker" when the worker returned them).
+DRIVER = """
+import sys
+import meshgen.quality.worker as worker
+original_metrics = worker.QualityWorker.metrics
+def metrics(self):
+    found = original_metrics(self)
+    print("metrics from the worker" if found is not None else "metrics not from the worker", file=sys.stderr)
+    return found
+worker.QualityWorker.metrics = metrics
+{patch}
+from meshgen.cli import main
+sys.argv[0] = "meshgen"
+main()
+"""
+
+FAILURES = {
+    "raises": "def failing(dim):\n    raise MemoryError('no memory in the worker')\nworker.load_compiled_kernels = failing",
+    "dies": "import os\ndef dying(dim):\n    os._exit(9)\nworker.load_compiled_kernels = dying",
+}
+
+
+def run_mesh(folder, patch: str = "") -> subprocess.CompletedProcess:
+    command = [sys.executable, "-c", DRIVER.format(patch=patch), "mesh", "-g", "semicylinder", "--method", "tfi"]
+    command += ["--dims", *map(str, DIMS), "-o", str(folder / "mesh.vtu"), "-q"]
+    return subprocess.run(command, capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def expected():
+    """The mesh's per-cell metrics and report, computed in this process."""
+    geometry = load_geometry("semicylinder")
+    X = tfi(geometry, DIMS)
+    return structured_metrics(X)[0], quality_report(X, geometry)
+
+
+def check_result(folder, expected) -> None:
+    metrics, report = expected
+    mesh = meshio.read(folder / "mesh.vtu")
+    for name in METRICS:
+        assert np.array_equal(mesh.cell_data[name][0], metrics[name], equal_nan=True), name
+    sidecar = json.loads((folder / "mesh.vtu.quality.json").read_text())
+    report = json.loads(json.dumps(report))  # as the sidecar stores it
+    assert {key: sidecar[key] for key in report} == report
+
+
+def test_the_worker_is_used_only_where_it_pays():
+    assert int(np.prod(DIMS)) >= NUMPY_CELLS
+    # this process may have loaded numba already (other tests): then never a worker
+    fits = worker_fits(tuple(n + 1 for n in DIMS))
+    assert fits == (sys.platform.startswith("linux") and "numba" not in sys.modules)
+    assert not worker_fits((11, 11, 11))  # NumPy kernels: nothing to load
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+def test_the_worker_computes_the_in_process_report(tmp_path, expected):
+    result = run_mesh(tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "metrics from the worker" in result.stderr
+    check_result(tmp_path, expected)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+@pytest.mark.parametrize("failure", sorted(FAILURES))
+def test_a_failing_worker_leaves_the_result_unchanged(tmp_path, expected, failure):
+    result = run_mesh(tmp_path, FAILURES[failure])
+    assert result.returncode == 0, result.stderr
+    assert "metrics from the worker" not in result.stderr and "Traceback" not in result.stderr
+    check_result(tmp_path, expected)
