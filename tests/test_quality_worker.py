@@ -6,8 +6,11 @@ loaded yet: the only case the worker is used in."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import meshio
 import numpy as np
@@ -33,6 +36,11 @@ def metrics(self):
     print("metrics from the worker" if found is not None else "metrics not from the worker", file=sys.stderr)
     return found
 worker.QualityWorker.metrics = metrics
+original_init = worker.QualityWorker.__init__
+def init(self, *arguments):
+    original_init(self, *arguments)
+    print(f"worker {{self._process.pid}}", file=sys.stderr, flush=True)
+worker.QualityWorker.__init__ = init
 {patch}
 from meshgen.cli import main
 sys.argv[0] = "meshgen"
@@ -45,10 +53,22 @@ FAILURES = {
 }
 
 
-def run_mesh(folder, patch: str = "") -> subprocess.CompletedProcess:
+def mesh_command(folder, patch: str = "") -> list[str]:
     command = [sys.executable, "-c", DRIVER.format(patch=patch), "mesh", "-g", "semicylinder", "--method", "tfi"]
-    command += ["--dims", *map(str, DIMS), "-o", str(folder / "mesh.vtu"), "-q"]
-    return subprocess.run(command, capture_output=True, text=True, timeout=300)
+    return command + ["--dims", *map(str, DIMS), "-o", str(folder / "mesh.vtu"), "-q"]
+
+
+def run_mesh(folder, patch: str = "") -> subprocess.CompletedProcess:
+    return subprocess.run(mesh_command(folder, patch), capture_output=True, text=True, timeout=300)
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie (an orphan's exit may wait to be reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            return handle.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
 
 
 @pytest.fixture(scope="module")
@@ -92,3 +112,21 @@ def test_a_failing_worker_leaves_the_result_unchanged(tmp_path, expected, failur
     assert result.returncode == 0, result.stderr
     assert "metrics from the worker" not in result.stderr and "Traceback" not in result.stderr
     check_result(tmp_path, expected)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+def test_a_killed_command_leaves_no_worker_behind(tmp_path):
+    """SIGKILL leaves the parent no cleanup: the worker must notice on its own and end."""
+    process = subprocess.Popen(mesh_command(tmp_path), stderr=subprocess.PIPE, text=True)
+    try:
+        line = process.stderr.readline()  # the worker's pid, printed when it is forked
+        assert line.startswith("worker "), line
+        worker = int(line.split()[1])
+        assert alive(worker)
+    finally:
+        os.kill(process.pid, signal.SIGKILL)
+        process.wait()
+    deadline = time.monotonic() + 60.0  # its kernels load first (a second or two), then it sees the parent gone
+    while alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(worker)

@@ -47,6 +47,9 @@ from meshgen.signals import TERMINATING_SIGNALS
 __all__ = ["QualityWorker", "load_compiled_kernels", "start_quality_worker", "worker_fits"]
 
 
+PARENT_CHECK_SECONDS = 0.5  # how often a waiting child checks that its parent lives
+
+
 def worker_fits(node_shape) -> bool:
     """Whether a mesh of ``node_shape`` nodes (its dimension's tuple, without the coordinate axis)
     gets its report from a forked worker in this process: Linux, numba not loaded here yet, and
@@ -87,9 +90,8 @@ class QualityWorker:
         self._metrics = _shared(len(METRICS) * cells).reshape(len(METRICS), cells)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe()
-        self._process = context.Process(
-            target=_serve, args=(child_end, self._nodes, self._metrics, geometry), name="meshgen-quality", daemon=True
-        )
+        arguments = (child_end, self._connection, os.getpid(), self._nodes, self._metrics, geometry)
+        self._process = context.Process(target=_serve, args=arguments, name="meshgen-quality", daemon=True)
         self._process.start()
         child_end.close()
         self._failed = False
@@ -154,15 +156,21 @@ def start_quality_worker(node_shape, dim: int, geometry=None) -> QualityWorker |
         return None
 
 
-def _serve(connection, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
+def _serve(connection, parent_end, parent: int, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
     """The child: load the kernels, wait for the nodes, send ("metrics", None) once the metric
-    arrays are in shared memory, then ("report", report); ("error", text) if anything fails."""
+    arrays are in shared memory, then ("report", report); ("error", text) if anything fails. It
+    ends when the parent does: its copy of the parent's end of the pipe is closed first, so the
+    pipe ends with the parent, and the wait also checks that ``parent`` is still its parent."""
+    parent_end.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in TERMINATING_SIGNALS:
         signal.signal(signum, signal.SIG_DFL)
     status = 0
     try:
         load_compiled_kernels(nodes.shape[-1])
+        while not connection.poll(PARENT_CHECK_SECONDS):
+            if os.getppid() != parent:
+                raise EOFError("the parent is gone")
         if connection.recv() == "go":
             with ThreadPoolExecutor(max_workers=4, thread_name_prefix="meshgen-quality") as pool:
                 computed, report = report_in_parallel(nodes, geometry, pool)
