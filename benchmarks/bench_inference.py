@@ -94,12 +94,41 @@ def inference_seconds(repeats: int) -> list[float]:
 
 
 _WRAPPER = """
-import json, resource, subprocess, sys, time
+import json, resource, subprocess, sys, threading, time
+
+def resident_kib(pid):
+    try:
+        with open(f"/proc/{pid}/status") as handle:
+            return next(int(line.split()[1]) for line in handle if line.startswith("VmRSS:"))
+    except (OSError, StopIteration, ValueError):
+        return 0
+
+def process_tree(pid):
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as handle:
+            children = [int(child) for child in handle.read().split()]
+    except OSError:
+        children = []
+    return [pid, *children]
+
 start = time.perf_counter()
-subprocess.run(sys.argv[1:], check=True)
+process = subprocess.Popen(sys.argv[1:])
+peak_sum = [0]
+
+def sample():
+    while process.poll() is None:
+        peak_sum[0] = max(peak_sum[0], sum(resident_kib(pid) for pid in process_tree(process.pid)))
+        time.sleep(0.02)
+
+sampler = threading.Thread(target=sample, daemon=True)
+sampler.start()
+if process.wait() != 0:
+    sys.exit(process.returncode)
 wall = time.perf_counter() - start
+sampler.join()
 usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime, "peak_kib": usage.ru_maxrss}))
+print(json.dumps({"seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime, "peak_kib": usage.ru_maxrss,
+                  "peak_sum_kib": peak_sum[0]}))
 """
 
 
@@ -107,9 +136,11 @@ def mesh_command(cells: int, folder: Path, environment: dict | None = None, opti
     """Run ``meshgen mesh --dims cells^3 -o out.vtu -q [options]`` in ``folder`` (with ``environment``,
     default this process's, and this checkout first on PYTHONPATH) by a wrapper process whose only
     child it is. Returns its wall and CPU seconds from start to exit (``import torch``, meshing,
-    quality, writing), its peak resident memory (ru_maxrss of the wrapper's RUSAGE_CHILDREN: this
-    process's would mix in earlier children), the size of the file written and whether the mesh
-    was polished (its sidecar's record)."""
+    quality, writing), its peak resident memory: the larger of the largest process's (ru_maxrss of
+    the wrapper's RUSAGE_CHILDREN: this process's would mix in earlier children) and the sum over
+    the command and its children (the quality worker), sampled every 20 ms (shared memory counted
+    in each process that maps it: an upper bound), the size of the file written and whether the
+    mesh was polished (its sidecar's record)."""
     environment = dict(os.environ if environment is None else environment)
     environment["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), environment.get("PYTHONPATH")]))
     command = [sys.executable, "-m", "meshgen", "mesh", "--dims", *[str(cells)] * 3, "-o", "out.vtu", "-q", *options]
@@ -120,7 +151,8 @@ def mesh_command(cells: int, folder: Path, environment: dict | None = None, opti
     return {
         "seconds": figures["seconds"],
         "cpu_seconds": figures["cpu_seconds"],
-        "peak_megabytes": figures["peak_kib"] * 1024 / 1e6,  # ru_maxrss is in KiB on Linux
+        "peak_megabytes": max(figures["peak_kib"], figures["peak_sum_kib"]) * 1024 / 1e6,  # KiB on Linux
+        "largest_process_megabytes": figures["peak_kib"] * 1024 / 1e6,
         "megabytes_written": (Path(folder) / "out.vtu").stat().st_size / 1e6,
         "polished": bool(_sidecar_polish(Path(folder) / "out.vtu.quality.json").get("polished", False)),
     }

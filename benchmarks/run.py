@@ -473,7 +473,7 @@ def mesh_command_section(quick: bool) -> dict:
     }
     print(
         f"{data['command']}: median {data['seconds']:.2f} s of {repeat} (CPU {data['cpu_seconds']:.2f} s), "
-        f"peak memory {data['peak_megabytes']:.0f} MB, {data['megabytes_written']:.0f} MB written; "
+        f"peak memory {data['peak_megabytes']:.0f} MB (summed over its processes), {data['megabytes_written']:.0f} MB written; "
         f"{'polished' if data['default_polished'] else 'not polished'} (the model's default); "
         f"with --no-polish: median {data['no_polish_seconds']:.2f} s (CPU {data['no_polish_cpu_seconds']:.2f} s); "
         f"with --polish: median {data['polish_seconds']:.2f} s (CPU {data['polish_cpu_seconds']:.2f} s)"
