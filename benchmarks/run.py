@@ -759,7 +759,7 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             "s",
             "mesh_command_100_seconds",
             cpu=data["cpu_seconds"],
-            note=f"peak memory {data['peak_megabytes']:.0f} MB; "
+            note=f"peak memory {data['peak_megabytes']:.0f} MB (its processes summed); "
             + (
                 "polished (the model's default)"
                 if data.get("default_polished", True)
