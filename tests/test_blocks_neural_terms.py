@@ -170,3 +170,40 @@ def test_init_refusals_are_one_line_errors(tiny_pipe, run_cli, args, message):
     result = run_cli("train", *args, "--init", str(tiny_pipe), "--out", "run", "--quiet")
     assert result.returncode == 2, result.stdout
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_tfi_anchor_is_validated_and_refused_for_one_block(run_cli, tmp_path):
+    from meshgen.neural.config import ConfigError, resolve_config
+
+    assert resolve_config("default").method.tfi_anchor == 1.0
+    with pytest.raises(ConfigError, match="method.tfi_anchor"):
+        tiny_config("method.tfi_anchor=-0.5")
+    result = run_cli("train", "-g", "semicylinder", "--set", "method.tfi_anchor=0.1", "--out", "run", "--quiet")
+    assert result.returncode == 2 and not (tmp_path / "run").exists()
+    assert "'semicylinder' is one block: method.tfi_anchor=0.1 applies to block sets only" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("weight", [0.0, 0.3, 1.0])
+def test_tfi_anchor_weighs_the_pull_towards_the_tfi_in_l1(weight):
+    """L1 = the residual part + tfi_anchor times the mean over blocks of the mean squared distance
+    from the TFI at the pool's points (computed here with NumPy's TFI); 0 leaves the residual alone."""
+    from meshgen.neural.block_problem import BlockNetworks, block_pde_term, block_samples, tfi_anchor_pool
+    from meshgen.tfi import transfinite
+
+    config = tiny_config(*TINY_BLOCKS, f"method.tfi_anchor={weight}")
+    problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))
+    torch.manual_seed(0)
+    networks = BlockNetworks(3, [8], 5).double().networks
+    sample, _ = block_samples(config, problem, fixed_block_points(problem, config, 32, 1), random=False)
+    pools = tfi_anchor_pool(problem, 40, 7)
+    with torch.no_grad():
+        plain = float(block_pde_term(networks, problem, sample))
+        problem.anchor, problem.anchor_weight = pools, config.method.tfi_anchor
+        anchored = float(block_pde_term(networks, problem, sample))
+        distances = []
+        for net, pool, boundary in zip(networks, pools, problem.boundaries):
+            points = pool["points"].double().numpy()
+            image = net(torch.from_numpy(points)).numpy()
+            distances.append(np.mean(np.sum((image - transfinite(boundary, list(points.T))) ** 2, axis=1)))
+    assert anchored - plain == pytest.approx(weight * np.mean(distances), rel=1e-5, abs=1e-12)

@@ -64,7 +64,7 @@ INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal
 # no map that is smooth in every block is C1 across all the interfaces at a junction, so the
 # residual there measures the junction, not the map (``junction_weights``).
 JUNCTION_MARGIN = 0.25
-# Weight of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
+# Default weight (``method.tfi_anchor``) of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
 # normalised units, of every block's network from its TFI at fixed interior points. Winslow's
 # equations barely resist some motions of a block set (an O-grid's core turned about its axis
 # against the wall, the ring between sheared into a spiral: the ring's map stays a Winslow solution);
@@ -116,6 +116,7 @@ class BlockProblem:
     anchor: list = field(default_factory=list)
     # the parallelogram rule's quadrilaterals at junction nodes (``junction_pool``), None: no rule
     junction: dict | None = None
+    anchor_weight: float = TFI_ANCHOR  # the pull's weight (``method.tfi_anchor``)
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
@@ -454,7 +455,7 @@ def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
 
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
     """L1: the mean squared Winslow residual over every block's grid and every interface's stencils
-    (those near junction edges weighted down: ``junction_weights``), plus ``TFI_ANCHOR`` times the
+    (those near junction edges weighted down: ``junction_weights``), plus ``anchor_weight`` times the
     pull towards the TFI (``anchor_term``) when the problem holds its pool."""
     grids, tangents = sample
     residuals = []
@@ -472,8 +473,8 @@ def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
     if problem.junction is not None:
         residuals.append(junction_rows(networks, problem.junction))
     value = pde_loss(torch.cat(residuals))
-    if problem.anchor and TFI_ANCHOR > 0:
-        value = value + TFI_ANCHOR * anchor_term(networks, problem.anchor)
+    if problem.anchor and problem.anchor_weight > 0:
+        value = value + problem.anchor_weight * anchor_term(networks, problem.anchor)
     return value
 
 

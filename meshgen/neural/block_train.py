@@ -268,7 +268,8 @@ def train_blocks(
     if start is not None:
         center, scale = start["model"]["center"], start["model"]["scale"]
     problem = block_problem(block_set, device, center, scale)
-    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6)
+    problem.anchor_weight = config.method.tfi_anchor
+    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6) if config.method.tfi_anchor > 0 else []
     torch.manual_seed(config.seed)
     network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)

@@ -15,7 +15,17 @@ from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
-from meshgen.neural.config import ConfigError, dotted_items, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.config import (
+    ConfigError,
+    TrainConfig,
+    dotted_items,
+    from_dict,
+    parse_override,
+    resolve_config,
+    set_key,
+    to_dict,
+    validate,
+)
 from meshgen.neural.device import inference_device
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
@@ -166,6 +176,7 @@ def prepare_run(
         geometry_object = load_geometry(geometry, parse_params(params), check=not blocks)
         if vary and blocks:
             raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
+        _refuse_block_only_keys(config, blocks, geometry_object.name)
         if blocks:  # keys a block set cannot use are refused, not ignored
             from meshgen.neural.block_train import check_block_keys
 
@@ -198,6 +209,20 @@ def prepare_run(
         config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,
         block_set, started,
     )  # fmt: skip
+
+
+BLOCK_ONLY_KEYS = ("method.tfi_anchor",)  # keys only a block set uses: refused away from their default for one shape
+
+
+def _refuse_block_only_keys(config, blocks: bool, name: str) -> None:
+    """ConfigError naming the keys of ``BLOCK_ONLY_KEYS`` that ``config`` sets away from their
+    default when the geometry is one block (a shape or a family of shapes), where nothing reads them."""
+    if blocks:
+        return
+    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
+    unused = [f"{key}={chosen[key]}" for key in BLOCK_ONLY_KEYS if chosen[key] != default[key]]
+    if unused:
+        raise ConfigError(f"'{name}' is one block: {', '.join(unused)} applies to block sets only (leave it at the default)")
 
 
 def _refuse_init_with(init, resume, vary) -> None:
