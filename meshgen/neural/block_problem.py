@@ -24,6 +24,7 @@ import torch
 
 from meshgen import cube
 from meshgen.blocks import BlockSet
+from meshgen.elliptic_blocks import junction_nodes
 from meshgen.neural.block_inference import face_plane
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
@@ -183,8 +184,6 @@ def junction_pool(block_set: BlockSet, device) -> dict | None:
     parametric node, a, b and ab in the quad's block, ``step`` (J,) the side in normalised units
     ``area`` (J,) the mean over the junction's quads of the product of their parametric sides,
     ``count`` J."""
-    from meshgen.elliptic_blocks import junction_nodes
-
     junctions, numbering, _ = junction_nodes(block_set)
     if len(junctions) == 0:
         return None

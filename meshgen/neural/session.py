@@ -15,6 +15,7 @@ from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
+from meshgen.neural.block_inference import is_block_model
 from meshgen.neural.config import (
     ConfigError,
     TrainConfig,
@@ -237,7 +238,6 @@ def check_init(path, config, geometry, block_set) -> dict:
     block set (``block_set`` not None), the checkpoint a block-set model of ``geometry`` (same name
     and parameters) with ``config``'s widths, and the run must not start with the fit to the TFI
     (``pretrain.steps`` 0), which would replace its weights."""
-    from meshgen.neural.block_inference import is_block_model
     from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
 
     if block_set is None:
