@@ -58,6 +58,12 @@ def _epilog() -> str:
 )
 @click.option("--resume", type=click.Path(dir_okay=False), default=None, help="Continue training from this checkpoint.")
 @click.option(
+    "--init",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="Block sets: start a new run from this checkpoint's weights (same geometry and widths; needs --set pretrain.steps=0).",
+)
+@click.option(
     "--seed",
     type=int,
     default=None,
@@ -86,7 +92,22 @@ def _epilog() -> str:
 )
 @click.option("--list-presets", is_flag=True, help="List the presets with one line each and exit.")
 def train(
-    geometry, params, preset, config_file, overrides, steps, out, resume, seed, device, threads, quiet, vary, force, list_presets
+    geometry,
+    params,
+    preset,
+    config_file,
+    overrides,
+    steps,
+    out,
+    resume,
+    init,
+    seed,
+    device,
+    threads,
+    quiet,
+    vary,
+    force,
+    list_presets,
 ):
     """Train a network that maps the unit cube onto a geometry (the 3DMeshNet method).
 
@@ -125,6 +146,7 @@ def train(
         threads=threads,
         vary=vary,
         force=force,
+        init=init,
     )
     result = run_training(run, quiet=quiet)
     if result.interrupted:

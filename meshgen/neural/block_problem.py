@@ -24,6 +24,7 @@ import torch
 
 from meshgen import cube
 from meshgen.blocks import BlockSet
+from meshgen.elliptic_blocks import junction_nodes
 from meshgen.neural.block_inference import face_plane
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
@@ -34,9 +35,11 @@ from meshgen.tfi import tfi, transfinite
 __all__ = [
     "INTERFACE_STEP",
     "JUNCTION_MARGIN",
+    "JUNCTION_STEP",
     "BlockNetworks",
     "BlockProblem",
     "ANCHOR_POINTS",
+    "FLAT_PATCH_STEP",
     "TFI_ANCHOR",
     "anchor_term",
     "block_boundary_term",
@@ -45,7 +48,11 @@ __all__ = [
     "block_sample",
     "block_samples",
     "fixed_block_points",
+    "flat_patch_rows",
     "interface_stencil",
+    "junction_pool",
+    "lattice_tangents",
+    "junction_rows",
     "junction_weights",
     "patch_pool",
     "pretrain_block_pool",
@@ -58,7 +65,7 @@ INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal
 # no map that is smooth in every block is C1 across all the interfaces at a junction, so the
 # residual there measures the junction, not the map (``junction_weights``).
 JUNCTION_MARGIN = 0.25
-# Weight of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
+# Default weight (``method.tfi_anchor``) of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
 # normalised units, of every block's network from its TFI at fixed interior points. Winslow's
 # equations barely resist some motions of a block set (an O-grid's core turned about its axis
 # against the wall, the ring between sheared into a spiral: the ring's map stays a Winslow solution);
@@ -66,6 +73,16 @@ JUNCTION_MARGIN = 0.25
 # solver does by starting from it.
 TFI_ANCHOR = 1.0
 ANCHOR_POINTS = 500  # fixed interior points per block of the pull towards the TFI
+# Parametric step of L2's right-angle rule on flat patches (``flat_patch_rows``): the multi-block
+# elliptic mesh moves a node on a flat patch to the projection of its neighbour one layer inside,
+# so grid lines meet the plane at right angles; the networks are asked the same of the map's
+# derivative across the face (second-order one-sided differences of this step). 0 switches it off.
+FLAT_PATCH_STEP = 0.05
+# L2's parallelogram rule at junction nodes (``junction_pool``): the multi-block elliptic mesh puts
+# a node where three or more blocks meet at the mean of the parallelogram completions of the grid
+# quadrilaterals around it; the networks are asked the same of quadrilaterals made physically
+# square, of side this fraction of the shortest mean block length around the junction. 0: off.
+JUNCTION_STEP = 0.05
 
 
 class BlockNetworks(torch.nn.Module):
@@ -98,6 +115,9 @@ class BlockProblem:
     junctions: list = field(default_factory=list)
     # per block: {"points" (K, d), "targets" (K, d)}, the TFI at fixed interior points (``tfi_anchor_pool``)
     anchor: list = field(default_factory=list)
+    # the parallelogram rule's quadrilaterals at junction nodes (``junction_pool``), None: no rule
+    junction: dict | None = None
+    anchor_weight: float = TFI_ANCHOR  # the pull's weight (``method.tfi_anchor``)
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
@@ -149,22 +169,119 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
             block_set.geometries[i.b], i.face_b.axis, dim
         )
         interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
-    return BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
+    problem = BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
+    problem.junction = junction_pool(block_set, device) if JUNCTION_STEP > 0 else None
+    return problem
 
 
-# ---------------------------------------------------------------------------------------------
-# fixed pools
+def junction_pool(block_set: BlockSet, device) -> dict | None:
+    """The parallelogram rule's quadrilaterals at the junction nodes of ``block_set``'s grid (its
+    ``coords``; ``meshgen.elliptic_blocks.junction_nodes``: where three or more blocks meet, on no
+    patch), as the elliptic mesh takes them (in 3D those across the block edge the node is on, in
+    its layer), each rescaled about the node to a physically square one of side ``JUNCTION_STEP``
+    times the shortest mean block length around the junction. Returns None without junctions, else
+    ``node`` (Q,) the junction number of each quad, ``block`` (Q,), ``points`` (Q, 4, d) the
+    parametric node, a, b and ab in the quad's block, ``step`` (J,) the side in normalised units
+    ``area`` (J,) the mean over the junction's quads of the product of their parametric sides,
+    ``count`` J."""
+    junctions, numbering, _ = junction_nodes(block_set)
+    if len(junctions) == 0:
+        return None
+    dim = block_set.dim
+    lengths = [[_mean_length(g, axis, dim) for axis in range(dim)] for g in block_set.geometries]
+    order = {int(n): k for k, n in enumerate(junctions)}
+    nodes, blocks, quads, sides = [], [], [], []
+    for block, ids in enumerate(numbering):
+        local = np.argwhere(np.isin(ids, junctions))
+        shape = np.array(ids.shape)
+        coords = block_set.coords[block]
+        free = ~((local == 0) | (local == shape - 1))
+        for edge_axis in range(dim) if dim == 3 else [None]:
+            if edge_axis is None:
+                rows, plane = np.arange(len(local)), [0, 1]
+            else:
+                rows = np.flatnonzero(free[:, edge_axis] & (free.sum(axis=1) == 1))
+                plane = [axis for axis in range(dim) if axis != edge_axis]
+            for index in local[rows]:
+                point = np.array([coords[axis][index[axis]] for axis in range(dim)])
+                for step_a in (-1, 1):
+                    for step_b in (-1, 1):
+                        a, b = index.copy(), index.copy()
+                        a[plane[0]] += step_a
+                        b[plane[1]] += step_b
+                        if not (0 <= a[plane[0]] < shape[plane[0]] and 0 <= b[plane[1]] < shape[plane[1]]):
+                            continue
+                        nodes.append(order[int(ids[tuple(index)])])
+                        blocks.append(block)
+                        quads.append((point, plane, (step_a, step_b)))
+                        sides.append(min(lengths[block][axis] for axis in plane))
+    nodes = np.array(nodes)
+    side = np.full(len(junctions), np.inf)
+    np.minimum.at(side, nodes, np.array(sides))
+    side *= JUNCTION_STEP
+    points = np.empty((len(nodes), 4, dim))
+    for q, (point, plane, signs) in enumerate(quads):  # node, a, b, ab: physical side ``side``
+        offsets = [sign * side[nodes[q]] / lengths[blocks[q]][axis] for axis, sign in zip(plane, signs)]
+        corner = [np.zeros(dim) for _ in range(4)]
+        corner[1][plane[0]] = corner[3][plane[0]] = offsets[0]
+        corner[2][plane[1]] = corner[3][plane[1]] = offsets[1]
+        points[q] = point + np.stack(corner)
+    areas = np.abs(np.prod(points[:, 3] - points[:, 0], axis=1, where=(points[:, 3] != points[:, 0])))
+    area = np.zeros(len(junctions))
+    np.add.at(area, nodes, areas)
+    area /= np.bincount(nodes, minlength=len(junctions))
+    return {
+        "node": torch.from_numpy(nodes).to(device),
+        "block": np.array(blocks),
+        "points": torch.from_numpy(points).to(device),
+        "area": torch.from_numpy(area).to(device),
+        "count": len(junctions),
+    }
 
 
-def patch_pool(problem: BlockProblem, count: int, seed: int) -> dict:
+def junction_rows(networks, pool: dict) -> torch.Tensor:
+    """L1's rows of the parallelogram rule (``JUNCTION_STEP``), (J, d): per junction, the node's
+    image (the mean of its blocks' images) minus the mean over its quads of x_a + x_b - x_ab,
+    divided by the mean over its quads of the product of their parametric sides: a mean mixed
+    second derivative in the blocks' parameters, the units of the Winslow residual (design notes §20)."""
+    points = pool["points"]
+    dtype = _dtype(networks[0])
+    values = torch.empty((*points.shape[:2], points.shape[-1]), dtype=dtype, device=points.device)
+    for block in np.unique(pool["block"]):
+        rows = torch.from_numpy(np.flatnonzero(pool["block"] == block)).to(points.device)
+        chosen = points.index_select(0, rows).to(dtype)
+        values[rows] = networks[block](chosen.reshape(-1, chosen.shape[-1])).reshape(chosen.shape)
+    node, count = pool["node"], pool["count"]
+    hits = torch.zeros(count, dtype=dtype, device=points.device).index_add_(0, node, torch.ones_like(node, dtype=dtype))
+    image = torch.zeros((count, points.shape[-1]), dtype=dtype, device=points.device).index_add_(0, node, values[:, 0])
+    completion = values[:, 1] + values[:, 2] - values[:, 3]
+    predicted = torch.zeros_like(image).index_add_(0, node, completion)
+    return (image - predicted) / (hits[:, None] * pool["area"].to(dtype)[:, None])
+
+
+def lattice_tangents(count: int, dim: int, margin: float) -> torch.Tensor:
+    """About ``count`` points of a face (``dim`` - 1 tangent coordinates) on a regular lattice
+    inside [margin, 1 - margin]: n per axis, n = round(count^(1/(dim-1))) (at least 2), at the
+    centres of the n equal cells, (n^(dim-1), dim-1) float64."""
+    n = max(2, round(count ** (1.0 / (dim - 1))))
+    axis = margin + (torch.arange(n, dtype=torch.float64) + 0.5) * (1.0 - 2.0 * margin) / n
+    grids = torch.meshgrid(*([axis] * (dim - 1)), indexing="ij")
+    return torch.stack([g.reshape(-1) for g in grids], -1)
+
+
+def patch_pool(problem: BlockProblem, count: int, seed: int, lattice: bool = False) -> dict:
     """``count`` points per patch face with their images, local sizes and planes, on the device:
     ``points`` (F, count, d), ``images`` (F, count, d), ``size`` (F, count), ``normal`` (F, d)
-    (zero for a curved face); ``interface_size``: per interface, the mean local size of its face."""
+    (zero for a curved face); ``interface_size``: per interface, the mean local size of its face.
+    ``lattice``: the points of ``lattice_tangents`` (about ``count``) instead of random ones."""
     generator = torch.Generator().manual_seed(seed)
     dim = problem.dim
     points, images, sizes, normals = [], [], [], []
     for block, face, plane in problem.patch_faces:
-        tangents = torch.rand((count, dim - 1), generator=generator, dtype=torch.float64).numpy()
+        if lattice:
+            tangents = lattice_tangents(count, dim, 0.0).numpy()
+        else:
+            tangents = torch.rand((count, dim - 1), generator=generator, dtype=torch.float64).numpy()
         p = face_points(face, tangents)
         image = problem.boundaries[block](p)
         points.append(p)
@@ -233,13 +350,22 @@ def block_sample(problem: BlockProblem, config, generator: torch.Generator, pool
     }
 
 
-def fixed_block_points(problem: BlockProblem, config, pool_count: int, seed: int) -> dict:
-    """The L-BFGS stage's fixed draw: the unshifted grids (``grid`` with scale 1) and one draw of
-    interface and patch points, from their own seed."""
+def fixed_block_points(problem: BlockProblem, config, pool_count: int, seed: int, lattice: int = 0) -> dict:
+    """A fixed draw: the unshifted grids (``grid`` with scale 1) and one draw of interface and
+    patch points, from their own seed. ``lattice`` > 0 (the L-BFGS stage): the interface points on
+    the regular lattice of ``lattice_tangents`` (as many per face as a draw) and the patch points
+    the first ``lattice`` of a lattice pool (``patch_pool(..., lattice=True)``), the same on every
+    face: a block set whose map does not change along an axis (an extrusion) then meets the same
+    equations in every layer across it, so nothing in the fixed points makes its layers differ."""
     generator = torch.Generator().manual_seed(seed)
     draw = block_sample(problem, config, generator, pool_count)
     draw["grid"] = torch.zeros_like(draw["grid"])
     draw["grid"][:, 0::2] = 1.0  # scale 1 (grid_from_draws with min_scale < 1), offset 0
+    if lattice:
+        per_face = draw["tangent"].shape[1]
+        tangent = lattice_tangents(per_face, problem.dim, INTERFACE_STEP).to(draw["tangent"].dtype)
+        draw["tangent"] = tangent.expand(len(problem.interfaces), *tangent.shape).contiguous()
+        draw["index"] = torch.arange(lattice).expand(len(problem.patch_faces), lattice).contiguous()
     return {k: v.to(problem.device) for k, v in draw.items()}
 
 
@@ -328,7 +454,7 @@ def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
 
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
     """L1: the mean squared Winslow residual over every block's grid and every interface's stencils
-    (those near junction edges weighted down: ``junction_weights``), plus ``TFI_ANCHOR`` times the
+    (those near junction edges weighted down: ``junction_weights``), plus ``anchor_weight`` times the
     pull towards the TFI (``anchor_term``) when the problem holds its pool."""
     grids, tangents = sample
     residuals = []
@@ -343,9 +469,11 @@ def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
         if ends and JUNCTION_MARGIN > 0:
             residual = residual * junction_weights(tangent.to(residual.dtype), ends).sqrt()[:, None]
         residuals.append(residual)
+    if problem.junction is not None:
+        residuals.append(junction_rows(networks, problem.junction))
     value = pde_loss(torch.cat(residuals))
-    if problem.anchor and TFI_ANCHOR > 0:
-        value = value + TFI_ANCHOR * anchor_term(networks, problem.anchor)
+    if problem.anchor and problem.anchor_weight > 0:
+        value = value + problem.anchor_weight * anchor_term(networks, problem.anchor)
     return value
 
 
@@ -368,12 +496,17 @@ def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sam
         points = pool["points"][number].index_select(0, rows).to(dtype)
         image = pool["images"][number].index_select(0, rows).to(dtype)
         value = networks[block](points)
+        size = pool["size"][number].index_select(0, rows).to(dtype)
         if plane is not None:  # only the distance from the plane: nodes slide in a flat patch
             normal = pool["normal"][number].to(dtype)
+            if FLAT_PATCH_STEP > 0:  # ... and grid lines meet it at right angles
+                predicted.append(flat_patch_rows(networks[block], problem.patch_faces[number][1], points, value, normal))
+                targets.append(torch.zeros_like(value))
+                sizes.append(torch.ones_like(size))
             value = image + ((value - image) @ normal)[:, None] * normal
         predicted.append(value)
         targets.append(image)
-        sizes.append(pool["size"][number].index_select(0, rows).to(dtype))
+        sizes.append(size)
     for number, (interface, tangent) in enumerate(zip(problem.interfaces, tangents)):
         _, value_a, value_b = interface_stencil(networks, problem, interface, tangent)
         predicted.append(value_a)
@@ -381,3 +514,23 @@ def block_boundary_term(networks, problem: BlockProblem, config, pool: dict, sam
         sizes.append(torch.full((len(value_a),), float(pool["interface_size"][number]), dtype=dtype, device=value_a.device))
     size = torch.cat(sizes) if config.method.boundary_error == "relative" else None
     return boundary_loss(torch.cat(predicted), torch.cat(targets), config.method.point_weights, size)[0]
+
+
+def flat_patch_rows(network, face: cube.Face, points: torch.Tensor, value: torch.Tensor, normal: torch.Tensor) -> torch.Tensor:
+    """L2's rows of the right-angle rule on a flat patch (``FLAT_PATCH_STEP``), (K, d): at the
+    face's parametric ``points`` (K, d), where the network's images are ``value`` (K, d), the
+    in-plane part of the map's derivative across the face over its length, i.e. the sine of the
+    angle by which the grid line leaving the face misses the plane's normal (dimensionless: the
+    rows enter L2 with local size 1). The derivative is the second-order one-sided difference
+    (-3 x(0) + 4 x(s) - x(2 s)) / 2 s, x(t) the image at parametric depth t inside the block.
+    Zero when grid lines meet the plane at right angles, the multi-block elliptic mesh's rule
+    (design notes §20)."""
+    inward = 1.0 if face.side == 0 else -1.0
+    steps = []
+    for depth in (FLAT_PATCH_STEP, 2.0 * FLAT_PATCH_STEP):
+        moved = points.clone()
+        moved[:, face.axis] = face.side + inward * depth
+        steps.append(moved)
+    inside = network(torch.cat(steps)).reshape(2, *value.shape)
+    across = -3.0 * value + 4.0 * inside[0] - inside[1]
+    return (across - (across @ normal)[:, None] * normal) / across.norm(dim=-1, keepdim=True)

@@ -189,6 +189,16 @@ def _lbfgs_step(training: Training, optimizer, pool, fixed) -> dict:
     return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": optimizer.param_groups[0]["lr"]}
 
 
+def lbfgs_points(training: Training, pool_count: int) -> tuple[dict, dict]:
+    """The L-BFGS stage's (patch pool, fixed draw): patch and interface points on regular lattices
+    (``fixed_block_points(..., lattice=...)``), as many per face as a step's draw."""
+    problem, config = training.problem, training.config
+    per_face = _per_face(training)
+    pool = patch_pool(problem, per_face, config.seed + 3, lattice=True)
+    count = pool["points"].shape[1]
+    return pool, fixed_block_points(problem, config, pool_count, config.seed + 2, lattice=count)
+
+
 def block_stage_table(pool: dict, pool_count: int) -> tuple:
     """The stages of a block set's run (the runner's table): ``pretrain``, ``adam``, ``lbfgs``."""
 
@@ -226,8 +236,8 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
         Stage(
             "lbfgs",
             optimizer=_lbfgs_optimizer,
-            points=lambda t, state: fixed_block_points(t.problem, t.config, pool_count, t.config.seed + 2),
-            step=lambda t, optimizer, scheduler, fixed: _lbfgs_step(t, optimizer, pool, fixed),
+            points=lambda t, state: lbfgs_points(t, pool_count),
+            step=lambda t, optimizer, scheduler, points: _lbfgs_step(t, optimizer, *points),
         ),
     )
 
@@ -243,30 +253,45 @@ def train_blocks(
     stop=None,
     geometry_spec: str | None = None,
     summary: bool = True,
+    init: dict | None = None,
 ) -> TrainResult:
     """Train (or continue, ``resume``) one model for ``block_set``: as ``meshgen.neural.train.train``
     for one shape (the same run folder, checkpoint layout, history and summary), with one network
-    per block. The networks map each block's unit cube; meshes of any --dims come from them."""
+    per block. The networks map each block's unit cube; meshes of any --dims come from them.
+    ``init``: {"path", "checkpoint"} (``meshgen train --init``): a new run whose networks and loss
+    weights start as that checkpoint's (its normalisation, its weights' type), recorded in the
+    checkpoint's ``init`` entry."""
     run_dir = Path(run_dir)
     device = torch.device(device)
     center = scale = None
-    if resume is not None:
-        center, scale = resume["model"]["center"], resume["model"]["scale"]
+    start = resume if resume is not None else (init or {}).get("checkpoint")
+    if start is not None:
+        center, scale = start["model"]["center"], start["model"]["scale"]
     problem = block_problem(block_set, device, center, scale)
-    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6)
+    problem.anchor_weight = config.method.tfi_anchor
+    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6) if config.method.tfi_anchor > 0 else []
     torch.manual_seed(config.seed)
     network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
     weights.to(device)
     generator = torch.Generator().manual_seed(config.seed)
     state = TrainState(BLOCK_STAGES[0])
-    if resume is not None:
-        if next(iter(resume["model"]["state_dict"].values())).dtype == torch.float64:  # stopped in an lbfgs.float64 stage
+    if start is not None:
+        if next(iter(start["model"]["state_dict"].values())).dtype == torch.float64:  # saved in an lbfgs.float64 stage
             network.double()
-        network.load_state_dict(resume["model"]["state_dict"])
-        weights.load_state_dict(resume["reweighting"])
+        network.load_state_dict(start["model"]["state_dict"])
+        weights.load_state_dict(start["reweighting"])
+    if resume is not None:
         generator.set_state(resume["rng"]["sampler"])
         state = state_from_checkpoint(resume)
+    started_from = resume.get("init") if resume is not None else None
+    if init is not None:
+        checkpoint = init["checkpoint"]
+        started_from = {
+            "path": str(init["path"]),
+            "step": int(checkpoint["step"]),
+            "training_seconds": float(checkpoint["elapsed_seconds"]),
+        }
     parallel = device.type == "cpu" and torch.get_num_threads() >= 2
     training = Training(network, weights, problem, config, generator, TermRunner(parallel))
     pool_count = _per_face(training) * config.points.boundary_pool
@@ -287,6 +312,7 @@ def train_blocks(
             },
             "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
             "test_loss": {"pde": pde, "boundary": boundary, "total": pde + boundary},
+            **({"init": started_from} if started_from is not None else {}),
         }
 
     saver = CheckpointWriter(training, describe_run, run_dir / "checkpoint.pt", state)

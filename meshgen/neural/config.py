@@ -72,6 +72,9 @@ class MethodConfig:
     boundary_error: str = "relative"
     pde_weight: float = 1.0  # fixed weight of L1 (the starting weight when reweighting)
     boundary_weight: float = 1.0  # fixed weight of L2 (the starting weight when reweighting)
+    # block sets only: weight in L1 of the pull of every block's network towards its TFI (design
+    # notes §20); 0 switches it off. Refused (unless 1) for one shape or a family
+    tfi_anchor: float = 1.0
 
 
 @dataclass
@@ -163,6 +166,7 @@ BOUNDS = {
     "method.point_weights": (0.0, 1e6),
     "method.pde_weight": (0.0, 1e6),
     "method.boundary_weight": (0.0, 1e6),
+    "method.tfi_anchor": (0.0, 1e6),
     "points.interior": (1, 10**7),
     "points.boundary": (1, 10**7),
     "points.grid_min_scale": (0.0, 1.0),
@@ -421,6 +425,7 @@ def validate(config: TrainConfig) -> None:
     need(config.method.point_weights >= 0, "method.point_weights", "must be >= 0")
     need(config.method.pde_weight > 0, "method.pde_weight", "must be > 0")
     need(config.method.boundary_weight > 0, "method.boundary_weight", "must be > 0")
+    need(config.method.tfi_anchor >= 0, "method.tfi_anchor", "must be >= 0")
     need(config.points.interior >= 1, "points.interior", "must be >= 1")
     need(config.points.boundary >= 1, "points.boundary", "must be >= 1")
     need(0 < config.points.grid_min_scale <= 1, "points.grid_min_scale", "must be in (0, 1]")

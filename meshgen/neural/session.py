@@ -15,7 +15,18 @@ from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
-from meshgen.neural.config import ConfigError, dotted_items, from_dict, parse_override, resolve_config, set_key, to_dict, validate
+from meshgen.neural.block_inference import is_block_model
+from meshgen.neural.config import (
+    ConfigError,
+    TrainConfig,
+    dotted_items,
+    from_dict,
+    parse_override,
+    resolve_config,
+    set_key,
+    to_dict,
+    validate,
+)
 from meshgen.neural.device import inference_device
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
@@ -42,6 +53,7 @@ class Run:
     fresh_name: bool = False  # run_dir is a default name: the run takes it, or the next free one
     force: bool = False  # --force: overwrite a run folder of another geometry or configuration
     block_set: object | None = None  # meshgen.blocks.BlockSet when the geometry declares blocks (one network per block)
+    init: dict | None = None  # --init: {"path", "checkpoint"}, the trained weights a new block-set run starts from
 
 
 def is_run_folder(path: Path) -> bool:
@@ -95,6 +107,7 @@ def prepare_run(
     threads=None,
     vary=(),
     force=False,
+    init=None,
 ) -> Run:
     """Check every input of ``meshgen train`` and return what to run; writes nothing.
 
@@ -103,9 +116,11 @@ def prepare_run(
     checkpoint, or an output folder that holds something other than a run. ``vary``: ``--vary
     name=low:high`` items, which make the run train a family (``meshgen.neural.family``).
     ``force``: train into an ``out`` folder that holds a run of another geometry or configuration.
+    ``init``: a block set's checkpoint whose weights a new run starts from (``check_init``).
     """
 
     checkpoint = resume_path = family = None
+    _refuse_init_with(init, resume, vary)
     if resume is not None and vary:
         raise ConfigError("--vary does not apply with --resume: the checkpoint sets the ranges")
     if resume is not None:
@@ -162,6 +177,7 @@ def prepare_run(
         geometry_object = load_geometry(geometry, parse_params(params), check=not blocks)
         if vary and blocks:
             raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
+        _refuse_block_only_keys(config, blocks, geometry_object.name)
         if blocks:  # keys a block set cannot use are refused, not ignored
             from meshgen.neural.block_train import check_block_keys
 
@@ -189,10 +205,60 @@ def prepare_run(
         from meshgen.neural.block_train import SUMMARY_DIMS
 
         block_set = load_block_set(geometry, geometry_object.values, (SUMMARY_DIMS,) * geometry_object.dim)
+    started = None if init is None else {"path": str(init), "checkpoint": check_init(init, config, geometry_object, block_set)}
     return Run(
         config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,
-        block_set,
+        block_set, started,
     )  # fmt: skip
+
+
+BLOCK_ONLY_KEYS = ("method.tfi_anchor",)  # keys only a block set uses: refused away from their default for one shape
+
+
+def _refuse_block_only_keys(config, blocks: bool, name: str) -> None:
+    """ConfigError naming the keys of ``BLOCK_ONLY_KEYS`` that ``config`` sets away from their
+    default when the geometry is one block (a shape or a family of shapes), where nothing reads them."""
+    if blocks:
+        return
+    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
+    unused = [f"{key}={chosen[key]}" for key in BLOCK_ONLY_KEYS if chosen[key] != default[key]]
+    if unused:
+        raise ConfigError(f"'{name}' is one block: {', '.join(unused)} applies to block sets only (leave it at the default)")
+
+
+def _refuse_init_with(init, resume, vary) -> None:
+    if init is not None and (resume is not None or vary):
+        raise ConfigError(
+            f"--init starts a new run from a checkpoint's weights: it does not go with {'--resume' if resume is not None else '--vary'}"
+        )
+
+
+def check_init(path, config, geometry, block_set) -> dict:
+    """The loaded checkpoint at ``path`` for ``--init``, or a one-line error: the geometry must be a
+    block set (``block_set`` not None), the checkpoint a block-set model of ``geometry`` (same name
+    and parameters) with ``config``'s widths, and the run must not start with the fit to the TFI
+    (``pretrain.steps`` 0), which would replace its weights."""
+    from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
+
+    if block_set is None:
+        raise ConfigError(f"--init is made for block sets (one network per block); '{geometry.name}' is one block")
+    checkpoint = load_checkpoint(Path(path))
+    model, trained_on = checkpoint["model"], checkpoint["geometry"]
+    if not is_block_model(model):
+        raise CheckpointError(f"--init {path}: not a block set's model")
+    if trained_on["name"] != geometry.name or dict(trained_on["params"]) != geometry.values:
+        raise CheckpointError(
+            f"--init {path} was trained on {trained_on['name']} {trained_on['params']}, not on {geometry.name} {geometry.values}"
+        )
+    if list(model["widths"]) != list(config.model.widths):
+        raise ConfigError(
+            f"--init {path} has model.widths={list(model['widths'])}, the run {list(config.model.widths)}: set them equal"
+        )
+    if config.pretrain.steps != 0:
+        raise ConfigError(
+            f"--init starts from trained weights, which the fit to the TFI would replace: --set pretrain.steps=0 (got {config.pretrain.steps})"
+        )
+    return checkpoint
 
 
 def _refuse_family_keys(config, preset, overrides) -> None:
@@ -248,7 +314,7 @@ def _trainer(run: Run):
     if run.block_set is not None:
         from meshgen.neural.block_train import train_blocks
 
-        return train_blocks, run.block_set, {"geometry_spec": run.geometry_spec}
+        return train_blocks, run.block_set, {"geometry_spec": run.geometry_spec, "init": run.init}
     from meshgen.neural.train import train
 
     return train, run.geometry, {"geometry_spec": run.geometry_spec}
