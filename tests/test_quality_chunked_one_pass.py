@@ -205,3 +205,24 @@ def test_the_shortest_edge_is_the_length_the_kernels_compare_with_the_tolerance(
     at = structured_metrics(X, tolerance=shortest, kernels="compiled")[1]
     below = structured_metrics(X, tolerance=math.nextafter(shortest, 0.0), kernels="compiled")[1]
     assert at.sum() == 2 ** (dim - 1) and not below.any()
+
+
+def test_block_reads_follow_a_file_rewritten_at_the_same_path(tmp_path):
+    """The zone's coordinate datasets are found once per version of the file: a mesh written
+    anew at the same path (another shape, other nodes) is what the next block read returns, and a
+    block beyond the zone is refused in one line."""
+    from meshgen.errors import FormatError
+    from meshgen.formats import read_node_block, read_node_components
+
+    path = tmp_path / "m.cgns"
+    first, second = box_grid((4, 5, 6)), box_grid((7, 3, 5)) + 10.0
+    write_mesh(path, first)
+    block = (slice(1, 3), slice(0, 3), slice(2, 5))
+    assert np.array_equal(read_node_block(path, block), first[block])
+    write_mesh(path, second)
+    assert np.array_equal(read_node_block(path, block), second[block])
+    assert np.array_equal(read_node_components(path, block), second[block].transpose(3, 2, 1, 0))
+    whole = (slice(0, 7), slice(0, 3), slice(0, 5))  # beyond the first mesh, all of the second
+    assert np.array_equal(read_node_components(path, whole), second.transpose(3, 2, 1, 0))
+    with pytest.raises(FormatError, match="is not in the zone's"):  # in the first mesh, beyond the second
+        read_node_components(path, (slice(0, 4), slice(0, 4), slice(0, 5)))
