@@ -388,7 +388,12 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
     # A block whose cells the mesh's tolerance or orientation could classify or orient otherwise
     # than its own (an edge longer than its tolerance, at most the mesh's; a 2D block folded
     # against the mesh): every block again, with the mesh's (design notes §21).
-    if any(shortest <= tolerance or own not in (None, orientation) for _, own, shortest in provisional):
+    # (A block's tolerance above the mesh's cannot happen, the formula being monotone; it would be
+    # caught all the same, should a libm's ``**`` not be.)
+    if any(
+        own_tolerance > tolerance or shortest <= tolerance or own not in (None, orientation)
+        for own_tolerance, own, shortest in provisional
+    ):
         counts.update(dict.fromkeys(counts, 0))
         merged.update(dict.fromkeys(METRICS))
         for done, (_, summary) in enumerate(
