@@ -105,7 +105,7 @@ def _grown(block, node_shape, before: int, after: int):
 def _tolerance(low, high) -> float:
     """The degenerate-edge tolerance of a bounding box (per component min ``low``, max ``high``;
     (inf, -inf) when no node is finite: 0). Each operation is monotone in the box's sides, so a box
-    inside another gets a tolerance at most the other's, in floating point too."""
+    inside another gets a tolerance at most the other's (``chunked_report`` checks it all the same)."""
     if not all(np.isfinite(v) for v in low):
         return 0.0
     return DEGENERATE_TOLERANCE * float(np.sqrt(sum((b - a) ** 2 for a, b in zip(low, high))))
