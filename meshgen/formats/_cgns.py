@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import threading
 
 import numpy as np
 
@@ -345,6 +346,7 @@ def read_node_components(path, block, out=None) -> np.ndarray:
 # label, several milliseconds, most of a block's read when a file is read block by block.
 _ZONES: dict = {}
 _ZONES_KEPT = 8
+_ZONES_LOCK = threading.Lock()  # block reads run on several threads
 
 
 def _block_coordinates(root, path, block) -> list:
@@ -359,9 +361,10 @@ def _block_coordinates(root, path, block) -> list:
     if found is None:
         _, zone, node_shape = _structured_zone(root, path)
         found = (node_shape, [array.name for array in _coordinate_arrays(zone, len(node_shape), path)])
-        while len(_ZONES) >= _ZONES_KEPT:
-            _ZONES.pop(next(iter(_ZONES)), None)
-        _ZONES[key] = found
+        with _ZONES_LOCK:
+            while len(_ZONES) >= _ZONES_KEPT:
+                _ZONES.pop(next(iter(_ZONES)))
+            _ZONES[key] = found
     node_shape, names = found
     if len(block) != len(node_shape) or any(not 0 <= s.start <= s.stop <= n for s, n in zip(block, node_shape)):
         raise FormatError(f"{path}: block {block} is not in the zone's {node_shape} nodes")
