@@ -82,13 +82,14 @@ def mesh_block_nodes() -> int:
 
 def run_fraction(done: int, total: int, phase: str, evaluate: bool) -> float:
     """The fraction of a chunked run done after ``done`` of ``total`` blocks of ``phase`` (as
-    ``write_chunked_mesh``'s progress reports them): the mesh pass is one of three passes over the
-    blocks when the quality is evaluated (its two passes count ``total`` = twice the blocks), else
-    the whole run. It only grows and reaches 1 at the very end: a progress bar that reached its end
-    after the mesh pass would stop its clock for the whole quality phase."""
+    ``write_chunked_mesh``'s progress reports them): the mesh pass is one of two passes over the
+    blocks when the quality is evaluated (the quality reads each block once: design notes §21),
+    else the whole run. It only grows and reaches 1 at the very end: a progress bar that reached its
+    end after the mesh pass would stop its clock for the whole quality phase. (The rare second
+    quality pass, ``meshgen.quality.chunked.SECOND_PASS``, goes over the second half again.)"""
     if phase == "mesh":
-        return done / (3 * total) if evaluate else done / total
-    return (total / 2 + done) / (1.5 * total)
+        return done / (2 * total) if evaluate else done / total
+    return (total + done) / (2 * total)
 
 
 def _node_array(block_function, shared, node_shape, dim: int, block_nodes: int | None):

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import threading
 
 import numpy as np
 
@@ -315,10 +316,9 @@ def read_node_block(path, block) -> np.ndarray:
     import h5py
 
     with h5py.File(path, "r") as root:
-        _, zone, _ = _structured_zone(root, path)
         hyperslab = tuple(block[::-1])
         X = np.empty(tuple(s.stop - s.start for s in block) + (len(block),))
-        for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
+        for axis, array in enumerate(_block_coordinates(root, path, block)):
             X[..., axis] = array[hyperslab].T
     return X
 
@@ -335,11 +335,40 @@ def read_node_components(path, block, out=None) -> np.ndarray:
     if out is None or out.shape != shape or out.dtype != np.float64 or not out.flags.c_contiguous:
         out = np.empty(shape)
     with h5py.File(path, "r") as root:
-        _, zone, _ = _structured_zone(root, path)
         hyperslab = tuple(block[::-1])
-        for axis, array in enumerate(_coordinate_arrays(zone, len(block), path)):
+        for axis, array in enumerate(_block_coordinates(root, path, block)):
             array.read_direct(out[axis], source_sel=hyperslab)
     return out
+
+
+# The coordinate datasets of a file's first structured zone, by version of the file (path, device,
+# inode, size, modification time): finding and verifying them walks the tree and reads each node's
+# label, several milliseconds, most of a block's read when a file is read block by block.
+_ZONES: dict = {}
+_ZONES_KEPT = 8
+_ZONES_LOCK = threading.Lock()  # block reads run on several threads
+
+
+def _block_coordinates(root, path, block) -> list:
+    """The coordinate datasets of the first zone of the open file ``root`` (``_structured_zone``
+    and ``_coordinate_arrays``, found once per version of the file), with ``block`` checked to lie in
+    the zone."""
+    import os
+
+    status = os.stat(path)
+    key = (os.fspath(path), status.st_dev, status.st_ino, status.st_size, status.st_mtime_ns)
+    found = _ZONES.get(key)
+    if found is None:
+        _, zone, node_shape = _structured_zone(root, path)
+        found = (node_shape, [array.name for array in _coordinate_arrays(zone, len(node_shape), path)])
+        with _ZONES_LOCK:
+            while len(_ZONES) >= _ZONES_KEPT:
+                _ZONES.pop(next(iter(_ZONES)))
+            _ZONES[key] = found
+    node_shape, names = found
+    if len(block) != len(node_shape) or any(not 0 <= s.start <= s.stop <= n for s, n in zip(block, node_shape)):
+        raise FormatError(f"{path}: block {block} is not in the zone's {node_shape} nodes")
+    return [root[name] for name in names]
 
 
 def _structured_zone(root, path):
