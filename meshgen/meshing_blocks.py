@@ -136,10 +136,10 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
 def _neural(request, block_set: BlockSet, model, progress=None):
     """The neural mesh of the block set (``meshgen.neural.block_inference.neural_blocks``) and its
     info; with ``polish`` (True only: not by default, unlike one block's) the multi-block elliptic
-    solver started from it. The default stays the network's conforming mesh because that solver,
-    started from another mesh than the TFI, does not return to the TFI-started state: measured on
-    the pipe at 8 4 4, the polished mesh of the benchmark model was 2.4 degrees of mean min angle
-    below the network's own after 200 sweeps (a slow mode: the core turned about the axis)."""
+    solver started from it. The default stays the network's conforming mesh (one forward pass):
+    polishing it is an elliptic solve that takes as many sweeps as the one from the TFI (the pipe's
+    benchmark model at 8 4 4 and 16 8 4: 30 and 36 sweeps to 0.17 and 0.16 deg of mean min angle
+    above the elliptic mesh, whose solve from the TFI takes 21 and 26; design notes §20)."""
     device = inference_device(request.device or "auto")
     correct = request.correct is not False
     Xs, correction = neural_blocks(block_set, model.checkpoint["model"], correct=correct, device=device)
