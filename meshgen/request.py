@@ -40,7 +40,7 @@ from meshgen.methods import get_method, make_mesh
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.patches import geometry_patches, parse_patch_options
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
-from meshgen.quality.worker import start_quality_worker
+from meshgen.quality.worker import quality_worker
 from meshgen.resources import check_block_nodes, check_free_space, needs_chunking
 from meshgen.scheduler import connect, scheduler_address
 from meshgen.tfi import check_axes
@@ -387,53 +387,45 @@ def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
         "model": plan.model,
     }
     iterative = "progress" in get_method(plan.method).options
-    worker = None
-    if plan.output is not None and request.quality:
-        # numba loads in a forked process while the mesh is made (design notes §21)
-        worker = start_quality_worker(tuple(int(n) + 1 for n in request.dims), len(request.dims), plan.geometry)
-    try:
-        return _make_and_write(request, plan, progress, options, iterative, worker)
-    finally:
-        if worker is not None:
-            worker.close()
-
-
-def _make_and_write(request: MeshRequest, plan: _Plan, progress, options: dict, iterative: bool, worker) -> Mesh:
-    timings = []
-    with progress(f"{plan.method} mesh", iterative) as callback:
-        if callback is not None and iterative:
-            options["progress"] = callback
-        for _ in range(max(1, int(request.timing_repeats))):
-            start = time.perf_counter()
-            X, info = make_mesh(plan.method, plan.geometry, plan.coords, **options)
-            timings.append(time.perf_counter() - start)
-    carries_patches = plan.output is not None and plan.output_format.patches
-    mesh = Mesh(
-        X,
-        plan.geometry,
-        plan.method,
-        tuple(request.dims),
-        tuple(request.clusters),
-        info,
-        statistics.median(timings),
-        output=plan.output,
-        patches=tuple(plan.patches) if carries_patches else (),
-        timings=tuple(timings),
-        notes=tuple(plan.notes),
-    )
-    if plan.output is None:
-        mesh.quality_report = quality_report(X, plan.geometry) if request.quality else None
-        return mesh
-    write_options = {"binary": not request.ascii} if plan.output_format.folder else {}
-    write_options.update(patches=plan.patches, format=plan.output_format.name)
-    if request.quality:
-        # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
-        mesh.quality_report = write_mesh_with_quality(
-            plan.output, X, plan.geometry, mesh.metadata(), worker=worker, **write_options
+    # with a quality report, numba loads in a forked worker while the mesh is made (design notes §21)
+    wanted = plan.output is not None and request.quality
+    node_shape = tuple(int(n) + 1 for n in request.dims)
+    with quality_worker(node_shape, plan.geometry) if wanted else contextlib.nullcontext() as worker:
+        timings = []
+        with progress(f"{plan.method} mesh", iterative) as callback:
+            if callback is not None and iterative:
+                options["progress"] = callback
+            for _ in range(max(1, int(request.timing_repeats))):
+                start = time.perf_counter()
+                X, info = make_mesh(plan.method, plan.geometry, plan.coords, **options)
+                timings.append(time.perf_counter() - start)
+        carries_patches = plan.output is not None and plan.output_format.patches
+        mesh = Mesh(
+            X,
+            plan.geometry,
+            plan.method,
+            tuple(request.dims),
+            tuple(request.clusters),
+            info,
+            statistics.median(timings),
+            output=plan.output,
+            patches=tuple(plan.patches) if carries_patches else (),
+            timings=tuple(timings),
+            notes=tuple(plan.notes),
         )
-    else:
-        write_mesh_alone(plan.output, X, mesh.metadata(), **write_options)  # and a previous mesh's sidecar is removed
-    return mesh
+        if plan.output is None:
+            mesh.quality_report = quality_report(X, plan.geometry) if request.quality else None
+            return mesh
+        write_options = {"binary": not request.ascii} if plan.output_format.folder else {}
+        write_options.update(patches=plan.patches, format=plan.output_format.name)
+        if request.quality:
+            # The mesh with its per-cell quality arrays, and <output>.quality.json beside it.
+            mesh.quality_report = write_mesh_with_quality(
+                plan.output, X, plan.geometry, mesh.metadata(), worker=worker, **write_options
+            )
+        else:
+            write_mesh_alone(plan.output, X, mesh.metadata(), **write_options)  # and a previous mesh's sidecar is removed
+        return mesh
 
 
 def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:

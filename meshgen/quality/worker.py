@@ -29,6 +29,7 @@ more), and for meshes that take the compiled kernels (``NUMPY_CELLS`` cells and 
 
 from __future__ import annotations
 
+import contextlib
 import mmap
 import os
 import signal
@@ -44,7 +45,7 @@ from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import structured_metrics, use_compiled
 from meshgen.signals import TERMINATING_SIGNALS
 
-__all__ = ["QualityWorker", "load_compiled_kernels", "start_quality_worker", "worker_fits"]
+__all__ = ["QualityWorker", "load_compiled_kernels", "quality_worker", "worker_fits"]
 
 
 PARENT_CHECK_SECONDS = 0.5  # how often a waiting child checks that its parent lives
@@ -80,13 +81,13 @@ def _shared(count: int) -> np.ndarray:
 class QualityWorker:
     """A forked process computing the quality report of one node array (see the module text)."""
 
-    def __init__(self, node_shape, dim: int, geometry=None):
+    def __init__(self, node_shape, geometry=None):
         import multiprocessing
 
-        self.node_shape = tuple(int(n) for n in node_shape)
-        self.dim = int(dim)
-        cells = int(np.prod([n - 1 for n in self.node_shape]))
-        self._nodes = _shared(int(np.prod(self.node_shape)) * self.dim).reshape(*self.node_shape, self.dim)
+        node_shape = tuple(int(n) for n in node_shape)
+        cells = int(np.prod([n - 1 for n in node_shape]))
+        # a node array has one coordinate per index axis (``check_node_array``)
+        self._nodes = _shared(int(np.prod(node_shape)) * len(node_shape)).reshape(*node_shape, len(node_shape))
         self._metrics = _shared(len(METRICS) * cells).reshape(len(METRICS), cells)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe()
@@ -95,7 +96,6 @@ class QualityWorker:
         self._process.start()
         child_end.close()
         self._failed = False
-        self._report = None
 
     def submit(self, X: np.ndarray) -> bool:
         """Hand node array ``X`` to the child; False (and the worker closed) when its shape is not
@@ -145,15 +145,19 @@ class QualityWorker:
         return True if value is None else value
 
 
-def start_quality_worker(node_shape, dim: int, geometry=None) -> QualityWorker | None:
-    """A ``QualityWorker`` for a mesh of ``node_shape`` nodes when ``worker_fits``, else None (also
-    when the process cannot be forked)."""
-    if not worker_fits(node_shape):
-        return None
+@contextlib.contextmanager
+def quality_worker(node_shape, geometry=None):
+    """A ``QualityWorker`` for a mesh of ``node_shape`` nodes when ``worker_fits`` (else None, also
+    when the process cannot be forked), closed on leaving the block."""
+    worker = None
+    if worker_fits(node_shape):
+        with contextlib.suppress(OSError):
+            worker = QualityWorker(node_shape, geometry)
     try:
-        return QualityWorker(node_shape, dim, geometry)
-    except OSError:
-        return None
+        yield worker
+    finally:
+        if worker is not None:
+            worker.close()
 
 
 def _serve(connection, parent_end, parent: int, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
