@@ -132,3 +132,40 @@ def test_a_killed_command_leaves_no_worker_behind(tmp_path):
     while alive(worker) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not alive(worker)
+
+
+# In a new interpreter: the kernels ``load_compiled_kernels`` loads are all the report of a large
+# mesh calls, in the same types (else the worker would leave part of numba's load to the report).
+NO_LATE_LOAD = """
+import numpy as np
+from meshgen.geometry import load_geometry
+from meshgen.quality.worker import _shared, load_compiled_kernels
+from meshgen.tfi import tfi
+from numba.core import dispatcher
+
+load_compiled_kernels({dim})
+late = []
+original = dispatcher.Dispatcher._compile_for_args
+def watched(self, *arguments, **keywords):
+    late.append(self.py_func.__name__)
+    return original(self, *arguments, **keywords)
+dispatcher.Dispatcher._compile_for_args = watched
+from concurrent.futures import ThreadPoolExecutor
+from meshgen.quality.report import report_in_parallel
+geometry = load_geometry("{name}")
+X = tfi(geometry, {dims})
+nodes = _shared(X.size).reshape(X.shape)  # as the worker holds them
+np.copyto(nodes, X)
+with ThreadPoolExecutor(max_workers=4) as pool:
+    report_in_parallel(nodes, geometry, pool)[1].result()
+print("late:", sorted(set(late)))
+"""
+
+
+@pytest.mark.parametrize(("name", "dims"), [("semicylinder", DIMS), ("semidisk", (720, 720))])
+def test_the_warm_up_loads_every_kernel_the_report_calls(name, dims):
+    assert int(np.prod(dims)) >= NUMPY_CELLS
+    script = NO_LATE_LOAD.format(dim=len(dims), name=name, dims=dims)
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1] == "late: []"
