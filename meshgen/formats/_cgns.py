@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import threading
 
 import numpy as np
@@ -353,8 +354,6 @@ def _block_coordinates(root, path, block) -> list:
     """The coordinate datasets of the first zone of the open file ``root`` (``_structured_zone``
     and ``_coordinate_arrays``, found once per version of the file), with ``block`` checked to lie in
     the zone."""
-    import os
-
     status = os.stat(path)
     key = (os.fspath(path), status.st_dev, status.st_ino, status.st_size, status.st_mtime_ns)
     found = _ZONES.get(key)

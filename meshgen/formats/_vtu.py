@@ -6,7 +6,7 @@ with its seven quality arrays. Here each array is cut into blocks of ``BLOCK_BYT
 thread pool deflates as soon as the array exists, while the calling thread builds the next array
 or encodes and writes the finished ones. The deflate is ISA-L's (``isal.isal_zlib``, which
 releases the GIL): its streams are ordinary zlib streams that VTK's ``vtkZLibDataCompressor`` and
-meshio inflate, made at about a fifth of zlib's CPU time for the same size (level 1 of each;
+meshio inflate, made at about a sixth of zlib's CPU time and 3% larger (level 1 of each;
 design notes §21, benchmarks/formats.py). Reading stays with meshio (``read``).
 
 The file, VTK's XML format version 1.0 as VTK writes it in its "binary" data mode::
@@ -63,9 +63,9 @@ __all__ = [
     "write",
 ]
 
-# ISA-L's level 1 (of 0-3): on the 1e6-hexahedron mesh with its seven quality arrays as small as
-# zlib's level 1 (its float64 arrays the same to 1%) at a fifth of its CPU time; level 0 is 20%
-# larger and no faster (benchmarks/formats.py, design notes §21).
+# ISA-L's level 1 (of 0-3): on the 1e6-hexahedron mesh with its seven quality arrays 3% larger
+# than zlib's level 1 at a sixth of its CPU time; level 0 is a third larger and hardly faster, level
+# 2 the same size at a quarter more CPU (benchmarks/formats.py, design notes §21).
 LEVEL = 1
 BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: enough blocks to share out, few Python calls
 HEADER_TYPE = np.dtype("<u8")
