@@ -30,7 +30,7 @@ from meshgen.neural.block_problem import (
     pretrain_block_pool,
     tfi_anchor_pool,
 )
-from meshgen.neural.config import ConfigError, TrainConfig, dotted_items, to_dict
+from meshgen.neural.config import ConfigError, keys_off_default
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.model import INPUT_MAP
 from meshgen.neural.pcgrad import assign, flatten
@@ -67,9 +67,10 @@ def check_block_keys(config, name: str = "block set") -> None:
     """ConfigError (one line) naming every key of ``BLOCK_UNUSED_KEYS`` that ``config`` sets away
     from its default, with why a block set cannot use it; ``points.boundary_pool`` 0 (fresh patch
     points every step) too: a block set draws them from a fixed pool."""
-    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
-    unused = {key: reason for key, reason in BLOCK_UNUSED_KEYS.items() if chosen[key] != default[key]}
+    chosen = keys_off_default(config, BLOCK_UNUSED_KEYS)
+    unused = {key: BLOCK_UNUSED_KEYS[key] for key in chosen}
     if config.points.boundary_pool == 0:
+        chosen["points.boundary_pool"] = 0
         unused["points.boundary_pool"] = "a block set draws its patch points from a fixed pool (1 or more steps' worth)"
     if unused:
         keys = ", ".join(f"{key}={chosen[key]}" for key in unused)

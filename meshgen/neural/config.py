@@ -21,6 +21,7 @@ from meshgen.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_tex
 
 __all__ = [
     "dotted_items",
+    "keys_off_default",
     "ConfigError",
     "ModelConfig",
     "MethodConfig",
@@ -466,6 +467,13 @@ def _check_bounds(config: TrainConfig) -> None:
         for number in values:
             if number is not None and not low <= number <= high:
                 raise ConfigError(f"configuration key '{key}' must lie in [{low:g}, {high:g}], got {excerpt(repr(number))}")
+
+
+def keys_off_default(config: TrainConfig, keys) -> dict:
+    """{dotted key: value} of those ``keys`` that ``config`` sets away from ``TrainConfig()``'s
+    default, in the order of ``keys``."""
+    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
+    return {key: chosen[key] for key in keys if chosen[key] != default[key]}
 
 
 def dotted_items(mapping: dict, prefix: str = "") -> dict:

@@ -18,9 +18,9 @@ from meshgen.limits import check_training_memory
 from meshgen.neural.block_inference import is_block_model
 from meshgen.neural.config import (
     ConfigError,
-    TrainConfig,
     dotted_items,
     from_dict,
+    keys_off_default,
     parse_override,
     resolve_config,
     set_key,
@@ -220,8 +220,7 @@ def _refuse_block_only_keys(config, blocks: bool, name: str) -> None:
     default when the geometry is one block (a shape or a family of shapes), where nothing reads them."""
     if blocks:
         return
-    chosen, default = dotted_items(to_dict(config)), dotted_items(to_dict(TrainConfig()))
-    unused = [f"{key}={chosen[key]}" for key in BLOCK_ONLY_KEYS if chosen[key] != default[key]]
+    unused = [f"{key}={value}" for key, value in keys_off_default(config, BLOCK_ONLY_KEYS).items()]
     if unused:
         raise ConfigError(f"'{name}' is one block: {', '.join(unused)} applies to block sets only (leave it at the default)")
 
