@@ -17,11 +17,12 @@ After each sweep, two kinds of nodes that no glued block holds inside move by th
   give 90, 135 and 135 degrees there): the mean over the grid quadrilaterals at the node of the
   parallelogram completion x_a + x_b - x_ab (in 3D the quads across the block edge the node is
   on), whose fixed point makes the cells around it as parallelogram-like as their neighbours allow;
-- nodes on a flat patch (and on no other patch) slide in its plane to the projection of their
-  neighbour one layer inside: grid lines meet flat inlets, outlets and straight walls at right
-  angles, and a straight extrusion (the pipe) is meshed as the extrusion of its section's mesh.
+- nodes on flat patches only, in one plane, slide in it to the projection of their neighbour one
+  layer inside; in 3D nodes on two planes that meet in a line (a channel's edge) slide along it the
+  same way: grid lines meet flat inlets, outlets and straight walls at right angles, and a straight
+  extrusion (the pipe, the 3D channel) is meshed as the extrusion of its section's mesh.
 
-Nodes on curved patches and on two patches stay where the TFI put them.
+Nodes on curved patches, on a corner of two lines (2D) or on three planes stay where the TFI put them.
 
 Stopping rule: a sweep's update is the largest node displacement relative to the node's local
 cell size (its shortest grid edge in the TFI start), the measure a flow solver feels: a node that
@@ -153,44 +154,84 @@ def _relax_junctions(block_set: BlockSet, Xs, junctions, numbering, stencil) -> 
 
 
 def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float = 1e-12):
-    """The boundary nodes that slide: those on a flat patch face (all its nodes within
-    ``tolerance`` times the characteristic length of a plane) and on no other patch.
-    Returns (node numbers (K,), their inner neighbours (P,) with the node each belongs to (P,), the
-    planes' points and unit normals per node (K, dim) each)."""
-    on_patch: dict[str, np.ndarray] = {}
-    flat = []
-    for (block, face_name), (patch, _kind) in block_set.patches.items():
-        face = cube.face_named(face_name, block_set.dim)
-        ids = numbering[block][face.node_index]
-        on_patch.setdefault(patch, np.zeros(count, dtype=bool))[ids] = True
-        points = Xs[block][face.node_index].reshape(-1, block_set.dim)
+    """The boundary nodes that slide: those on flat patch faces only (all a face's nodes within
+    ``tolerance`` times the characteristic length of a plane) whose faces lie in one plane (they
+    slide in it), or in 3D in two planes that meet in a line (they slide along it: a channel's edge
+    where a flat wall meets a flat inlet or cap). A node on a curved patch, on a corner of two lines
+    (2D) or on three planes stays put.
+    Returns per (node, inner neighbour) pair: the node's number (P,), the neighbour's (P,) and the
+    projector (P, dim, dim) onto the node's plane or line's direction(s)."""
+    dim = block_set.dim
+    curved = np.zeros(count, dtype=bool)
+    records = []  # (node ids, inner neighbour ids, centre, normal) per flat patch face
+    for (block, face_name), _ in block_set.patches.items():
+        face = cube.face_named(face_name, dim)
+        ids = numbering[block][face.node_index].reshape(-1)
+        points = Xs[block][face.node_index].reshape(-1, dim)
         centre = points.mean(axis=0)
         _, singular, vt = np.linalg.svd(points - centre, full_matrices=False)
-        if singular[-1] <= tolerance * block_set.length * np.sqrt(len(points)):
-            inner_index = list(face.node_index)
-            inner_index[face.axis] = -2 if face.side else 1
-            flat.append((ids.reshape(-1), numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
-    faces_of = sum(mask.astype(int) for mask in on_patch.values())  # patches each node is on
-    nodes, inner, owner_point, owner_normal = [], [], [], []
-    for ids, inside, centre, normal in flat:
-        keep = faces_of[ids] == 1
-        nodes.append(ids[keep])
-        inner.append(inside[keep])
-        owner_point.append(np.broadcast_to(centre, (keep.sum(), block_set.dim)))
-        owner_normal.append(np.broadcast_to(normal, (keep.sum(), block_set.dim)))
-    if not nodes:
+        if singular[-1] > tolerance * block_set.length * np.sqrt(len(points)):
+            curved[ids] = True
+            continue
+        inner_index = list(face.node_index)
+        inner_index[face.axis] = -2 if face.side else 1
+        records.append((ids, numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
+    planes = _distinct_planes([(centre, normal) for _, _, centre, normal in records], block_set.length)
+    on_plane = np.zeros((count, len(set(planes))), dtype=bool)
+    for (ids, *_), plane in zip(records, planes):
+        on_plane[ids, plane] = True
+    kinds = on_plane.sum(axis=1)
+    free = ~curved & ((kinds == 1) | ((kinds == 2) & (dim == 3)))
+    nodes, inner, projectors = [], [], []
+    for ids, inside, _, normal in records:
+        keep = free[ids]
+        ids, inside = ids[keep], inside[keep]
+        projector = np.broadcast_to(np.eye(dim) - np.outer(normal, normal), (len(ids), dim, dim)).copy()
+        two = kinds[ids] == 2
+        if two.any():  # the line where this node's two planes meet
+            other = [_second_normal(records, planes, on_plane[node], normal) for node in ids[two]]
+            direction = np.cross(normal, np.array(other))
+            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+            projector[two] = np.einsum("pi,pj->pij", direction, direction)
+        nodes.append(ids)
+        inner.append(inside)
+        projectors.append(projector)
+    if not sum(len(n) for n in nodes):
         return None
-    return np.concatenate(nodes), np.concatenate(inner), np.concatenate(owner_point), np.concatenate(owner_normal)
+    return np.concatenate(nodes), np.concatenate(inner), np.concatenate(projectors)
+
+
+def _distinct_planes(planes, length: float, tolerance: float = 1e-9) -> list[int]:
+    """A plane number per (centre, unit normal), equal for planes that coincide to ``tolerance``."""
+    numbers, kept = [], []
+    for centre, normal in planes:
+        for number, (c, n) in enumerate(kept):
+            if abs(abs(n @ normal) - 1.0) < tolerance and abs((centre - c) @ n) < tolerance * length:
+                numbers.append(number)
+                break
+        else:
+            numbers.append(len(kept))
+            kept.append((centre, normal))
+    return numbers
+
+
+def _second_normal(records, planes, node_planes, normal):
+    """The normal of the node's other plane (``node_planes``: which planes it is on)."""
+    for (_, _, _, n), plane in zip(records, planes):
+        if node_planes[plane] and abs(abs(n @ normal) - 1.0) > 1e-9:
+            return n
+    raise AssertionError("a node on two planes has one normal")
 
 
 def _slide(block_set: BlockSet, Xs, numbering, count, sliding) -> None:
-    """Each sliding node to the mean of its inner neighbours projected onto its plane: grid lines
-    meet the flat patch at right angles (a Neumann condition)."""
+    """Each sliding node to the mean of its inner neighbours projected onto its plane or line: grid
+    lines meet the flat patches at right angles (a Neumann condition)."""
     if sliding is None:
         return
-    nodes, inner, centre, normal = sliding
+    nodes, inner, projector = sliding
     values = _gather(Xs, numbering, count)
-    projected = values[inner] - np.einsum("pd,pd->p", values[inner] - centre, normal)[:, None] * normal
+    point = values[nodes]  # on the node's plane or line, where the TFI put it and sliding keeps it
+    projected = point + np.einsum("pij,pj->pi", projector, values[inner] - point)
     total = np.zeros((count, block_set.dim))
     hits = np.zeros(count)
     np.add.at(total, nodes, projected)

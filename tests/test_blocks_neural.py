@@ -9,6 +9,7 @@ from mesh_checks import corner_jacobians
 from neural_helpers import TINY, tiny_config
 
 import meshgen
+from meshgen.block_extrusion import extrusion_of, section_of
 from meshgen.blocks import face_index, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.formats.multiblock import read_zones
@@ -169,8 +170,9 @@ def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_floa
     made = meshgen.mesh("pipe", (4, 2, 3), method="neural", model=str(result.checkpoint_path))  # float64 weights load
     assert all(np.isfinite(X).all() for X in made.blocks)
 
-    problem = block_problem(block_set, torch.device("cpu"), checkpoint["model"]["center"], checkpoint["model"]["scale"])
-    networks = BlockNetworks(3, [16, 16], 5)
+    section = section_of(block_set, extrusion_of(block_set))  # what the pipe's networks are trained on
+    problem = block_problem(section, torch.device("cpu"), checkpoint["model"]["center"], checkpoint["model"]["scale"])
+    networks = BlockNetworks(2, [16, 16], 5)
     networks.load_state_dict(weights)
     pool = patch_pool(problem, 64, 1)
     pde_sample, boundary_sample = block_samples(config, problem, fixed_block_points(problem, config, 64, 2), random=False)

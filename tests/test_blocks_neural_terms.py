@@ -13,6 +13,7 @@ from meshgen.blocks import load_block_set
 from meshgen.neural.block_problem import (
     INTERFACE_STEP,
     JUNCTION_STEP,
+    BlockNetworks,
     _mean_length,
     block_problem,
     fixed_block_points,
@@ -207,3 +208,18 @@ def test_tfi_anchor_weighs_the_pull_towards_the_tfi_in_l1(weight):
             image = net(torch.from_numpy(points)).numpy()
             distances.append(np.mean(np.sum((image - transfinite(boundary, list(points.T))) ** 2, axis=1)))
     assert anchored - plain == pytest.approx(weight * np.mean(distances), rel=1e-5, abs=1e-12)
+
+
+def test_init_from_a_pipe_model_of_3d_networks_is_a_one_line_error(tiny_pipe, run_cli, tmp_path):
+    """A pipe model from before the section training (one 3D network per block) cannot start a run
+    of the pipe, whose networks now map its 2D section (design notes §20)."""
+    checkpoint = load_checkpoint(tiny_pipe)
+    model = {k: v for k, v in checkpoint["model"].items() if k != "extruded"}
+    model.update(dim=3, center=[0.0, 0.0, 2.0], scale=4.0, state_dict=BlockNetworks(3, [16, 16], 5).state_dict())
+    old = tmp_path / "old.pt"
+    torch.save({**checkpoint, "model": model}, old)
+    result = run_cli("train", "-g", "pipe", "--init", str(old), "--set", "model.widths=[16,16]", "--set", "pretrain.steps=0",
+                     "--out", tmp_path / "run", "--quiet")  # fmt: skip
+    assert result.returncode == 2, result.stdout
+    assert "holds 3D networks, and 'pipe' is extruded" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()

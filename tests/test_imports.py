@@ -88,6 +88,7 @@ LAYERS = [
         "meshgen.elliptic",
         "meshgen.polish",
         "meshgen.elliptic_blocks",
+        "meshgen.block_extrusion",
         "meshgen.block_grading",
         "meshgen.deviation",
     ],

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from meshgen.block_extrusion import extrusion_of
 from meshgen.commands._options import geometry_options
 from meshgen.commands._text import echo
 from meshgen.neural.config import list_presets as preset_list
@@ -163,6 +164,10 @@ def train(
         f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
         f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})"
     )
+    extrusion = extrusion_of(run.block_set) if run.block_set is not None else None
+    if extrusion is not None:
+        sweep = ", ".join(f"{v:g}" for v in extrusion.direction)
+        echo(f"'{run.geometry.name}' is an extrusion along ({sweep}): the networks map its 2D section (docs/design.md §20)")
     echo(f"Network, {size} mesh:")
     for line in summary_lines(summary["network"]):
         echo(f"  {line}")

@@ -8,6 +8,10 @@ takes the mean projected onto the patch's plane (it slides in the plane, as in t
 Each block is then corrected to those face positions, X + C[target - X] with the blending of
 ``meshgen.correction.add_boundary_correction``, so that the faces are the targets to round-off;
 interface nodes are finally made bit-identical (``meshgen.blocks.unify_interfaces``).
+
+A model of an extruded block set (``meshgen.block_extrusion``; its ``model["extruded"]`` holds the
+extrusion it was trained for) holds the section's 2D networks: the section's mesh is made as above
+and extruded, so the mesh is an exact extrusion at every --dims.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen import cube
+from meshgen.block_extrusion import extrude, extrusion_of, section_of
 from meshgen.blocks import BlockSet, check_handedness, global_numbering, interface_gaps, unify_interfaces
 from meshgen.correction import add_boundary_correction
 from meshgen.neural.checkpoint_data import CheckpointError, check_network
@@ -25,6 +30,7 @@ __all__ = [
     "FLAT_TOLERANCE",
     "block_model",
     "check_block_model",
+    "check_start_model",
     "face_plane",
     "face_targets",
     "is_block_model",
@@ -81,9 +87,31 @@ def _check_fits(model: dict, block_set: BlockSet) -> None:
         )
 
 
+def _section(model: dict, block_set: BlockSet):
+    """(extrusion, section block set) when ``model`` is an extruded set's section model, else None;
+    CheckpointError when the model's extrusion is not ``block_set``'s."""
+    if "extruded" not in model:
+        return None
+    extrusion = extrusion_of(block_set)
+    if extrusion is None or not extrusion.matches(model["extruded"], block_set.length):
+        raise CheckpointError(
+            f"the model meshes the section of an extruded block set, and '{block_set.name}' with these parameters is not "
+            "that extrusion (design notes §20)"
+        )
+    return extrusion, section_of(block_set, extrusion)
+
+
 def network_blocks(model: dict, block_set: BlockSet, device: str = "cpu") -> list[np.ndarray]:
     """Every block's network on its tensor grid (``block_set.coords``), in physical units: node
     arrays as ``meshgen.blocks`` takes them (not yet conforming, nor on the boundary)."""
+    section = _section(model, block_set)
+    if section is not None:
+        extrusion, plane = section
+        return extrude(extrusion, _network_nodes(model, plane, device), block_set.coords[0][2])
+    return _network_nodes(model, block_set, device)
+
+
+def _network_nodes(model: dict, block_set: BlockSet, device: str) -> list[np.ndarray]:
     _check_fits(model, block_set)
     center, scale = np.asarray(model["center"], dtype=float), float(model["scale"])
     Xs = []
@@ -92,6 +120,27 @@ def network_blocks(model: dict, block_set: BlockSet, device: str = "cpu") -> lis
         values = evaluate_network(block_model(model, index), list(coords), device=device)
         Xs.append(values.reshape(*shape, block_set.dim) * scale + center)
     return Xs
+
+
+def check_start_model(model: dict, block_set: BlockSet, option: str) -> None:
+    """CheckpointError (one line) unless the block model ``model`` that a run starts from
+    (``option``: --resume or --init) is of the kind the run trains: the section's 2D networks for an
+    extruded ``block_set`` (the same extrusion), else networks of the set's dimension."""
+    extrusion = extrusion_of(block_set)
+    extruded = model.get("extruded")
+    if extrusion is not None and extruded is None:
+        raise CheckpointError(
+            f"{option}: the checkpoint holds {model['dim']}D networks, and '{block_set.name}' is extruded: meshgen trains "
+            "its 2D section (design notes §20); train anew"
+        )
+    if extrusion is None and extruded is not None:
+        raise CheckpointError(
+            f"{option}: the checkpoint holds the section model of an extruded block set; '{block_set.name}' is not extruded"
+        )
+    if extrusion is not None and not extrusion.matches(extruded, block_set.length):
+        raise CheckpointError(
+            f"{option}: the checkpoint's section model was trained for another extrusion than that of '{block_set.name}'"
+        )
 
 
 def face_targets(block_set: BlockSet, Xs) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -135,7 +184,21 @@ def neural_blocks(block_set: BlockSet, model: dict, correct: bool = True, device
     their targets to round-off, interface nodes identical; without it, the networks' own nodes
     with the interfaces merely unified (refused when they do not coincide). ``info``: the
     interface gap and boundary error before the correction (relative to the set's length)."""
-    Xs = network_blocks(model, block_set, device=device)
+    section = _section(model, block_set)
+    if section is not None:
+        extrusion, plane = section
+        Xs, info = _conforming(plane, model, correct, device)
+        Xs = extrude(extrusion, Xs, block_set.coords[0][2])
+        check_handedness(block_set, Xs)
+        rescale = plane.length / block_set.length  # the section's relative figures as the set's
+        for key in ("interface_gap_before", "face_error_before"):
+            info[key] *= rescale
+        return Xs, {**info, "extruded": True}
+    return _conforming(block_set, model, correct, device)
+
+
+def _conforming(block_set: BlockSet, model: dict, correct: bool, device: str):
+    Xs = _network_nodes(model, block_set, device)
     length = block_set.length
     gap = max(interface_gaps(block_set, Xs), default=0.0) / length
     target, numbering = face_targets(block_set, Xs)

@@ -59,6 +59,7 @@ __all__ = [
     "tfi_anchor_pool",
 ]
 
+LENGTH_CELLS = 8  # cells per axis of the TFI grid lines whose mean length scales a block's axis (``_mean_length``)
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
 # Interface stencils within this parametric distance of a junction edge (where the face meets
 # another interface: three or more blocks around the edge) are weighted down by (d / margin)^2:
@@ -121,8 +122,8 @@ class BlockProblem:
 
 
 def _mean_length(geometry, axis: int, dim: int) -> float:
-    """Mean length of the TFI grid lines (8 cells per axis) of a block along ``axis``."""
-    X = tfi(geometry, None, [np.linspace(0.0, 1.0, 9)] * dim)
+    """Mean length of the TFI grid lines (``LENGTH_CELLS`` cells per axis) of a block along ``axis``."""
+    X = tfi(geometry, None, [np.linspace(0.0, 1.0, LENGTH_CELLS + 1)] * dim)
     return float(np.linalg.norm(np.diff(X, axis=axis), axis=-1).sum(axis=axis).mean())
 
 

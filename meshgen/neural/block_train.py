@@ -15,8 +15,9 @@ from pathlib import Path
 
 import torch
 
+from meshgen.block_extrusion import extrusion_of, section_of
 from meshgen.blocks import BlockSet, merged_mesh, tfi_blocks
-from meshgen.neural.block_inference import network_blocks, neural_blocks
+from meshgen.neural.block_inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.block_problem import (
     ANCHOR_POINTS,
     BlockNetworks,
@@ -78,11 +79,13 @@ def check_block_keys(config, name: str = "block set") -> None:
         raise ConfigError(f"{name} cannot use {keys} (leave {'it' if len(unused) == 1 else 'them'} at the default): {reasons}")
 
 
-def describe_blocks(training: Training, names) -> dict:
+def describe_blocks(training: Training, names, extrusion=None) -> dict:
     """The plain-data description of a block set's trained maps (``meshgen.neural.model``'s, plus
-    ``blocks``; weights of block i under ``networks.<i>.``)."""
+    ``blocks``; weights of block i under ``networks.<i>.``), and ``extruded`` (the extrusion's
+    ``describe()``) for the section model of an extruded block set."""
     problem, config = training.problem, training.config
     return {
+        **({"extruded": extrusion.describe()} if extrusion is not None else {}),
         "dim": problem.dim,
         "widths": [int(w) for w in config.model.widths],
         "activation": "tanh",
@@ -266,13 +269,16 @@ def train_blocks(
     device = torch.device(device)
     center = scale = None
     start = resume if resume is not None else (init or {}).get("checkpoint")
+    extrusion = extrusion_of(block_set)  # an extruded set is trained on its section (design notes §20)
+    trained_set = block_set if extrusion is None else section_of(block_set, extrusion)
     if start is not None:
+        check_start_model(start["model"], block_set, "--resume" if resume is not None else "--init")
         center, scale = start["model"]["center"], start["model"]["scale"]
-    problem = block_problem(block_set, device, center, scale)
+    problem = block_problem(trained_set, device, center, scale)
     problem.anchor_weight = config.method.tfi_anchor
     problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6) if config.method.tfi_anchor > 0 else []
     torch.manual_seed(config.seed)
-    network = BlockNetworks(problem.dim, list(config.model.widths), len(block_set.names)).to(device)
+    network = BlockNetworks(problem.dim, list(config.model.widths), len(trained_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
     weights.to(device)
     generator = torch.Generator().manual_seed(config.seed)
@@ -303,7 +309,7 @@ def train_blocks(
     def describe_run() -> dict:
         pde, boundary = _fixed_losses(training, pool, test_points, held_out)
         return {
-            "model": describe_blocks(training, block_set.names),
+            "model": describe_blocks(training, block_set.names, extrusion),
             "geometry": {
                 "name": block_set.name,
                 "spec": geometry_spec or block_set.name,

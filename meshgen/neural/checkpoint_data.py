@@ -55,6 +55,20 @@ def check_readable(path: Path) -> None:
         raise CheckpointError(str(exc)) from None
 
 
+def _check_extruded(entry, path: Path) -> None:
+    """CheckpointError unless ``entry`` is an extrusion's plain data: finite origin (3,), frame (2, 3), direction (3,)."""
+    shapes = {"origin": (3,), "frame": (2, 3), "direction": (3,)}
+    try:
+        ok = isinstance(entry, dict) and all(
+            np.shape(entry[key]) == shape and np.isfinite(np.asarray(entry[key], dtype=float)).all()
+            for key, shape in shapes.items()
+        )
+    except (KeyError, TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise CheckpointError(f"checkpoint {path}: its model's extrusion entry is damaged: not a meshgen checkpoint")
+
+
 def check_checkpoint(checkpoint, path: Path) -> dict:
     """``checkpoint`` when it is a complete meshgen checkpoint this meshgen reads, else CheckpointError."""
     if not isinstance(checkpoint, dict) or checkpoint.get("format") != FORMAT:
@@ -70,7 +84,9 @@ def check_checkpoint(checkpoint, path: Path) -> dict:
     model, geometry = checkpoint["model"], checkpoint["geometry"]
     if not (isinstance(model, dict) and isinstance(geometry, dict) and {"name", "spec", "dim", "params"} <= set(geometry)):
         raise CheckpointError(f"checkpoint {path}: its model or geometry entry is damaged: not a meshgen checkpoint")
-    if model.get("dim") != geometry["dim"]:
+    if "extruded" in model:  # the section model of an extruded block set (meshgen.block_extrusion)
+        _check_extruded(model["extruded"], path)
+    if model.get("dim") != geometry["dim"] - ("extruded" in model):
         raise CheckpointError(
             f"checkpoint {path} holds a {model.get('dim')}D map but records the {geometry['dim']}D geometry "
             f"'{geometry['name']}': not a consistent meshgen checkpoint"

@@ -15,7 +15,7 @@ from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.limits import check_training_memory
-from meshgen.neural.block_inference import is_block_model
+from meshgen.neural.block_inference import check_start_model, is_block_model
 from meshgen.neural.config import (
     ConfigError,
     dotted_items,
@@ -249,6 +249,7 @@ def check_init(path, config, geometry, block_set) -> dict:
         raise CheckpointError(
             f"--init {path} was trained on {trained_on['name']} {trained_on['params']}, not on {geometry.name} {geometry.values}"
         )
+    check_start_model(model, block_set, "--init")
     if list(model["widths"]) != list(config.model.widths):
         raise ConfigError(
             f"--init {path} has model.widths={list(model['widths'])}, the run {list(config.model.widths)}: set them equal"
