@@ -59,13 +59,13 @@ __all__ = [
     "tfi_anchor_pool",
 ]
 
-LENGTH_CELLS = 8  # cells per axis of the TFI grid lines whose mean length scales a block's axis (``_mean_length``)
+LENGTH_CELLS = 64  # cells per axis of the TFI grid lines whose mean length scales a block's axis (``_mean_length``)
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
 # Interface stencils within this parametric distance of a junction edge (where the face meets
 # another interface: three or more blocks around the edge) are weighted down by (d / margin)^2:
 # no map that is smooth in every block is C1 across all the interfaces at a junction, so the
 # residual there measures the junction, not the map (``junction_weights``).
-JUNCTION_MARGIN = 0.25
+JUNCTION_MARGIN = 0.1
 # Default weight (``method.tfi_anchor``) of the pull towards the TFI in L1 (``tfi_anchor_pool``): mean squared distance, in
 # normalised units, of every block's network from its TFI at fixed interior points. Winslow's
 # equations barely resist some motions of a block set (an O-grid's core turned about its axis
