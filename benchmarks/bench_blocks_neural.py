@@ -1,4 +1,4 @@
-"""The neural pipe model (one network per block, ``meshgen train -g pipe``) against the multi-block
+"""The neural pipe model (one network per block of the pipe's section, ``meshgen train -g pipe``) against the multi-block
 elliptic mesh, at two resolutions, through the request path (``meshgen.mesh``).
 
     python benchmarks/bench_blocks_neural.py [--quick] [--json FILE] [--checkpoint PATH]
