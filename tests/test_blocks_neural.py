@@ -97,6 +97,7 @@ def test_train_the_pipe_through_the_cli_and_mesh_the_newest_run(run_cli, tmp_pat
     trained = run_cli("train", "-g", "pipe", "--out", "runs/pipe-1", "--quiet", *tiny)
     assert trained.returncode == 0, trained.stderr
     assert "Trained pipe for 8 steps" in trained.stdout
+    assert "'pipe' is an extrusion along (0, 0, 4): the networks map its 2D section" in trained.stdout
     monkeypatch.chdir(tmp_path)  # auto: the newest run of the pipe under ./runs
     made = meshgen.mesh("pipe", (4, 2, 3))
     assert made.method == "neural" and "runs/pipe-1/checkpoint.pt" in made.notes[0]
