@@ -179,3 +179,26 @@ def test_channel_edge_nodes_slide_along_their_line_and_stay_on_both_planes():
             assert np.all(X[:, 0] == 0.0) and np.all(X[:, 2] == X0[:, 2])  # on the inlet and on the front / back
             moved = max(moved, float(np.abs(X[1:-1, 1] - X0[1:-1, 1]).max()))
     assert moved > 1e-4  # the edge nodes did slide along the edge
+
+
+def test_a_set_that_is_not_an_extrusion_trains_3d_networks_and_meshes_conforming(tmp_path):
+    """The path of 3D networks, kept for sets that are not extrusions: a cone (the pipe's section
+    growing along the axis) trains one 3D network per block and meshes with identical interface
+    nodes, the wall on the cone and the inlet and outlet in their planes."""
+    spec = _variant(tmp_path, "cone", "xyz[:, :2] *= (1.0 + 0.2 * zeta)[:, None]")
+    block_set = load_block_set(spec, None, (4, 2, 4))
+    result = train_blocks(tiny_config(*TINY_BLOCKS), block_set, tmp_path / "run", summary=False, geometry_spec=spec)
+    model = load_checkpoint(result.checkpoint_path)["model"]
+    assert model["dim"] == 3 and "extruded" not in model
+    block_set = load_block_set(spec, None, (6, 3, 5))
+    Xs, info = neural_blocks(block_set, model)
+    assert "extruded" not in info
+    for interface in block_set.interfaces:
+        index_a, index_b = face_index(block_set, interface)
+        assert np.array_equal(Xs[interface.a].reshape(-1, 3)[index_a], Xs[interface.b].reshape(-1, 3)[index_b])
+    zeta = block_set.coords[1][2]
+    for X in Xs[1:]:  # the wall: radius 0.5 (1 + 0.2 zeta) at z = 4 zeta
+        np.testing.assert_allclose(np.hypot(X[-1, ..., 0], X[-1, ..., 1]), 0.5 * (1.0 + 0.2 * zeta), rtol=1e-12)
+    for X in Xs:
+        np.testing.assert_allclose(X[..., 0, 2], 0.0, atol=1e-12)
+        np.testing.assert_allclose(X[..., -1, 2], 4.0, rtol=1e-12)

@@ -5,6 +5,7 @@ patch), OpenFOAM (checkMesh, potentialFoam's uniform flow through the pipe), mer
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,15 +202,22 @@ def test_gmsh_reads_the_merged_msh_of_a_block_set(tmp_path, request, case):
 
 
 @needs_openfoam
-@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+@pytest.mark.parametrize("method", ["tfi", "elliptic", "neural"])
 def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
     """The pipe's mesh is an extrusion of its section (the elliptic one too: its inlet and outlet
-    nodes slide in their planes): the finite-volume potential flow from a uniform inlet is uniform
-    to solver accuracy."""
+    nodes slide in their planes; the neural one by construction: the benchmark model's section,
+    extruded): the finite-volume potential flow from a uniform inlet is uniform to solver accuracy."""
     from meshgen.elliptic_blocks import elliptic_blocks
+    from meshgen.neural.block_inference import neural_blocks
+    from meshgen.neural.checkpoint import load_checkpoint
 
-    block_set = load_block_set("pipe", {"length": 1.0}, (6, 3, 4))
-    Xs = tfi_blocks(block_set) if method == "tfi" else elliptic_blocks(block_set)[0]
+    length = 4.0 if method == "neural" else 1.0  # the benchmark model's pipe
+    block_set = load_block_set("pipe", {"length": length}, (6, 3, 4))
+    if method == "neural":
+        model = load_checkpoint(Path(__file__).resolve().parents[1] / "benchmarks" / "models" / "pipe" / "checkpoint.pt")["model"]
+        Xs = neural_blocks(block_set, model)[0]
+    else:
+        Xs = tfi_blocks(block_set) if method == "tfi" else elliptic_blocks(block_set)[0]
     case = write_blocks(tmp_path / "pipe", block_set, Xs, format_name="openfoam")
     report = check_mesh(case)
     assert report["ok"], report["log"][-2000:]
