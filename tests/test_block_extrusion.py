@@ -187,7 +187,9 @@ def test_a_set_that_is_not_an_extrusion_trains_3d_networks_and_meshes_conforming
     nodes, the wall on the cone and the inlet and outlet in their planes."""
     spec = _variant(tmp_path, "cone", "xyz[:, :2] *= (1.0 + 0.2 * zeta)[:, None]")
     block_set = load_block_set(spec, None, (4, 2, 4))
-    result = train_blocks(tiny_config(*TINY_BLOCKS), block_set, tmp_path / "run", summary=False, geometry_spec=spec)
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()  # the command line claims the folder; train_blocks writes into it
+    result = train_blocks(tiny_config(*TINY_BLOCKS), block_set, run_dir, summary=False, geometry_spec=spec)
     model = load_checkpoint(result.checkpoint_path)["model"]
     assert model["dim"] == 3 and "extruded" not in model
     block_set = load_block_set(spec, None, (6, 3, 5))
@@ -198,7 +200,8 @@ def test_a_set_that_is_not_an_extrusion_trains_3d_networks_and_meshes_conforming
         assert np.array_equal(Xs[interface.a].reshape(-1, 3)[index_a], Xs[interface.b].reshape(-1, 3)[index_b])
     zeta = block_set.coords[1][2]
     for X in Xs[1:]:  # the wall: radius 0.5 (1 + 0.2 zeta) at z = 4 zeta
-        np.testing.assert_allclose(np.hypot(X[-1, ..., 0], X[-1, ..., 1]), 0.5 * (1.0 + 0.2 * zeta), rtol=1e-12)
+        radius = np.hypot(X[-1, ..., 0], X[-1, ..., 1])
+        np.testing.assert_allclose(radius, np.broadcast_to(0.5 * (1.0 + 0.2 * zeta), radius.shape), rtol=1e-12)
     for X in Xs:
         np.testing.assert_allclose(X[..., 0, 2], 0.0, atol=1e-12)
         np.testing.assert_allclose(X[..., -1, 2], 4.0, rtol=1e-12)
