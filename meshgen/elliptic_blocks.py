@@ -41,7 +41,7 @@ from meshgen.blocks import BlockSet, global_numbering, tfi_blocks
 from meshgen.elliptic import DEFAULT_TOL, AndersonMixing, hierarchy, v_cycle
 from meshgen.winslow import component_array, node_array, stencils, winslow_operator
 
-__all__ = ["elliptic_blocks", "glue", "junction_nodes", "local_cell_sizes"]
+__all__ = ["elliptic_blocks", "glue", "junction_nodes", "local_cell_sizes", "mean_length"]
 
 MAX_SWEEPS = 200  # Schwarz sweeps over all interfaces
 # Multigrid V-cycles per glued block and sweep, by dimension: the 3D pipe at 32 x 16 x 4 takes 91
@@ -66,7 +66,8 @@ def _turned(block_set: BlockSet, interface, X: np.ndarray) -> tuple[np.ndarray, 
     return turned, [(abs(t) - 1, int(np.sign(t))) for t in T]
 
 
-def _mean_length(X: np.ndarray, axis: int) -> float:
+def mean_length(X: np.ndarray, axis: int) -> float:
+    """Mean over the grid lines along ``axis`` of the node array ``X`` (..., d) of their polyline length."""
     steps = np.linalg.norm(np.diff(X, axis=axis), axis=-1)
     return float(np.mean(np.sum(steps, axis=axis)))
 
@@ -85,7 +86,7 @@ def glue(block_set: BlockSet, Xs, interface) -> tuple[np.ndarray, list, tuple, t
     coords_b = block_set.coords[b][b_axis]
     if b_sign < 0:
         coords_b = 1.0 - coords_b[::-1]
-    length_a, length_b = _mean_length(A, normal), _mean_length(B, normal)
+    length_a, length_b = mean_length(A, normal), mean_length(B, normal)
     n_a, n_b = A.shape[normal], B.shape[normal]
     if face.side == 1:
         glued = np.concatenate([A, np.take(B, range(1, n_b), axis=normal)], axis=normal)
@@ -176,8 +177,8 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
         inner_index = list(face.node_index)
         inner_index[face.axis] = -2 if face.side else 1
         records.append((ids, numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
-    planes = _distinct_planes([(centre, normal) for _, _, centre, normal in records], block_set.length)
-    on_plane = np.zeros((count, len(set(planes))), dtype=bool)
+    planes, normals = _distinct_planes([(centre, normal) for _, _, centre, normal in records], block_set.length)
+    on_plane = np.zeros((count, len(normals)), dtype=bool)
     for (ids, *_), plane in zip(records, planes):
         on_plane[ids, plane] = True
     kinds = on_plane.sum(axis=1)
@@ -188,9 +189,9 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
         ids, inside = ids[keep], inside[keep]
         projector = np.broadcast_to(np.eye(dim) - np.outer(normal, normal), (len(ids), dim, dim)).copy()
         two = kinds[ids] == 2
-        if two.any():  # the line where this node's two planes meet
-            other = [_second_normal(records, planes, on_plane[node], normal) for node in ids[two]]
-            direction = np.cross(normal, np.array(other))
+        if two.any():  # the line where the node's two planes meet
+            pair = np.nonzero(on_plane[ids[two]])[1].reshape(-1, 2)
+            direction = np.cross(normals[pair[:, 0]], normals[pair[:, 1]])
             direction /= np.linalg.norm(direction, axis=1, keepdims=True)
             projector[two] = np.einsum("pi,pj->pij", direction, direction)
         nodes.append(ids)
@@ -201,8 +202,9 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
     return np.concatenate(nodes), np.concatenate(inner), np.concatenate(projectors)
 
 
-def _distinct_planes(planes, length: float, tolerance: float = 1e-9) -> list[int]:
-    """A plane number per (centre, unit normal), equal for planes that coincide to ``tolerance``."""
+def _distinct_planes(planes, length: float, tolerance: float = 1e-9) -> tuple[list[int], np.ndarray]:
+    """A plane number per (centre, unit normal), equal for planes that coincide to ``tolerance``,
+    and the unit normals (P, d) of the distinct planes."""
     numbers, kept = [], []
     for centre, normal in planes:
         for number, (c, n) in enumerate(kept):
@@ -212,15 +214,7 @@ def _distinct_planes(planes, length: float, tolerance: float = 1e-9) -> list[int
         else:
             numbers.append(len(kept))
             kept.append((centre, normal))
-    return numbers
-
-
-def _second_normal(records, planes, node_planes, normal):
-    """The normal of the node's other plane (``node_planes``: which planes it is on)."""
-    for (_, _, _, n), plane in zip(records, planes):
-        if node_planes[plane] and abs(abs(n @ normal) - 1.0) > 1e-9:
-            return n
-    raise AssertionError("a node on two planes has one normal")
+    return numbers, np.array([n for _, n in kept]) if kept else np.zeros((0, 3))
 
 
 def _slide(block_set: BlockSet, Xs, numbering, count, sliding) -> None:
@@ -312,16 +306,16 @@ def elliptic_blocks(
     tol: float | None = None,
     max_iter: int | None = None,
     progress=None,
-    slide: bool | None = None,
+    slide: bool = True,
     initial=None,
 ):
     """Multi-block Winslow mesh of ``block_set``: (list of node arrays, one per block, interface
     nodes identical in every block; info dict as ``meshgen.elliptic.solve_winslow``'s, with
     ``sweeps``). ``tol``: stop when a sweep moves no node by more than ``tol`` times its local cell
-    size (``local_cell_sizes``; ``final_update`` is in that unit); ``max_iter``: most sweeps; ``slide``: nodes on flat patches (a pipe's
-    inlet, a channel's straight walls) slide in their plane so that grid lines meet it at right
-    angles (``planar_sliding``), else every boundary node stays where the TFI put it; default: on
-    in 2D, off in 3D. ``initial``: the node arrays to start from (conforming, on the boundary: a
+    size (``local_cell_sizes``; ``final_update`` is in that unit); ``max_iter``: most sweeps;
+    ``slide`` (default on): nodes on flat patches (a pipe's inlet, a channel's straight walls)
+    slide in their plane, or along the line where two meet, so that grid lines meet them at right
+    angles (``planar_sliding``), else every boundary node stays where the TFI put it. ``initial``: the node arrays to start from (conforming, on the boundary: a
     network's corrected mesh; copied), else the TFI."""
     tol = DEFAULT_TOL if tol is None else tol
     max_sweeps = MAX_SWEEPS if max_iter is None else max_iter
@@ -337,8 +331,6 @@ def elliptic_blocks(
         glued, coords, _, _ = glue(block_set, Xs, interface)
         _, axial = winslow_operator(component_array(glued), stencils(coords))
         levels.append(hierarchy(coords, [np.median(c) for c in axial], compiled=block_set.dim == 3))
-    if slide is None:
-        slide = True
     sliding = planar_sliding(block_set, Xs, numbering, count) if slide else None
     mixing = AndersonMixing(ANDERSON_DEPTH)
     update, sweeps, first = np.inf, 0, None

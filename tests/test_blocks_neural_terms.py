@@ -14,7 +14,7 @@ from meshgen.neural.block_problem import (
     INTERFACE_STEP,
     JUNCTION_STEP,
     BlockNetworks,
-    _mean_length,
+    block_lengths,
     block_problem,
     fixed_block_points,
     flat_patch_rows,
@@ -78,7 +78,7 @@ def test_the_pipes_junction_quads_are_its_core_corners_made_physically_square():
     assert pool["count"] == 12 and len(pool["node"]) == 36
     assert np.bincount(pool["block"]).tolist() == [12, 6, 6, 6, 6]
     assert np.bincount(pool["node"].numpy()).tolist() == [3] * 12
-    lengths = [[_mean_length(g, axis, 3) for axis in range(3)] for g in block_set.geometries]
+    lengths = [block_lengths(g, 3) for g in block_set.geometries]
     side = JUNCTION_STEP * min(min(lengths[0][:2]), min(lengths[1][:2]))  # the core's and a wall block's, in the section
     points = pool["points"].numpy()
     for q, block in enumerate(pool["block"]):

@@ -188,8 +188,7 @@ def neural_blocks(block_set: BlockSet, model: dict, correct: bool = True, device
     if section is not None:
         extrusion, plane = section
         Xs, info = _conforming(plane, model, correct, device)
-        Xs = extrude(extrusion, Xs, block_set.coords[0][2])
-        check_handedness(block_set, Xs)
+        Xs = extrude(extrusion, Xs, block_set.coords[0][2])  # right-handed: the section is, and so is (e1, e2, sweep)
         rescale = plane.length / block_set.length  # the section's relative figures as the set's
         for key in ("interface_gap_before", "face_error_before"):
             info[key] *= rescale

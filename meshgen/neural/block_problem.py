@@ -24,7 +24,7 @@ import torch
 
 from meshgen import cube
 from meshgen.blocks import BlockSet
-from meshgen.elliptic_blocks import junction_nodes
+from meshgen.elliptic_blocks import junction_nodes, mean_length
 from meshgen.neural.block_inference import face_plane
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
@@ -43,6 +43,7 @@ __all__ = [
     "TFI_ANCHOR",
     "anchor_term",
     "block_boundary_term",
+    "block_lengths",
     "block_pde_term",
     "block_problem",
     "block_sample",
@@ -59,7 +60,7 @@ __all__ = [
     "tfi_anchor_pool",
 ]
 
-LENGTH_CELLS = 64  # cells per axis of the TFI grid lines whose mean length scales a block's axis (``_mean_length``)
+LENGTH_CELLS = 64  # cells per axis of the TFI grid lines whose mean length scales a block's axis (``block_lengths``)
 INTERFACE_STEP = 0.05  # parametric stencil step at interfaces (block a's normal axis, and the tangents)
 # Interface stencils within this parametric distance of a junction edge (where the face meets
 # another interface: three or more blocks around the edge) are weighted down by (d / margin)^2:
@@ -121,10 +122,11 @@ class BlockProblem:
     anchor_weight: float = TFI_ANCHOR  # the pull's weight (``method.tfi_anchor``)
 
 
-def _mean_length(geometry, axis: int, dim: int) -> float:
-    """Mean length of the TFI grid lines (``LENGTH_CELLS`` cells per axis) of a block along ``axis``."""
+def block_lengths(geometry, dim: int) -> list[float]:
+    """Per axis, the mean length of a block's TFI grid lines along it (``LENGTH_CELLS`` cells per
+    axis, one TFI for all axes)."""
     X = tfi(geometry, None, [np.linspace(0.0, 1.0, LENGTH_CELLS + 1)] * dim)
-    return float(np.linalg.norm(np.diff(X, axis=axis), axis=-1).sum(axis=axis).mean())
+    return [mean_length(X, axis) for axis in range(dim)]
 
 
 def face_points(face: cube.Face, tangents: np.ndarray) -> np.ndarray:
@@ -157,6 +159,7 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
         plane = face_plane(boundaries[block](face_points(face, grid)), 1.0)
         patch_faces.append((block, face, plane))
     interfaces, junctions = [], []
+    lengths = [block_lengths(g, dim) for g in block_set.geometries]
     shared = {(i.a, i.face_a.name) for i in block_set.interfaces} | {(i.b, i.face_b.name) for i in block_set.interfaces}
     for i in block_set.interfaces:
         ends = [
@@ -166,30 +169,28 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
             if (i.a, f"{cube.AXIS_NAMES[axis]}{side}") in shared
         ]
         junctions.append(ends)
-        ratio = _mean_length(block_set.geometries[i.a], i.face_a.axis, dim) / _mean_length(
-            block_set.geometries[i.b], i.face_b.axis, dim
-        )
+        ratio = lengths[i.a][i.face_a.axis] / lengths[i.b][i.face_b.axis]
         interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
     problem = BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
-    problem.junction = junction_pool(block_set, device) if JUNCTION_STEP > 0 else None
+    problem.junction = junction_pool(block_set, device, lengths) if JUNCTION_STEP > 0 else None
     return problem
 
 
-def junction_pool(block_set: BlockSet, device) -> dict | None:
+def junction_pool(block_set: BlockSet, device, lengths=None) -> dict | None:
     """The parallelogram rule's quadrilaterals at the junction nodes of ``block_set``'s grid (its
     ``coords``; ``meshgen.elliptic_blocks.junction_nodes``: where three or more blocks meet, on no
     patch), as the elliptic mesh takes them (in 3D those across the block edge the node is on, in
     its layer), each rescaled about the node to a physically square one of side ``JUNCTION_STEP``
     times the shortest mean block length around the junction. Returns None without junctions, else
     ``node`` (Q,) the junction number of each quad, ``block`` (Q,), ``points`` (Q, 4, d) the
-    parametric node, a, b and ab in the quad's block, ``step`` (J,) the side in normalised units
-    ``area`` (J,) the mean over the junction's quads of the product of their parametric sides,
-    ``count`` J."""
+    parametric node, a, b and ab in the quad's block, ``area`` (J,) the mean over the junction's
+    quads of the product of their parametric sides, ``count`` J. ``lengths``: the blocks'
+    ``block_lengths`` (computed when not given)."""
     junctions, numbering, _ = junction_nodes(block_set)
     if len(junctions) == 0:
         return None
     dim = block_set.dim
-    lengths = [[_mean_length(g, axis, dim) for axis in range(dim)] for g in block_set.geometries]
+    lengths = lengths or [block_lengths(g, dim) for g in block_set.geometries]
     order = {int(n): k for k, n in enumerate(junctions)}
     nodes, blocks, quads, sides = [], [], [], []
     for block, ids in enumerate(numbering):
