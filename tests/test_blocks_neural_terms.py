@@ -59,14 +59,8 @@ def test_the_right_angle_rule_is_the_sine_of_the_grid_lines_tilt(side):
     expected = np.array([slope, 0.0, 0.0]) / np.hypot(slope, length) * (1 if side == 0 else -1)
     np.testing.assert_allclose(rows.numpy(), np.tile(expected, (20, 1)), atol=1e-12)
     straight = lambda p: torch.stack([p[:, 0], p[:, 1], length * p[:, 2]], -1)  # noqa: E731 (meets the plane at right angles)
-    assert (
-        float(
-            flat_patch_rows(straight, face, points, straight(points), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
-            .abs()
-            .max()
-        )
-        < 1e-12
-    )
+    rows = flat_patch_rows(straight, face, points, straight(points), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
+    assert float(rows.abs().max()) < 1e-12
 
 
 def test_the_pipes_junction_quads_are_its_core_corners_made_physically_square():

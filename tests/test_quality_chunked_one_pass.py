@@ -159,14 +159,9 @@ def test_a_file_with_non_finite_and_collapsed_nodes_in_one_pass(tmp_path):
 
 
 def numpy_lengths(F):
-    """Every edge length of nodes by component ``F`` (dim, nk, nj, ni), computed axis by axis."""
-    lengths = []
-    for axis in (1, 2, 3):
-        upper, lower = [slice(None)] * 4, [slice(None)] * 4
-        upper[axis], lower[axis] = slice(1, None), slice(None, -1)
-        e = F[tuple(upper)] - F[tuple(lower)]
-        lengths.append(np.sqrt(sum(e[d] * e[d] for d in range(len(e)))).ravel())
-    return np.concatenate(lengths)
+    """Every edge length of nodes by component ``F`` (dim, nk, nj, ni): the norms of the node
+    differences along each grid axis."""
+    return np.concatenate([np.linalg.norm(np.diff(F, axis=axis), axis=0).ravel() for axis in (1, 2, 3)])
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -192,19 +187,27 @@ def test_the_shortest_edge_above_a_floor_against_numpy(dim):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_the_shortest_edge_is_the_length_the_kernels_compare_with_the_tolerance(dim):
     """The kernels call a cell degenerate when an edge is at most the tolerance: with the
-    tolerance at the shortest edge the cells on it are degenerate, one ulp below it none is."""
+    tolerance at the shortest edge the cells on it are degenerate, one ulp below it none is; the
+    shortest edge above that one (the floored search) is the next length the kernels tell apart."""
     rng = np.random.default_rng(5)
     shape = (7, 6, 5)[:dim]
     X = np.stack(np.meshgrid(*[np.arange(n, dtype=float) for n in shape], indexing="ij"), axis=-1)
     X = X + rng.uniform(-0.2, 0.2, X.shape)
     X[(2,) * dim] = X[(1,) + (2,) * (dim - 1)] + rng.uniform(1e-7, 2e-7, dim)  # one short edge
+    X[(4,) + (3,) * (dim - 1)] = X[(3,) * dim] + rng.uniform(5e-7, 6e-7, dim)  # a longer one, other cells
     F = X.transpose((dim,) + tuple(range(dim - 1, -1, -1)))
     F = F if dim == 3 else F[:, None]
-    shortest = shortest_edge_above(F, (0, 0, 0), (shape + (1,))[:3])
+    box = (shape + (1,))[:3]
+    shortest = shortest_edge_above(F, (0, 0, 0), box)
     assert 1e-7 < shortest < 4e-7
-    at = structured_metrics(X, tolerance=shortest, kernels="compiled")[1]
-    below = structured_metrics(X, tolerance=math.nextafter(shortest, 0.0), kernels="compiled")[1]
-    assert at.sum() == 2 ** (dim - 1) and not below.any()
+    cells_per_edge = 2 ** (dim - 1)
+    for length, degenerate in (
+        (shortest, cells_per_edge),
+        (shortest_edge_above(F, (0, 0, 0), box, shortest), 2 * cells_per_edge),
+    ):
+        at = structured_metrics(X, tolerance=length, kernels="compiled")[1]
+        below = structured_metrics(X, tolerance=math.nextafter(length, 0.0), kernels="compiled")[1]
+        assert at.sum() == degenerate and below.sum() == degenerate - cells_per_edge, length
 
 
 def test_block_reads_follow_a_file_rewritten_at_the_same_path(tmp_path):

@@ -20,7 +20,6 @@ from meshgen.geometry import load_geometry
 from meshgen.quality import quality_report
 from meshgen.quality.kernels import METRICS
 from meshgen.quality.structured import NUMPY_CELLS, structured_metrics
-from meshgen.quality.worker import worker_fits
 from meshgen.tfi import tfi
 
 DIMS = (80, 80, 80)  # 512,000 cells: the compiled kernels' size (NUMPY_CELLS), so the worker's
@@ -89,12 +88,20 @@ def check_result(folder, expected) -> None:
     assert {key: sidecar[key] for key in report} == report
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
 def test_the_worker_is_used_only_where_it_pays():
+    """In a new interpreter: a large mesh gets a worker until numba is loaded; a small one never."""
     assert int(np.prod(DIMS)) >= NUMPY_CELLS
-    # this process may have loaded numba already (other tests): then never a worker
-    fits = worker_fits(tuple(n + 1 for n in DIMS))
-    assert fits == (sys.platform.startswith("linux") and "numba" not in sys.modules)
-    assert not worker_fits((11, 11, 11))  # NumPy kernels: nothing to load
+    shape = tuple(n + 1 for n in DIMS)
+    script = (
+        "from meshgen.quality.worker import worker_fits\n"
+        f"print(worker_fits({shape}), worker_fits((11, 11, 11)))\n"
+        "import numba\n"
+        f"print(worker_fits({shape}))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["True", "False", "False"]
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
@@ -110,6 +117,7 @@ def test_the_worker_computes_the_in_process_report(tmp_path, expected):
 def test_a_failing_worker_leaves_the_result_unchanged(tmp_path, expected, failure):
     result = run_mesh(tmp_path, FAILURES[failure])
     assert result.returncode == 0, result.stderr
+    assert "worker " in result.stderr  # a worker was forked, and failed
     assert "metrics from the worker" not in result.stderr and "Traceback" not in result.stderr
     check_result(tmp_path, expected)
 

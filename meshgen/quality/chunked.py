@@ -42,9 +42,9 @@ from meshgen.errors import MeshgenError
 from meshgen.formats import read_header, read_node_block, read_node_components
 from meshgen.grid import block_slices
 from meshgen.quality import sketch as sketches
-from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS
+from meshgen.quality.kernels import METRICS
 from meshgen.quality.report import assemble_report
-from meshgen.quality.structured import apply_degenerate, structured_metrics
+from meshgen.quality.structured import apply_degenerate, box_tolerance, signed_area_2d, structured_metrics
 from meshgen.resources import available_memory, blocks_in_flight, check_block_nodes
 from meshgen.scheduler import compute_in_order_of_completion
 
@@ -102,32 +102,14 @@ def _grown(block, node_shape, before: int, after: int):
     return tuple(slice(max(s.start - before, 0), min(s.stop + after, n)) for s, n in zip(block, node_shape))
 
 
-def _tolerance(low, high) -> float:
-    """The degenerate-edge tolerance of a bounding box (per component min ``low``, max ``high``;
-    (inf, -inf) when no node is finite: 0). Each operation is monotone in the box's sides, so a box
-    inside another gets a tolerance at most the other's (``chunked_report`` checks it all the same)."""
-    if not all(np.isfinite(v) for v in low):
-        return 0.0
-    return DEGENERATE_TOLERANCE * float(np.sqrt(sum((b - a) ** 2 for a, b in zip(low, high))))
-
-
 def _orientation(area: float, dim: int) -> float:
     return (1.0 if area >= 0.0 else -1.0) if dim == 2 else 1.0
 
 
-def _signed_area(nodes, block, read_block, node_shape) -> float:
-    """The signed area (diagonal cross products) of the cells of a 2D block's owned nodes (C order,
-    (n1, n2, 2), read at ``read_block``)."""
-    owned = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(block, read_block))
-    i, j = tuple(slice(o.start, min(o.stop, n - 1 - r.start)) for o, r, n in zip(owned, read_block, node_shape))
-    x, y = nodes[..., 0], nodes[..., 1]
-
-    def shifted(a, di, dj):
-        return a[i.start + di : i.stop + di, j.start + dj : j.stop + dj]
-
-    d1 = (shifted(x, 1, 1) - shifted(x, 0, 0), shifted(y, 1, 1) - shifted(y, 0, 0))
-    d2 = (shifted(x, 0, 1) - shifted(x, 1, 0), shifted(y, 0, 1) - shifted(y, 1, 0))
-    return float(np.nansum(d1[0] * d2[1] - d1[1] * d2[0]))
+def _owned_cells(block, node_shape) -> tuple:
+    """The cells whose first node is in ``block`` (mesh indices, a slice per axis; empty on an axis
+    where the block holds only the mesh's last node)."""
+    return tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
 
 
 def _finite_box(F, lo, own):
@@ -144,7 +126,7 @@ def _finite_box(F, lo, own):
     return [float(v) for v in low], [float(v) for v in high], int(nonfinite)
 
 
-def _block_figures(F, block, read_block, node_shape):
+def _block_figures(F, block, read_block, node_shape, has_cells: bool):
     """(low, high, nonfinite, tolerance, shortest) of a block from its nodes by component ``F``
     (dim, [nk,] nj, ni), read at ``read_block``: per component min and max of its finite owned
     nodes, its owned nodes with a non-finite coordinate, its own tolerance (that of its bounding
@@ -158,9 +140,9 @@ def _block_figures(F, block, read_block, node_shape):
     lo = [s.start - r.start for s, r in zip(block, read_block)] + [0] * (3 - len(block))
     own = [s.stop - r.start for s, r in zip(block, read_block)] + [1] * (3 - len(block))
     low, high, nonfinite = _finite_box(F, lo, own)
-    tolerance = _tolerance(low, high)
+    tolerance = box_tolerance(low, high)
     shortest = np.inf
-    if all(s.start < n - 1 for s, n in zip(block, node_shape)):  # it owns cells: the edges of their nodes
+    if has_cells:  # the edges of their nodes
         box = [min(s.stop + 1, n) - r.start for s, r, n in zip(block, read_block, node_shape)] + [1] * (3 - len(block))
         shortest = shortest_edge_above(F, lo, box)
         if shortest <= tolerance:  # a positive edge at most the block's tolerance: the shortest one above it
@@ -205,20 +187,20 @@ def _quality_of_block(nodes, block, read_block, node_shape, tolerance, orientati
     first pass, with the block's own tolerance and orientation, its figures under ``"figures"``:
     (low, high, nonfinite, area, tolerance, orientation, shortest) (``_block_figures``)."""
     figures = None
+    owned_cells = _owned_cells(block, node_shape)
+    mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
+    has_cells = all(s.stop > s.start for s in owned_cells)
     if tolerance is None:
         dim = nodes.shape[-1]
         low, high, nonfinite, tolerance, shortest = _block_figures(
-            nodes.transpose((dim,) + tuple(range(dim - 1, -1, -1))), block, read_block, node_shape
+            nodes.transpose((dim,) + tuple(range(dim - 1, -1, -1))), block, read_block, node_shape, has_cells
         )
-        area = _signed_area(nodes, block, read_block, node_shape) if dim == 2 else 0.0
+        area = signed_area_2d(nodes[mine[0].start : mine[0].stop + 1, mine[1].start : mine[1].stop + 1]) if dim == 2 else 0.0
         orientation = _orientation(area, dim)
         # a block without cells orients none: it agrees with any orientation of the mesh
-        has_cells = all(s.start < n - 1 for s, n in zip(block, node_shape))
         figures = (low, high, nonfinite, area, tolerance, orientation if has_cells else None, shortest)
-    owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
     summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
-    if all(s.stop > s.start for s in owned_cells):
-        mine = tuple(slice(s.start - r.start, s.stop - r.start) for s, r in zip(owned_cells, read_block))
+    if has_cells:
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             values, degenerate, _ = structured_metrics(nodes, tolerance=tolerance, orientation=orientation, cells=mine)
         summary = _summary_of_cells(values, degenerate)
@@ -259,15 +241,16 @@ def _file_quality_of_block(path, block, read_block, node_shape, tolerance, spare
     (``structured_hex_file_order``: the same values), buffers reused from block to block."""
     from meshgen.quality.compiled import structured_hex_file_order
 
-    owned_cells = tuple(slice(s.start, min(s.stop, n - 1)) for s, n in zip(block, node_shape))
+    owned_cells = _owned_cells(block, node_shape)
+    has_cells = all(s.stop > s.start for s in owned_cells)
     summary = {"cells": 0, "inverted": 0, "degenerate": 0, "metrics": {}}
     buffers, nodes = _file_block(path, read_block, spare)
     try:
         figures = None
         if tolerance is None:
-            low, high, nonfinite, tolerance, shortest = _block_figures(nodes, block, read_block, node_shape)
+            low, high, nonfinite, tolerance, shortest = _block_figures(nodes, block, read_block, node_shape, has_cells)
             figures = (low, high, nonfinite, 0.0, tolerance, 1.0, shortest)
-        if all(s.stop > s.start for s in owned_cells):
+        if has_cells:
             first = tuple(s.start - r.start for s, r in zip(owned_cells, read_block))
             last = tuple(s.stop - r.start for s, r in zip(owned_cells, read_block))
             cells = int(np.prod([b - a for a, b in zip(first, last)]))
@@ -383,7 +366,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
             del points, positions
         if progress is not None:
             progress(done, len(blocks), "quality")
-    tolerance, orientation = _tolerance(low, high), _orientation(area, dim)
+    tolerance, orientation = box_tolerance(low, high), _orientation(area, dim)
 
     # A block whose cells the mesh's tolerance or orientation could classify or orient otherwise
     # than its own (an edge longer than its tolerance, at most the mesh's; a 2D block folded

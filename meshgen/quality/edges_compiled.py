@@ -88,10 +88,7 @@ def _lengths_above(F, lo, box, floor: float) -> float:
     for axis in (3, 2, 1):  # i, j, k
         if nodes.shape[axis] < 2:
             continue
-        upper = [slice(None)] * 4
-        lower = [slice(None)] * 4
-        upper[axis], lower[axis] = slice(1, None), slice(None, -1)
-        e = nodes[tuple(upper)] - nodes[tuple(lower)]
+        e = np.diff(nodes, axis=axis)
         squares = e[0] * e[0]
         for d in range(1, len(e)):
             squares = squares + e[d] * e[d]

@@ -56,22 +56,32 @@ def degenerate_tolerance(points, kernels: str = "auto") -> tuple[float, int]:
     else:
         finite_extent = numpy_kernels.finite_extent
     low, high, nonfinite = finite_extent(points)
-    if not np.all(np.isfinite(low)):
-        return 0.0, int(nonfinite)
-    largest = max(float(np.abs(low).max()), float(np.abs(high).max()))
-    if largest > MAX_COORDINATE:
-        raise MeshgenError(f"coordinates reach {largest:.3g}, beyond {MAX_COORDINATE:g}: lengths and volumes would overflow")
-    extent = np.sqrt(sum(float(h - lo) ** 2 for lo, h in zip(low, high)))
-    return DEGENERATE_TOLERANCE * extent, int(nonfinite)
+    if np.all(np.isfinite(low)):
+        largest = max(float(np.abs(low).max()), float(np.abs(high).max()))
+        if largest > MAX_COORDINATE:
+            raise MeshgenError(f"coordinates reach {largest:.3g}, beyond {MAX_COORDINATE:g}: lengths and volumes would overflow")
+    return box_tolerance(low, high), int(nonfinite)
+
+
+def box_tolerance(low, high) -> float:
+    """The degenerate-edge length of a bounding box (per component min ``low``, max ``high``):
+    ``DEGENERATE_TOLERANCE`` times its diagonal; 0 when no node is finite (``low`` inf)."""
+    if not all(np.isfinite(v) for v in low):
+        return 0.0
+    return DEGENERATE_TOLERANCE * float(np.sqrt(sum(float(h - lo) ** 2 for lo, h in zip(low, high))))
+
+
+def signed_area_2d(X) -> float:
+    """The quads' total signed area (diagonal cross products, NaN cells left out) of the 2D node
+    array ``X`` (n1, n2, 2)."""
+    d1 = X[1:, 1:] - X[:-1, :-1]
+    d2 = X[:-1, 1:] - X[1:, :-1]
+    return float(np.nansum(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]))
 
 
 def orientation_2d(X) -> float:
-    """+1 if the quads' total signed area (diagonal cross products) of the 2D node array ``X`` is
-    >= 0, else -1."""
-    d1 = X[1:, 1:] - X[:-1, :-1]
-    d2 = X[:-1, 1:] - X[1:, :-1]
-    total = float(np.nansum(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]))
-    return 1.0 if total >= 0.0 else -1.0
+    """+1 if ``signed_area_2d`` of the 2D node array ``X`` is >= 0, else -1."""
+    return 1.0 if signed_area_2d(X) >= 0.0 else -1.0
 
 
 def apply_degenerate(metrics: dict, degenerate: np.ndarray) -> None:

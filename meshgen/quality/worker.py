@@ -98,10 +98,10 @@ class QualityWorker:
         self._failed = False
 
     def submit(self, X: np.ndarray) -> bool:
-        """Hand node array ``X`` to the child; False (and the worker closed) when its shape is not
-        the one the worker was made for or the child is gone."""
+        """Hand node array ``X`` to the child; False (and every later call fails) when its shape is
+        not the one the worker was made for or the pipe to the child is broken."""
         if X.shape != self._nodes.shape:
-            self.close()
+            self._failed = True
             return False
         np.copyto(self._nodes, X)
         return self._send("go")
