@@ -1,4 +1,4 @@
-"""Multi-block meshes (meshgen.blocks): the pipe O-grid's quality against resolution, and the DFG
+"""Multi-block meshes (meshgen.geometry.blocks): the pipe O-grid's quality against resolution, and the DFG
 2D-1 benchmark on the dfg-cylinder block set with OpenFOAM's simpleFoam.
 
     python benchmarks/bench_blocks.py [--quick] [--json FILE] [--only pipe|dfg]
@@ -39,8 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples" / "dfg"))
 
-from meshgen.blocks import load_block_set, merged_mesh, tfi_blocks  # noqa: E402
-from meshgen.elliptic_blocks import elliptic_blocks  # noqa: E402
+from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks  # noqa: E402
+from meshgen.methods.elliptic_blocks import elliptic_blocks  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 
 DFG_DIMS = [(17, 10), (34, 20), (68, 40)]  # a refinement series: the last two are the 10k and the 40k rows

@@ -98,7 +98,7 @@ def check_mesh(case: Path, cells: int) -> dict:
     shared machine's other work is not what a shortfall kills."""
     import shutil
 
-    from meshgen.resources import available_memory
+    from meshgen.run.resources import available_memory
 
     if shutil.which("checkMesh") is None:
         return {"skipped": "OpenFOAM's checkMesh is not installed (Debian package openfoam)"}

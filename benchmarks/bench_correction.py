@@ -73,12 +73,12 @@ def figures(report: dict) -> dict:
 def measure(geometry, checkpoint: dict, n: int) -> dict:
     """The corrected network mesh and the converged elliptic mesh of ``n``^3 cells, measured alike:
     the network on the boundary layout it was trained on, elliptic on its default layout."""
-    from meshgen.correction import correct_boundary
-    from meshgen.elliptic import elliptic
-    from meshgen.layout import trained_layout, with_layout
+    from meshgen.geometry.layout import trained_layout, with_layout
+    from meshgen.methods.correction import correct_boundary
+    from meshgen.methods.elliptic import elliptic
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.network_map import mesh_from_model
     from meshgen.quality import quality_report
-    from meshgen.tfi import parametric_grid
 
     trained = with_layout(geometry, trained_layout(checkpoint))  # the boundary map the network learnt
     coords = parametric_grid([n] * 3)
@@ -131,7 +131,7 @@ def run(
     """The whole table: {"rows": [...], "all_met": bool, ...}; see the module docstring.
     ``partial``: a JSON file rewritten after each row (what a long run has measured so far);
     ``geometries``, ``dims``: a part of the table only (default: all of it)."""
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
 
     names = geometries or (["semicylinder"] if quick else GEOMETRIES)
     dims = dims or ([20] if quick else DIMS)

@@ -26,11 +26,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from meshgen.elliptic import elliptic  # noqa: E402
-from meshgen.geometry import load_geometry  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.methods.elliptic import elliptic  # noqa: E402
+from meshgen.methods.tfi import parametric_grid, tfi  # noqa: E402
+from meshgen.methods.winslow import centre_coefficient, component_array, stencils, winslow_operator  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
-from meshgen.tfi import parametric_grid, tfi  # noqa: E402
-from meshgen.winslow import centre_coefficient, component_array, stencils, winslow_operator  # noqa: E402
 
 TARGETS = {30: 3.0, 100: 5.0}  # cells per axis -> seconds, the targets for a 2-core CPU
 

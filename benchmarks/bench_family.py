@@ -10,7 +10,7 @@ Each is trained with the ``family`` preset, then every member of the validation 
 parameter, the box's corners included: ``Family.grid``) and ``members`` random members (seeded)
 are meshed at ``cells``^3 and measured with ``meshgen.quality``: inverted cells, boundary deviation
 (relative to the characteristic length), mean minimum angle, and the same for the converged
-elliptic mesh of the member (``meshgen.elliptic.elliptic``) on the boundary layout the family was
+elliptic mesh of the member (``meshgen.methods.elliptic.elliptic``) on the boundary layout the family was
 trained on. The worst member has the most inverted cells, then the mean minimum angle furthest
 from its elliptic mesh's. ``--quick``: the first and last case, fewer training steps, the grid's
 members alone, 20^3 cells: the mechanism, not the figure.
@@ -46,13 +46,13 @@ def measure_case(name: str, ranges: dict, members: int, cells: int, overrides=()
     ``members`` random ones and compare each with its elliptic mesh. Returns a JSON-ready dict."""
     import numpy as np
 
-    from meshgen.elliptic import elliptic
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
+    from meshgen.methods.elliptic import elliptic
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.config import resolve_config
     from meshgen.neural.family import VALIDATION_POINTS, make_family, mesh_member
     from meshgen.neural.family_train import train_family
     from meshgen.quality import quality_report
-    from meshgen.tfi import parametric_grid
 
     config = resolve_config("family", None, list(overrides), seed=seed)
     family = make_family(load_geometry(name), name, ranges, config.boundary_layout)

@@ -1,5 +1,5 @@
 """Solver fidelity: potentialFoam's max |U - U_exact| on meshgen's meshes, through meshgen's own
-OpenFOAM writer (``meshgen.fidelity.potential_flow_error``), beside the mean minimum angle and the
+OpenFOAM writer (``meshgen.quality.fidelity.potential_flow_error``), beside the mean minimum angle and the
 predictors of the quality report (expansion ratio, grid-line smoothness, checkMesh's
 non-orthogonality).
 
@@ -7,12 +7,12 @@ Rows: ``tfi``, ``elliptic``, the bundled model, and freshly trained ``default`` 
 (``meshgen train -g semicylinder --preset P --seed 0``, checkpoints kept in ``--checkpoints``,
 default /tmp/meshgen-fidelity), each neural row polished (``polish=True``) and raw (``polish=False``:
 the network's corrected mesh alone); the one ``meshgen mesh`` gives by default
-(``meshgen.polish.polishes_by_default``: raw for the bundled and ``exact`` networks, polished for
+(``meshgen.methods.polish.polishes_by_default``: raw for the bundled and ``exact`` networks, polished for
 ``default``) is marked ``default`` and judged as the mesh a user gets. Semicylinder (exact: U = (0, 0, 1)) at 20x20x40 and 60x60x120;
 canal (exact: the potential vortex about its bend's axis) at 20x20x40 for tfi and elliptic (no
 bundled model; --canal-neural trains ``default`` there too). Each row gives the error of the U that
 potentialFoam writes and of the velocity reconstructed from its face fluxes
-(``meshgen.fidelity.reconstructed_velocity``); on the canal only the second measures the mesh.
+(``meshgen.quality.fidelity.reconstructed_velocity``); on the canal only the second measures the mesh.
 
     python benchmarks/bench_fidelity.py [--quick] [--json FILE] [--checkpoints DIR]
 
@@ -67,8 +67,8 @@ def trained(geometry: str, preset: str, folder: Path) -> Path:
 def default_polish(checkpoint: Path | None) -> bool:
     """Whether ``meshgen mesh`` polishes the semicylinder mesh of ``checkpoint`` (None: the
     bundled model) when not told."""
+    from meshgen.methods.polish import polishes_by_default
     from meshgen.neural.models import find_model
-    from meshgen.polish import polishes_by_default
 
     return polishes_by_default(
         find_model(None if checkpoint is None else str(checkpoint), geometry_name="semicylinder").checkpoint
@@ -77,8 +77,8 @@ def default_polish(checkpoint: Path | None) -> bool:
 
 def row(geometry: str, dims, method: str, label: str, **options) -> dict:
     import meshgen
-    from meshgen.fidelity import potential_flow_error
     from meshgen.quality import quality_report
+    from meshgen.quality.fidelity import potential_flow_error
 
     start = time.perf_counter()
     mesh = meshgen.mesh(geometry, dims, method=method, **options)
@@ -129,7 +129,7 @@ def run(quick: bool = False, checkpoints: Path | None = None, canal_neural: bool
     mesh`` gives by default (``default``) within ``TARGET_FACTOR`` of the elliptic mesh's error,
     "polished_within_target" and "raw_within_target": the same of the polished rows and of the raw
     rows (the networks' own meshes, no polish), "skipped": reason or None}."""
-    from meshgen.fidelity import missing_openfoam
+    from meshgen.quality.fidelity import missing_openfoam
 
     reason = missing_openfoam()
     if reason:

@@ -1,5 +1,5 @@
 """Boundary layouts on every 3D built-in: fixed (each face the Coons layout of its edges) against
-smoothed (arc length on the edges, the surface's Winslow grid on each face; ``meshgen.layout``).
+smoothed (arc length on the edges, the surface's Winslow grid on each face; ``meshgen.geometry.layout``).
 
     python benchmarks/bench_layout.py [--quick] [--json FILE]
 
@@ -27,12 +27,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from meshgen.blocks import is_multiblock  # noqa: E402
-from meshgen.elliptic import elliptic  # noqa: E402
-from meshgen.geometry import list_geometries, load_geometry  # noqa: E402
-from meshgen.layout import layout_of, smoothed  # noqa: E402
+from meshgen.geometry.blocks import is_multiblock  # noqa: E402
+from meshgen.geometry.layout import layout_of, smoothed  # noqa: E402
+from meshgen.geometry.plugins import list_geometries, load_geometry  # noqa: E402
+from meshgen.methods.elliptic import elliptic  # noqa: E402
+from meshgen.methods.tfi import tfi  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
-from meshgen.tfi import tfi  # noqa: E402
 
 GMSH_SMOOTHED = {30: 74.42, 100: 74.79}  # semicylinder, mean min angle of gmsh's smoothed transfinite mesh
 SECTION_GEO = """Point(1) = {{0, 0, 0}}; Point(2) = {{-1, 0, 0}}; Point(3) = {{Cos(3*Pi/4), Sin(3*Pi/4), 0}};

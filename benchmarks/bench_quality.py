@@ -35,11 +35,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from meshgen.formats import write_mesh  # noqa: E402
-from meshgen.geometry import load_geometry  # noqa: E402
-from meshgen.grid import cell_connectivity, flat_points  # noqa: E402
+from meshgen.geometry.grid import cell_connectivity, flat_points  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.methods.tfi import tfi  # noqa: E402
 from meshgen.quality import cell_metrics, cell_metrics_unstructured, quality_report  # noqa: E402
 from meshgen.quality.chunked import chunked_report  # noqa: E402
-from meshgen.tfi import tfi  # noqa: E402
 
 TARGET_SECONDS = 3.0
 KERNEL_TARGET_SECONDS_PER_MILLION = 0.1

@@ -54,10 +54,10 @@ from shape_helpers import (  # noqa: E402
     write_twisted_loft,
 )
 
-from meshgen.geometry import load_geometry  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.geometry.shapes.parametrise import parametrise, signed_areas  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
-from meshgen.request import mesh  # noqa: E402
-from meshgen.shapes.parametrise import parametrise, signed_areas  # noqa: E402
+from meshgen.run.request import mesh  # noqa: E402
 
 
 def boundary_nodes(X):

@@ -25,8 +25,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from meshgen.formats import read_mesh, write_mesh  # noqa: E402
-from meshgen.geometry import load_geometry  # noqa: E402
-from meshgen.patches import geometry_patches  # noqa: E402
+from meshgen.geometry.patches import geometry_patches  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
 from meshgen.quality import cell_metrics  # noqa: E402
 
 # (label, file name, write options)
@@ -42,8 +42,8 @@ TARGETS = [
 
 
 def make_mesh(kind: str, cells: int):
-    from meshgen.clustering import node_coordinates
-    from meshgen.methods import make_mesh as build
+    from meshgen.methods.clustering import node_coordinates
+    from meshgen.methods.registry import make_mesh as build
 
     geometry = load_geometry("semicylinder")
     X, _ = build(kind, geometry, node_coordinates((cells,) * 3))

@@ -28,7 +28,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as meshgen train does, be
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from meshgen.geometry import load_geometry  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.methods.tfi import parametric_grid  # noqa: E402
 from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.neural.config import resolve_config  # noqa: E402
 from meshgen.neural.model import MLP, mesh_from_checkpoint, normalisation, normalised_boundary  # noqa: E402
@@ -37,7 +38,6 @@ from meshgen.neural.reweighting import UncertaintyWeights  # noqa: E402
 from meshgen.neural.steps import DEVICE_BLOCK, TermRunner, Training, make_optimizer  # noqa: E402
 from meshgen.neural.train import adam_steps, corrected, train  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
-from meshgen.tfi import parametric_grid  # noqa: E402
 
 VARIANTS = ["default", "fd-pinn", "exact", "pinn", "mgnet", "rwgp-pinn"]
 SIZES = {"default": [48, 48, 48], "paper": [85, 85, 85, 85]}
@@ -243,9 +243,9 @@ def reference_figures(geometry, cells: int = 30, layout: str = "smoothed") -> di
     boundary ``layout`` a network is trained on ("smoothed": the faces' own Winslow grids, what
     ``meshgen mesh --method elliptic`` makes; "fixed": the Coons faces): the yardsticks of the
     angle bounds."""
-    from meshgen.elliptic import elliptic
-    from meshgen.layout import with_layout
-    from meshgen.tfi import tfi
+    from meshgen.geometry.layout import with_layout
+    from meshgen.methods.elliptic import elliptic
+    from meshgen.methods.tfi import tfi
 
     dims = [cells] * geometry.dim
     return {
@@ -286,8 +286,8 @@ class QualityProbe:
             print("   ", text, flush=True)
 
     def measure(self, checkpoint, seconds) -> dict:
-        from meshgen.correction import boundary_errors, error_figures
-        from meshgen.layout import trained_layout, with_layout
+        from meshgen.geometry.layout import trained_layout, with_layout
+        from meshgen.methods.correction import boundary_errors, error_figures
 
         # the boundary the network was trained on (the smoothed layout for today's presets): its
         # error and the correction are measured against it, as ``meshgen mesh`` does

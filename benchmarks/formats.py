@@ -37,9 +37,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from meshgen.formats import FORMATS, read_mesh, write_mesh  # noqa: E402
-from meshgen.geometry import load_geometry  # noqa: E402
-from meshgen.grid import cell_connectivity, flat_points  # noqa: E402
-from meshgen.tfi import tfi  # noqa: E402
+from meshgen.geometry.grid import cell_connectivity, flat_points  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.methods.tfi import tfi  # noqa: E402
 
 
 def best_time(function, repeat: int) -> float:
@@ -129,7 +129,7 @@ def vtu_rows(X, mesh_label: str, repeat: int) -> dict:
     import vtk
 
     from meshgen.formats import _vtu
-    from meshgen.grid import cell_connectivity
+    from meshgen.geometry.grid import cell_connectivity
     from meshgen.quality import cell_metrics
 
     dims = tuple(n - 1 for n in X.shape[:-1])

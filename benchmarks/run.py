@@ -9,7 +9,7 @@ Sections, in order (all on the semicylinder, the reference shape):
   (GFLOP/s of a 4096 x 4096 product with torch, best of several: the roof for inference;
   ``bench_inference.matmul_rates``);
 - ``meshing``: ``tfi``, ``elliptic`` and ``neural`` (the bundled model, boundary corrected) at 30^3
-  and 100^3 cells through ``meshgen.methods.make_mesh``, median of several runs (--quick: 30^3, and
+  and 100^3 cells through ``meshgen.methods.registry.make_mesh``, median of several runs (--quick: 30^3, and
   elliptic 100^3 once, for its target; the first 100^3 elliptic run loads the compiled kernels,
   as a fresh process does); then the network's forward pass alone (``evaluate_network``: NumPy,
   what meshing on a CPU runs) for the bundled model and for a [85]*4 network on
@@ -359,11 +359,11 @@ def meshing(quick: bool, roof: dict | None) -> dict:
     import bench_inference
     import torch
 
-    from meshgen.geometry import load_geometry
-    from meshgen.methods import make_mesh
+    from meshgen.geometry.plugins import load_geometry
+    from meshgen.methods.registry import make_mesh
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.model import MLP, describe
     from meshgen.neural.network_map import evaluate_network
-    from meshgen.tfi import parametric_grid
 
     geometry = load_geometry(GEOMETRY)
     model = bundled_model()
@@ -512,7 +512,7 @@ def training(quick: bool) -> dict:
     import bench_train
     import torch
 
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
 
     geometry = load_geometry(GEOMETRY)
     sizes = {"default": bench_train.SIZES["default"]} if quick else bench_train.SIZES
@@ -543,7 +543,7 @@ def training(quick: bool) -> dict:
 def time_to_quality(quick: bool) -> dict:
     import bench_train
 
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
 
     return bench_train.speed_table(load_geometry(GEOMETRY), quick=quick)
 
@@ -640,8 +640,8 @@ def evaluate(quick: bool) -> dict:
 def formats(quick: bool) -> dict:
     import formats as formats_benchmark
 
-    from meshgen.geometry import load_geometry
-    from meshgen.tfi import tfi
+    from meshgen.geometry.plugins import load_geometry
+    from meshgen.methods.tfi import tfi
 
     cells = 50 if quick else 100
     repeat = 1 if quick else 3

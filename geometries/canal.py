@@ -16,7 +16,7 @@ are Coons-filled disks. Volume (Pappus): pi r^2 * pi R. Needs r < R.
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.tfi import transfinite
+from meshgen.methods.tfi import transfinite
 
 name = "canal"
 dim = 3

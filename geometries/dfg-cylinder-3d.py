@@ -1,13 +1,13 @@
 """The 3D channel with a cylinder of the DFG benchmark (Schaefer and Turek, 1996; 3D-1Z): the
 ``dfg-cylinder`` section (channel 2.2 x 0.41, cylinder D = 0.1 at (0.2, 0.2)) extruded 0.41
-along z, the cylinder spanning the channel; the same twelve blocks (meshgen.blocks), each the 2D
+along z, the cylinder spanning the channel; the same twelve blocks (meshgen.geometry.blocks), each the 2D
 block times [0, 0.41]; the front and back (z = 0 and z = 0.41) are walls.
 """
 
 import numpy as np
 
-from meshgen.geometry import plugin_module
-from meshgen.tfi import transfinite
+from meshgen.geometry.plugins import plugin_module
+from meshgen.methods.tfi import transfinite
 
 _section, _ = plugin_module("dfg-cylinder")
 

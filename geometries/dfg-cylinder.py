@@ -1,5 +1,5 @@
 """The channel with a cylinder of the DFG benchmark (Schaefer and Turek, 1996), 2D, in twelve blocks
-(meshgen.blocks): an O-grid of four blocks around the cylinder inside the square box
+(meshgen.geometry.blocks): an O-grid of four blocks around the cylinder inside the square box
 |x - 0.2|, |y - 0.2| <= BOX, and eight rectangles filling the channel around the box.
 
 Channel [0, 2.2] x [0, 0.41], cylinder of diameter 0.1 centred at (0.2, 0.2). The O-grid's blocks

@@ -17,7 +17,7 @@ volume, unchanged: pi R^2 (1 + a^2 / 2) * L.
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.tfi import transfinite
+from meshgen.methods.tfi import transfinite
 
 name = "flower"
 dim = 3

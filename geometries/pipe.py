@@ -1,4 +1,4 @@
-"""Straight round pipe of radius R and length L as an O-grid (meshgen.blocks): a square core block
+"""Straight round pipe of radius R and length L as an O-grid (meshgen.geometry.blocks): a square core block
 and four blocks between the core and the wall, one per quarter of the circumference.
 
 Cross-section: the core is the square |x|, |y| <= c with c = CORE * R; block ``east`` fills the
@@ -10,7 +10,7 @@ outwards, eta counterclockwise), ``north``, ``west`` and ``south`` are the same 
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.tfi import transfinite
+from meshgen.methods.tfi import transfinite
 
 name = "pipe"
 dim = 3

@@ -8,8 +8,8 @@ Cross-section: the half-disk x^2 + y^2 <= R^2, y >= 0, parametrised by (xi, eta)
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.geometry import load_geometry
-from meshgen.tfi import transfinite
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import transfinite
 
 name = "semicylinder"
 dim = 3

@@ -1,7 +1,7 @@
 """The functions of meshgen's top level that are not a module's own: ``tfi`` and ``elliptic`` (a
 mesh by one method), ``read`` and ``write`` (a Mesh from and to a file) and ``evaluate`` (the
 quality report of a mesh, a node array or a file). Every function that makes or reads a mesh
-returns a ``meshgen.meshing.Mesh``; ``write`` and ``evaluate`` return the quality report (the
+returns a ``meshgen.run.meshing.Mesh``; ``write`` and ``evaluate`` return the quality report (the
 schema of ``meshgen evaluate --json``)."""
 
 from __future__ import annotations
@@ -13,10 +13,10 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 from meshgen.formats import read_mesh, write_mesh
-from meshgen.geometry import load_geometry
-from meshgen.meshing import Mesh
+from meshgen.geometry.plugins import load_geometry
 from meshgen.quality import as_node_array, cells_for_quality, evaluate_file, quality_report, recorded_metadata
-from meshgen.request import mesh
+from meshgen.run.meshing import Mesh
+from meshgen.run.request import mesh
 
 __all__ = ["elliptic", "evaluate", "read", "tfi", "write"]
 

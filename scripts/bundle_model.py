@@ -52,12 +52,12 @@ def figures(X, geometry) -> dict:
 def neural_figures(model, geometry, cells: int) -> dict:
     """Figures of the network's own mesh (--no-correct), of the corrected one (what ``meshgen mesh``
     gives by default for a network trained with the exact boundary on the smoothed layout's lattice,
-    ``meshgen.polish.polishes_by_default``) and of the corrected and polished one (--polish)."""
-    from meshgen.correction import correct_boundary
-    from meshgen.layout import trained_layout, with_layout
+    ``meshgen.methods.polish.polishes_by_default``) and of the corrected and polished one (--polish)."""
+    from meshgen.geometry.layout import trained_layout, with_layout
+    from meshgen.methods.correction import correct_boundary
+    from meshgen.methods.polish import polish
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.network_map import mesh_from_model
-    from meshgen.polish import polish
-    from meshgen.tfi import parametric_grid
 
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it learnt, as meshgen mesh does
     coords = parametric_grid([cells] * geometry.dim)
@@ -103,7 +103,7 @@ def main():
     import torch
 
     from meshgen import __version__
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
     from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
     from meshgen.neural.models import MODELS_DIR, load_model
 
@@ -165,8 +165,8 @@ def main():
 
 def quality(model, geometry) -> dict:
     """Step 3: the model's meshes at 30^d and 100^d next to TFI's and elliptic's at 30^d."""
-    from meshgen.methods import make_mesh
-    from meshgen.tfi import parametric_grid
+    from meshgen.methods.registry import make_mesh
+    from meshgen.methods.tfi import parametric_grid
 
     coords = parametric_grid([30] * geometry.dim)
     classical = {method: figures(make_mesh(method, geometry, coords)[0], geometry) for method in ("tfi", "elliptic")}
@@ -180,7 +180,7 @@ def quality(model, geometry) -> dict:
 
 
 def measure_only(name: str) -> None:
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
     from meshgen.neural.models import MODELS_DIR, load_model
 
     folder = MODELS_DIR / name

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 
 REPO = Path(__file__).resolve().parents[1]
 HANDLED_SIGNALS = [getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)]
@@ -97,7 +97,7 @@ def _work_in_tmp_path(tmp_path, monkeypatch):
 
 @pytest.fixture(autouse=True, scope="session")
 def _layout_cache_in_tmp(tmp_path_factory):
-    """The boundary-layout cache (``meshgen.layout.cache_path``) of the whole session, commands run
+    """The boundary-layout cache (``meshgen.geometry.layout.cache_path``) of the whole session, commands run
     by ``run_cli`` included, in a temporary folder rather than the user's ~/.cache; the parallel
     workers of one run (``-n 2``) share it, so each layout is solved once."""
     previous = os.environ.get("MESHGEN_CACHE_DIR")

@@ -104,7 +104,7 @@ def stall_openfoam_poly_mesh(marker: str, call: int) -> None:
 
 
 def stall_publish_rename(marker: str, call: int) -> None:
-    """Stop after the N-th rename of a publication (meshgen.publish), its lock held: the mesh has
+    """Stop after the N-th rename of a publication (meshgen.run.publish), its lock held: the mesh has
     its name, the sidecar not yet."""
     from meshgen import publish
 
@@ -130,7 +130,7 @@ def same_second(marker: str, call: int) -> None:
 
 
 def stall_make_mesh(marker: str, call: int) -> None:
-    import meshgen.request as request
+    import meshgen.run.request as request
 
     real_make_mesh = request.make_mesh
     calls = [0]

@@ -43,18 +43,18 @@ class Recorder:
 
 
 def direct_correction(error_at, coords):
-    """The boundary correction of ``meshgen.correction`` by its direct form, a second
+    """The boundary correction of ``meshgen.methods.correction`` by its direct form, a second
     algorithm: the multilinear interpolant of the errors at the cube's corners, written out as a
     sum over the corners of products of t and 1 - t, plus the 26-term (2D: 8-term) Gordon-Hall sum
-    (``meshgen.tfi.transfinite``) of the rest of the error with the blending (1 - t)^p, t^p.
+    (``meshgen.methods.tfi.transfinite``) of the rest of the error with the blending (1 - t)^p, t^p.
     ``error_at``: (K, d) boundary parametric points -> (K, d) errors; ``coords``: 1D node
     coordinates per axis. Returns the correction on their tensor grid, (n1, .., d)."""
     import itertools
 
     import numpy as np
 
-    from meshgen.correction import CORRECTION_POWER
-    from meshgen.tfi import transfinite
+    from meshgen.methods.correction import CORRECTION_POWER
+    from meshgen.methods.tfi import transfinite
 
     dim = len(coords)
     corners = [np.array(c, dtype=float) for c in itertools.product((0, 1), repeat=dim)]

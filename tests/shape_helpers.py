@@ -180,7 +180,7 @@ def write_twisted_loft(path, solids: int = 1):
         occ.addBox(5, 0, 0, 1, 1, 1)
     occ.synchronize()
     volume = occ.getMass(3, loft[0][1])
-    from meshgen.shapes.cad import quiet_stdout
+    from meshgen.geometry.shapes.cad import quiet_stdout
 
     with quiet_stdout():  # OCC's writers print statistics to the process's stdout
         gmsh.write(str(path))

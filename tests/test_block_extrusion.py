@@ -1,4 +1,4 @@
-"""Extruded block sets (``meshgen.block_extrusion``): which sets are extrusions (closed forms: the
+"""Extruded block sets (``meshgen.geometry.extrusion``): which sets are extrusions (closed forms: the
 pipe's sweep is (0, 0, L)), the section and the extrusion checked against independent 3D
 computations (the 3D TFI, the 3D multi-block elliptic solver), and the section model of a pipe
 trained, meshed and refused where it does not fit."""
@@ -10,10 +10,10 @@ import pytest
 from neural_helpers import tiny_config
 
 import meshgen
-from meshgen.block_extrusion import extrude, extrusion_of, section_of
-from meshgen.blocks import face_index, load_block_set, tfi_blocks
-from meshgen.elliptic_blocks import elliptic_blocks
 from meshgen.errors import MeshgenError
+from meshgen.geometry.blocks import face_index, load_block_set, tfi_blocks
+from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
+from meshgen.methods.elliptic_blocks import elliptic_blocks
 from meshgen.neural.block_inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.block_train import train_blocks
 from meshgen.neural.checkpoint import load_checkpoint
@@ -26,7 +26,7 @@ def _variant(tmp_path, name: str, body: str) -> str:
     images of ``points``, returned changed)."""
     source = f'''
         import numpy as np
-        from meshgen.geometry import plugin_module
+        from meshgen.geometry.plugins import plugin_module
 
         _pipe, _ = plugin_module("pipe")
         name = "{name}"

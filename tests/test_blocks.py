@@ -1,14 +1,14 @@
-"""Block sets (meshgen.blocks) and their TFI and elliptic meshes: the pipe O-grid and the DFG
+"""Block sets (meshgen.geometry.blocks) and their TFI and elliptic meshes: the pipe O-grid and the DFG
 channel with a cylinder; bad block sets rejected with one line."""
 
 import numpy as np
 import pytest
 from blocks_helpers import cell_measures, size_ratios
 
-from meshgen.blocks import global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
-from meshgen.elliptic_blocks import elliptic_blocks
 from meshgen.errors import GeometryError
-from meshgen.geometry import load_geometry
+from meshgen.geometry.blocks import global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.elliptic_blocks import elliptic_blocks
 from meshgen.quality import quality_report
 
 

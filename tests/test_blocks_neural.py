@@ -9,13 +9,13 @@ from mesh_checks import corner_jacobians
 from neural_helpers import TINY, tiny_config
 
 import meshgen
-from meshgen.block_extrusion import extrusion_of, section_of
-from meshgen.blocks import face_index, load_block_set
 from meshgen.errors import MeshgenError
 from meshgen.formats.multiblock import read_zones
+from meshgen.geometry.blocks import face_index, load_block_set
+from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.block_train import train_blocks
 from meshgen.neural.checkpoint import load_checkpoint
-from meshgen.request import MeshRequest, carry_out
+from meshgen.run.request import MeshRequest, carry_out
 
 RADIUS, LENGTH = 0.5, 4.0  # the pipe's defaults
 
@@ -69,7 +69,7 @@ def test_interface_stencil_is_the_winslow_residual_of_one_smooth_map():
     on the glued stencil equals the single map's Winslow residual on an ordinary stencil."""
     import torch
 
-    from meshgen import cube
+    from meshgen.geometry import cube
     from meshgen.neural.block_problem import INTERFACE_STEP, BlockProblem, interface_stencil
     from meshgen.neural.derivatives import stencil_derivatives
     from meshgen.neural.winslow import winslow_residual
@@ -220,6 +220,7 @@ def test_the_pull_towards_the_tfi_adds_its_weighted_distance_to_l1():
     blocks of the mean squared distance of each network from the pool's targets (NumPy here)."""
     import torch
 
+    from meshgen.methods.tfi import transfinite
     from meshgen.neural.block_problem import (
         TFI_ANCHOR,
         BlockNetworks,
@@ -229,7 +230,6 @@ def test_the_pull_towards_the_tfi_adds_its_weighted_distance_to_l1():
         fixed_block_points,
         tfi_anchor_pool,
     )
-    from meshgen.tfi import transfinite
 
     config = tiny_config(*TINY_BLOCKS)
     problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))

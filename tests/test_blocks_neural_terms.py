@@ -8,8 +8,8 @@ import pytest
 import torch
 from neural_helpers import tiny_config
 
-from meshgen import cube
-from meshgen.blocks import load_block_set
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import load_block_set
 from meshgen.neural.block_problem import (
     INTERFACE_STEP,
     JUNCTION_STEP,
@@ -183,8 +183,8 @@ def test_tfi_anchor_is_validated_and_refused_for_one_block(run_cli, tmp_path):
 def test_tfi_anchor_weighs_the_pull_towards_the_tfi_in_l1(weight):
     """L1 = the residual part + tfi_anchor times the mean over blocks of the mean squared distance
     from the TFI at the pool's points (computed here with NumPy's TFI); 0 leaves the residual alone."""
+    from meshgen.methods.tfi import transfinite
     from meshgen.neural.block_problem import BlockNetworks, block_pde_term, block_samples, tfi_anchor_pool
-    from meshgen.tfi import transfinite
 
     config = tiny_config(*TINY_BLOCKS, f"method.tfi_anchor={weight}")
     problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
-from meshgen.blocks import load_block_set, tfi_blocks
 from meshgen.formats import write_mesh
 from meshgen.formats._cgns import read_zones
 from meshgen.formats.multiblock import write_blocks
-from meshgen.geometry import load_geometry
-from meshgen.patches import geometry_patches
-from meshgen.tfi import tfi
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
+from meshgen.geometry.patches import geometry_patches
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 
 PIPE_DIMS = (6, 3, 4)
 
@@ -207,7 +207,7 @@ def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
     """The pipe's mesh is an extrusion of its section (the elliptic one too: its inlet and outlet
     nodes slide in their planes; the neural one by construction: the benchmark model's section,
     extruded): the finite-volume potential flow from a uniform inlet is uniform to solver accuracy."""
-    from meshgen.elliptic_blocks import elliptic_blocks
+    from meshgen.methods.elliptic_blocks import elliptic_blocks
     from meshgen.neural.block_inference import neural_blocks
     from meshgen.neural.checkpoint import load_checkpoint
 

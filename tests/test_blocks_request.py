@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import meshgen
-from meshgen.blocks import load_block_set, merged_mesh, tfi_blocks
 from meshgen.errors import ParameterError
 from meshgen.formats.multiblock import read_zones
-from meshgen.request import MeshRequest, carry_out
+from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks
+from meshgen.run.request import MeshRequest, carry_out
 
 N, M, A = 4, 2, 3  # pipe --dims: cells around a quarter, across the wall layer, along the axis
 

@@ -15,7 +15,7 @@ from openfoam_helpers import check_mesh, needs_openfoam
 
 import meshgen
 from meshgen.formats import write_mesh
-from meshgen.patches import geometry_patches
+from meshgen.geometry.patches import geometry_patches
 from meshgen.quality.faces_openfoam import non_orthogonality
 
 CASES = [

@@ -12,14 +12,14 @@ import pytest
 from click.testing import CliRunner
 from neural_helpers import direct_correction
 
-from meshgen.chunked import neural_array, tfi_array, write_chunked_mesh
 from meshgen.cli import cli
-from meshgen.clustering import node_coordinates
 from meshgen.formats._cgns import read_node_block, zone_header
+from meshgen.methods.clustering import node_coordinates
+from meshgen.methods.tfi import tfi
 from meshgen.quality import METRICS, quality_report
 from meshgen.quality import sketch as sketches
 from meshgen.quality.chunked import chunked_report
-from meshgen.tfi import tfi
+from meshgen.run.chunked import neural_array, tfi_array, write_chunked_mesh
 
 pytest.importorskip("dask")
 
@@ -163,8 +163,8 @@ def soft_model(rng):
 
 
 def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_the_error(semicylinder):
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.network_map import mesh_from_model
-    from meshgen.tfi import parametric_grid
 
     model = soft_model(np.random.default_rng(1))
     dims = (6, 5, 7)
@@ -192,9 +192,9 @@ def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_th
 
 
 def test_bundled_neural_model_in_blocks_equals_the_in_memory_map(semicylinder):
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.models import find_model
     from meshgen.neural.network_map import mesh_from_model
-    from meshgen.tfi import parametric_grid
 
     model = find_model(geometry_name="semicylinder").checkpoint["model"]
     coords = parametric_grid((8, 6, 10))

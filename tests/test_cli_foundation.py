@@ -246,7 +246,7 @@ def test_version(run_cli):
 def test_geometries_json_matches_the_plugins():
     import importlib.util
 
-    from meshgen.geometry import _builtin_files, available_names
+    from meshgen.geometry.plugins import _builtin_files, available_names
 
     result = CliRunner().invoke(cli, ["geometries", "--json"])
     assert result.exit_code == 0, result.output
@@ -257,7 +257,7 @@ def test_geometries_json_matches_the_plugins():
             ["blocks", "dims"] if "blocks" in item else ["dims"]
         )
     by_name = {item["name"]: item for item in listed}
-    for stem, path in _builtin_files().items():  # read the plugin files directly, not through meshgen.geometry
+    for stem, path in _builtin_files().items():  # read the plugin files directly, not through meshgen.geometry.plugins
         spec = importlib.util.spec_from_file_location(f"_listing_check_{stem}", path)
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
@@ -269,7 +269,7 @@ def test_geometries_json_matches_the_plugins():
 
 
 def test_geometries_table_lists_every_geometry():
-    from meshgen.geometry import available_names
+    from meshgen.geometry.plugins import available_names
 
     result = CliRunner().invoke(cli, ["geometries"], env={"COLUMNS": "200"})
     assert result.exit_code == 0, result.output

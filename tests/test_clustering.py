@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
 from meshgen.errors import MeshgenError
-from meshgen.geometry import load_geometry
-from meshgen.tfi import tfi
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.clustering import clustered_coordinates, node_coordinates, parse_cluster
+from meshgen.methods.tfi import tfi
 
 
 @pytest.mark.parametrize("side", ["min", "max", "both"])

@@ -14,9 +14,9 @@ import sys
 import numpy as np
 import pytest
 
-from meshgen import comparison as comparing
-from meshgen import plots
-from meshgen.tables import number
+from meshgen.cli import comparison as comparing
+from meshgen.cli import plots
+from meshgen.cli.tables import number
 
 HAVE_MATPLOTLIB = importlib.util.find_spec("matplotlib") is not None
 
@@ -195,14 +195,14 @@ def test_without_matplotlib_the_tables_are_written_and_the_command_says_how_to_g
 def test_a_failing_method_gets_a_failed_row_and_exit_1_while_the_others_are_compared(tmp_path, monkeypatch):
     from click.testing import CliRunner
 
-    import meshgen.methods
+    import meshgen.methods.registry
     from meshgen.cli import cli
     from meshgen.errors import MeshgenError
 
     def broken(geometry, coords):
         raise MeshgenError("tfi broke")
 
-    monkeypatch.setattr(meshgen.methods, "build_tfi", broken)
+    monkeypatch.setattr(meshgen.methods.registry, "build_tfi", broken)
     monkeypatch.chdir(tmp_path)
     result = CliRunner().invoke(cli, ["compare", "-g", "bump", "--dims", "6", "3", "--out", "out"])
     assert result.exit_code == 1
@@ -275,9 +275,9 @@ def test_best_rows_rules():
 
 
 def test_headline_and_cells_of_a_report():
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
+    from meshgen.methods.tfi import tfi
     from meshgen.quality import quality_report
-    from meshgen.tfi import tfi
 
     geometry = load_geometry("semidisk")
     report = quality_report(tfi(geometry, (6, 4)), geometry)
@@ -291,9 +291,9 @@ def test_headline_and_cells_of_a_report():
 
 
 def test_mid_section_values_are_the_whole_mesh_metrics_of_the_cells_on_the_plane():
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
+    from meshgen.methods.tfi import tfi
     from meshgen.quality import cell_metrics
-    from meshgen.tfi import tfi
 
     X = tfi(load_geometry("semicylinder"), (7, 5, 4))
     whole = {name: values.reshape(7, 5, 4) for name, values in cell_metrics(X).items()}
@@ -316,7 +316,7 @@ def test_mid_section_values_are_the_whole_mesh_metrics_of_the_cells_on_the_plane
 
 @pytest.mark.skipif(not HAVE_MATPLOTLIB, reason="matplotlib (meshgen[plot]) not installed")
 def test_3d_sections_and_loss_curves_figures(tmp_path):
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
 
     geometry = load_geometry("semicylinder")
     outcome = comparing.compare_methods(geometry, (5, 4, 3), ["tfi"])
@@ -343,16 +343,16 @@ def plots_picture(label, **fields):
 
 
 def test_timing_repeats_mesh_n_times_and_report_the_median(monkeypatch, semidisk):
-    import meshgen.methods
-    from meshgen.request import MeshRequest, carry_out
+    import meshgen.methods.registry
+    from meshgen.run.request import MeshRequest, carry_out
 
-    calls, build = [], meshgen.methods.build_tfi
+    calls, build = [], meshgen.methods.registry.build_tfi
 
     def counted(*args, **kwargs):
         calls.append(1)
         return build(*args, **kwargs)
 
-    monkeypatch.setattr(meshgen.methods, "build_tfi", counted)
+    monkeypatch.setattr(meshgen.methods.registry, "build_tfi", counted)
     made = carry_out(MeshRequest((4, 3), semidisk, method="tfi", timing_repeats=4))
     assert len(calls) == 4 and len(made.timings) == 4
     assert made.seconds == statistics.median(made.timings) and all(math.isfinite(t) for t in made.timings)

@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from meshgen import cube
+from meshgen.geometry import cube
 
 
 @pytest.mark.parametrize("dim", [2, 3])

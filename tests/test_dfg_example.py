@@ -7,7 +7,7 @@ import sys
 from conftest import REPO
 from openfoam_helpers import needs_openfoam
 
-from meshgen.blocks import load_block_set
+from meshgen.geometry.blocks import load_block_set
 
 
 @needs_openfoam

@@ -1,6 +1,6 @@
 """Elliptic (Winslow) meshes: the discrete equations, the multigrid solver and the CLI.
 
-The reference implementation below is written independently of meshgen.winslow: node-array
+The reference implementation below is written independently of meshgen.methods.winslow: node-array
 layout, the cofactors as det(g) g^-1 (so it also checks design notes §5's formulas with their
 squares), every derivative spelled out on a uniform grid, and a plain point-Jacobi iteration.
 """
@@ -13,8 +13,11 @@ import numpy as np
 import pytest
 from mesh_checks import corner_jacobians
 
-from meshgen.clustering import node_coordinates
-from meshgen.elliptic import (
+from meshgen.errors import MeshgenError
+from meshgen.formats import metadata_of, read_mesh
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.clustering import node_coordinates
+from meshgen.methods.elliptic import (
     ConvergenceWarning,
     along_axes,
     build_elliptic,
@@ -23,11 +26,8 @@ from meshgen.elliptic import (
     interpolation_matrix,
     solve_lines,
 )
-from meshgen.errors import MeshgenError
-from meshgen.formats import metadata_of, read_mesh
-from meshgen.geometry import load_geometry
-from meshgen.tfi import parametric_grid, tfi
-from meshgen.winslow import winslow_residual
+from meshgen.methods.tfi import parametric_grid, tfi
+from meshgen.methods.winslow import winslow_residual
 
 # ---------------------------------------------------------------------------------------------
 # independent reference: the discrete Winslow equations on a uniform grid, and point Jacobi

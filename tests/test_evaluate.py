@@ -8,10 +8,10 @@ import pytest
 
 meshio = pytest.importorskip("meshio")
 
-from meshgen.geometry import load_geometry  # noqa: E402
-from meshgen.grid import cell_connectivity, flat_points  # noqa: E402
+from meshgen.geometry.grid import cell_connectivity, flat_points  # noqa: E402
+from meshgen.geometry.plugins import load_geometry  # noqa: E402
+from meshgen.methods.tfi import tfi  # noqa: E402
 from meshgen.quality import METRICS, STATS, cell_metrics  # noqa: E402
-from meshgen.tfi import tfi  # noqa: E402
 
 
 def sheared_box(dims, shear):
@@ -206,7 +206,7 @@ def test_some_non_finite_nodes_are_reported_not_fatal(run_cli, tmp_path):
 
 
 def test_help_names_every_gate_quantity(run_cli):
-    from meshgen.gates import gate_names
+    from meshgen.quality.gates import gate_names
 
     result = run_cli("evaluate", "--help")
     assert result.returncode == 0

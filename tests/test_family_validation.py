@@ -13,11 +13,12 @@ import torch
 
 import meshgen.neural.family as family_module
 import meshgen.neural.family_train as family_train
-from meshgen.cube import faces
-from meshgen.elliptic import elliptic
-from meshgen.fidelity import missing_openfoam, potential_flow_error
-from meshgen.geometry import load_geometry
-from meshgen.layout_family import solve_family_layout
+from meshgen.geometry.cube import faces
+from meshgen.geometry.layout_family import solve_family_layout
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.elliptic import elliptic
+from meshgen.methods.polish import polish
+from meshgen.methods.tfi import parametric_grid
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import resolve_config
 from meshgen.neural.family import (
@@ -29,8 +30,7 @@ from meshgen.neural.family import (
 )
 from meshgen.neural.family_train import END_SHARE, FamilyProblem, family_sample, sample_members, summary_table, train_family
 from meshgen.neural.models import build_neural
-from meshgen.polish import polish
-from meshgen.tfi import parametric_grid
+from meshgen.quality.fidelity import missing_openfoam, potential_flow_error
 
 TINY = ["model.widths=[6]", "adam.steps=0", "lbfgs.steps=0", "points.interior=27"]
 

@@ -22,7 +22,7 @@ from neural_helpers import TINY
 
 from meshgen.cli import cli
 from meshgen.formats import metadata_of, read_mesh
-from meshgen.publish import output_lock
+from meshgen.run.publish import output_lock
 
 REPO = Path(__file__).resolve().parents[1]
 HELPERS = Path(__file__).resolve().parent / "hardening_helpers.py"

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import meshgen
-from meshgen.fidelity import exact_velocity, missing_openfoam, potential_flow_error
-from meshgen.geometry import load_geometry
-from meshgen.polish import NOT_POLISHED_REASON
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.polish import NOT_POLISHED_REASON
+from meshgen.quality.fidelity import exact_velocity, missing_openfoam, potential_flow_error
 
 needs_potential_foam = pytest.mark.skipif(missing_openfoam() is not None, reason=missing_openfoam() or "")
 DIMS = (8, 8, 16)
@@ -54,7 +54,7 @@ def test_elliptic_and_neural_meshes_polished_or_raw_reproduce_uniform_flow(tmp_p
 
 @needs_potential_foam
 def test_velocity_from_the_fluxes_is_openfoams_reconstruction_and_measures_the_canal(tmp_path):
-    from meshgen.fidelity import _read_vectors, reconstructed_velocity
+    from meshgen.quality.fidelity import _read_vectors, reconstructed_velocity
 
     semicylinder = meshgen.mesh("semicylinder", (5, 4, 6), method="tfi")
     semicylinder.X[2, 2, 3] += [0.02, -0.01, 0.03]  # an interior node moved: the flow is no longer uniform

@@ -12,8 +12,8 @@ from vtk.util.numpy_support import vtk_to_numpy
 
 from meshgen.errors import FormatError
 from meshgen.formats import extensions, metadata_of, read_mesh, write_mesh
-from meshgen.geometry import load_geometry
-from meshgen.tfi import tfi
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 
 ALL_EXTENSIONS = [".vtu", ".vtk", ".xdmf", ".cgns", ".xyz", ".fmt"]
 WITH_CELL_DATA = [".vtu", ".vtk", ".xdmf", ".cgns"]

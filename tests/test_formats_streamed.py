@@ -1,5 +1,5 @@
 """Meshes larger than memory in every solver format: the slab-by-slab writers
-(``meshgen.formats.streamed``) and the chunked path through them (``meshgen.chunked``).
+(``meshgen.formats.streamed``) and the chunked path through them (``meshgen.run.chunked``).
 
 Each streamed file is compared with what the in-memory writer makes of the same node array:
 byte for byte (a 2D OpenFOAM case: its extrusion's thickness is a sum in another order, so its
@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam
 
-from meshgen.chunked import tfi_array, write_chunked_mesh
-from meshgen.clustering import node_coordinates
 from meshgen.errors import FormatError
 from meshgen.formats import check_patches, write_mesh
 from meshgen.formats._openfoam import read_list
 from meshgen.formats._vts_streamed import byte_blocks
 from meshgen.formats.streamed import NodeFile, cells_of_slab, write_streamed
-from meshgen.grid import cell_connectivity
-from meshgen.patches import Patch, geometry_patches
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import Patch, geometry_patches
+from meshgen.methods.clustering import node_coordinates
+from meshgen.run.chunked import tfi_array, write_chunked_mesh
 
 pytest.importorskip("dask")
 

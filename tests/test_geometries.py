@@ -15,8 +15,8 @@ from mesh_checks import corner_jacobians
 
 from meshgen.cli import cli
 from meshgen.errors import GeometryError
-from meshgen.geometry import ENTRY_POINT_GROUP, _builtin_files, available_names, load_geometry
-from meshgen.tfi import parametric_grid, tfi
+from meshgen.geometry.plugins import ENTRY_POINT_GROUP, _builtin_files, available_names, load_geometry
+from meshgen.methods.tfi import parametric_grid, tfi
 
 BLOCK_SETS = ["dfg-cylinder", "dfg-cylinder-3d", "pipe"]  # multi-block plugins: tests/test_blocks.py
 NAMES = [name for name in available_names() if name not in BLOCK_SETS]

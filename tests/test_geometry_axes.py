@@ -14,9 +14,9 @@ from click.testing import CliRunner
 
 from meshgen.cli import cli
 from meshgen.errors import GeometryError
-from meshgen.geometry import load_geometry
-from meshgen.patches import Patch, flow_role
-from meshgen.tfi import tfi
+from meshgen.geometry.patches import Patch, flow_role
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 
 SINGLE_BLOCK = ["bump", "canal", "flower", "semicylinder", "semidisk", "topcurve"]
 AXES = ("xi", "eta", "zeta")

@@ -181,14 +181,14 @@ from neural_helpers import TINY, tiny_config
 
 from meshgen.cli import cli
 from meshgen.formats import write_mesh
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 from meshgen.neural.train import train
-from meshgen.tfi import tfi
 
 REPO = Path(__file__).resolve().parents[1]
 HELPERS = Path(__file__).resolve().parent / "hardening_helpers.py"
 TINY_ARGS = [arg for item in TINY for arg in ("--set", item)]
-TEMPORARY = re.compile(r"^\..*\.tmp-\d+")  # meshgen.atomic's temporary names
+TEMPORARY = re.compile(r"^\..*\.tmp-\d+")  # meshgen.run.atomic's temporary names
 
 
 # ---------------------------------------------------------------------------------------------

@@ -53,44 +53,47 @@ LAZY_LIBRARIES = (
 LAYERS = [
     [
         "meshgen",
+        "meshgen.geometry",  # the subpackages' __init__ modules import nothing (lazy string maps)
+        "meshgen.methods",
+        "meshgen.run",
         "meshgen.errors",
-        "meshgen.signals",
-        "meshgen.publish",
-        "meshgen.atomic",
-        "meshgen.cube",
-        "meshgen.grid",
-        "meshgen.mlp_numpy",
-        "meshgen.resources",
-        "meshgen.scheduler",
-        "meshgen.limits",
-        "meshgen.inputs",
+        "meshgen.run.signals",
+        "meshgen.run.publish",
+        "meshgen.run.atomic",
+        "meshgen.geometry.cube",
+        "meshgen.geometry.grid",
+        "meshgen.neural.mlp_numpy",
+        "meshgen.run.resources",
+        "meshgen.run.scheduler",
+        "meshgen.run.limits",
+        "meshgen.run.inputs",
     ],
     [
-        "meshgen.clustering",
-        "meshgen.tfi",
-        "meshgen.winslow",
-        "meshgen.winslow_compiled",
-        "meshgen.anderson",
-        "meshgen.layout_start",
-        "meshgen.orthogonal",
-        "meshgen.patches",
-        "meshgen.surface",
-        "meshgen.domain",
-        "meshgen.blocks",
-        "meshgen.shapes",
-        "meshgen.trust",
-        "meshgen.plugin_calls",
-        "meshgen.geometry",
+        "meshgen.methods.clustering",
+        "meshgen.methods.tfi",
+        "meshgen.methods.winslow",
+        "meshgen.methods.winslow_compiled",
+        "meshgen.methods.anderson",
+        "meshgen.geometry.layout_start",
+        "meshgen.methods.orthogonal",
+        "meshgen.geometry.patches",
+        "meshgen.geometry.surface",
+        "meshgen.geometry.domain",
+        "meshgen.geometry.blocks",
+        "meshgen.geometry.shapes",
+        "meshgen.run.trust",
+        "meshgen.geometry.plugin_calls",
+        "meshgen.geometry.plugins",
     ],
     [
-        "meshgen.layout",
-        "meshgen.layout_family",
-        "meshgen.elliptic",
-        "meshgen.polish",
-        "meshgen.elliptic_blocks",
-        "meshgen.block_extrusion",
-        "meshgen.block_grading",
-        "meshgen.deviation",
+        "meshgen.geometry.layout",
+        "meshgen.geometry.layout_family",
+        "meshgen.methods.elliptic",
+        "meshgen.methods.polish",
+        "meshgen.methods.elliptic_blocks",
+        "meshgen.geometry.extrusion",
+        "meshgen.geometry.grading",
+        "meshgen.quality.deviation",
     ],
     [
         "meshgen.quality.kernels",
@@ -112,21 +115,21 @@ LAYERS = [
         "meshgen.quality.summary",
     ],
     ["meshgen.formats"],
-    ["meshgen.quality", "meshgen.correction"],
+    ["meshgen.quality", "meshgen.methods.correction"],
     ["meshgen.neural"],
     [
-        "meshgen.chunked",
-        "meshgen.methods",
-        "meshgen.meshing",
-        "meshgen.meshing_blocks",
-        "meshgen.fidelity",
-        "meshgen.gates",
-        "meshgen.tables",
-        "meshgen.plots",
+        "meshgen.run.chunked",
+        "meshgen.methods.registry",
+        "meshgen.run.meshing",
+        "meshgen.run.meshing_blocks",
+        "meshgen.quality.fidelity",
+        "meshgen.quality.gates",
+        "meshgen.cli.tables",
+        "meshgen.cli.plots",
     ],
-    ["meshgen.request"],
-    ["meshgen.api", "meshgen.comparison"],
-    ["meshgen.commands", "meshgen.cli", "meshgen.__main__"],
+    ["meshgen.run.request"],
+    ["meshgen.api", "meshgen.cli.comparison"],
+    ["meshgen.cli", "meshgen.__main__"],
 ]
 
 # Modules of the request path (meshing, methods, compare, commands) and of the training loop
@@ -240,7 +243,7 @@ def test_the_cycle_finder_finds_a_cycle_and_accepts_a_tree():
 
 def test_package_edges():
     # Outside the package, importing a submodule also runs the package's __init__; inside, not.
-    assert edges("meshgen.chunked", "meshgen.quality.structured") == {"meshgen.quality.structured", "meshgen.quality"}
+    assert edges("meshgen.run.chunked", "meshgen.quality.structured") == {"meshgen.quality.structured", "meshgen.quality"}
     assert edges("meshgen.quality.files", "meshgen.quality.structured") == {"meshgen.quality.structured"}
     assert edges("meshgen.quality", "meshgen.quality.files") == {"meshgen.quality.files"}
     assert imported_module("meshgen.quality", "sketch") == "meshgen.quality.sketch"
@@ -339,7 +342,9 @@ def test_imports_run_down_the_layers():
     assert not upwards, "imports up the layers: " + "; ".join(upwards)
 
 
-@pytest.mark.parametrize("name", ["meshgen.elliptic", "meshgen.layout", "meshgen.quality.files", "meshgen.chunked"])
+@pytest.mark.parametrize(
+    "name", ["meshgen.methods.elliptic", "meshgen.geometry.layout", "meshgen.quality.files", "meshgen.run.chunked"]
+)
 def test_the_cycles_this_test_guards_against_are_gone(name):
     """The two cycles that once hid behind function-level imports: elliptic <-> layout, and
     quality.files -> chunked -> neural inference -> quality."""

@@ -1,4 +1,4 @@
-"""The smoothed boundary layout (meshgen.layout): faces' surface grids by the 2D Winslow equations."""
+"""The smoothed boundary layout (meshgen.geometry.layout): faces' surface grids by the 2D Winslow equations."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from meshgen.cube import face_named
-from meshgen.elliptic import elliptic
 from meshgen.errors import GeometryError
-from meshgen.geometry import check_boundary, load_geometry
-from meshgen.layout import RESOLUTION, coons_start, interpolate_1d, interpolate_2d, layout_of, smoothed, with_layout
+from meshgen.geometry.cube import face_named
+from meshgen.geometry.layout import RESOLUTION, coons_start, interpolate_1d, interpolate_2d, layout_of, smoothed, with_layout
+from meshgen.geometry.plugins import check_boundary, load_geometry
+from meshgen.methods.elliptic import elliptic
+from meshgen.methods.tfi import tfi
 from meshgen.quality import quality_report
-from meshgen.tfi import tfi
 
 
 def _face_grid(geometry, name, cells=RESOLUTION):
@@ -55,7 +55,7 @@ def test_curved_face_solves_the_tangential_winslow_equations(tmp_path):
     )
     geometry = load_geometry(str(path))
     X = _face_grid(geometry, "zeta1")
-    from meshgen.winslow import stencils, winslow_operator
+    from meshgen.methods.winslow import stencils, winslow_operator
 
     t = np.linspace(0.0, 1.0, RESOLUTION + 1)
     residual, _ = winslow_operator(np.ascontiguousarray(np.moveaxis(X, -1, 0)), stencils([t, t]))
@@ -277,7 +277,7 @@ def test_strongly_twisted_flower_layout_converges_on_the_surface_without_inverti
 def test_an_unconverged_layout_raises_one_line_naming_geometry_face_and_update():
     """Capping the Newton steps at one leaves the twisted flower's faces unsolved: compute_layout
     must raise (never return the unsolved layout), in one line that says what to do."""
-    from meshgen.layout import compute_layout
+    from meshgen.geometry.layout import compute_layout
 
     geometry = load_geometry("flower", {"twist": 180.0, "amplitude": 0.3})
     with pytest.raises(GeometryError) as caught:

@@ -1,4 +1,4 @@
-"""The smoothed layout of a family (``meshgen.layout_family``): solved on a grid over the parameter
+"""The smoothed layout of a family (``meshgen.geometry.layout_family``): solved on a grid over the parameter
 box and interpolated in between. Checked against layouts solved directly (``compute_layout``) at
 the grid's members and between them, against the flower's closed-form surface, and through a tiny
 family trained on it."""
@@ -6,12 +6,12 @@ family trained on it."""
 import numpy as np
 import pytest
 
-from meshgen.cube import face_samples
 from meshgen.errors import GeometryError
-from meshgen.geometry import load_geometry
-from meshgen.layout import Layout, compute_layout, layout_of, relax_faces, smoothed
-from meshgen.layout_family import FamilyLayout, interpolated_member, solve_family_layout
-from meshgen.tfi import parametric_grid
+from meshgen.geometry.cube import face_samples
+from meshgen.geometry.layout import Layout, compute_layout, layout_of, relax_faces, smoothed
+from meshgen.geometry.layout_family import FamilyLayout, interpolated_member, solve_family_layout
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import parametric_grid
 
 CELLS = 4  # the layouts' fine grid: coarse, so that each solve takes a fraction of a second
 RANGES = {"twist": (0.0, 40.0)}
@@ -46,7 +46,7 @@ def test_the_interpolated_layout_is_the_solved_one_at_the_grid_members_and_close
 
 def test_a_member_on_the_interpolated_layout_stays_on_the_flower_surface(flower, family_layout):
     member = interpolated_member(flower.with_params(twist=13.0), family_layout)
-    assert smoothed(member) is member  # already smoothed: meshgen.layout leaves it as it is
+    assert smoothed(member) is member  # already smoothed: meshgen.geometry.layout leaves it as it is
     points = face_samples(3, 9)
     on_side = np.isclose(points[:, 2], 0.0) | np.isclose(points[:, 2], 1.0)
     wall = member.boundary(points[~on_side])
@@ -59,7 +59,7 @@ def test_a_member_on_the_interpolated_layout_stays_on_the_flower_surface(flower,
 
 
 def test_relaxing_a_members_faces_starts_from_its_interpolated_layout(flower, family_layout, monkeypatch):
-    import meshgen.layout as layout_module
+    import meshgen.geometry.layout as layout_module
 
     member = interpolated_member(flower.with_params(twist=30.0), family_layout)
 
@@ -80,7 +80,7 @@ def test_the_record_round_trips_and_an_unsolvable_member_is_named(family_layout,
     }
     again = FamilyLayout.from_record(copied)
     assert np.array_equal(flat(again.at({"twist": 7.0})), flat(family_layout.at({"twist": 7.0})))
-    import meshgen.layout_family as layout_family
+    import meshgen.geometry.layout_family as layout_family
 
     solved = layout_of(flower.with_params(twist=0.0), CELLS)
     stuck = Layout(

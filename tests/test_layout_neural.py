@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from neural_helpers import tiny_config
 
-from meshgen.layout import smoothed, trained_layout
+from meshgen.geometry.layout import smoothed, trained_layout
+from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.neural.config import ConfigError
 from meshgen.neural.model import mesh_from_checkpoint
 from meshgen.neural.train import train
-from meshgen.tfi import parametric_grid, tfi
 
 
 @pytest.mark.parametrize("layout", ["smoothed", "fixed"])

@@ -17,12 +17,12 @@ import numpy as np
 from conftest import REPO
 from terminal_helpers import run_in_terminal
 
-from meshgen.chunked import run_fraction, tfi_array, write_chunked_mesh
-from meshgen.clustering import node_coordinates
 from meshgen.formats import write_mesh
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.clustering import node_coordinates
+from meshgen.methods.tfi import tfi
 from meshgen.quality import evaluate_file
-from meshgen.tfi import tfi
+from meshgen.run.chunked import run_fraction, tfi_array, write_chunked_mesh
 
 HELPERS = Path(__file__).resolve().parent / "hardening_helpers.py"
 

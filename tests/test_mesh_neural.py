@@ -12,9 +12,11 @@ import pytest
 import torch
 from neural_helpers import direct_correction, tiny_config
 
-from meshgen.clustering import clustered_coordinates, node_coordinates, parse_cluster
-from meshgen.correction import add_boundary_correction, boundary_errors, correct_boundary
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.clustering import clustered_coordinates, node_coordinates, parse_cluster
+from meshgen.methods.correction import add_boundary_correction, boundary_errors, correct_boundary
+from meshgen.methods.polish import NOT_POLISHED_REASON, polishes_by_default
+from meshgen.methods.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.checkpoint_data import read_plain_checkpoint
 from meshgen.neural.config import resolve_config, to_dict
@@ -23,9 +25,7 @@ from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.network_map import mesh_from_model
 from meshgen.neural.train import train
-from meshgen.polish import NOT_POLISHED_REASON, polishes_by_default
 from meshgen.quality import quality_report
-from meshgen.tfi import parametric_grid, tfi, transfinite, transfinite_on_grid
 
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
 
@@ -53,7 +53,7 @@ def network_at(checkpoint, coords, geometry):
     with torch.no_grad():
         N = network(torch.from_numpy(grid.reshape(-1, len(coords))).float()).double().numpy().reshape(grid.shape)
     if model["exact_boundary"]:
-        from meshgen.layout import trained_layout, with_layout
+        from meshgen.geometry.layout import trained_layout, with_layout
 
         geometry = with_layout(geometry, trained_layout(checkpoint))  # the boundary it was trained on
         return tfi(geometry, None, coords) + model["scale"] * bubble(grid)[..., None] * N
@@ -177,7 +177,7 @@ def test_mesh_from_a_checkpoint_is_the_network_at_the_same_points(run_cli, tmp_p
 def test_exact_boundary_map_on_a_clustered_grid(semicylinder):
     checkpoint = load_checkpoint(BUNDLED)
     coords = node_coordinates((5, 4, 12), ["zeta:both:1.3", "xi:0:h=0.05"])
-    from meshgen.layout import trained_layout, with_layout
+    from meshgen.geometry.layout import trained_layout, with_layout
 
     trained_on = with_layout(semicylinder, trained_layout(checkpoint))  # mesh_from_model takes the geometry as trained
     X = mesh_from_model(checkpoint["model"], coords, trained_on, chunk=64)
@@ -233,7 +233,7 @@ def test_correction_is_the_tfi_of_the_boundary_error_and_exact_on_the_boundary(r
     coords = parametric_grid(dims)
     grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1)
     on_boundary = boundary_mask(X.shape[:-1])
-    from meshgen.layout import smoothed
+    from meshgen.geometry.layout import smoothed
 
     # the default configuration trains on the smoothed boundary layout: the correction goes there
     exact = smoothed(semicylinder).boundary(grid[on_boundary])
@@ -285,7 +285,7 @@ def test_correction_of_an_error_inside_one_face_fades_as_the_closed_form(semicyl
     """A bump on the cap zeta = 0, zero on its edges: the correction's corner part and every other
     face's term vanish, so it is the bump times (1 - zeta)^p at every node (closed form), where
     linear TFI would carry (1 - zeta) of it through the whole volume."""
-    from meshgen.correction import CORRECTION_POWER
+    from meshgen.methods.correction import CORRECTION_POWER
 
     dims = (12, 10, 16)
     coords = parametric_grid(dims)
@@ -363,7 +363,7 @@ def test_default_preset_corrected_is_valid_and_near_elliptic_at_every_resolution
     reweighting, PCGrad), shortened and on the 2D semidisk, leaves the boundary visibly off; its
     corrected mesh has no inverted cell, the exact boundary, and a mean minimum angle within 0.3
     degrees of the converged elliptic mesh's, at every resolution (the same network)."""
-    from meshgen.elliptic import elliptic
+    from meshgen.methods.elliptic import elliptic
     from meshgen.neural.config import resolve_config
 
     config = resolve_config(

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from meshgen import comparison as comparing
 from meshgen.cli import cli, message_for_command_line
-from meshgen.clustering import node_coordinates
+from meshgen.cli import comparison as comparing
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean
-from meshgen.methods import METHODS, TRAINED, get_method, make_mesh
+from meshgen.methods.clustering import node_coordinates
+from meshgen.methods.registry import METHODS, TRAINED, get_method, make_mesh
 from meshgen.neural.config import preset_paths
 
 
@@ -145,8 +145,8 @@ def test_the_flags_reach_the_terminal(run_cli):
 
 
 def test_one_exception_type_for_the_axes_check(semidisk):
-    from meshgen.elliptic import elliptic
-    from meshgen.tfi import tfi
+    from meshgen.methods.elliptic import elliptic
+    from meshgen.methods.tfi import tfi
 
     messages = []
     for method in (tfi, elliptic):
@@ -162,7 +162,7 @@ def test_did_you_mean():
 
 
 def test_a_neural_mesh_checks_its_geometry_once(monkeypatch):
-    import meshgen.geometry as geometry_module
+    import meshgen.geometry.plugins as geometry_module
 
     checked = []
     original = geometry_module.check_boundary
@@ -177,8 +177,8 @@ def test_a_neural_mesh_checks_its_geometry_once(monkeypatch):
 def test_atomic_write_keeps_the_old_file_and_says_why_in_one_line(tmp_path):
     import errno
 
-    from meshgen.atomic import atomic_write
     from meshgen.errors import FormatError
+    from meshgen.run.atomic import atomic_write
 
     target = tmp_path / "a.txt"
     target.write_text("old")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from meshgen.errors import MeshgenError
-from meshgen.mlp_numpy import forward_on_grid, read_checkpoint
+from meshgen.neural.mlp_numpy import forward_on_grid, read_checkpoint
 
 torch = pytest.importorskip("torch")
 BUNDLED = Path(__file__).resolve().parents[1] / "meshgen" / "_models" / "semicylinder" / "checkpoint.pt"
@@ -97,7 +97,7 @@ def test_foreign_pickles_and_other_files_are_refused(tmp_path):
 def test_blas_threads_are_restored_after_concurrent_passes():
     from concurrent.futures import ThreadPoolExecutor
 
-    from meshgen.mlp_numpy import openblas_thread_functions
+    from meshgen.neural.mlp_numpy import openblas_thread_functions
 
     functions = openblas_thread_functions()
     if functions is None:

@@ -7,11 +7,11 @@ import pytest
 import torch
 from neural_helpers import Recorder, tiny_config
 
+from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import from_dict
 from meshgen.neural.model import MLP, bubble, mesh_from_checkpoint
 from meshgen.neural.train import train
-from meshgen.tfi import parametric_grid, tfi
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import torch
 from helpers import files_in as snapshot
 from neural_helpers import TINY, tiny_config
 
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import from_dict, preset_paths
 from meshgen.neural.history import HISTORY_COLUMNS

@@ -76,7 +76,7 @@ def test_a_run_on_cuda_trains_checkpoints_and_resumes_on_the_cpu(tmp_path, semic
 def test_a_family_step_captured_equals_the_eager_step_at_every_replay():
     """The family's Adam step goes through the same capture: the replayed gradients are the eager
     ones for new members and grids at every replay."""
-    from meshgen.geometry import load_geometry
+    from meshgen.geometry.plugins import load_geometry
     from meshgen.neural.config import resolve_config
     from meshgen.neural.family import FamilyMLP, family_scale, make_family
     from meshgen.neural.family_train import FamilyProblem, family_gradients, family_sample

@@ -13,9 +13,10 @@ import torch
 from neural_helpers import TINY
 
 from meshgen.cli import cli
-from meshgen.cube import faces
 from meshgen.formats import metadata_of
-from meshgen.geometry import load_geometry
+from meshgen.geometry.cube import faces
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.neural.checkpoint import CheckpointError, load_checkpoint
 from meshgen.neural.config import resolve_config
 from meshgen.neural.family import (
@@ -29,7 +30,6 @@ from meshgen.neural.family import (
 from meshgen.neural.family_train import FAMILY_UNUSED_KEYS, LBFGS_RESAMPLE, covering_members, train_family
 from meshgen.neural.model import bubble
 from meshgen.neural.models import load_model
-from meshgen.tfi import parametric_grid, tfi
 
 # the tiny settings a family uses (it refuses the others)
 TINY_ARGS = [arg for item in TINY if item.split("=")[0] not in FAMILY_UNUSED_KEYS for arg in ("--set", item)]
@@ -328,7 +328,7 @@ def test_the_family_benchmark_measures_each_member_against_the_elliptic_mesh_on_
     reference is the elliptic mesh on that layout, not on the smoothed one (the elliptic default)."""
     import sys
 
-    from meshgen.elliptic import elliptic
+    from meshgen.methods.elliptic import elliptic
     from meshgen.quality import quality_report
 
     sys.path.insert(0, str(METHODS_PAGE.parents[1] / "benchmarks"))

@@ -14,8 +14,9 @@ import pytest
 import torch
 from neural_helpers import Recorder, tiny_config
 
-from meshgen.geometry import load_geometry
-from meshgen.layout import RESOLUTION, with_layout
+from meshgen.geometry.layout import RESOLUTION, with_layout
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import parametric_grid, transfinite
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import ConfigError, from_dict, resolve_config
 from meshgen.neural.derivatives import grid_derivatives, grid_points, lattice_grid_from_draws, training_grid
@@ -23,7 +24,6 @@ from meshgen.neural.model import MLP, bubble, mesh_from_checkpoint, normalisatio
 from meshgen.neural.problem import Problem, grid_residual, lattice_blocks, lbfgs_points, sample_pde_points
 from meshgen.neural.train import train
 from meshgen.neural.winslow import winslow_residual
-from meshgen.tfi import parametric_grid, transfinite
 
 
 @pytest.fixture(scope="module")

@@ -98,9 +98,9 @@ def test_repeated_failure_stops_and_keeps_the_last_good_checkpoint(tmp_path, sem
 
 
 def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
+    from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.model import mesh_from_checkpoint
     from meshgen.quality import quality_report
-    from meshgen.tfi import parametric_grid
 
     result = train(tiny_config(), semidisk, tmp_path)
     summary = json.loads((tmp_path / "summary.json").read_text())
@@ -120,8 +120,8 @@ def test_final_summary_compares_the_network_with_tfi(tmp_path, semidisk):
 def test_correction_of_a_shifted_mesh_shifts_it_back(semidisk):
     """An error field that is the same at every boundary node: its TFI is that constant, so the
     correction moves every node, not only the boundary ones, back by the shift."""
+    from meshgen.methods.tfi import parametric_grid, tfi
     from meshgen.neural.train import corrected
-    from meshgen.tfi import parametric_grid, tfi
 
     coords = parametric_grid((6, 4))
     exact = tfi(semidisk, None, coords)

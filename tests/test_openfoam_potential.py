@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshgen.elliptic import elliptic
 from meshgen.formats import write_mesh
+from meshgen.methods.elliptic import elliptic
 
 TOOLS = ("plot3dToFoam", "topoSet", "createPatch", "potentialFoam")
 missing = [tool for tool in TOOLS if shutil.which(tool) is None]

@@ -14,8 +14,8 @@ from openfoam_helpers import needs_openfoam, read_vector_field, run_tool
 import meshgen.formats._foam_fields as foam_fields
 from meshgen.errors import MeshgenWarning
 from meshgen.formats import write_mesh
-from meshgen.patches import geometry_patches
-from meshgen.tfi import tfi
+from meshgen.geometry.patches import geometry_patches
+from meshgen.methods.tfi import tfi
 
 MESH = ("mesh", "-g", "semicylinder", "--method", "tfi", "--format", "openfoam", "-q", "-o", "case", "--dims")
 

@@ -1,4 +1,4 @@
-"""Orthogonality at chosen walls (meshgen.orthogonal): the first cell layer leaves the wall along
+"""Orthogonality at chosen walls (meshgen.methods.orthogonal): the first cell layer leaves the wall along
 its normal, checked against the walls' closed-form normals."""
 
 from __future__ import annotations
@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from meshgen.clustering import node_coordinates
-from meshgen.elliptic import elliptic
 from meshgen.errors import MeshgenError
-from meshgen.orthogonal import inner_block, parse_walls
+from meshgen.methods.clustering import node_coordinates
+from meshgen.methods.elliptic import elliptic
+from meshgen.methods.orthogonal import inner_block, parse_walls
+from meshgen.methods.winslow import winslow_residual
 from meshgen.quality import quality_report
-from meshgen.winslow import winslow_residual
 
 
 def _angle_from(normal, edges) -> np.ndarray:

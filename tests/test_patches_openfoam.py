@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
-from meshgen import cube
 from meshgen.errors import MeshgenError
 from meshgen.formats import read_mesh, read_patches, write_mesh
-from meshgen.geometry import load_geometry
-from meshgen.patches import geometry_patches, parse_patch_options
+from meshgen.geometry import cube
+from meshgen.geometry.patches import geometry_patches, parse_patch_options
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 from meshgen.quality import cell_metrics, quality_report
-from meshgen.tfi import tfi
 
 cgnscheck = shutil.which("cgnscheck")
 needs_cgnscheck = pytest.mark.skipif(cgnscheck is None, reason="cgnscheck not installed (Debian package cgns-convert)")
@@ -35,8 +35,8 @@ def expected_face_counts(patches, dims) -> dict[str, int]:
 
 
 def make(method, name, dims):
-    from meshgen.clustering import node_coordinates
-    from meshgen.methods import make_mesh
+    from meshgen.methods.clustering import node_coordinates
+    from meshgen.methods.registry import make_mesh
 
     geometry = load_geometry(name)
     X, _ = make_mesh(method, geometry, node_coordinates(dims))

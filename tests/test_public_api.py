@@ -84,11 +84,11 @@ def test_the_top_level_holds_the_public_names_only_and_stays_cheap():
     for removed in ("make_mesh", "write_mesh", "read_mesh", "transfinite", "node_coordinates", "quality_report"):
         assert not hasattr(meshgen, removed), removed  # they live in their modules
     # Importing the modules named like the functions keeps the functions at the top level.
-    from meshgen.elliptic import build_elliptic
-    from meshgen.tfi import transfinite
+    from meshgen.methods.elliptic import build_elliptic
+    from meshgen.methods.tfi import transfinite
 
     assert callable(transfinite) and callable(build_elliptic)
-    assert meshgen.tfi.__module__ == "meshgen.api" and meshgen.elliptic.__module__ == "meshgen.api"
+    assert meshgen.methods.tfi.__module__ == "meshgen.api" and meshgen.methods.elliptic.__module__ == "meshgen.api"
     code = (
         "import sys, meshgen\n"
         "[getattr(meshgen, name) for name in meshgen.__all__]\n"
@@ -102,7 +102,7 @@ def test_mesh_tfi_elliptic_and_read_return_a_mesh_write_and_evaluate_a_report(tm
     from test_quality import vtk_quality
 
     import meshgen
-    from meshgen.grid import cell_connectivity
+    from meshgen.geometry.grid import cell_connectivity
 
     dims = (6, 4)
     made = {"tfi": meshgen.tfi(semidisk, dims), "elliptic": meshgen.elliptic(semidisk, dims, tol=1e-8)}

@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from meshgen.deviation import boundary_deviation, distance_to_boundary, grid_boundary_nodes
-from meshgen.grid import cell_connectivity, flat_points
+from meshgen.geometry.grid import cell_connectivity, flat_points
+from meshgen.methods.tfi import tfi
 from meshgen.quality import (
     METRICS,
     STATS,
@@ -18,7 +18,7 @@ from meshgen.quality import (
     summary_lines,
     write_mesh_with_quality,
 )
-from meshgen.tfi import tfi
+from meshgen.quality.deviation import boundary_deviation, distance_to_boundary, grid_boundary_nodes
 
 
 def box(dims, lengths=None):

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from meshgen.grid import cell_connectivity, flat_points
+from meshgen.geometry.grid import cell_connectivity, flat_points
 from meshgen.quality import METRICS, cell_metrics_unstructured
 from meshgen.quality.numpy_kernels import numpy_cell_metrics as reference_cell_metrics
 from meshgen.quality.structured import structured_metrics

@@ -10,11 +10,11 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 from meshgen.quality import quality_report, write_mesh_with_quality
 from meshgen.quality.report import report_in_parallel
 from meshgen.quality.structured import structured_metrics
-from meshgen.tfi import tfi
 
 
 def jittered(geometry, dims, seed=0):

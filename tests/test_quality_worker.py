@@ -16,11 +16,11 @@ import meshio
 import numpy as np
 import pytest
 
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 from meshgen.quality import quality_report
 from meshgen.quality.kernels import METRICS
 from meshgen.quality.structured import NUMPY_CELLS, structured_metrics
-from meshgen.tfi import tfi
 
 DIMS = (80, 80, 80)  # 512,000 cells: the compiled kernels' size (NUMPY_CELLS), so the worker's
 
@@ -146,9 +146,9 @@ def test_a_killed_command_leaves_no_worker_behind(tmp_path):
 # mesh calls, in the same types (else the worker would leave part of numba's load to the report).
 NO_LATE_LOAD = """
 import numpy as np
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 from meshgen.quality.worker import _shared, load_compiled_kernels
-from meshgen.tfi import tfi
+from meshgen.methods.tfi import tfi
 from numba.core import dispatcher
 
 load_compiled_kernels({dim})

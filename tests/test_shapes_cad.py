@@ -6,7 +6,7 @@ import pytest
 from shape_helpers import distance_to_cad, enclosed_volume, write_twisted_loft
 
 import meshgen
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 from meshgen.quality import quality_report
 
 gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python package (pip install gmsh)")

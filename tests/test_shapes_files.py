@@ -10,8 +10,8 @@ from openfoam_helpers import check_mesh, needs_openfoam
 from shape_helpers import DUCT_NAMES, duct_point, duct_surface, write_ascii_stl, write_twisted_loft
 
 import meshgen
-from meshgen.geometry import Geometry, load_geometry
-from meshgen.layout import cache_path
+from meshgen.geometry.layout import cache_path
+from meshgen.geometry.plugins import Geometry, load_geometry
 from meshgen.quality import quality_report
 
 
@@ -166,9 +166,9 @@ def test_yaml_corners_fix_the_assignment(duct):
 
 
 def test_the_parametrisation_is_kept_between_runs(duct, monkeypatch):
-    from meshgen import cube
-    from meshgen.shapes import triangulated
-    from meshgen.shapes.assemble import content_hash
+    from meshgen.geometry import cube
+    from meshgen.geometry.shapes import triangulated
+    from meshgen.geometry.shapes.assemble import content_hash
 
     folder, (vertices, triangles, labels) = duct
     path = write_ascii_stl(folder / "duct.stl", vertices, triangles, labels)

@@ -1,4 +1,4 @@
-"""Patches onto the unit square (meshgen.shapes.parametrise): one-to-one on random patches with
+"""Patches onto the unit square (meshgen.geometry.shapes.parametrise): one-to-one on random patches with
 ears, corners and sides where they belong, planar maps reproduced, holes and handles refused."""
 
 import numpy as np
@@ -7,7 +7,7 @@ from scipy.spatial import Delaunay
 from shape_helpers import random_patch
 
 from meshgen.errors import GeometryError
-from meshgen.shapes.parametrise import SQUARE_CORNERS, parametrise, signed_areas
+from meshgen.geometry.shapes.parametrise import SQUARE_CORNERS, parametrise, signed_areas
 
 
 @pytest.mark.parametrize("seed", range(20))

@@ -10,7 +10,7 @@ from openfoam_helpers import check_mesh, needs_openfoam
 from shape_helpers import DUCT_CORNERS, DUCT_NAMES, distance_to_triangles, duct_point, duct_surface, write_ascii_stl
 
 import meshgen
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 from meshgen.quality import quality_report
 
 

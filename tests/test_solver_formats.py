@@ -9,12 +9,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from meshgen import cube
 from meshgen.formats import read_mesh, read_patches, write_mesh
-from meshgen.geometry import load_geometry
-from meshgen.patches import geometry_patches
+from meshgen.geometry import cube
+from meshgen.geometry.patches import geometry_patches
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 from meshgen.quality import cell_metrics, quality_report
-from meshgen.tfi import tfi
 
 gmsh = shutil.which("gmsh")
 

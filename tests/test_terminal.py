@@ -11,7 +11,7 @@ from rich.console import Console
 from terminal_helpers import run_in_terminal
 
 from meshgen.cli import cli
-from meshgen.commands._text import wrapped
+from meshgen.cli._text import wrapped
 from meshgen.neural.config import resolve_config
 from meshgen.neural.progress import FIELD_HELP, LogReporter, RichReporter, describe_row, shown_fields
 
@@ -101,8 +101,8 @@ def test_meshgen_alone_prints_the_help(run_cli):
 
 
 def test_help_texts_show_defaults_and_choices():
-    from meshgen.elliptic import DEFAULT_MAX_ITER, DEFAULT_TOL
-    from meshgen.methods import METHODS
+    from meshgen.methods.elliptic import DEFAULT_MAX_ITER, DEFAULT_TOL
+    from meshgen.methods.registry import METHODS
 
     runner = CliRunner()
 
@@ -172,7 +172,7 @@ def test_compare_at_a_real_terminal_shows_training_and_fits_the_table(tmp_path):
 
 
 def test_compare_table_keeps_its_full_width_in_a_file(run_cli):
-    from meshgen.comparison import COLUMNS
+    from meshgen.cli.comparison import COLUMNS
 
     result = run_cli(*COMPARE, "--methods", "tfi,elliptic")
     assert result.returncode == 0, result.stderr

@@ -5,8 +5,8 @@ import itertools
 import numpy as np
 import pytest
 
-from meshgen.geometry import load_geometry
-from meshgen.tfi import parametric_grid, tfi, transfinite
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import parametric_grid, tfi, transfinite
 
 
 def affine_boundary(points):

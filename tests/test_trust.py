@@ -15,7 +15,7 @@ from neural_helpers import tiny_config
 
 from meshgen.cli import cli
 from meshgen.formats import write_mesh
-from meshgen.geometry import load_geometry
+from meshgen.geometry.plugins import load_geometry
 from meshgen.neural.train import train
 
 # A valid 2D plugin (the unit square) whose import writes MARKER: if MARKER appears, meshgen ran it.
@@ -175,7 +175,7 @@ def test_a_tear_of_one_percent_of_an_edge_is_found(low, tmp_path):
     """The face xi = 1 leaves its neighbour eta = 0 along 1% of their common edge, by 1% of the
     box: the faces disagree there, and loading the plugin says where."""
     from meshgen.errors import GeometryError
-    from meshgen.geometry import load_geometry as load
+    from meshgen.geometry.plugins import load_geometry as load
 
     (tmp_path / "torn.py").write_text(TORN_BOX.format(low=low))
     unchecked = load(str(tmp_path / "torn.py"), check=False)
@@ -453,10 +453,10 @@ def test_ctrl_c_and_meshgen_signals_pass_through_a_plugin_call():
     import types
 
     from meshgen.errors import GeometryError
-    from meshgen.plugin_calls import call_plugin
+    from meshgen.geometry.plugin_calls import call_plugin
 
     own = types.new_class("Stop", (BaseException,))
-    own.__module__ = "meshgen.signals"
+    own.__module__ = "meshgen.run.signals"
     foreign = types.new_class("Stop", (BaseException,))
     foreign.__module__ = "meshgen_plugin_x"
 

@@ -1,5 +1,5 @@
 """.vtu writer (meshgen.formats._vtu): read back by meshio and by VTK's XML reader, checked against
-the node array, meshgen.grid's connectivity and VTK's own quality of the cells; the compression
+the node array, meshgen.geometry.grid's connectivity and VTK's own quality of the cells; the compression
 layout decoded by hand; atomic writes."""
 
 import base64
@@ -13,9 +13,9 @@ import pytest
 from vtk.util.numpy_support import vtk_to_numpy
 
 from meshgen.formats import _vtu, metadata_of, read_mesh, write_mesh
-from meshgen.geometry import load_geometry
-from meshgen.grid import cell_connectivity, flat_points
-from meshgen.tfi import tfi
+from meshgen.geometry.grid import cell_connectivity, flat_points
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.tfi import tfi
 
 METADATA = {"method": "tfi", "geometry": "semicylinder", "dims": [6, 5, 4], "note": "quotes \" ' and < & > survive"}
 VTK_HEXAHEDRON, VTK_QUAD = 12, 9

@@ -1,6 +1,6 @@
-"""The compiled multigrid kernels (meshgen.winslow_compiled) against the NumPy code they replace on
-large grids: the Winslow residual and coefficients (meshgen.winslow.winslow_operator), one line-ADI
-sweep (meshgen.elliptic.smooth), the multigrid transfers (dense matrices along each axis) and a
+"""The compiled multigrid kernels (meshgen.methods.winslow_compiled) against the NumPy code they replace on
+large grids: the Winslow residual and coefficients (meshgen.methods.winslow.winslow_operator), one line-ADI
+sweep (meshgen.methods.elliptic.smooth), the multigrid transfers (dense matrices along each axis) and a
 whole solve, on small distorted grids with uniform and stretched axes. The kernels' work is split
 over threads on every call here (``THREADED_NODES`` 0), as it is on large grids."""
 
@@ -9,12 +9,12 @@ import sys
 import numpy as np
 import pytest
 
-import meshgen.elliptic  # noqa: F401  (the module; ``meshgen.elliptic`` the attribute is the function)
-from meshgen import winslow_compiled
-from meshgen.geometry import load_geometry
-from meshgen.winslow import component_array, winslow_operator
+import meshgen.methods.elliptic  # noqa: F401  (the module; ``meshgen.methods.elliptic`` the attribute is the function)
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods import winslow_compiled
+from meshgen.methods.winslow import component_array, winslow_operator
 
-elliptic_module = sys.modules["meshgen.elliptic"]
+elliptic_module = sys.modules["meshgen.methods.elliptic"]
 Level, along_axes, smooth, solve_winslow = (
     elliptic_module.Level,
     elliptic_module.along_axes,
@@ -100,8 +100,8 @@ def test_transfers_match_the_dense_matrices():
 
 def test_solve_with_kernels_matches_numpy(monkeypatch):
     """A whole multigrid solve with the kernels on every grid gives the NumPy solve's mesh."""
-    from meshgen.layout import relax_faces, with_layout
-    from meshgen.tfi import parametric_grid, tfi
+    from meshgen.geometry.layout import relax_faces, with_layout
+    from meshgen.methods.tfi import parametric_grid, tfi
 
     geometry = with_layout(load_geometry("semicylinder"), "smoothed")
     coords = parametric_grid((8, 6, 10))

@@ -2,7 +2,7 @@
 
 Each format is a small module with ``write(path, X, cell_data, metadata)`` (formats that carry
 boundary patches: ``write(path, X, cell_data, metadata, patches)``, ``patches`` a list of
-``meshgen.patches.Patch`` covering every cube face, and ``read_patches(path)``; where names are
+``meshgen.geometry.patches.Patch`` covering every cube face, and ``read_patches(path)``; where names are
 restricted, ``check_patch_name(name)``) and, where meshgen can read it back,
 ``read(path) -> meshio.Mesh``. A folder format (OpenFOAM) also has ``check_output(path)`` and writes
 atomically itself. ``X`` is the node array of design notes §2;
@@ -33,12 +33,12 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.atomic import atomic_write, check_output_file
 from meshgen.errors import FormatError, MeshgenError, excerpt
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.inputs import InputError, check_input_file
-from meshgen.patches import check_covers
-from meshgen.publish import publishing
+from meshgen.geometry.patches import check_covers
+from meshgen.run.atomic import atomic_write, check_output_file
+from meshgen.run.inputs import InputError, check_input_file
+from meshgen.run.publish import publishing
 
 __all__ = [
     "FORMATS",
@@ -284,7 +284,7 @@ def write_mesh(
     one of the extension). ``cell_data``: name -> per-cell array, or a callable returning that
     mapping, called once: by a format with ``deferred_cell_data`` (``.vtu``) after its nodes and
     cells are under way, so that computing the cell data overlaps writing them; by any other
-    before the write. ``patches``: the boundary patches (``meshgen.patches.Patch`` or
+    before the write. ``patches``: the boundary patches (``meshgen.geometry.patches.Patch`` or
     ``{"name", "type", "faces"}`` records covering every cube face once; None: one per face, named
     after it), written by the formats that carry them. ``options``: format options (OpenFOAM:
     ``binary``). Returns the path written (an OpenFOAM case: its folder)."""
@@ -309,7 +309,7 @@ def write_mesh(
     arguments = (X, cell_data, dict(metadata or {})) + ((patches,) if fmt.patches else ())
     if not fmt.folder and options:
         raise FormatError(f"{fmt.name} takes no option {', '.join(options)}")
-    # One publication (meshgen.publish): the file, or the case's files, take their names together
+    # One publication (meshgen.run.publish): the file, or the case's files, take their names together
     # under the output's lock, with the sidecar when the caller publishes one with it.
     with publishing(path, FormatError):
         if fmt.folder:
@@ -321,7 +321,7 @@ def write_mesh(
 
 
 def read_patches(path) -> list:
-    """The boundary patches (``meshgen.patches.Patch``) a mesh file or case records; FormatError
+    """The boundary patches (``meshgen.geometry.patches.Patch``) a mesh file or case records; FormatError
     for a format that carries none."""
     fmt = _reading_format(Path(path))
     if fmt is None or not fmt.patches:

@@ -56,7 +56,6 @@ import threading
 
 import numpy as np
 
-from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._cgns_nodes import (
     BASE_NAME,
@@ -76,8 +75,9 @@ from meshgen.formats._cgns_nodes import (
     node_text,
 )
 from meshgen.formats.metadata import METADATA_KEY
-from meshgen.grid import cell_connectivity, flat_points
-from meshgen.patches import Patch, flow_role
+from meshgen.geometry import cube
+from meshgen.geometry.grid import cell_connectivity, flat_points
+from meshgen.geometry.patches import Patch, flow_role
 
 __all__ = [
     "BASE_NAME",
@@ -113,7 +113,7 @@ ZONE_BC_NAME = "ZoneBC"
 def write(path, X, cell_data, metadata, patches=()):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as one structured zone; ``cell_data``
     arrays (C order of the cells) as a cell-centred FlowSolution; ``metadata`` as a Descriptor;
-    ``patches`` (``meshgen.patches.Patch``) as a ZoneBC with Families."""
+    ``patches`` (``meshgen.geometry.patches.Patch``) as a ZoneBC with Families."""
     node_shape = X.shape[:-1]
     cell_shape = tuple(n - 1 for n in node_shape)
     with stream(path, node_shape, X.shape[-1], metadata, cell_names=list(cell_data), patches=patches) as zone:

@@ -24,7 +24,7 @@ import os
 import re
 from pathlib import Path
 
-from meshgen.patches import flow_role
+from meshgen.geometry.patches import flow_role
 
 __all__ = [
     "FIELD_NAMES",

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshgen import cube
 from meshgen.formats._structured import face_nodes, node_labels
+from meshgen.geometry import cube
 
 __all__ = ["boundary_owner", "internal_faces", "patch_entries", "poly_mesh_note"]
 

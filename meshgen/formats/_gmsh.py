@@ -22,13 +22,13 @@ import json
 
 import numpy as np
 
-from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.formats.streamed import bounding_box, cell_slabs, cells_of_slab, map_orientation
-from meshgen.grid import cell_connectivity
-from meshgen.patches import Patch, as_records
+from meshgen.geometry import cube
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import Patch, as_records
 
 __all__ = [
     "DOMAIN_NAME",

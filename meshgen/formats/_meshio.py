@@ -25,7 +25,7 @@ import numpy as np
 
 from meshgen.errors import FormatError
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.grid import cell_connectivity, flat_points
+from meshgen.geometry.grid import cell_connectivity, flat_points
 
 __all__ = ["HEADER_BYTES", "read", "write"]
 

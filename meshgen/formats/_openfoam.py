@@ -2,7 +2,7 @@
 ``CASE/CASE.foam`` for ParaView; and, where the case has none, ``system/controlDict``,
 ``fvSchemes`` and ``fvSolution`` (set up for ``potentialFoam``), without which no OpenFOAM tool
 (checkMesh included) opens a case. Where the case has no ``0/`` and the patches include an inlet
-and an outlet (``meshgen.patches.flow_role``: ``patch``-type patches named inlet/inflow and
+and an outlet (``meshgen.geometry.patches.flow_role``: ``patch``-type patches named inlet/inflow and
 outlet/outflow), ``0/U`` and ``0/p`` for potential flow too: 1 m/s into the domain normal to the
 inlet, p = 0 on the outlet, slip walls, symmetry and empty as their types, zero gradient on any
 other patch. Re-meshing a case keeps the user's ``system/`` files; of ``0/U`` and ``0/p`` it
@@ -39,17 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen import cube
-from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError, MeshgenWarning, excerpt
 from meshgen.formats._foam_fields import field_record, fields_to_write, kept_warning, previous_fields, starting_fields
 from meshgen.formats._foam_topology import boundary_owner, internal_faces, patch_entries, poly_mesh_note
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.grid import cell_connectivity
-from meshgen.inputs import InputError, read_input_bytes
-from meshgen.patches import Patch, flow_role
-from meshgen.publish import publishing, remove_stale_temporaries
+from meshgen.geometry import cube
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import Patch, flow_role
+from meshgen.run.atomic import atomic_path
+from meshgen.run.inputs import InputError, read_input_bytes
+from meshgen.run.publish import publishing, remove_stale_temporaries
 
 __all__ = [
     "CONTROL_DICT",
@@ -177,7 +177,7 @@ def check_patch_name(name: str) -> None:
 
 def write(case, X, cell_data, metadata, patches, binary: bool = True) -> None:
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as ``case/constant/polyMesh`` with the
-    boundary ``patches`` (``meshgen.patches.Patch``), atomically: the new polyMesh is written beside
+    boundary ``patches`` (``meshgen.geometry.patches.Patch``), atomically: the new polyMesh is written beside
     the old one and swapped in. ``cell_data`` has no place in a polyMesh and is not written."""
     check_extrusion_patch(patches, X.shape[-1])
     X3 = extrude(X) if X.shape[-1] == 2 else X
@@ -220,7 +220,7 @@ def write_case(case, node_shape, metadata, patches, write_poly_mesh) -> None:
         f'"metadata": {metadata_json(metadata)}}}'
     )
 
-    # Inside the publication of write_mesh (meshgen.publish): the polyMesh, the system files and
+    # Inside the publication of write_mesh (meshgen.run.publish): the polyMesh, the system files and
     # the starting fields are staged and take their names together under the case's lock; a
     # failure removes what this run staged and the folders it made, never another run's.
     with publishing(case, FormatError) as publication:
@@ -451,7 +451,7 @@ def read(path):
 
 
 def _input_bytes(path: Path, limit: int = 2**40) -> bytes:
-    """The bytes of a case file (a regular file, at most ``limit`` bytes: ``meshgen.inputs``)."""
+    """The bytes of a case file (a regular file, at most ``limit`` bytes: ``meshgen.run.inputs``)."""
     try:
         return read_input_bytes(path, "case file", limit)
     except InputError as exc:

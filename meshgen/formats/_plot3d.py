@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.errors import FormatError
-from meshgen.grid import cell_connectivity, flat_points
+from meshgen.geometry.grid import cell_connectivity, flat_points
 
 __all__ = ["RECORD_LIMIT", "check_node_shape", "read", "write", "write_streamed"]
 

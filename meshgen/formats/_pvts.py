@@ -13,7 +13,7 @@ Pieces are slabs of about ``PIECE_NODES`` nodes (whatever the memory: the same m
 files in memory and block by block); neighbouring pieces share their node plane, so every cell is
 in exactly one piece. Each piece is a .vts of ``meshgen.formats._vts`` with the mesh's extents (its
 patch ids those of the whole mesh) and meshgen's metadata and patches in its field data. The
-pieces' folder and the .pvts take their names together (``meshgen.publish``).
+pieces' folder and the .pvts take their names together (``meshgen.run.publish``).
 """
 
 from __future__ import annotations
@@ -25,15 +25,15 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError
 from meshgen.formats._vts import PATCH_ARRAY, block_extent, whole_extent
 from meshgen.formats._vts import read as read_piece
 from meshgen.formats._vts import read_patches as read_piece_patches
 from meshgen.formats._vts import write as write_piece
 from meshgen.formats.streamed import NodeFile, slab_slices
-from meshgen.grid import cell_connectivity
-from meshgen.publish import current_publication
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.run.atomic import atomic_path
+from meshgen.run.publish import current_publication
 
 __all__ = ["PIECE_NODES", "check_target", "piece_slices", "read", "read_patches", "write", "write_streamed"]
 

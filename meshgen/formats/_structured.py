@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshgen import cube
+from meshgen.geometry import cube
 
 __all__ = ["boundary_elements", "corner_volume", "face_nodes", "node_labels", "orientation", "write_rows"]
 

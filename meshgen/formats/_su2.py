@@ -30,8 +30,8 @@ from meshgen.errors import FormatError
 from meshgen.formats._structured import boundary_elements, orientation, write_rows
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.formats.streamed import cell_slabs, cells_of_slab, map_orientation
-from meshgen.grid import cell_connectivity, flat_points
-from meshgen.patches import as_records, from_records
+from meshgen.geometry.grid import cell_connectivity, flat_points
+from meshgen.geometry.patches import as_records, from_records
 
 __all__ = ["MARKER_NAME", "check_patch_name", "read", "read_patches", "write", "write_elements", "write_parts", "write_streamed"]
 

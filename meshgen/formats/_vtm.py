@@ -14,8 +14,8 @@ from __future__ import annotations
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from meshgen.atomic import atomic_path
 from meshgen.formats._vts import write
+from meshgen.run.atomic import atomic_path
 
 __all__ = ["write_blocks_vtm"]
 

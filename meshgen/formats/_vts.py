@@ -40,7 +40,6 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from meshgen import cube
 from meshgen.errors import FormatError
 from meshgen.formats._vtu import (
     BLOCK_BYTES,
@@ -51,8 +50,9 @@ from meshgen.formats._vtu import (
     cpu_count,
 )
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.grid import cell_connectivity
-from meshgen.patches import as_records, from_records
+from meshgen.geometry import cube
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import as_records, from_records
 
 __all__ = [
     "FILE_TAIL",
@@ -88,7 +88,7 @@ NUMPY_TYPES = {
 def write(path, X, cell_data, metadata, patches, block=None, whole_shape=None):
     """Write node array ``X`` (n1+1, n2+1[, n3+1], dim) as a compressed .vts with ``cell_data``
     (name -> (cells,) float64, C order of the cells), ``metadata`` and ``patches``
-    (``meshgen.patches.Patch``). A piece of a .pvts: ``X`` is the nodes ``block`` (one slice per
+    (``meshgen.geometry.patches.Patch``). A piece of a .pvts: ``X`` is the nodes ``block`` (one slice per
     axis) of a mesh of ``whole_shape`` nodes, whose index range is the file's extent."""
     node_shape = X.shape[:-1]
     dim = len(node_shape)

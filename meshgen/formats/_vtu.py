@@ -47,7 +47,7 @@ import numpy as np
 from isal import isal_zlib
 
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
+from meshgen.geometry.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
 
 __all__ = [
     "BLOCK_BYTES",
@@ -148,7 +148,7 @@ def compression_header(nbytes: int, block_bytes: int, streams) -> bytes:
 
 
 def _connectivity(node_shape) -> np.ndarray:
-    """The cells of ``meshgen.grid.cell_connectivity``, (cells, 8 or 4) int64, as one broadcast sum:
+    """The cells of ``meshgen.geometry.grid.cell_connectivity``, (cells, 8 or 4) int64, as one broadcast sum:
     each cell's first node index plus the flat offsets of its VTK corners (3-4x faster there)."""
     node_shape = tuple(int(n) for n in node_shape)
     corners = HEX_CORNERS if len(node_shape) == 3 else QUAD_CORNERS

@@ -11,9 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen import cube
-from meshgen.atomic import atomic_write, check_output_file
-from meshgen.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
 from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
 from meshgen.formats._cgns import read_zones, write_zones, zone_count
@@ -24,8 +21,11 @@ from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
 from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
-from meshgen.grid import cell_connectivity
-from meshgen.patches import Patch, as_records
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import Patch, as_records
+from meshgen.run.atomic import atomic_write, check_output_file
 
 __all__ = [
     "MERGED_FORMATS",

@@ -1,7 +1,7 @@
 """Writing a mesh larger than memory in the formats that list its nodes in one fixed order
 (OpenFOAM, .vts, Plot3D, .su2, .msh), slab by slab from a node file.
 
-The chunked path (``meshgen.chunked``) computes blocks in the order they complete, so it first
+The chunked path (``meshgen.run.chunked``) computes blocks in the order they complete, so it first
 streams them into a scratch CGNS file (random-access hyperslab writes), then a format's
 ``write_streamed(path, nodes, metadata, patches)`` reads that file back in slabs of
 ``NodeFile.block_nodes`` nodes in the order the format lists its nodes: slabs of the first
@@ -26,7 +26,7 @@ import numpy as np
 from meshgen.formats import format_named
 from meshgen.formats._cgns import read_node_block
 from meshgen.formats._structured import corner_volume, node_labels, write_rows
-from meshgen.grid import BLOCK_NODES, HEX_CORNERS, QUAD_CORNERS
+from meshgen.geometry.grid import BLOCK_NODES, HEX_CORNERS, QUAD_CORNERS
 
 __all__ = [
     "NodeFile",
@@ -80,7 +80,7 @@ def cell_slabs(node_shape, block_nodes: int = BLOCK_NODES) -> list[slice]:
 
 
 def cells_of_slab(node_shape, part: slice) -> np.ndarray:
-    """``meshgen.grid.cell_connectivity``'s rows of the cells whose i index is in ``part``: (cells,
+    """``meshgen.geometry.grid.cell_connectivity``'s rows of the cells whose i index is in ``part``: (cells,
     8 or 4) int64 labels of the C-order nodes, VTK corner order, cells in C order."""
     node_shape = tuple(int(n) for n in node_shape)
     corners = HEX_CORNERS if len(node_shape) == 3 else QUAD_CORNERS

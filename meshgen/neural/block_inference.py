@@ -6,10 +6,10 @@ interface takes the mean of the images of all blocks that hold it; a node on a c
 two patches) takes the geometry's boundary map; a node on one flat patch only (a pipe's inlet)
 takes the mean projected onto the patch's plane (it slides in the plane, as in the elliptic mesh).
 Each block is then corrected to those face positions, X + C[target - X] with the blending of
-``meshgen.correction.add_boundary_correction``, so that the faces are the targets to round-off;
-interface nodes are finally made bit-identical (``meshgen.blocks.unify_interfaces``).
+``meshgen.methods.correction.add_boundary_correction``, so that the faces are the targets to round-off;
+interface nodes are finally made bit-identical (``meshgen.geometry.blocks.unify_interfaces``).
 
-A model of an extruded block set (``meshgen.block_extrusion``; its ``model["extruded"]`` holds the
+A model of an extruded block set (``meshgen.geometry.extrusion``; its ``model["extruded"]`` holds the
 extrusion it was trained for) holds the section's 2D networks: the section's mesh is made as above
 and extruded, so the mesh is an exact extrusion at every --dims.
 """
@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshgen import cube
-from meshgen.block_extrusion import extrude, extrusion_of, section_of
-from meshgen.blocks import BlockSet, check_handedness, global_numbering, interface_gaps, unify_interfaces
-from meshgen.correction import add_boundary_correction
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import BlockSet, check_handedness, global_numbering, interface_gaps, unify_interfaces
+from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
+from meshgen.methods.correction import add_boundary_correction
+from meshgen.methods.tfi import boundary_faces
 from meshgen.neural.checkpoint_data import CheckpointError, check_network
 from meshgen.neural.network_map import evaluate_network
-from meshgen.tfi import boundary_faces
 
 __all__ = [
     "FLAT_TOLERANCE",
@@ -103,7 +103,7 @@ def _section(model: dict, block_set: BlockSet):
 
 def network_blocks(model: dict, block_set: BlockSet, device: str = "cpu") -> list[np.ndarray]:
     """Every block's network on its tensor grid (``block_set.coords``), in physical units: node
-    arrays as ``meshgen.blocks`` takes them (not yet conforming, nor on the boundary)."""
+    arrays as ``meshgen.geometry.blocks`` takes them (not yet conforming, nor on the boundary)."""
     section = _section(model, block_set)
     if section is not None:
         extrusion, plane = section

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import torch
 
-from meshgen.block_extrusion import extrusion_of, section_of
-from meshgen.blocks import BlockSet, merged_mesh, tfi_blocks
+from meshgen.geometry.blocks import BlockSet, merged_mesh, tfi_blocks
+from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.block_inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.block_problem import (
     ANCHOR_POINTS,

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import torch
 
-from meshgen.atomic import atomic_path
 from meshgen.neural.checkpoint_data import FORMAT, FORMAT_VERSION, CheckpointError, check_checkpoint, check_readable
-from meshgen.publish import reason
+from meshgen.run.atomic import atomic_path
+from meshgen.run.publish import reason
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
 

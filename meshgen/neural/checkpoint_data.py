@@ -4,7 +4,7 @@
 that is one) and ``check_network`` (the model description is a tanh MLP of 2 xi - 1 whose weights
 have the shapes its widths say) hold for a checkpoint read by ``torch.load``
 (``meshgen.neural.checkpoint.load_checkpoint``: tensors) and for one read by the restricted
-unpickler of ``meshgen.mlp_numpy`` (``read_plain_checkpoint``: NumPy arrays), so meshing on a CPU
+unpickler of ``meshgen.neural.mlp_numpy`` (``read_plain_checkpoint``: NumPy arrays), so meshing on a CPU
 needs no torch and both readers refuse the same files with the same words.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import MeshgenError
-from meshgen.inputs import InputError, check_input_file
-from meshgen.mlp_numpy import read_checkpoint
+from meshgen.neural.mlp_numpy import read_checkpoint
+from meshgen.run.inputs import InputError, check_input_file
 
 __all__ = [
     "FORMAT",
@@ -84,7 +84,7 @@ def check_checkpoint(checkpoint, path: Path) -> dict:
     model, geometry = checkpoint["model"], checkpoint["geometry"]
     if not (isinstance(model, dict) and isinstance(geometry, dict) and {"name", "spec", "dim", "params"} <= set(geometry)):
         raise CheckpointError(f"checkpoint {path}: its model or geometry entry is damaged: not a meshgen checkpoint")
-    if "extruded" in model:  # the section model of an extruded block set (meshgen.block_extrusion)
+    if "extruded" in model:  # the section model of an extruded block set (meshgen.geometry.extrusion)
         _check_extruded(model["extruded"], path)
     if model.get("dim") != geometry["dim"] - ("extruded" in model):
         raise CheckpointError(

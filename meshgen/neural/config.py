@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from meshgen.errors import MeshgenError, did_you_mean, excerpt, unknown_name
-from meshgen.geometry import builtin_dir
-from meshgen.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
+from meshgen.geometry.plugins import builtin_dir
+from meshgen.run.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = [
     "dotted_items",
@@ -141,7 +141,7 @@ class TrainConfig:
     description: str = "the full 3DMeshNet method, sized for a few minutes on a 2-core CPU (fit to TFI, Adam, L-BFGS)"
     dim: int | None = None  # 2 or 3 for presets made for one dimension; null: any
     seed: int = 0
-    # the boundary the network learns: "smoothed" (meshgen.layout: the faces' own Winslow grids) or
+    # the boundary the network learns: "smoothed" (meshgen.geometry.layout: the faces' own Winslow grids) or
     # "fixed" (the geometry's map: each face the Coons layout of its edges)
     boundary_layout: str = "smoothed"
     model: ModelConfig = field(default_factory=ModelConfig)

@@ -36,17 +36,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from meshgen.cube import face_samples
 from meshgen.errors import GeometryError, MeshgenError
-from meshgen.geometry import check_boundary, load_recorded_geometry
-from meshgen.layout_family import FamilyLayout, interpolated_member, solve_family_layout
+from meshgen.geometry.cube import face_samples
+from meshgen.geometry.layout_family import FamilyLayout, interpolated_member, solve_family_layout
+from meshgen.geometry.plugins import check_boundary, load_recorded_geometry
+from meshgen.methods.polish import polishes_by_default
+from meshgen.methods.tfi import parametric_grid, transfinite_on_grid
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_points
 from meshgen.neural.model import INPUT_MAP, bubble
 from meshgen.neural.models import TrainedModel, display_path
 from meshgen.neural.network_map import mesh_from_model
-from meshgen.polish import polishes_by_default
-from meshgen.tfi import parametric_grid, transfinite_on_grid
 
 __all__ = [
     "Family",
@@ -186,7 +186,7 @@ def make_family(geometry, spec: str, ranges: dict, layout: str = "fixed") -> Fam
     varied name is a parameter of the geometry not also fixed by --param, and the geometry accepts
     every corner of the ranges and their middle (boundary map checked as on load). ``layout``
     "smoothed": the smoothed layout solved on a grid over the box and interpolated
-    (``meshgen.layout_family``); "fixed": each member's own map."""
+    (``meshgen.geometry.layout_family``); "fixed": each member's own map."""
     if not ranges:
         raise MeshgenError("a family needs at least one --vary name=low:high")
     for name in ranges:
@@ -306,7 +306,7 @@ def member_model(model: dict, q) -> dict:
 
 def family_from_checkpoint(checkpoint: dict) -> Family:
     """The Family a checkpoint was trained on (its geometry loaded by name, or by a plugin path the
-    user gave: ``meshgen.trust``)."""
+    user gave: ``meshgen.run.trust``)."""
     entry = checkpoint["geometry"]
     ranges = {k: (float(lo), float(hi)) for k, (lo, hi) in checkpoint["family"]["ranges"].items()}
     base = load_recorded_geometry(entry["spec"], dict(entry["params"]), check=False, where="the checkpoint")
@@ -332,7 +332,7 @@ def load_family_member(path, values: dict, geometry_name: str | None = None, war
     description (so ``meshgen mesh`` meshes it like any exact-boundary model), and its geometry.
     ``warn`` (a callable taking one line; else Python's ``warnings``) hears :func:`validation_note`'s
     line when there is one (``polished``: whether the mesh will be polished; None: as
-    ``meshgen.polish.polishes_by_default`` decides for the checkpoint).
+    ``meshgen.methods.polish.polishes_by_default`` decides for the checkpoint).
     Returns None when ``path`` is no family checkpoint."""
     path = Path(path)
     checkpoint = checkpoints.load_checkpoint(path)

@@ -21,6 +21,8 @@ import numpy as np
 import torch
 
 from meshgen.errors import ParameterError
+from meshgen.methods.polish import polish
+from meshgen.methods.tfi import parametric_grid, tfi, transfinite
 from meshgen.neural import checkpoint as checkpoints
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points, training_grid
 from meshgen.neural.family import (
@@ -40,9 +42,7 @@ from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
 from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, make_optimizer
 from meshgen.neural.winslow import winslow_residual
-from meshgen.polish import polish
 from meshgen.quality import quality_report, write_json
-from meshgen.tfi import parametric_grid, tfi, transfinite
 
 __all__ = [
     "FAMILY_UNUSED_KEYS",
@@ -395,7 +395,7 @@ def write_family_summary(checkpoint: dict, run_dir) -> dict:
     """Validate the family: mesh every member of its validation grid (``Family.grid``:
     ``VALIDATION_POINTS`` values per varied parameter, the box's corners included) at
     ``SUMMARY_CELLS``^d cells with the family network, polish a copy as ``meshgen mesh`` does by
-    default (``meshgen.polish``), mesh it with TFI, measure the three (``meshgen.quality``, boundary
+    default (``meshgen.methods.polish``), mesh it with TFI, measure the three (``meshgen.quality``, boundary
     deviation included), write ``summary.json`` in ``run_dir`` and return it. ``worst`` indexes the
     worst member (:func:`worst_member`: most inverted cells of the network's mesh, then lowest mean
     minimum angle); ``failing`` lists the members whose network or polished mesh has an inverted

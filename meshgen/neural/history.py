@@ -11,7 +11,7 @@ from pathlib import Path
 
 import torch
 
-from meshgen.inputs import read_input_text
+from meshgen.run.inputs import read_input_text
 
 __all__ = [
     "HISTORY_COLUMNS",

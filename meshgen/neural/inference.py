@@ -1,7 +1,7 @@
 """Evaluation of a trained network on a tensor grid of any size with torch (CPU threads or a GPU).
 
 ``evaluate_on_grid``: what ``meshgen mesh --device cuda`` runs (a CPU run takes the NumPy forward
-pass of ``meshgen.mlp_numpy`` through ``meshgen.neural.network_map``, which needs no torch). A [85]*4 network on 101^3 nodes is about
+pass of ``meshgen.neural.mlp_numpy`` through ``meshgen.neural.network_map``, which needs no torch). A [85]*4 network on 101^3 nodes is about
 4.6e10 flop, nearly all in the three 85 x 85 products. Three things keep it near the matrix-product
 bound on a small CPU:
 
@@ -16,7 +16,7 @@ The network's inputs are made per chunk from the 1D coordinates, so no (N, d) gr
 points exists at any time; the only full-size array is the node array itself.
 
 The map of a model on a grid (``mesh_from_model``) is ``meshgen.neural.network_map``; the boundary
-correction ``meshgen.correction``; the choice of the model ``meshgen.neural.models``.
+correction ``meshgen.methods.correction``; the choice of the model ``meshgen.neural.models``.
 """
 
 from __future__ import annotations
@@ -28,9 +28,9 @@ import numpy as np
 import torch
 
 from meshgen.errors import MeshgenError
-from meshgen.mlp_numpy import finite_output
 from meshgen.neural.checkpoint_data import check_network
 from meshgen.neural.device import inference_device
+from meshgen.neural.mlp_numpy import finite_output
 
 __all__ = [
     "CHUNK_NODES",

@@ -23,9 +23,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from meshgen.cube import face_samples
-from meshgen.geometry import load_recorded_geometry
-from meshgen.layout import trained_layout, with_layout
+from meshgen.geometry.cube import face_samples
+from meshgen.geometry.layout import trained_layout, with_layout
+from meshgen.geometry.plugins import load_recorded_geometry
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.network_map import CHUNK_NODES, mesh_from_model
 

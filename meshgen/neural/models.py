@@ -5,7 +5,7 @@ Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/
 bundled in ``meshgen/_models/`` for its geometry with default parameters.
 
 The method (``build_neural``): the model's map on the tensor grid (``meshgen.neural.network_map``),
-then the boundary correction X = N + TFI[g - N] (``meshgen.correction``).
+then the boundary correction X = N + TFI[g - N] (``meshgen.methods.correction``).
 """
 
 from __future__ import annotations
@@ -18,16 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.correction import boundary_errors, correct_boundary, error_figures
 from meshgen.errors import MeshgenError, ParameterError
-from meshgen.geometry import load_geometry
-from meshgen.layout import trained_layout, with_layout
+from meshgen.geometry.layout import trained_layout, with_layout
+from meshgen.geometry.plugins import load_geometry
+from meshgen.methods.correction import boundary_errors, correct_boundary, error_figures
+from meshgen.methods.polish import NOT_POLISHED_REASON, polishes_by_default
+from meshgen.methods.polish import polish as polish_mesh
 from meshgen.neural.block_inference import check_block_model, is_block_model
 from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
 from meshgen.neural.config import ConfigError, dotted_items, preset_paths, resolve_config, schema, to_dict
 from meshgen.neural.network_map import mesh_from_model
-from meshgen.polish import NOT_POLISHED_REASON, polishes_by_default
-from meshgen.polish import polish as polish_mesh
 
 __all__ = [
     "MODELS_DIR",
@@ -249,13 +249,13 @@ def _default_params(name: str) -> dict:
 
 
 def build_neural(geometry, coords, model=None, correct=True, device="auto", polish=None):
-    """The ``neural`` method of ``meshgen.methods``: the trained map of ``model`` (a TrainedModel,
+    """The ``neural`` method of ``meshgen.methods.registry``: the trained map of ``model`` (a TrainedModel,
     a checkpoint path, or None for ``find_model``'s choice for ``geometry``) on the tensor grid of
     ``coords``, evaluated on ``device`` ("cpu", "cuda" or "auto"), then corrected to
     X + TFI[g - X] (:func:`correct_boundary`) unless ``correct`` is False, then (``polish``, with
     ``correct``) polished: faces and interior brought to the discrete Winslow equations at the
-    mesh's resolution (``meshgen.polish``), which is what a flow solver needs. ``polish`` None: the
-    model's default (``meshgen.polish.polishes_by_default``: not for a network trained on the
+    mesh's resolution (``meshgen.methods.polish``), which is what a flow solver needs. ``polish`` None: the
+    model's default (``meshgen.methods.polish.polishes_by_default``: not for a network trained on the
     smoothed layout's lattice with the exact boundary). Returns (X, info) with info {"model",
     "correction", "polish", "warnings"}; ``info["polish"]["polished"]`` says whether the mesh was
     polished (with the reason when it was not); ``info["correction"]["error_before"]`` is the

@@ -2,7 +2,7 @@
 soft or exact boundary), ``model_boundary_errors`` (its boundary error from the grid's faces alone)
 and ``evaluate_network``, the forward pass on the device asked for.
 
-On a CPU the forward pass is NumPy's (``meshgen.mlp_numpy``: a tanh MLP is a few float32 matrix
+On a CPU the forward pass is NumPy's (``meshgen.neural.mlp_numpy``: a tanh MLP is a few float32 matrix
 products), so meshing with a trained model imports no torch; torch (``meshgen.neural.inference``)
 runs it on a GPU only: ``--device cuda``, or ``auto`` where ``meshgen.neural.device`` finds one.
 """
@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.errors import MeshgenError
-from meshgen.mlp_numpy import CHUNK_NODES, finite_output, forward_on_grid
+from meshgen.methods.tfi import boundary_faces, tfi, transfinite_on_grid
 from meshgen.neural.checkpoint_data import check_network
 from meshgen.neural.device import inference_device
-from meshgen.tfi import boundary_faces, tfi, transfinite_on_grid
+from meshgen.neural.mlp_numpy import CHUNK_NODES, finite_output, forward_on_grid
 
 __all__ = ["CHUNK_NODES", "bubble_on_grid", "evaluate_network", "mesh_from_model", "model_boundary_errors"]
 

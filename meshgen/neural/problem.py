@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from meshgen.layout import RESOLUTION
+from meshgen.geometry.layout import RESOLUTION
+from meshgen.methods.tfi import transfinite
 from meshgen.neural.config import TrainConfig
 from meshgen.neural.derivatives import (
     autograd_derivatives,
@@ -29,7 +30,6 @@ from meshgen.neural.derivatives import (
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
 from meshgen.neural.model import MLP, bubble
 from meshgen.neural.winslow import winslow_residual
-from meshgen.tfi import transfinite
 
 __all__ = [
     "TEST_SEED",

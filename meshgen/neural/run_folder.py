@@ -2,9 +2,9 @@
 another run (design notes, "Concurrency, faults and reproducible output").
 
 - A default name (``runs/<geometry>-<timestamp>``) is taken with ``os.mkdir``, or ``-2``, ``-3``
-  ... when another run took it first (``meshgen.publish.make_fresh_folder``): two trainings
+  ... when another run took it first (``meshgen.run.publish.make_fresh_folder``): two trainings
   started at once never share a folder.
-- The folder's lock (``meshgen.publish.output_lock``, not waited for) is held while the run
+- The folder's lock (``meshgen.run.publish.output_lock``, not waited for) is held while the run
   trains: a second training into the same ``--out`` stops with one line.
 - ``--out`` onto a folder whose checkpoint is of another geometry, other parameters or another
   configuration is refused unless ``--force`` (``check_run_folder``).
@@ -18,8 +18,8 @@ from pathlib import Path
 
 from meshgen.errors import MeshgenError
 from meshgen.neural.config import to_dict
-from meshgen.publish import make_fresh_folder, output_lock
-from meshgen.signals import TERMINATING_SIGNALS
+from meshgen.run.publish import make_fresh_folder, output_lock
+from meshgen.run.signals import TERMINATING_SIGNALS
 
 __all__ = ["check_run_folder", "claim_run_folder", "stop_signals"]
 

@@ -11,10 +11,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from meshgen.blocks import is_multiblock, load_block_set
 from meshgen.errors import MeshgenError
-from meshgen.geometry import load_geometry, load_recorded_geometry, looks_like_path, parse_params
-from meshgen.limits import check_training_memory
+from meshgen.geometry.blocks import is_multiblock, load_block_set
+from meshgen.geometry.plugins import load_geometry, load_recorded_geometry, looks_like_path, parse_params
 from meshgen.neural.block_inference import check_start_model, is_block_model
 from meshgen.neural.config import (
     ConfigError,
@@ -30,6 +29,7 @@ from meshgen.neural.config import (
 from meshgen.neural.device import inference_device
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
+from meshgen.run.limits import check_training_memory
 
 __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
 
@@ -52,7 +52,7 @@ class Run:
     family: object | None = None  # meshgen.neural.family.Family when parameters are varied (--vary)
     fresh_name: bool = False  # run_dir is a default name: the run takes it, or the next free one
     force: bool = False  # --force: overwrite a run folder of another geometry or configuration
-    block_set: object | None = None  # meshgen.blocks.BlockSet when the geometry declares blocks (one network per block)
+    block_set: object | None = None  # meshgen.geometry.blocks.BlockSet when the geometry declares blocks (one network per block)
     init: dict | None = None  # --init: {"path", "checkpoint"}, the trained weights a new block-set run starts from
 
 
@@ -276,7 +276,7 @@ def _refuse_family_keys(config, preset, overrides) -> None:
 
 def check_training_size(config, dim: int) -> None:
     """MeshgenError, before the run folder exists, when the network and the points of one step
-    would not fit in memory (``meshgen.limits.training_bytes``): the finite-difference residual
+    would not fit in memory (``meshgen.run.limits.training_bytes``): the finite-difference residual
     evaluates the network at each point and its 2 dim neighbours."""
     points = config.points
     per_step = max(
@@ -300,7 +300,7 @@ def _family(config, geometry, spec: str, params, vary):
             "--vary trains the exact-boundary form (TFI + b N) alone: use --preset family or exact, "
             "or --set model.exact_boundary=true"
         )
-    # smoothed: the layout solved on a grid over the box and interpolated (meshgen.layout_family)
+    # smoothed: the layout solved on a grid over the box and interpolated (meshgen.geometry.layout_family)
     return make_family(geometry, spec, ranges, config.boundary_layout)
 
 

@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from meshgen.correction import correct_boundary
-from meshgen.layout import with_layout
+from meshgen.geometry.layout import with_layout
+from meshgen.methods.correction import correct_boundary
+from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.neural.config import TrainConfig
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.model import MLP, describe, mesh_from_checkpoint, normalisation, normalised_boundary
@@ -55,7 +56,6 @@ from meshgen.neural.steps import (
     pretrain_step,
 )
 from meshgen.quality import quality_report, write_json
-from meshgen.tfi import parametric_grid, tfi
 
 __all__ = ["STAGES", "STAGE_TABLE", "SUMMARY_CELLS", "adam_steps", "corrected", "start_training", "train", "write_summary"]
 
@@ -203,7 +203,7 @@ def start_training(config: TrainConfig, geometry, device: torch.device, resume: 
 
 def corrected(X: np.ndarray, geometry, coords) -> np.ndarray:
     """A copy of node array ``X`` corrected to X + TFI[g - X] (what ``meshgen mesh`` makes of a
-    network's mesh by default; ``meshgen.correction.correct_boundary``)."""
+    network's mesh by default; ``meshgen.methods.correction.correct_boundary``)."""
     X = X.copy()
     correct_boundary(X, geometry, coords)
     return X

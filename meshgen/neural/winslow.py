@@ -8,7 +8,7 @@ With r = (x, y, z) and the covariant metric g_ij = r_i . r_j (derivatives in xi^
 with the cofactors of g: a1 = g22 g33 - g23^2, a2 = g11 g33 - g13^2, a3 = g11 g22 - g12^2,
 b12 = g13 g23 - g12 g33, b23 = g12 g13 - g11 g23, b31 = g12 g23 - g13 g22. In 2D:
 g22 r_11 - 2 g12 r_12 + g11 r_22 = 0 (the cofactors of the 2x2 metric). The cofactor formulas
-live in one place, ``meshgen.winslow.cofactors``, shared with the elliptic solver.
+live in one place, ``meshgen.methods.winslow.cofactors``, shared with the elliptic solver.
 
 Scale: the raw residual grows like length^5 (cofactors ~ length^4 times second derivatives).
 Every variant divides it by the trace of the cofactor matrix, a1 + a2 + a3 (2D: g11 + g22), which
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import torch
 
-from meshgen.winslow import cofactors as metric_cofactors
+from meshgen.methods.winslow import cofactors as metric_cofactors
 
 __all__ = ["SCALE_FLOOR", "cofactor_terms", "cofactors", "winslow_residual"]
 
@@ -33,7 +33,7 @@ SCALE_FLOOR = 1e-6  # in units of (normalised length)^4; a healthy normalised ma
 def cofactor_terms(first: torch.Tensor):
     """The distinct cofactors of g from the first derivatives (..., dim, dim), each of shape (...):
     3D (a1, a2, a3, b12, b23, b31), 2D (g22, g11, -g12) in the same roles (a1, a2, b12).
-    The formulas are ``meshgen.winslow.cofactors`` (one place for both the NumPy solver and the
+    The formulas are ``meshgen.methods.winslow.cofactors`` (one place for both the NumPy solver and the
     networks' loss): it takes any arrays with ``*``, ``-`` and ``**``, torch tensors included."""
     r = first.unbind(-2)  # r_i = d r / d xi_i, (..., dim) each
     dim = first.shape[-1]

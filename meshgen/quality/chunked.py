@@ -1,7 +1,7 @@
 """The quality report of a mesh larger than memory, block by block on Dask.
 
 The node array (a CGNS file read by hyperslabs, or any NumPy or dask array) is cut into the blocks
-of ``meshgen.grid.block_slices``. Each block is read once, with a one-cell overlap on every side
+of ``meshgen.geometry.grid.block_slices``. Each block is read once, with a one-cell overlap on every side
 (non-orthogonality needs the centroid of the cell across each face), and gives:
 
 - the bounding box and the non-finite nodes of the nodes it owns (and in 2D the signed area of its
@@ -37,16 +37,16 @@ import queue
 
 import numpy as np
 
-from meshgen.deviation import deviation_figures, distance_to_boundary
 from meshgen.errors import MeshgenError
 from meshgen.formats import read_header, read_node_block, read_node_components
-from meshgen.grid import block_slices
+from meshgen.geometry.grid import block_slices
 from meshgen.quality import sketch as sketches
+from meshgen.quality.deviation import deviation_figures, distance_to_boundary
 from meshgen.quality.kernels import METRICS
 from meshgen.quality.report import assemble_report
 from meshgen.quality.structured import apply_degenerate, box_tolerance, signed_area_2d, structured_metrics
-from meshgen.resources import available_memory, blocks_in_flight, check_block_nodes
-from meshgen.scheduler import compute_in_order_of_completion
+from meshgen.run.resources import available_memory, blocks_in_flight, check_block_nodes
+from meshgen.run.scheduler import compute_in_order_of_completion
 
 # Block size of evaluation in nodes, at most: a block's nodes, centroids, seven metrics and the
 # sketch's temporaries take about EVALUATE_BYTES_PER_BLOCK_NODE bytes per node.
@@ -81,7 +81,7 @@ READ_HALO = 3  # node planes a block reads beyond its own: one before, two after
 
 
 def evaluation_slices(node_shape, block_nodes: int) -> list[list[slice]]:
-    """``meshgen.grid.block_slices`` for evaluation, with the halo counted: a block and the
+    """``meshgen.geometry.grid.block_slices`` for evaluation, with the halo counted: a block and the
     ``READ_HALO`` planes it reads around it hold about ``block_nodes`` nodes. Slabs of the last
     axis while a slab of 1 + READ_HALO planes fits; beyond that (planes of about 2.6e5 nodes and
     more at the default size), split along the first axis too, else a 1000^2 plane would be read as
@@ -163,7 +163,7 @@ def _summary_of_cells(values: dict, degenerate: np.ndarray) -> dict:
 
 def _owned_boundary(block, node_shape) -> tuple:
     """Index arrays (one per axis, relative to ``block``) of the mesh's boundary nodes in ``block``,
-    each node once, as ``meshgen.deviation.grid_boundary_nodes``."""
+    each node once, as ``meshgen.quality.deviation.grid_boundary_nodes``."""
     dim = len(node_shape)
     on_boundary = np.zeros(tuple(s.stop - s.start for s in block), dtype=bool)
     for axis in range(dim):

@@ -11,22 +11,22 @@ from pathlib import Path
 
 import numpy as np
 
-from meshgen.atomic import atomic_path
 from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
 from meshgen.formats.multiblock import read_zones, zone_count
-from meshgen.geometry import load_geometry, load_recorded_geometry
-from meshgen.grid import cell_connectivity
-from meshgen.inputs import read_input_text
-from meshgen.patches import geometry_patches
-from meshgen.publish import publishing
+from meshgen.geometry.grid import cell_connectivity
+from meshgen.geometry.patches import geometry_patches
+from meshgen.geometry.plugins import load_geometry, load_recorded_geometry
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.report import assess, build_report, quality_report, report_in_parallel
 from meshgen.quality.structured import check_node_array
-from meshgen.resources import needs_chunking
-from meshgen.trust import UntrustedGeometry
+from meshgen.run.atomic import atomic_path
+from meshgen.run.inputs import read_input_text
+from meshgen.run.publish import publishing
+from meshgen.run.resources import needs_chunking
+from meshgen.run.trust import UntrustedGeometry
 
 __all__ = [
     "zone_reports",

@@ -92,7 +92,7 @@ WORST = {
 
 BLOCK_CELLS = 16384  # cells per block where a caller processes cells in blocks
 
-# Corner offsets (s0, s1[, s2]) -> VTK corner index (hexahedron, quad), as meshgen.grid writes them.
+# Corner offsets (s0, s1[, s2]) -> VTK corner index (hexahedron, quad), as meshgen.geometry.grid writes them.
 HEX_CORNER = {(0, 0, 0): 0, (1, 0, 0): 1, (1, 1, 0): 2, (0, 1, 0): 3, (0, 0, 1): 4, (1, 0, 1): 5, (1, 1, 1): 6, (0, 1, 1): 7}
 QUAD_CORNER = {(0, 0): 0, (1, 0): 1, (1, 1): 2, (0, 1): 3}
 # Faces in kernel order: (normal axis, side); the VTK corners of each (unordered: to match faces).

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from meshgen.deviation import boundary_deviation, grid_boundary_nodes
 from meshgen.errors import MeshgenError
+from meshgen.quality.deviation import boundary_deviation, grid_boundary_nodes
 from meshgen.quality.faces import cells_for_quality, unstructured_metrics
 from meshgen.quality.faces_openfoam import DEFINITIONS as FACE_DEFINITIONS
 from meshgen.quality.faces_openfoam import non_orthogonality
@@ -76,7 +76,7 @@ def solver_figures(X: np.ndarray) -> dict:
 
 
 def node_array_deviation(X: np.ndarray, geometry) -> dict:
-    """The boundary deviation (``meshgen.deviation.boundary_deviation``) of the boundary nodes of
+    """The boundary deviation (``meshgen.quality.deviation.boundary_deviation``) of the boundary nodes of
     node array ``X`` from ``geometry``, as the report gives it."""
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         boundary_points, guesses = grid_boundary_nodes(X)
@@ -111,7 +111,7 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
 
     ``X_or_mesh``: a node array ``(n1+1, n2+1[, n3+1], dim)``, a ``(points, cells)`` pair, or a
     ``meshio.Mesh`` (hexahedra, else quads; other cell types counted under ``skipped``).
-    ``geometry``: a ``meshgen.geometry.Geometry``; adds ``boundary_deviation``.
+    ``geometry``: a ``meshgen.geometry.plugins.Geometry``; adds ``boundary_deviation``.
 
     Keys: ``cells``, ``dim``, ``metrics`` ({name: {mean, min, max, p01, p99}}), ``inverted``
     ({count, fraction, degenerate}), ``valid`` (no inverted cell), ``valid_rule``, ``units`` and,

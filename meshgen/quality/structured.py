@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.errors import MeshgenError
-from meshgen.limits import MAX_COORDINATE
 from meshgen.quality import numpy_kernels
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE, METRICS, WORST
+from meshgen.run.limits import MAX_COORDINATE
 
 __all__ = [
     "NUMPY_CELLS",

@@ -43,7 +43,7 @@ from meshgen.quality.kernels import METRICS
 from meshgen.quality.report import report_in_parallel
 from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import structured_metrics, use_compiled
-from meshgen.signals import TERMINATING_SIGNALS
+from meshgen.run.signals import TERMINATING_SIGNALS
 
 __all__ = ["QualityWorker", "load_compiled_kernels", "quality_worker", "worker_fits"]
 

@@ -1,0 +1,148 @@
+"""Extruded block sets: a 3D block set that is a 2D block set (its section) swept along a straight
+line, with flat end caps square to it, as the pipe and the 3D DFG channel are (design notes §20).
+
+Winslow's equations keep such a set's mesh an extrusion: with x(xi, eta, zeta) = o + s(xi, eta) +
+zeta v, s in the plane square to v, the zeta grid lines are straight and square to every section,
+the 3D equations reduce to |v|^2 times the section's 2D ones, grid lines meet the caps at right
+angles (the rule of flat patches) and interface and junction rules are those of the section. So
+the extruded block set's elliptic mesh is the extrusion of its section's, and a block set's
+network is trained on the section alone: its mesh is then an exact extrusion at every --dims,
+where 3D networks leave cross-sections that vary along the axis, a motion the equations barely
+resist when the cells are long along it.
+
+The extrusion axis is every block's third parametric axis (zeta); a set qualifies when, to
+``TOLERANCE`` times its characteristic length, every block's boundary map is s(xi, eta) + zeta v
+with one v for all blocks, its zeta = 0 cap lies in one plane square to v, and every interface
+keeps zeta as zeta (transform entry 3). The section's 2D coordinates are those in the frame
+``(e1, e2)`` of ``Extrusion``: (x - origin) . e1, (x - origin) . e2.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import BlockSet, Interface
+from meshgen.geometry.domain import Geometry
+
+__all__ = ["TOLERANCE", "Extrusion", "extrude", "extrusion_of", "section_of"]
+
+TOLERANCE = 1e-9  # relative to the block set's characteristic length
+_SAMPLES = 9  # sample points per face axis of the test
+
+
+@dataclass(frozen=True)
+class Extrusion:
+    """x = origin + s1 e1 + s2 e2 + zeta direction: ``origin`` (3,) the foot of the section's
+    plane on the line through 0 along ``direction``; ``frame`` (2, 3) orthonormal e1, e2 square to
+    ``direction`` (3,), the sweep from zeta = 0 to zeta = 1, with (e1, e2, direction) right-handed."""
+
+    origin: np.ndarray
+    frame: np.ndarray
+    direction: np.ndarray
+
+    def describe(self) -> dict:
+        """Plain data (a checkpoint's ``model["extruded"]``)."""
+        return {"origin": self.origin.tolist(), "frame": self.frame.tolist(), "direction": self.direction.tolist()}
+
+    def matches(self, entry: dict, length: float) -> bool:
+        """Whether the plain data ``entry`` (``describe``) is this extrusion to ``TOLERANCE * length``."""
+        mine = np.concatenate([self.origin, self.frame.ravel(), self.direction])
+        theirs = np.concatenate([np.ravel(entry[key]) for key in ("origin", "frame", "direction")]).astype(float)
+        return mine.shape == theirs.shape and bool(np.max(np.abs(mine - theirs)) <= TOLERANCE * max(length, 1.0))
+
+
+def _frame(direction: np.ndarray) -> np.ndarray:
+    """Orthonormal (e1, e2) square to ``direction`` with (e1, e2, direction) right-handed: the two
+    coordinate axes after the direction's, cyclically, when it lies along one (z: e1 = x, e2 = y)."""
+    unit = direction / np.linalg.norm(direction)
+    axis = int(np.argmin(np.abs(unit)))
+    if np.count_nonzero(np.abs(unit) > TOLERANCE) == 1:
+        axis = (int(np.argmax(np.abs(unit))) + 1) % 3
+    e1 = np.eye(3)[axis] - unit[axis] * unit
+    e1 /= np.linalg.norm(e1)
+    return np.stack([e1, np.cross(unit, e1)])
+
+
+def extrusion_of(block_set: BlockSet) -> Extrusion | None:
+    """The block set's ``Extrusion`` along every block's zeta axis, or None when it is not one
+    (the module docstring's tests)."""
+    if block_set.dim != 3 or any(i.transform[2] != 3 or 2 in (i.face_a.axis, i.face_b.axis) for i in block_set.interfaces):
+        return None
+    if any(not np.array_equal(coords[2], block_set.coords[0][2]) for coords in block_set.coords):
+        return None
+    tolerance = TOLERANCE * block_set.length
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, _SAMPLES)] * 2, indexing="ij"), -1).reshape(-1, 2)
+    zetas = np.linspace(0.0, 1.0, _SAMPLES)
+    direction, caps = None, ([], [])
+    for geometry in block_set.geometries:
+        for face in cube.faces(3):
+            if face.axis == 2:
+                continue
+            points = np.empty((len(grid), 3))
+            points[:, list(face.tangent_axes)] = grid
+            points[:, face.axis] = float(face.side)
+            images = geometry.boundary(points).reshape(_SAMPLES, _SAMPLES, 3)  # the tangent axes: (xi or eta, zeta)
+            sweep = images[:, -1] - images[:, 0]
+            if direction is None:
+                direction = sweep[0]
+            if np.max(np.abs(sweep - direction)) > tolerance:
+                return None
+            linear = images[:, :1] + zetas[None, :, None] * direction
+            if np.max(np.abs(images - linear)) > tolerance:
+                return None
+        for side, cap in enumerate(caps):  # the caps inside: the same section, the sweep apart
+            cap.append(geometry.boundary(np.column_stack([grid, np.full(len(grid), float(side))])) - side * direction)
+    if direction is None or not np.linalg.norm(direction) > tolerance:
+        return None
+    start, end = np.concatenate(caps[0]), np.concatenate(caps[1])
+    if np.max(np.abs(end - start)) > tolerance:
+        return None
+    unit = direction / np.linalg.norm(direction)
+    heights = start @ unit
+    if np.ptp(heights) > tolerance:
+        return None
+    return Extrusion(float(heights.mean()) * unit, _frame(direction), direction)
+
+
+def _section_map(geometry: Geometry, extrusion: Extrusion):
+    def section(points, **values):
+        points = np.asarray(points, dtype=float)
+        images = geometry.boundary(np.column_stack([points, np.zeros(len(points))]))
+        return (images - extrusion.origin) @ extrusion.frame.T
+
+    return section
+
+
+def section_of(block_set: BlockSet, extrusion: Extrusion) -> BlockSet:
+    """The 2D block set of the extruded ``block_set``'s section (its zeta = 0 cap in the frame's
+    coordinates): the same blocks, interfaces and side patches, each block's first two axes."""
+    geometries = tuple(
+        dataclasses.replace(g, name=f"{g.name}.section", dim=2, boundary_map=_section_map(g, extrusion), length_map=None)
+        for g in block_set.geometries
+    )
+    interfaces = tuple(
+        Interface(i.a, cube.face_named(i.face_a.name, 2), i.b, cube.face_named(i.face_b.name, 2), tuple(i.transform[:2]))
+        for i in block_set.interfaces
+    )
+    patches = {key: value for key, value in block_set.patches.items() if not key[1].startswith("zeta")}
+    sample = np.concatenate([g.boundary(cube.face_samples(2, 17)) for g in geometries])
+    length = float(np.linalg.norm(sample.max(axis=0) - sample.min(axis=0)))
+    return BlockSet(
+        f"{block_set.name} (section)", 2, block_set.description, dict(block_set.values), block_set.names, geometries,
+        tuple(coords[:2] for coords in block_set.coords), interfaces, patches, block_set.dims_meaning, length,
+    )  # fmt: skip
+
+
+def extrude(extrusion: Extrusion, sections, zeta: np.ndarray) -> list[np.ndarray]:
+    """Node arrays (n1, n2, len(zeta), 3) of the 3D blocks from the section's (n1, n2, 2) ones at
+    the parametric nodes ``zeta`` along the axis: origin + s1 e1 + s2 e2 + zeta direction."""
+    zeta = np.asarray(zeta, dtype=float)
+    blocks = []
+    for S in sections:
+        plane = extrusion.origin + np.asarray(S, dtype=float) @ extrusion.frame  # (n1, n2, 3)
+        blocks.append(plane[:, :, None, :] + zeta[None, None, :, None] * extrusion.direction)
+    return blocks

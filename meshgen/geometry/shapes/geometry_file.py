@@ -1,0 +1,143 @@
+"""The YAML geometry file: a shape file (or one surface file per patch) with its face assignment
+and patch names and types, so that ``meshgen mesh -g duct.yaml`` is explicit and repeatable::
+
+    surface: duct.stl          # STL/OBJ/PLY or STEP/STP/IGES/IGS/BREP, relative to this file
+    # patches:                 # instead of surface: one closed surface split in files, one per patch
+    #   inlet: inlet.stl
+    #   walls: {file: walls.stl, type: wall}
+    feature_angle: 40          # degrees: sharp edges that split a single surface into patches
+    faces:                     # cube face -> patch (solid, CAD face, file or patchN name)
+      zeta0: inlet
+      zeta1: outlet
+      xi0: inner
+      xi1: outer
+      eta0: floor
+      eta1: ceiling
+    # corners:                 # instead of faces: the eight corner points at the cube's corners
+    #   [[x, y, z], ...]        # (xi, eta, zeta) = (0,0,0), (0,0,1), (0,1,0), (0,1,1), (1,0,0), ...
+    rename: {patch1: inlet}    # patch names as written to the mesh files
+    types: {inlet: patch, outlet: patch, floor: symmetry}   # default: by name (wall otherwise)
+
+Every key is optional except ``surface`` or ``patches``. ``faces`` must name all six faces;
+``corners`` (eight points, each within 1e-6 of the size of a corner vertex) fixes the assignment
+instead. A left-handed assignment is refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import GeometryError
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, shape_geometry
+from meshgen.geometry.shapes.cad import cad_block
+from meshgen.geometry.shapes.faces import FACE_NAMES
+from meshgen.geometry.shapes.triangulated import surface_block
+
+__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "read_geometry_file"]
+
+GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types")
+
+
+def read_geometry_file(path: Path) -> dict:
+    """The YAML mapping of a geometry file, with its keys checked."""
+    import yaml
+
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise GeometryError(f"geometry file {path} cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
+    if not text.strip():
+        raise GeometryError(f"geometry file {path} is empty")
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        line = f" (line {where.line + 1})" if where is not None else ""
+        raise GeometryError(f"geometry file {path} is not valid YAML{line}") from None
+    if not isinstance(data, dict):
+        raise GeometryError(f"geometry file {path} must be a mapping with 'surface' or 'patches'")
+    unknown = [k for k in data if k not in GEOMETRY_FILE_KEYS]
+    if unknown:
+        raise GeometryError(f"geometry file {path}: unknown key '{unknown[0]}' (keys: {', '.join(GEOMETRY_FILE_KEYS)})")
+    if ("surface" in data) == ("patches" in data):
+        raise GeometryError(
+            f"geometry file {path} needs exactly one of 'surface' (a shape file) and 'patches' (one file per patch)"
+        )
+    for key in ("faces", "rename", "types"):
+        value = data.get(key)
+        if value is not None and not (isinstance(value, dict) and all(isinstance(v, str) for v in value.values())):
+            raise GeometryError(f"geometry file {path}: '{key}' must map names to names")
+    faces = data.get("faces")
+    if faces is not None and sorted(faces) != sorted(FACE_NAMES):
+        raise GeometryError(f"geometry file {path}: 'faces' must name each of {', '.join(FACE_NAMES)} once")
+    corners = data.get("corners")
+    if corners is not None:
+        if faces is not None:
+            raise GeometryError(f"geometry file {path}: give 'faces' or 'corners', not both")
+        try:
+            array = np.array(corners, dtype=float)
+        except (TypeError, ValueError):
+            array = np.zeros(0)
+        if array.shape != (8, 3) or not np.all(np.isfinite(array)):
+            raise GeometryError(f"geometry file {path}: 'corners' must be eight points [x, y, z]")
+    angle = data.get("feature_angle")
+    if angle is not None and (isinstance(angle, bool) or not isinstance(angle, (int, float)) or not 0 < angle < 180):
+        raise GeometryError(f"geometry file {path}: 'feature_angle' must be a number of degrees between 0 and 180")
+    return data
+
+
+def _named_file(base: Path, value, path: Path, what: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise GeometryError(f"geometry file {path}: {what} must be a file name")
+    file = (base / value).expanduser()
+    if not file.is_file():
+        raise GeometryError(f"geometry file {path}: the file {value} named for {what} does not exist")
+    return file
+
+
+def load_geometry_file(path) -> object:
+    """The Geometry a YAML geometry file describes (module docstring)."""
+    path = Path(path)
+    data = read_geometry_file(path)
+    base = path.parent
+    types = dict(data.get("types") or {})
+    faces = data.get("faces")
+    corners = data.get("corners")
+    rename = dict(data.get("rename") or {})
+    if "surface" in data:
+        file = _named_file(base, data["surface"], path, "'surface'")
+        suffix = file.suffix.lower()
+        options = {"yaml": path.read_bytes().hex()}  # the whole file: faces, corners, angle
+        if suffix in CAD_FORMATS:
+            block = cad_block(file, faces, content_hash([file], options), corners)
+            kind = "CAD solid"
+        elif suffix in TRIANGULATED_FORMATS:
+            block = surface_block(
+                [file], str(file), None, data.get("feature_angle"), faces, content_hash([file], options), corners
+            )
+            kind = "surface"
+        else:
+            raise GeometryError(f"geometry file {path}: 'surface' {data['surface']}: unknown format {suffix or '(none)'}")
+    else:
+        patches = data["patches"]
+        if not isinstance(patches, dict) or len(patches) == 0:
+            raise GeometryError(f"geometry file {path}: 'patches' must map patch names to files")
+        names, files = [], []
+        for name, entry in patches.items():
+            if isinstance(entry, dict):
+                if "type" in entry:
+                    types.setdefault(str(name), str(entry["type"]))
+                entry = entry.get("file")
+            files.append(_named_file(base, entry, path, f"patch '{name}'"))
+            names.append(str(name))
+        bad = [f for f in files if f.suffix.lower() not in TRIANGULATED_FORMATS]
+        if bad:
+            raise GeometryError(
+                f"geometry file {path}: patch file {bad[0].name} is not a surface ({', '.join(TRIANGULATED_FORMATS)})"
+            )
+        options = {"yaml": path.read_bytes().hex()}
+        block = surface_block(files, str(path), names, None, faces, content_hash(files, options), corners)
+        kind = "surface"
+    return shape_geometry(block, path, kind, types, rename)
