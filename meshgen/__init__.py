@@ -23,10 +23,9 @@ The node array ``X`` is the one currency between the parts: shape ``(n1+1, n2+1,
 
 Everything else lives in its module (``from meshgen.methods.tfi import transfinite``, ``from
 meshgen.run.request import MeshRequest, carry_out``, ``from meshgen.quality import cell_metrics``).
-``meshgen.methods.tfi`` and ``meshgen.methods.elliptic`` are the functions above; their modules are reached with
-``from meshgen.methods.tfi import ...`` / ``from meshgen.methods.elliptic import ...``. The names are imported
-lazily, so ``import meshgen`` stays cheap (no torch, no trimesh).
-"""
+``meshgen.tfi`` and ``meshgen.elliptic`` are the functions above; their modules are reached with
+``from meshgen.methods.tfi import ...`` / ``from meshgen.methods.elliptic import ...``. The names are
+imported lazily, so ``import meshgen`` stays cheap (no torch, no trimesh)."""
 
 import importlib
 import importlib.abc
