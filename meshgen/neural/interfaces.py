@@ -1,4 +1,4 @@
-"""What a block set's networks are trained on (design notes §20):
+"""The terms across the interfaces of a set of several blocks, and its problem (design notes §20):
 one MLP per block, all in normalised units of the whole set, and the loss terms that make them one
 mesh.
 
@@ -26,8 +26,8 @@ from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet
 from meshgen.methods.elliptic_blocks import junction_nodes, mean_length
 from meshgen.methods.tfi import tfi, transfinite
-from meshgen.neural.block_inference import face_plane
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
+from meshgen.neural.inference import face_plane
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
 from meshgen.neural.model import MLP
 from meshgen.neural.winslow import winslow_residual
