@@ -39,7 +39,15 @@ from meshgen.neural.model import INPUT_MAP
 from meshgen.neural.pcgrad import assign, flatten
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import Job, Stage
-from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, combined_gradients, make_optimizer
+from meshgen.neural.steps import (
+    DEVICE_BLOCK,
+    AdamSteps,
+    TermRunner,
+    Training,
+    combined_gradients,
+    lbfgs_optimizer,
+    make_optimizer,
+)
 from meshgen.quality import quality_report, write_json
 
 __all__ = [
@@ -153,15 +161,6 @@ def _pretrain_step(training: Training, optimizer, pools) -> dict:
         return {"total": loss()}
 
 
-def _lbfgs_optimizer(training: Training):
-    """The L-BFGS stage's optimiser, the networks first moved to float64 with ``lbfgs.float64`` (the
-    terms follow the networks' type): in float32 the finite-difference residual's round-off stops
-    L-BFGS above what the networks can reach (design notes §18)."""
-    if training.config.lbfgs.float64:
-        training.network.double()
-    return make_optimizer("lbfgs", training.network, training.weights, training.config)
-
-
 def _held_out_config(config):
     """``config`` with the held-out draw's sizes (``test.interior``, ``test.boundary``) as its points'."""
     points = dataclasses.replace(config.points, interior=config.test.interior, boundary=config.test.boundary)
@@ -242,7 +241,7 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
         ),
         Stage(
             "lbfgs",
-            optimizer=_lbfgs_optimizer,
+            optimizer=lbfgs_optimizer,
             points=lambda t, state: lbfgs_points(t, pool_count),
             step=lambda t, optimizer, scheduler, points: _lbfgs_step(t, optimizer, *points),
         ),

@@ -61,6 +61,7 @@ from meshgen.neural.steps import (
     TermRunner,
     Training,
     adam_gradients,
+    lbfgs_optimizer,
     lbfgs_step,
     make_optimizer,
     pretrain_step,
@@ -104,14 +105,6 @@ def adam_steps(training: Training) -> AdamSteps:
         lambda: sample_step(config, problem, generator, pool),
         lambda inputs: adam_gradients(training, inputs, pool),
     )
-
-
-def lbfgs_optimizer(training: Training):
-    """The L-BFGS stage's optimiser, the network first moved to float64 with ``lbfgs.float64`` (its
-    residual then follows: ``meshgen.neural.problem.network_dtype``)."""
-    if training.config.lbfgs.float64:
-        training.network.double()
-    return make_optimizer("lbfgs", training.network, training.weights, training.config)
 
 
 STAGE_TABLE = (
