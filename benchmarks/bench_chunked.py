@@ -160,7 +160,7 @@ def gpu_row(repeats: int = 3) -> dict:
 
     if not torch.cuda.is_available():
         return {"skipped": "no CUDA device on this machine (torch.cuda.is_available() is False)"}
-    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.gpu_forward import evaluate_on_grid
     from meshgen.neural.model import MLP, describe
 
     torch.manual_seed(0)

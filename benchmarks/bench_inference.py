@@ -4,7 +4,7 @@
 
 Figures (targets for a 2-core CPU):
 
-- inference: ``meshgen.neural.inference.evaluate_on_grid`` on 101^3 nodes through a random
+- inference: ``meshgen.neural.gpu_forward.evaluate_on_grid`` on 101^3 nodes through a random
   [85]*4 tanh network, median of 5 (target 0.6 s), next to the float32 matrix-product roof: the
   network's flop count divided by the GFLOP/s of a large sgemm measured here;
 - end to end: ``meshgen mesh --dims 100 100 100 -o out.vtu`` in a fresh folder (no ./runs/, so
@@ -78,7 +78,7 @@ def network_flops(widths, dim: int, nodes: int) -> float:
 def inference_seconds(repeats: int) -> list[float]:
     import torch
 
-    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.gpu_forward import evaluate_on_grid
     from meshgen.neural.model import MLP, describe
 
     torch.manual_seed(0)

@@ -14,9 +14,9 @@ from meshgen.errors import MeshgenError
 from meshgen.geometry.blocks import face_index, load_block_set, tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
 from meshgen.methods.elliptic_blocks import elliptic_blocks
-from meshgen.neural.block_inference import check_start_model, network_blocks, neural_blocks
-from meshgen.neural.block_train import train_blocks
 from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.inference import check_start_model, network_blocks, neural_blocks
+from meshgen.neural.train import train
 
 TINY_BLOCKS = ("pretrain.steps=20", "pretrain.points=300", "lbfgs.max_iter=10", "adam.steps=20", "model.widths=[16,16]")
 
@@ -121,7 +121,7 @@ def test_the_3d_elliptic_mesh_is_the_extrusion_of_its_section_mesh(name, dims):
 @pytest.fixture(scope="module")
 def section_model(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("pipe-section")
-    result = train_blocks(tiny_config(*TINY_BLOCKS), load_block_set("pipe", None, (4, 2, 4)), run_dir, geometry_spec="pipe")
+    result = train(tiny_config(*TINY_BLOCKS), load_block_set("pipe", None, (4, 2, 4)), run_dir, geometry_spec="pipe")
     return result.checkpoint_path, load_checkpoint(result.checkpoint_path)
 
 
@@ -188,8 +188,8 @@ def test_a_set_that_is_not_an_extrusion_trains_3d_networks_and_meshes_conforming
     spec = _variant(tmp_path, "cone", "xyz[:, :2] *= (1.0 + 0.2 * zeta)[:, None]")
     block_set = load_block_set(spec, None, (4, 2, 4))
     run_dir = tmp_path / "run"
-    run_dir.mkdir()  # the command line claims the folder; train_blocks writes into it
-    result = train_blocks(tiny_config(*TINY_BLOCKS), block_set, run_dir, summary=False, geometry_spec=spec)
+    run_dir.mkdir()  # the command line claims the folder; train writes into it
+    result = train(tiny_config(*TINY_BLOCKS), block_set, run_dir, summary=False, geometry_spec=spec)
     model = load_checkpoint(result.checkpoint_path)["model"]
     assert model["dim"] == 3 and "extruded" not in model
     block_set = load_block_set(spec, None, (6, 3, 5))

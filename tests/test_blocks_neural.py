@@ -13,8 +13,8 @@ from meshgen.errors import MeshgenError
 from meshgen.formats.multiblock import read_zones
 from meshgen.geometry.blocks import face_index, load_block_set
 from meshgen.geometry.extrusion import extrusion_of, section_of
-from meshgen.neural.block_train import train_blocks
 from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.train import train
 from meshgen.run.request import MeshRequest, carry_out
 
 RADIUS, LENGTH = 0.5, 4.0  # the pipe's defaults
@@ -29,7 +29,7 @@ def pipe_checkpoint(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("pipe-run")
     config = tiny_config(*TINY_BLOCKS)
     block_set = load_block_set("pipe", None, (4, 2, 4))
-    result = train_blocks(config, block_set, run_dir, summary=False, geometry_spec="pipe")
+    result = train(config, block_set, run_dir, summary=False, geometry_spec="pipe")
     return result.checkpoint_path
 
 
@@ -70,8 +70,8 @@ def test_interface_stencil_is_the_winslow_residual_of_one_smooth_map():
     import torch
 
     from meshgen.geometry import cube
-    from meshgen.neural.block_problem import INTERFACE_STEP, BlockProblem, interface_stencil
     from meshgen.neural.derivatives import stencil_derivatives
+    from meshgen.neural.interfaces import INTERFACE_STEP, BlockProblem, interface_stencil
     from meshgen.neural.winslow import winslow_residual
 
     def smooth(p):
@@ -152,7 +152,7 @@ def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_floa
     stage; the terms computed in float64 agree with the float32 ones to float32's precision."""
     import torch
 
-    from meshgen.neural.block_problem import (
+    from meshgen.neural.interfaces import (
         BlockNetworks,
         block_boundary_term,
         block_pde_term,
@@ -164,7 +164,7 @@ def test_a_block_run_honours_lbfgs_float64_and_its_float64_terms_agree_with_floa
 
     config = tiny_config(*TINY_BLOCKS, "adam.steps=2", "pretrain.steps=2", "lbfgs.max_iter=3", "lbfgs.float64=true")
     block_set = load_block_set("pipe", None, (4, 2, 4))
-    result = train_blocks(config, block_set, tmp_path, summary=False, geometry_spec="pipe")
+    result = train(config, block_set, tmp_path, summary=False, geometry_spec="pipe")
     checkpoint = load_checkpoint(result.checkpoint_path)
     weights = checkpoint["model"]["state_dict"]
     assert {value.dtype for value in weights.values()} == {torch.float64}
@@ -196,7 +196,7 @@ def test_junction_edges_of_the_pipe_and_their_weights():
     end at the core (xi = 0), not the one on the wall. Weights: (d / margin)^2, capped at 1."""
     import torch
 
-    from meshgen.neural.block_problem import JUNCTION_MARGIN, block_problem, junction_weights
+    from meshgen.neural.interfaces import JUNCTION_MARGIN, block_problem, junction_weights
 
     block_set = load_block_set("pipe", None, (4, 2, 4))
     problem = block_problem(block_set, torch.device("cpu"))
@@ -221,7 +221,7 @@ def test_the_pull_towards_the_tfi_adds_its_weighted_distance_to_l1():
     import torch
 
     from meshgen.methods.tfi import transfinite
-    from meshgen.neural.block_problem import (
+    from meshgen.neural.interfaces import (
         TFI_ANCHOR,
         BlockNetworks,
         block_pde_term,

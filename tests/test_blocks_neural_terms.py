@@ -10,7 +10,8 @@ from neural_helpers import tiny_config
 
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import load_block_set
-from meshgen.neural.block_problem import (
+from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.interfaces import (
     INTERFACE_STEP,
     JUNCTION_STEP,
     BlockNetworks,
@@ -22,8 +23,7 @@ from meshgen.neural.block_problem import (
     junction_rows,
     lattice_tangents,
 )
-from meshgen.neural.block_train import train_blocks
-from meshgen.neural.checkpoint import load_checkpoint
+from meshgen.neural.train import train
 
 
 class Map(torch.nn.Module):
@@ -124,9 +124,7 @@ def test_the_lbfgs_lattices_are_regular_and_the_same_on_every_face():
 def tiny_pipe(tmp_path_factory):
     run_dir = tmp_path_factory.mktemp("pipe-init")
     config = tiny_config(*TINY_BLOCKS)
-    return train_blocks(
-        config, load_block_set("pipe", None, (4, 2, 4)), run_dir, summary=False, geometry_spec="pipe"
-    ).checkpoint_path
+    return train(config, load_block_set("pipe", None, (4, 2, 4)), run_dir, summary=False, geometry_spec="pipe").checkpoint_path
 
 
 def test_init_starts_a_new_run_from_the_checkpoints_weights(tiny_pipe, run_cli, tmp_path):
@@ -184,7 +182,7 @@ def test_tfi_anchor_weighs_the_pull_towards_the_tfi_in_l1(weight):
     """L1 = the residual part + tfi_anchor times the mean over blocks of the mean squared distance
     from the TFI at the pool's points (computed here with NumPy's TFI); 0 leaves the residual alone."""
     from meshgen.methods.tfi import transfinite
-    from meshgen.neural.block_problem import BlockNetworks, block_pde_term, block_samples, tfi_anchor_pool
+    from meshgen.neural.interfaces import BlockNetworks, block_pde_term, block_samples, tfi_anchor_pool
 
     config = tiny_config(*TINY_BLOCKS, f"method.tfi_anchor={weight}")
     problem = block_problem(load_block_set("pipe", None, (4, 2, 4)), torch.device("cpu"))

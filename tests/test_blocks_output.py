@@ -208,8 +208,8 @@ def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
     nodes slide in their planes; the neural one by construction: the benchmark model's section,
     extruded): the finite-volume potential flow from a uniform inlet is uniform to solver accuracy."""
     from meshgen.methods.elliptic_blocks import elliptic_blocks
-    from meshgen.neural.block_inference import neural_blocks
     from meshgen.neural.checkpoint import load_checkpoint
+    from meshgen.neural.inference import neural_blocks
 
     length = 4.0 if method == "neural" else 1.0  # the benchmark model's pipe
     block_set = load_block_set("pipe", {"length": length}, (6, 3, 4))

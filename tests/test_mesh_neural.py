@@ -20,7 +20,7 @@ from meshgen.methods.tfi import parametric_grid, tfi, transfinite, transfinite_o
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.checkpoint_data import read_plain_checkpoint
 from meshgen.neural.config import resolve_config, to_dict
-from meshgen.neural.inference import evaluate_on_grid
+from meshgen.neural.gpu_forward import evaluate_on_grid
 from meshgen.neural.model import bubble, network_from_description
 from meshgen.neural.models import MODELS_DIR
 from meshgen.neural.network_map import mesh_from_model

@@ -42,7 +42,7 @@ def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers):
 
 
 def test_the_checkpoint_reads_as_torch_loads_it(tmp_path):
-    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.gpu_forward import evaluate_on_grid
 
     expected = torch.load(BUNDLED, map_location="cpu", weights_only=True)
     read = read_checkpoint(BUNDLED)

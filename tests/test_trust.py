@@ -380,7 +380,7 @@ def test_a_checkpoint_with_nan_weights_is_an_error_and_writes_nothing(tmp_path, 
 def test_a_non_finite_network_output_is_an_error(semidisk_checkpoint):
     """Finite weights whose product overflows float32: the output check, not the weight check."""
     from meshgen.errors import MeshgenError
-    from meshgen.neural.inference import evaluate_on_grid
+    from meshgen.neural.gpu_forward import evaluate_on_grid
 
     model = dict(semidisk_checkpoint["model"])
     state = dict(model["state_dict"])

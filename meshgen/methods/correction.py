@@ -5,7 +5,7 @@ is the geometry's boundary map g. A map N that misses it (a trained network's) b
 X = N + TFI[g - N]: the error g - N at the face nodes, interpolated into the volume by the same
 Gordon-Hall sum as TFI. Exact on the boundary, smooth inside; the face terms are made once, and
 any block of the grid can be corrected from them (``correction_terms``, ``add_correction_terms``;
-the errors from the grid's faces alone: ``meshgen.neural.inference.model_boundary_errors``), which
+the errors from the grid's faces alone: ``meshgen.neural.network_map.model_boundary_errors``), which
 is how the chunked path (``meshgen.run.chunked``) corrects a mesh larger than memory.
 """
 

@@ -16,7 +16,7 @@ its network and model description, and meshing a member.
 
 Meshing one member is one forward pass: the varied inputs are constant over the grid, so they fold
 into the first layer's bias, which leaves a plain exact-boundary model description
-(``member_model``) for the fast inference of ``meshgen.neural.inference``.
+(``member_model``) for the fast inference of ``meshgen.neural.network_map``.
 
 Derivatives with respect to the parameters (``FamilyMesher``): the network term by autograd; the
 TFI term by a custom autograd function whose backward takes central differences of the plugin's TFI

@@ -1,7 +1,7 @@
 """The trained network's forward pass in NumPy: a small tanh MLP is a few float32 matrix products,
 so meshing with a trained model needs no torch.
 
-``forward_on_grid(model, coords)`` is ``meshgen.neural.inference.evaluate_on_grid`` without torch:
+``forward_on_grid(model, coords)`` is ``meshgen.neural.gpu_forward.evaluate_on_grid`` without torch:
 the same inputs u = 2 xi - 1 in float32, the same layers (x W^T + b, tanh between), float32
 throughout, the result as float64. It agrees with torch's forward to float32 round-off (the two
 libraries' products sum in different orders; tested).

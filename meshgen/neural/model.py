@@ -15,7 +15,7 @@ layer but the last, and returns N(xi) in normalised units. The physical map is
 
 with TFI the transfinite interpolant of the geometry's boundary map; b vanishes on the cube's
 boundary, so there the map is the geometry's boundary exactly. ``mesh_from_checkpoint`` evaluates
-either form on a tensor grid (``meshgen.neural.inference``).
+either form on a tensor grid (``meshgen.neural.network_map``).
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def mesh_from_checkpoint(checkpoint: dict, coords, geometry=None, chunk: int | N
     ``checkpoint``: a dict from ``load_checkpoint`` (only ``"model"`` and, for the exact-boundary form
     without ``geometry``, ``"geometry"`` are read). ``geometry``: the bound Geometry, needed for the
     exact-boundary form (loaded from the checkpoint's name and parameters when omitted).
-    Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.inference``).
+    Evaluated without autograd in cache-sized chunks of nodes (``meshgen.neural.network_map``).
     Returns the node array X, shape (len(coords[0]), ..., dim), float64.
     """
     model = checkpoint["model"]

@@ -4,7 +4,8 @@ Model choice (``find_model``): an explicit checkpoint; else the newest ``runs/*/
 (skipping runs of another geometry or other parameters than the ones given); else the model
 bundled in ``meshgen/_models/`` for its geometry with default parameters.
 
-The method (``build_neural``): the model's map on the tensor grid (``meshgen.neural.network_map``),
+The method (``build_neural``): the model's map on the tensor grid (``meshgen.neural.inference.block_nodes``,
+the path every block of a block set takes too),
 then the boundary correction X = N + TFI[g - N] (``meshgen.methods.correction``).
 """
 
@@ -24,10 +25,9 @@ from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.correction import boundary_errors, correct_boundary, error_figures
 from meshgen.methods.polish import NOT_POLISHED_REASON, polishes_by_default
 from meshgen.methods.polish import polish as polish_mesh
-from meshgen.neural.block_inference import check_block_model, is_block_model
-from meshgen.neural.checkpoint_data import CheckpointError, check_network, read_plain_checkpoint
+from meshgen.neural.checkpoint_data import CheckpointError, read_plain_checkpoint
 from meshgen.neural.config import ConfigError, dotted_items, preset_paths, resolve_config, schema, to_dict
-from meshgen.neural.network_map import mesh_from_model
+from meshgen.neural.inference import block_nodes, check_model, is_block_model
 
 __all__ = [
     "MODELS_DIR",
@@ -180,10 +180,7 @@ def load_model(path, source: str = "checkpoint", record: dict | None = None) -> 
         raise CheckpointError(
             f"checkpoint {path} holds a family of shapes: mesh a member with --checkpoint {path} --param name=value"
         )
-    if is_block_model(checkpoint["model"]):  # one network per block (meshgen.neural.block_train)
-        check_block_model(checkpoint["model"])
-    else:
-        check_network(checkpoint["model"])  # a foreign model description fails here, before any work
+    check_model(checkpoint["model"])  # a foreign model description fails here, before any work
     return TrainedModel(path, checkpoint, source, record or {})
 
 
@@ -270,7 +267,7 @@ def build_neural(geometry, coords, model=None, correct=True, device="auto", poli
     if len(coords) != model.dim:
         raise ParameterError("dims", f"model {model.path} is {model.dim}D: {{name}} needs {model.dim} numbers, got {len(coords)}")
     geometry = with_layout(geometry, trained_layout(model.checkpoint))  # the boundary it was trained on
-    X = mesh_from_model(model.checkpoint["model"], coords, geometry, device=device)
+    X = block_nodes(model.checkpoint["model"], 0, coords, geometry, device=device)  # the one inference path
     info = {"model": model.metadata(), "warnings": []}
     if correct:
         info["correction"] = correct_boundary(X, geometry, coords)

@@ -3,7 +3,7 @@ soft or exact boundary), ``model_boundary_errors`` (its boundary error from the 
 and ``evaluate_network``, the forward pass on the device asked for.
 
 On a CPU the forward pass is NumPy's (``meshgen.neural.mlp_numpy``: a tanh MLP is a few float32 matrix
-products), so meshing with a trained model imports no torch; torch (``meshgen.neural.inference``)
+products), so meshing with a trained model imports no torch; torch (``meshgen.neural.gpu_forward``)
 runs it on a GPU only: ``--device cuda``, or ``auto`` where ``meshgen.neural.device`` finds one.
 """
 
@@ -26,7 +26,7 @@ def evaluate_network(model: dict, coords, out=None, chunk: int = CHUNK_NODES, wo
     [* n3], d) float64, nodes in C order, written into ``out`` when given. ``device``: "cpu",
     "cuda" or "auto" (``inference_device``); only cuda imports torch."""
     if inference_device(device) == "cuda":
-        from meshgen.neural.inference import evaluate_on_grid  # torch
+        from meshgen.neural.gpu_forward import evaluate_on_grid  # torch
 
         return evaluate_on_grid(model, coords, out=out, device="cuda")
     check_network(model)

@@ -14,7 +14,6 @@ from pathlib import Path
 from meshgen.errors import MeshgenError
 from meshgen.geometry.blocks import is_multiblock, load_block_set
 from meshgen.geometry.plugins import load_geometry, load_recorded_geometry, looks_like_path, parse_params
-from meshgen.neural.block_inference import check_start_model, is_block_model
 from meshgen.neural.config import (
     ConfigError,
     dotted_items,
@@ -27,6 +26,7 @@ from meshgen.neural.config import (
     validate,
 )
 from meshgen.neural.device import inference_device
+from meshgen.neural.inference import check_start_model, is_block_model
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
 from meshgen.run.limits import check_training_memory
@@ -179,7 +179,7 @@ def prepare_run(
             raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
         _refuse_block_only_keys(config, blocks, geometry_object.name)
         if blocks:  # keys a block set cannot use are refused, not ignored
-            from meshgen.neural.block_train import check_block_keys
+            from meshgen.neural.interface_stages import check_block_keys
 
             check_block_keys(config, f"block set '{geometry_object.name}'")
         if vary:
@@ -202,7 +202,7 @@ def prepare_run(
     fresh_name = out is None and resume is None
     block_set = None
     if blocks:  # its blocks, interfaces and patches checked now, before the run folder exists
-        from meshgen.neural.block_train import SUMMARY_DIMS
+        from meshgen.neural.interface_stages import SUMMARY_DIMS
 
         block_set = load_block_set(geometry, geometry_object.values, (SUMMARY_DIMS,) * geometry_object.dim)
     started = None if init is None else {"path": str(init), "checkpoint": check_init(init, config, geometry_object, block_set)}
@@ -305,19 +305,17 @@ def _family(config, geometry, spec: str, params, vary):
 
 
 def _trainer(run: Run):
-    """(training function, what it trains, its extra keywords) of ``run``: a family, a block set
-    or one shape, all run by the one stage runner (design notes §15)."""
+    """(training function, what it trains, its extra keywords) of ``run``: a family, or the
+    geometry's set of networks (``meshgen.neural.train.train``: one block, or a block set's
+    ``block_set``), all run by the one stage runner (design notes §15)."""
     if run.family is not None:
         from meshgen.neural.family_train import train_family
 
         return train_family, run.family, {}
-    if run.block_set is not None:
-        from meshgen.neural.block_train import train_blocks
-
-        return train_blocks, run.block_set, {"geometry_spec": run.geometry_spec, "init": run.init}
     from meshgen.neural.train import train
 
-    return train, run.geometry, {"geometry_spec": run.geometry_spec}
+    subject = run.block_set if run.block_set is not None else run.geometry
+    return train, subject, {"geometry_spec": run.geometry_spec, "init": run.init}
 
 
 def run_training(run: Run, quiet: bool = False):

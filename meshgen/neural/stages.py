@@ -1,5 +1,5 @@
-"""The stage runner: one training loop for a single shape (``meshgen.neural.train``) and for a
-family of shapes (``meshgen.neural.family_train``), design notes §6.
+"""The stage runner: one training loop for a geometry's set of networks (one block or several,
+``meshgen.neural.train``) and for a family of shapes (``meshgen.neural.family_train``), design notes §6.
 
 A run is a table of :class:`Stage` rows (optimiser, fixed points, one step, what to do first, how
 many steps to take between two reads from the device); :func:`run_stages` goes through it: resume
@@ -25,7 +25,16 @@ from meshgen.neural.config import to_dict, to_yaml
 from meshgen.neural.history import DivergenceGuard, TrainState, format_row, open_history, read_rows, state_to_checkpoint
 from meshgen.neural.steps import Training
 
-__all__ = ["CONFIG_HEADER", "CheckpointWriter", "Stage", "TrainResult", "TrainingDiverged", "check_resumable", "run_stages"]
+__all__ = [
+    "CONFIG_HEADER",
+    "CheckpointWriter",
+    "Job",
+    "Stage",
+    "TrainResult",
+    "TrainingDiverged",
+    "check_resumable",
+    "run_stages",
+]
 
 CONFIG_HEADER = "# meshgen train: the resolved configuration of this run (repeat it with --config FILE)\n"
 
@@ -46,6 +55,20 @@ class Stage:
     start: Callable = lambda training, say: None  # (Training, say) before the stage's first step
     # (Training) -> steps taken between two reads of their rows (one wait for the device)
     block: Callable = lambda training: 1
+
+
+@dataclass
+class Job:
+    """A run set up for the runner (``meshgen.neural.train.train``): the Training and its
+    TrainState, the stage table, ``describe()`` (what the checkpoint records of the model, the
+    geometry and the held-out loss) and ``summary(checkpoint, run_dir)`` (the end-of-run quality
+    summary, written to ``summary.json``)."""
+
+    training: Training
+    state: TrainState
+    table: tuple
+    describe: Callable[[], dict]
+    summary: Callable
 
 
 @dataclass

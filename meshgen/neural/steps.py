@@ -30,6 +30,7 @@ __all__ = [
     "Training",
     "adam_gradients",
     "apply_adam",
+    "lbfgs_optimizer",
     "lbfgs_step",
     "make_optimizer",
     "pretrain_step",
@@ -226,3 +227,12 @@ def make_optimizer(stage: str, network, weights, config: TrainConfig):
         tolerance_change=0.0,
     )
     return optimizer, None
+
+
+def lbfgs_optimizer(training: Training):
+    """The L-BFGS stage's optimiser (one block or a block set), the networks first moved to float64
+    with ``lbfgs.float64`` (the terms follow the weights' type): in float32 the finite-difference
+    residual's round-off stops L-BFGS above what the networks can reach (design notes §18)."""
+    if training.config.lbfgs.float64:
+        training.network.double()
+    return make_optimizer("lbfgs", training.network, training.weights, training.config)

@@ -1,7 +1,14 @@
-"""Training a mesh network (design notes §6): the stage table of one shape, run by
-``meshgen.neural.stages.run_stages``.
+"""Training the networks of a geometry (design notes §6, §20): ``train``, the one training entry.
 
-One run goes through up to three stages, each a number of steps in the configuration:
+Every geometry is a set of blocks, one network per block. A geometry of one boundary map is a set
+of one block: one network, trained on the terms of ``meshgen.neural.problem`` by the stage table
+below (exactly 0.2's single-shape training, checkpoint layout included); a set of several blocks
+adds the terms across its interfaces (``meshgen.neural.interfaces``, its stage table in
+``meshgen.neural.interface_stages``). Both go through one stage runner
+(``meshgen.neural.stages.run_stages``), one checkpoint writer, one run folder layout and one
+summary step, and their models are read by one inference path (``meshgen.neural.inference``).
+
+One run of one block goes through up to three stages, each a number of steps in the configuration:
 
 1. ``pretrain``: an L-BFGS least-squares fit of the network to TFI, so that training starts from
    a valid map that meets the boundary instead of a random one that first cuts the geometry's
@@ -27,11 +34,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from meshgen.errors import MeshgenError
+from meshgen.geometry.blocks import BlockSet
 from meshgen.geometry.layout import with_layout
 from meshgen.methods.correction import correct_boundary
 from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.neural.config import TrainConfig
 from meshgen.neural.history import TrainState, state_from_checkpoint
+from meshgen.neural.interface_stages import set_job
 from meshgen.neural.model import MLP, describe, mesh_from_checkpoint, normalisation, normalised_boundary
 from meshgen.neural.problem import (
     Problem,
@@ -44,20 +54,31 @@ from meshgen.neural.problem import (
     test_loss,
 )
 from meshgen.neural.reweighting import UncertaintyWeights
-from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
+from meshgen.neural.stages import CheckpointWriter, Job, Stage, TrainResult, run_stages
 from meshgen.neural.steps import (
     DEVICE_BLOCK,
     AdamSteps,
     TermRunner,
     Training,
     adam_gradients,
+    lbfgs_optimizer,
     lbfgs_step,
     make_optimizer,
     pretrain_step,
 )
 from meshgen.quality import quality_report, write_json
 
-__all__ = ["STAGES", "STAGE_TABLE", "SUMMARY_CELLS", "adam_steps", "corrected", "start_training", "train", "write_summary"]
+__all__ = [
+    "STAGES",
+    "STAGE_TABLE",
+    "SUMMARY_CELLS",
+    "adam_steps",
+    "corrected",
+    "one_block_job",
+    "start_training",
+    "train",
+    "write_summary",
+]
 
 SUMMARY_CELLS = 30  # the final quality summary meshes 30^dim cells
 
@@ -84,14 +105,6 @@ def adam_steps(training: Training) -> AdamSteps:
         lambda: sample_step(config, problem, generator, pool),
         lambda inputs: adam_gradients(training, inputs, pool),
     )
-
-
-def lbfgs_optimizer(training: Training):
-    """The L-BFGS stage's optimiser, the network first moved to float64 with ``lbfgs.float64`` (its
-    residual then follows: ``meshgen.neural.problem.network_dtype``)."""
-    if training.config.lbfgs.float64:
-        training.network.double()
-    return make_optimizer("lbfgs", training.network, training.weights, training.config)
 
 
 STAGE_TABLE = (
@@ -121,7 +134,7 @@ STAGES = tuple(stage.name for stage in STAGE_TABLE)
 
 def train(
     config: TrainConfig,
-    geometry,
+    subject,
     run_dir,
     *,
     device: str = "cpu",
@@ -130,21 +143,44 @@ def train(
     stop=None,
     geometry_spec: str | None = None,
     summary: bool = True,
+    init: dict | None = None,
 ) -> TrainResult:
-    """Train (or, with ``resume`` = a loaded checkpoint, continue training) a mesh network.
+    """Train (or, with ``resume`` = a loaded checkpoint, continue training) the networks of
+    ``subject``: a Geometry (a set of one block, one network: :func:`one_block_job`) or a
+    ``meshgen.geometry.blocks.BlockSet`` of several blocks (one network per block, with interface
+    terms: ``meshgen.neural.interface_stages.set_job``).
 
     ``run_dir``: existing folder for ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and
     ``summary.json``. ``reporter``: an object with ``stage(name, done, total)``,
     ``update(row, done, total)`` and ``message(text)`` (see ``meshgen.neural.progress``), or None.
     ``stop``: a callable polled before each step; when it returns True the state is saved and the
     run returns with ``interrupted=True``. ``geometry_spec``: how to load the geometry again (its
-    name or plugin path; default its name). ``summary``: mesh 30^d cells at the end and write the
-    quality summary. On a CPU with two or more torch threads, the two terms of a step run side by
-    side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
+    name or plugin path; default its name). ``summary``: mesh the geometry at the end and write the
+    quality summary. ``init`` ({"path", "checkpoint"}, ``meshgen train --init``): a block set's new
+    run starting from a checkpoint's weights. On a CPU with two or more torch threads, the two
+    terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
     """
-    geometry = with_layout(geometry, config.boundary_layout)  # the boundary the network learns
     run_dir = Path(run_dir)
-    training, state = start_training(config, geometry, torch.device(device), resume)
+    if isinstance(subject, BlockSet):
+        job = set_job(config, subject, torch.device(device), resume, geometry_spec, init)
+    elif init is not None:
+        raise MeshgenError(f"--init is made for block sets (one network per block); '{subject.name}' is one block")
+    else:
+        job = one_block_job(config, subject, torch.device(device), resume, geometry_spec)
+    saver = CheckpointWriter(job.training, job.describe, run_dir / "checkpoint.pt", job.state)
+    checkpoint, interrupted = run_stages(
+        job.table, job.training, job.state, saver, run_dir, resume=resume, reporter=reporter, stop=stop
+    )
+    quality = job.summary(checkpoint, run_dir) if summary and not interrupted else None
+    return TrainResult.of_run(saver, job.state, interrupted, checkpoint, quality)
+
+
+def one_block_job(config: TrainConfig, geometry, device: torch.device, resume=None, geometry_spec=None) -> Job:
+    """The run (``meshgen.neural.stages.Job``) of a geometry of one boundary map: one network on
+    the terms of ``meshgen.neural.problem``, :data:`STAGE_TABLE`, 0.2's checkpoint layout (one
+    network under ``layers.<k>.``, no ``blocks`` entry), the summary of :func:`write_summary`."""
+    geometry = with_layout(geometry, config.boundary_layout)  # the boundary the network learns
+    training, state = start_training(config, geometry, device, resume)
     problem, test_set = training.problem, make_test_set(training.problem, config)
 
     def describe_run() -> dict:
@@ -161,12 +197,10 @@ def train(
             "test_loss": test_loss(network, problem, test_set),
         }
 
-    saver = CheckpointWriter(training, describe_run, run_dir / "checkpoint.pt", state)
-    checkpoint, interrupted = run_stages(
-        STAGE_TABLE, training, state, saver, run_dir, resume=resume, reporter=reporter, stop=stop
-    )
-    quality = write_summary(checkpoint, geometry, run_dir) if summary and not interrupted else None
-    return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
+    def summary(checkpoint, run_dir):
+        return write_summary(checkpoint, geometry, run_dir)
+
+    return Job(training, state, STAGE_TABLE, describe_run, summary)
 
 
 def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None):

@@ -2,7 +2,7 @@
 it out for a geometry that declares blocks (design notes §14, §20): the checks of what a block set
 takes (before any work), the mesh of every block (``tfi`` per block with shared interface nodes;
 ``elliptic`` with the interface nodes solved as interior nodes; ``neural`` with the block set's
-trained model, ``meshgen.neural.block_inference``; ``auto`` is ``neural`` when a model of the
+trained model, ``meshgen.neural.inference``; ``auto`` is ``neural`` when a model of the
 block set is found, else ``elliptic``, one note line saying so), and the write through ``meshgen.formats.multiblock`` with the merged mesh's
 quality sidecar. The result is a ``Mesh`` whose ``blocks`` hold the node arrays, ``X`` None.
 """
@@ -19,8 +19,8 @@ from meshgen.geometry.blocks import BlockSet, is_multiblock, load_block_set, tfi
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.plugins import Geometry, available_names, load_geometry, plugin_module
 from meshgen.methods.elliptic_blocks import elliptic_blocks
-from meshgen.neural.block_inference import is_block_model, neural_blocks
 from meshgen.neural.device import inference_device
+from meshgen.neural.inference import is_block_model, neural_blocks
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.run.meshing import Mesh
 
@@ -134,7 +134,7 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
 
 
 def _neural(request, block_set: BlockSet, model, progress=None):
-    """The neural mesh of the block set (``meshgen.neural.block_inference.neural_blocks``) and its
+    """The neural mesh of the block set (``meshgen.neural.inference.neural_blocks``) and its
     info; with ``polish`` (True only: not by default, unlike one block's) the multi-block elliptic
     solver started from it. The default stays the network's conforming mesh (one forward pass):
     polishing it is an elliptic solve that takes as many sweeps as the one from the TFI (the pipe's

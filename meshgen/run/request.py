@@ -285,7 +285,7 @@ def _method_and_geometry(request: MeshRequest, dims, say, warn):
 
 
 def _neural_model(request: MeshRequest, dims, warn, fallback: bool):
-    """The model to mesh with (``meshgen.neural.inference.find_model``) and the geometry it was
+    """The model to mesh with (``meshgen.neural.models.find_model``) and the geometry it was
     trained on, with its parameters: the one asked for when the model was trained on it, else the
     model's. With ``fallback`` and no checkpoint, (None, geometry) when no trained model fits."""
     spec, checkpoint = request.geometry, request.checkpoint

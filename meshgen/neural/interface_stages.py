@@ -1,11 +1,13 @@
-"""Training one model for a block set (design notes §20): one MLP
-per block, trained together by the stage runner (``meshgen.neural.stages.run_stages``) on the
-terms of ``meshgen.neural.block_problem``: a fit of every block to its TFI, then Adam (PCGrad and
-the learned reweighting of L1 and L2, as for one shape), then L-BFGS on fixed points.
+"""The stages of a set of several blocks (design notes §20): one MLP per block, trained together by
+the stage runner (``meshgen.neural.stages.run_stages``, through ``meshgen.neural.train.train``, the
+one training entry) on the block terms and interface terms of ``meshgen.neural.interfaces``: a fit
+of every block to its TFI, then Adam (PCGrad and the learned reweighting of L1 and L2, as for one
+block), then L-BFGS on fixed points.
 
-The checkpoint has the single-shape layout (``meshgen.neural.checkpoint``); its ``model`` entry
-adds ``blocks`` (the block names, in the set's order) and holds every block's weights under
-``networks.<i>.`` in one plain ``state_dict``; its ``geometry`` entry adds ``blocks`` too.
+The checkpoint has the one-block layout (``meshgen.neural.checkpoint``); its ``model`` entry adds
+``blocks`` (the block names, in the set's order) and holds every block's weights under
+``networks.<i>.`` in one plain ``state_dict`` (``meshgen.neural.inference.block_model`` reads
+block i, and reads 0.2's one network as block 0); its ``geometry`` entry adds ``blocks`` too.
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import torch
 
 from meshgen.geometry.blocks import BlockSet, merged_mesh, tfi_blocks
 from meshgen.geometry.extrusion import extrusion_of, section_of
-from meshgen.neural.block_inference import check_start_model, network_blocks, neural_blocks
-from meshgen.neural.block_problem import (
+from meshgen.neural.config import ConfigError, keys_off_default
+from meshgen.neural.history import TrainState, state_from_checkpoint
+from meshgen.neural.inference import check_start_model, network_blocks, neural_blocks
+from meshgen.neural.interfaces import (
     ANCHOR_POINTS,
     BlockNetworks,
     block_boundary_term,
@@ -31,13 +35,19 @@ from meshgen.neural.block_problem import (
     pretrain_block_pool,
     tfi_anchor_pool,
 )
-from meshgen.neural.config import ConfigError, keys_off_default
-from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.model import INPUT_MAP
 from meshgen.neural.pcgrad import assign, flatten
 from meshgen.neural.reweighting import UncertaintyWeights
-from meshgen.neural.stages import CheckpointWriter, Stage, TrainResult, run_stages
-from meshgen.neural.steps import DEVICE_BLOCK, AdamSteps, TermRunner, Training, combined_gradients, make_optimizer
+from meshgen.neural.stages import Job, Stage
+from meshgen.neural.steps import (
+    DEVICE_BLOCK,
+    AdamSteps,
+    TermRunner,
+    Training,
+    combined_gradients,
+    lbfgs_optimizer,
+    make_optimizer,
+)
 from meshgen.quality import quality_report, write_json
 
 __all__ = [
@@ -48,7 +58,8 @@ __all__ = [
     "block_stage_table",
     "check_block_keys",
     "describe_blocks",
-    "train_blocks",
+    "set_job",
+    "write_block_summary",
 ]
 
 SUMMARY_DIMS = 8  # the final summary and the training's block set: 8 per --dims number
@@ -150,15 +161,6 @@ def _pretrain_step(training: Training, optimizer, pools) -> dict:
         return {"total": loss()}
 
 
-def _lbfgs_optimizer(training: Training):
-    """The L-BFGS stage's optimiser, the networks first moved to float64 with ``lbfgs.float64`` (the
-    terms follow the networks' type): in float32 the finite-difference residual's round-off stops
-    L-BFGS above what the networks can reach (design notes §18)."""
-    if training.config.lbfgs.float64:
-        training.network.double()
-    return make_optimizer("lbfgs", training.network, training.weights, training.config)
-
-
 def _held_out_config(config):
     """``config`` with the held-out draw's sizes (``test.interior``, ``test.boundary``) as its points'."""
     points = dataclasses.replace(config.points, interior=config.test.interior, boundary=config.test.boundary)
@@ -239,34 +241,20 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
         ),
         Stage(
             "lbfgs",
-            optimizer=_lbfgs_optimizer,
+            optimizer=lbfgs_optimizer,
             points=lambda t, state: lbfgs_points(t, pool_count),
             step=lambda t, optimizer, scheduler, points: _lbfgs_step(t, optimizer, *points),
         ),
     )
 
 
-def train_blocks(
-    config,
-    block_set: BlockSet,
-    run_dir,
-    *,
-    device: str = "cpu",
-    resume: dict | None = None,
-    reporter=None,
-    stop=None,
-    geometry_spec: str | None = None,
-    summary: bool = True,
-    init: dict | None = None,
-) -> TrainResult:
-    """Train (or continue, ``resume``) one model for ``block_set``: as ``meshgen.neural.train.train``
-    for one shape (the same run folder, checkpoint layout, history and summary), with one network
-    per block. The networks map each block's unit cube; meshes of any --dims come from them.
-    ``init``: {"path", "checkpoint"} (``meshgen train --init``): a new run whose networks and loss
-    weights start as that checkpoint's (its normalisation, its weights' type), recorded in the
-    checkpoint's ``init`` entry."""
-    run_dir = Path(run_dir)
-    device = torch.device(device)
+def set_job(config, block_set: BlockSet, device: torch.device, resume=None, geometry_spec=None, init=None) -> Job:
+    """The run (``meshgen.neural.stages.Job``) of one model for ``block_set`` (several blocks), or
+    its continuation (``resume``): one network per block, the block set's stage table. The networks
+    map each block's unit cube; meshes of any --dims come from them. ``init``: {"path",
+    "checkpoint"} (``meshgen train --init``): a new run whose networks and loss weights start as
+    that checkpoint's (its normalisation, its weights' type), recorded in the checkpoint's ``init``
+    entry."""
     center = scale = None
     start = resume if resume is not None else (init or {}).get("checkpoint")
     extrusion = extrusion_of(block_set)  # an extruded set is trained on its section (design notes §20)
@@ -322,11 +310,10 @@ def train_blocks(
             **({"init": started_from} if started_from is not None else {}),
         }
 
-    saver = CheckpointWriter(training, describe_run, run_dir / "checkpoint.pt", state)
-    table = block_stage_table(pool, pool_count)
-    checkpoint, interrupted = run_stages(table, training, state, saver, run_dir, resume=resume, reporter=reporter, stop=stop)
-    quality = write_block_summary(checkpoint, block_set, run_dir) if summary and not interrupted else None
-    return TrainResult.of_run(saver, state, interrupted, checkpoint, quality)
+    def summary(checkpoint, run_dir):
+        return write_block_summary(checkpoint, block_set, run_dir)
+
+    return Job(training, state, block_stage_table(pool, pool_count), describe_run, summary)
 
 
 def write_block_summary(checkpoint: dict, block_set: BlockSet, run_dir) -> dict:

@@ -1,4 +1,4 @@
-"""What a block set's networks are trained on (design notes §20):
+"""The terms across the interfaces of a set of several blocks, and its problem (design notes §20):
 one MLP per block, all in normalised units of the whole set, and the loss terms that make them one
 mesh.
 
@@ -26,10 +26,11 @@ from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet
 from meshgen.methods.elliptic_blocks import junction_nodes, mean_length
 from meshgen.methods.tfi import tfi, transfinite
-from meshgen.neural.block_inference import face_plane
-from meshgen.neural.derivatives import grid_derivatives, grid_from_draws, grid_points
+from meshgen.neural.derivatives import grid_derivatives, grid_from_draws
+from meshgen.neural.inference import face_plane
 from meshgen.neural.losses import boundary_local_size, boundary_loss, pde_loss, sample_boundary, sample_interior
 from meshgen.neural.model import MLP
+from meshgen.neural.problem import Problem, grid_residual
 from meshgen.neural.winslow import winslow_residual
 
 __all__ = [
@@ -97,7 +98,9 @@ class BlockNetworks(torch.nn.Module):
 
 @dataclass
 class BlockProblem:
-    """A block set in normalised units (the whole set scaled into [-1/2, 1/2]^d).
+    """A block set in normalised units (the whole set scaled into [-1/2, 1/2]^d): per block its own
+    part (``blocks``: the one-block ``meshgen.neural.problem.Problem`` of its boundary map, whose
+    Winslow residual is the set's inside that block), and the terms that join the blocks.
 
     ``boundaries``: per block, (N, d) cube-boundary points -> (N, d) normalised points (NumPy);
     ``interfaces``: (a, face a, b, face b, transform, ratio) with ratio = a's mean length across
@@ -120,6 +123,8 @@ class BlockProblem:
     # the parallelogram rule's quadrilaterals at junction nodes (``junction_pool``), None: no rule
     junction: dict | None = None
     anchor_weight: float = TFI_ANCHOR  # the pull's weight (``method.tfi_anchor``)
+    # per block: its one-block problem (soft boundary, the set's normalisation), made by ``block_problem``
+    blocks: list = field(default_factory=list)
 
 
 def block_lengths(geometry, dim: int) -> list[float]:
@@ -171,7 +176,10 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
         junctions.append(ends)
         ratio = lengths[i.a][i.face_a.axis] / lengths[i.b][i.face_b.axis]
         interfaces.append((i.a, i.face_a, i.b, i.face_b, tuple(i.transform), ratio))
-    problem = BlockProblem(dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions)
+    parts = [Problem(dim, boundary, center, scale, False, device) for boundary in boundaries]
+    problem = BlockProblem(
+        dim, block_set.names, boundaries, interfaces, patch_faces, center, scale, device, junctions=junctions, blocks=parts
+    )
     problem.junction = junction_pool(block_set, device, lengths) if JUNCTION_STEP > 0 else None
     return problem
 
@@ -455,16 +463,14 @@ def junction_weights(tangent: torch.Tensor, ends) -> torch.Tensor:
 
 
 def block_pde_term(networks, problem: BlockProblem, sample) -> torch.Tensor:
-    """L1: the mean squared Winslow residual over every block's grid and every interface's stencils
+    """L1: the mean squared Winslow residual over every block's grid (one block's residual,
+    ``meshgen.neural.problem.grid_residual`` of its part) and every interface's stencils
     (those near junction edges weighted down: ``junction_weights``), plus ``anchor_weight`` times the
     pull towards the TFI (``anchor_term``) when the problem holds its pool."""
     grids, tangents = sample
     residuals = []
-    for net, (axes, spacing) in zip(networks, grids):
-        nodes = grid_points(axes)
-        values = net(nodes.reshape(-1, problem.dim).to(_dtype(net))).reshape(*nodes.shape)
-        _, first, second = grid_derivatives(values, spacing)
-        residuals.append(winslow_residual(first, second).reshape(-1, problem.dim))
+    for net, part, (axes, spacing) in zip(networks, problem.blocks, grids):  # inside each block: one block's residual
+        residuals.append(grid_residual(net, part, axes, spacing).reshape(-1, problem.dim))
     junctions = problem.junctions or [[]] * len(problem.interfaces)
     for interface, tangent, ends in zip(problem.interfaces, tangents, junctions):
         residual = interface_stencil(networks, problem, interface, tangent)[0]
