@@ -33,9 +33,49 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 
-__all__ = ["CHUNK_NODES", "finite_output", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
+__all__ = [
+    "CHUNK_NODES",
+    "TILE_ROWS",
+    "finite_output",
+    "forward_on_grid",
+    "forward_tile",
+    "network_arrays",
+    "openblas_thread_functions",
+    "read_checkpoint",
+]
 
 CHUNK_NODES = 8192
+TILE_ROWS = 1024  # rows of every matrix product: a node's arithmetic never depends on the batch
+
+
+def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
+    """A tile's float32 buffers: its inputs (``TILE_ROWS``, dim), then one (``TILE_ROWS``, width)
+    per layer."""
+    return [np.zeros((TILE_ROWS, dim), dtype=np.float32)] + [
+        np.empty((TILE_ROWS, b.shape[0]), dtype=np.float32) for _, b in layers
+    ]
+
+
+def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray]) -> np.ndarray:
+    """The network of ``layers`` (:func:`network_arrays`) at up to ``TILE_ROWS`` float32 input rows
+    ``inputs`` (rows, d): the first ``rows`` rows of the returned (``TILE_ROWS``, d) float32 buffer.
+
+    Every product is (``TILE_ROWS``, fan_in) x (fan_in, fan_out), whatever the number of rows asked
+    for (the rest of the tile padded with zeros): a BLAS product's rounding may depend on its shape
+    (other kernels for other row counts, a matrix-vector kernel for one row), never on which row of
+    a product of fixed shape a node is. So a node's value is the same bits in any grid, block or
+    batch: a mesh computed block by block equals the whole-grid one (``meshgen.run.chunked``).
+    ``buffers``: :func:`_tile_buffers`, reused from tile to tile."""
+    hidden = buffers[0]
+    hidden[: len(inputs)] = inputs
+    hidden[len(inputs) :] = 0.0
+    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:])):
+        np.matmul(hidden, weight, out=result)
+        result += bias
+        if index < len(layers) - 1:
+            np.tanh(result, out=result)
+        hidden = result
+    return hidden
 
 
 def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -128,22 +168,17 @@ def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: i
     count = int(np.prod([len(c) for c in coords]))
     if out is None:
         out = np.empty((count, dim))
-    widths = [bias.shape[0] for _, bias in layers]
 
     def run(first: int) -> None:
         # each task owns its buffers: chunks run on any worker thread
-        buffers = [np.empty((chunk, width), dtype=np.float32) for width in widths]
+        buffers = _tile_buffers(layers, dim)
         for start in range(first, min(count, first + span), chunk):
             stop = min(count, start + chunk)
-            hidden = _grid_inputs(axes, start, stop)
-            for index, ((weight, bias), buffer) in enumerate(zip(layers, buffers)):
-                result = buffer[: stop - start]
-                np.matmul(hidden, weight, out=result)
-                result += bias
-                if index < len(layers) - 1:
-                    np.tanh(result, out=result)
-                hidden = result
-            out[start:stop] = hidden
+            inputs = _grid_inputs(axes, start, stop)
+            for tile in range(0, stop - start, TILE_ROWS):
+                rows = min(TILE_ROWS, stop - start - tile)
+                result = forward_tile(layers, inputs[tile : tile + rows], buffers)
+                out[start + tile : start + tile + rows] = result[:rows]
 
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
