@@ -6,6 +6,9 @@ small enough for both, cut into many small blocks.
 
 import json
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,22 +187,71 @@ def test_neural_blocks_correct_the_boundary_as_the_direct_gordon_hall_form_of_th
         return error[index]
 
     expected = M + direct_correction(error_at, coords)  # the direct form, a second algorithm
-    assert np.allclose(X, expected, rtol=0, atol=1e-6)  # float32 network: blocks and faces round alike to 1e-7
+    # the same network bits in both (M in memory); the two forms of the correction differ by float64 round-off
+    assert np.allclose(X, expected, rtol=0, atol=1e-12)
     assert info["error_before"]["max"] == pytest.approx(np.linalg.norm(error.reshape(-1, 3), axis=1).max(), rel=1e-5)
     on_faces = X.reshape(-1, 3)[on_boundary]
     assert np.array_equal(on_faces, semicylinder.boundary(grid[on_boundary]))
     assert np.abs(X - M).max() > 0.1  # the correction did move the nodes
 
 
-def test_bundled_neural_model_in_blocks_equals_the_in_memory_map(semicylinder):
+def in_memory_and_chunked(which: str, block_nodes: int, dims=(9, 6, 10)):
+    """The in-memory mesh of ``which`` ("tfi", "neural" (the bundled exact-boundary model) or
+    "soft" (a random soft-boundary network)) on the semicylinder, and the chunked one."""
+    from meshgen.geometry import load_geometry
+    from meshgen.geometry.layout import trained_layout, with_layout
+    from meshgen.methods.correction import correct_boundary
     from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.models import find_model
     from meshgen.neural.network_map import mesh_from_model
 
-    model = find_model(geometry_name="semicylinder").checkpoint["model"]
-    coords = parametric_grid((8, 6, 10))
-    X, _ = neural_array(model, semicylinder, coords, block_nodes=100)
-    assert np.allclose(X.compute(), mesh_from_model(model, coords, semicylinder), rtol=0, atol=1e-6)
+    geometry = load_geometry("semicylinder")
+    coords = parametric_grid(dims)
+    if which == "tfi":
+        return tfi(geometry, None, coords), tfi_array(geometry, coords, block_nodes).compute()
+    if which == "neural":
+        checkpoint = find_model(geometry_name="semicylinder").checkpoint
+        model, geometry = checkpoint["model"], with_layout(geometry, trained_layout(checkpoint))
+    else:
+        model = soft_model(np.random.default_rng(3))
+    whole = mesh_from_model(model, coords, geometry)
+    correct_boundary(whole, geometry, coords)  # what build_neural does, before the polish (not chunked)
+    return whole, neural_array(model, geometry, coords, block_nodes=block_nodes)[0].compute()
+
+
+@pytest.mark.parametrize("which", ["tfi", "neural", "soft"])
+@pytest.mark.parametrize("block_nodes", [37, 101, 257, 540])
+def test_a_chunked_mesh_is_the_in_memory_mesh_bit_for_bit_at_any_block_size(which, block_nodes):
+    """Bits, not a tolerance: every node sees the same arithmetic in any block (the network's
+    forward pass in a fixed order per node, ``meshgen.neural.mlp_numpy.dense_kernel``; the TFI and
+    correction terms blended node by node; the boundary nodes set to g in both). Odd block sizes
+    cut the grid into slabs and partial planes. (elliptic has no chunked path: it solves for all
+    nodes at once.)"""
+    whole, chunked = in_memory_and_chunked(which, block_nodes)
+    assert np.array_equal(chunked, whole)
+
+
+def test_the_mesh_is_the_same_bits_with_one_or_two_threads(tmp_path):
+    """The chunked and in-memory meshes of the bundled network in fresh processes with
+    OMP_NUM_THREADS=1 and 2 (the BLAS and Dask thread counts that follow it): all four the same bits."""
+    script = (
+        "import sys, numpy as np; sys.path.insert(0, sys.argv[1]); "
+        "from test_chunked import in_memory_and_chunked; "
+        "whole, chunked = in_memory_and_chunked('neural', 101, (7, 5, 8)); "
+        "np.save(sys.argv[2] + '-whole.npy', whole); np.save(sys.argv[2] + '-chunked.npy', chunked)"
+    )
+    for threads in ("1", "2"):
+        env = dict(os.environ, OMP_NUM_THREADS=threads, OPENBLAS_NUM_THREADS=threads)
+        result = subprocess.run(
+            [sys.executable, "-c", script, str(Path(__file__).parent), str(tmp_path / threads)],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
+        assert result.returncode == 0, result.stderr
+    arrays = [np.load(tmp_path / f"{t}-{kind}.npy") for t in ("1", "2") for kind in ("whole", "chunked")]
+    for array in arrays[1:]:
+        assert np.array_equal(array, arrays[0])
 
 
 @pytest.fixture(scope="module")

@@ -138,3 +138,27 @@ def test_auto_device_is_cpu_without_a_visible_gpu(monkeypatch):
     assert nvidia_device_visible() is False
     if not torch.cuda.is_available():
         assert inference_device("auto") == "cpu"
+
+
+def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid():
+    """The forward pass per node is W h summed k = 0, 1, .. with every product and sum rounded to
+    float32 (no FMA, no reordering), then + b and tanh: a NumPy oracle doing exactly that,
+    column by column, gives the same bits; and so does any sub-grid, batch or worker count (a BLAS
+    product rounds a node by its row in the product, so it would not)."""
+    _, model = random_model(3, [20, 17], seed=5)
+    coords = [np.linspace(0.0, 1.0, n) ** 1.3 for n in (11, 7, 9)]
+    grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, 3).astype(np.float32)
+    hidden = np.float32(2.0) * grid - np.float32(1.0)
+    layers = [
+        (model["state_dict"][f"layers.{i}.weight"].numpy(), model["state_dict"][f"layers.{i}.bias"].numpy()) for i in range(3)
+    ]
+    for index, (weight, bias) in enumerate(layers):
+        total = np.zeros((len(hidden), weight.shape[0]), dtype=np.float32)
+        for k in range(weight.shape[1]):
+            total = total + hidden[:, k : k + 1] * weight[:, k]  # float32 product, then float32 sum
+        hidden = np.tanh(total + bias) if index < 2 else total + bias
+    whole = forward_on_grid(model, coords, workers=2)
+    np.testing.assert_array_equal(whole, hidden.astype(np.float64))
+    part = [coords[0][3:8], coords[1][[0, 5]], coords[2][1:2]]
+    expected = whole.reshape(11, 7, 9, 3)[3:8][:, [0, 5]][:, :, 1:2].reshape(-1, 3)
+    np.testing.assert_array_equal(forward_on_grid(model, part, chunk=3, workers=1), expected)

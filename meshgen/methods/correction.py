@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.methods.tfi import add_face_terms, blending, boundary_faces, face_terms
+from meshgen.methods.tfi import add_face_terms, blending, boundary_faces, face_terms, face_values
 from meshgen.quality.structured import cell_metrics
 
 __all__ = [
@@ -28,24 +28,37 @@ __all__ = [
     "error_figures",
     "inverted_cells",
     "multilinear",
+    "snap_to_boundary",
 ]
 
 CORRECTION_POWER = 8  # blending (1 - t)^p, t^p of the boundary correction (meshgen.methods.tfi.blending)
 
 
-def boundary_errors(X: np.ndarray, geometry, coords) -> list[np.ndarray]:
+def boundary_errors(X: np.ndarray, geometry, coords, values=None) -> list[np.ndarray]:
     """The boundary error field g - X at the face nodes of the tensor grid of ``coords`` (1D
     parametric node coordinates per axis, from 0 to 1): per face, in ``meshgen.geometry.cube`` order, an
-    array (face nodes..., d), g the geometry's boundary map at the nodes' parametric points.
+    array (face nodes..., d), g the geometry's boundary map at the nodes' parametric points
+    (``values``: g as ``meshgen.methods.tfi.face_values`` gives it, when the caller has it).
 
     ``X`` (n1+1, .., d) need only hold the face nodes (a block-wise caller may fill just those)."""
-    faces = boundary_faces(coords)
-    images = geometry.boundary(np.concatenate([points for _, points in faces]))
-    errors, start = [], 0
-    for index, points in faces:
-        errors.append(images[start : start + len(points)].reshape(X[index].shape) - X[index])
-        start += len(points)
-    return errors
+    values = face_values(geometry.boundary, coords) if values is None else values
+    return [g - X[index] for g, (index, _) in zip(values, boundary_faces(coords))]
+
+
+def snap_to_boundary(out: np.ndarray, values, coords, block=None) -> np.ndarray:
+    """Set the face nodes of the node array ``out`` to the boundary map's ``values``
+    (``meshgen.methods.tfi.face_values`` on the grid of ``coords``) exactly: the whole grid, or
+    with ``block`` (one slice per axis) the face nodes inside that block, ``out`` of its shape.
+    X + (g - X) is g only to round-off; after this the boundary nodes are g's bits. Returns ``out``."""
+    dim = len(coords)
+    block = tuple(block) if block is not None else (slice(None),) * dim
+    for face, g in zip(cube.faces(dim), values):
+        end = len(coords[face.axis]) - 1 if face.side else 0
+        first, last, _ = block[face.axis].indices(len(coords[face.axis]))
+        if first <= end < last:
+            index = tuple(end - first if d == face.axis else slice(None) for d in range(dim))
+            out[index] = g[tuple(b for d, b in enumerate(block) if d != face.axis)]
+    return out
 
 
 def error_figures(errors, geometry) -> dict:
@@ -143,13 +156,15 @@ def add_boundary_correction(out: np.ndarray, errors, coords, block=None) -> np.n
 
 def correct_boundary(X: np.ndarray, geometry, coords, count_inverted: bool = False) -> dict:
     """Correct node array ``X`` (n1+1, .., d) of the tensor grid ``coords`` in place to
-    X + TFI[g - X] (:func:`add_boundary_correction`). Returns what it did, JSON-ready:
+    X + TFI[g - X] (:func:`add_boundary_correction`), the boundary nodes then exactly g
+    (:func:`snap_to_boundary`: what a block-wise caller does, ``meshgen.run.chunked``). Returns what it did, JSON-ready:
     ``error_before`` (:func:`error_figures` of the uncorrected nodes); with ``count_inverted``
     also ``inverted_before`` / ``inverted_after`` / ``inverted_by_correction``: inverted cells of
     the whole mesh (two quality passes over it)."""
-    errors = boundary_errors(X, geometry, coords)
+    values = face_values(geometry.boundary, coords)
+    errors = boundary_errors(X, geometry, coords, values)
     before = inverted_cells(X) if count_inverted else None
-    add_boundary_correction(X, errors, coords)
+    snap_to_boundary(add_boundary_correction(X, errors, coords), values, coords)
     info = {"corrected": True, "error_before": error_figures(errors, geometry)}
     if count_inverted:
         after = inverted_cells(X)

@@ -1,15 +1,16 @@
-"""The trained network's forward pass in NumPy: a small tanh MLP is a few float32 matrix products,
-so meshing with a trained model needs no torch.
+"""The trained network's forward pass without torch: a small tanh MLP, each layer a compiled
+fixed-order float32 kernel (``dense_kernel``), so meshing with a trained model needs no torch.
 
 ``forward_on_grid(model, coords)`` is ``meshgen.neural.gpu_forward.evaluate_on_grid`` without torch:
-the same inputs u = 2 xi - 1 in float32, the same layers (x W^T + b, tanh between), float32
-throughout, the result as float64. It agrees with torch's forward to float32 round-off (the two
-libraries' products sum in different orders; tested).
+the same inputs u = 2 xi - 1 in float32, the same layers (W h + b, tanh between), float32
+throughout, the result as float64. It agrees with torch's forward to float32 round-off (tested).
+Unlike a BLAS product, whose rounding of a node depends on the node's row in the product (the
+batch's shape, OpenBLAS's kernel for the CPU), a node's value here is the same bits in any grid,
+block, batch or thread count: a chunked mesh equals the in-memory one bit for bit.
 
-The grid goes through in chunks of ``CHUNK_NODES`` nodes, so a chunk's activations (8192 x 85
-float32, 2.8 MB) stay in cache from layer to layer; worker threads take chunks in turn (NumPy's
-products and ``tanh`` release the GIL), each product on one BLAS thread (OpenBLAS's own threads
-on an 8192 x 48 product cost ten times the CPU of one thread). No (N, d) array of parametric points is made: each chunk's
+The grid goes through in chunks of ``CHUNK_NODES`` nodes (worker threads take chunks in turn:
+the kernel and ``tanh`` release the GIL), each in tiles of ``TILE_ROWS`` nodes whose activations
+stay in cache from layer to layer. No (N, d) array of parametric points is made: each chunk's
 inputs come from the 1D coordinates.
 
 ``read_checkpoint(path)`` reads a meshgen checkpoint (torch's zip format of plain data) into
@@ -33,13 +34,77 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 
-__all__ = ["CHUNK_NODES", "finite_output", "forward_on_grid", "network_arrays", "openblas_thread_functions", "read_checkpoint"]
+__all__ = [
+    "CHUNK_NODES",
+    "TILE_ROWS",
+    "finite_output",
+    "forward_on_grid",
+    "dense_kernel",
+    "forward_tile",
+    "network_arrays",
+    "openblas_thread_functions",
+    "read_checkpoint",
+]
 
 CHUNK_NODES = 8192
+TILE_ROWS = 1024  # nodes per tile of the compiled forward pass (its activations: 1024 x 85 float32, 350 kB)
+
+
+@functools.lru_cache(maxsize=1)
+def dense_kernel():
+    """The compiled layer ``out = W h + b`` on a tile (numba, loaded on first use): ``h`` (fan_in,
+    nodes), ``W`` (fan_out, fan_in), ``b`` (fan_out,), ``out`` (fan_out, nodes), float32.
+
+    Each output is (((W_0 h_0 + W_1 h_1) + W_2 h_2) + ...) + b, products and sums rounded one by one
+    (no fused multiply-add, no reordering: ``fastmath`` off), vectorised across the nodes. So a
+    node's value is the same bits in any grid, block, batch or thread, on any CPU: IEEE float32
+    arithmetic in a fixed order, where a BLAS product's rounding depends on the node's row in it
+    (OpenBLAS's AVX2 kernel treats rows by their index modulo 6)."""
+    from numba import njit
+
+    @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+    def dense(h, weight, bias, out):
+        fan_in, nodes = h.shape
+        for j in range(weight.shape[0]):
+            for r in range(nodes):
+                out[j, r] = 0.0
+            for k in range(fan_in):
+                w = weight[j, k]
+                for r in range(nodes):
+                    out[j, r] += w * h[k, r]
+            for r in range(nodes):
+                out[j, r] += bias[j]
+
+    return dense
+
+
+def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
+    """A tile's float32 buffers: its inputs (dim, ``TILE_ROWS``), then one (width, ``TILE_ROWS``)
+    per layer."""
+    return [np.zeros((dim, TILE_ROWS), dtype=np.float32)] + [
+        np.empty((b.shape[0], TILE_ROWS), dtype=np.float32) for _, b in layers
+    ]
+
+
+def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray]) -> np.ndarray:
+    """The network of ``layers`` (:func:`network_arrays`) at up to ``TILE_ROWS`` float32 input rows
+    ``inputs`` (rows, d): the first ``rows`` columns of the returned (d, ``TILE_ROWS``) float32
+    buffer. Every layer is :func:`dense_kernel` (fixed-order arithmetic per node), then ``tanh``
+    (elementwise); a short tile is padded with zeros. ``buffers``: :func:`_tile_buffers`."""
+    dense = dense_kernel()
+    hidden = buffers[0]
+    hidden[:, : len(inputs)] = inputs.T
+    hidden[:, len(inputs) :] = 0.0
+    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:])):
+        dense(hidden, weight, bias, result)
+        if index < len(layers) - 1:
+            np.tanh(result, out=result)
+        hidden = result
+    return hidden
 
 
 def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The layers of a ``checkpoint["model"]`` description as [(W^T (in, out), b (out,)), ...],
+    """The layers of a ``checkpoint["model"]`` description as [(W (out, in), b (out,)), ...],
     float32 C-contiguous arrays (the state dict may hold NumPy arrays or CPU tensors)."""
     dim, widths = int(model["dim"]), [int(w) for w in model["widths"]]
     state = model["state_dict"]
@@ -50,7 +115,7 @@ def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
         bias = np.asarray(state[f"layers.{index}.bias"], dtype=np.float32)
         if weight.shape != (fan_out, fan_in) or bias.shape != (fan_out,):
             raise MeshgenError(f"the network's layer {index} has shape {weight.shape}, expected {(fan_out, fan_in)}")
-        layers.append((np.ascontiguousarray(weight.T), bias))
+        layers.append((np.ascontiguousarray(weight), bias))
     return layers
 
 
@@ -128,22 +193,17 @@ def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: i
     count = int(np.prod([len(c) for c in coords]))
     if out is None:
         out = np.empty((count, dim))
-    widths = [bias.shape[0] for _, bias in layers]
 
     def run(first: int) -> None:
         # each task owns its buffers: chunks run on any worker thread
-        buffers = [np.empty((chunk, width), dtype=np.float32) for width in widths]
+        buffers = _tile_buffers(layers, dim)
         for start in range(first, min(count, first + span), chunk):
             stop = min(count, start + chunk)
-            hidden = _grid_inputs(axes, start, stop)
-            for index, ((weight, bias), buffer) in enumerate(zip(layers, buffers)):
-                result = buffer[: stop - start]
-                np.matmul(hidden, weight, out=result)
-                result += bias
-                if index < len(layers) - 1:
-                    np.tanh(result, out=result)
-                hidden = result
-            out[start:stop] = hidden
+            inputs = _grid_inputs(axes, start, stop)
+            for tile in range(0, stop - start, TILE_ROWS):
+                rows = min(TILE_ROWS, stop - start - tile)
+                result = forward_tile(layers, inputs[tile : tile + rows], buffers)
+                out[start + tile : start + tile + rows] = result[:, :rows].T
 
     if workers is None:
         workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

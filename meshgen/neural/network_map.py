@@ -12,12 +12,22 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.errors import MeshgenError
-from meshgen.methods.tfi import boundary_faces, tfi, transfinite_on_grid
+from meshgen.geometry import cube
+from meshgen.methods.tfi import add_face_terms, boundary_faces, face_terms, face_values, tfi
 from meshgen.neural.checkpoint_data import check_network
 from meshgen.neural.device import inference_device
 from meshgen.neural.mlp_numpy import CHUNK_NODES, finite_output, forward_on_grid
 
-__all__ = ["CHUNK_NODES", "bubble_on_grid", "evaluate_network", "mesh_from_model", "model_boundary_errors"]
+__all__ = [
+    "CHUNK_NODES",
+    "bubble_on_grid",
+    "evaluate_network",
+    "exact_boundary_terms",
+    "map_on_block",
+    "mesh_from_model",
+    "model_boundary_errors",
+    "spans_cube",
+]
 
 
 def evaluate_network(model: dict, coords, out=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu") -> np.ndarray:
@@ -43,6 +53,42 @@ def bubble_on_grid(coords) -> np.ndarray:
     return result
 
 
+def spans_cube(coords) -> bool:
+    """Whether the 1D coordinates ``coords`` run from 0 to 1 on every axis (a whole grid)."""
+    return bool(coords) and all(c[0] == 0.0 and c[-1] == 1.0 for c in coords)
+
+
+def exact_boundary_terms(model: dict, geometry, coords):
+    """The TFI face terms (``meshgen.methods.tfi.face_terms``, face-sized) the exact-boundary map
+    of ``model`` needs on the grid of ``coords`` (spanning the cube); None for a soft-boundary model."""
+    if not model["exact_boundary"]:
+        return None
+    if geometry is None:
+        raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
+    return face_terms(face_values(geometry.boundary, coords), coords)
+
+
+def map_on_block(model: dict, coords, block=None, tfi_terms=None, workers=None, device: str = "cpu") -> np.ndarray:
+    """The physical map of ``model`` on the nodes ``block`` (one slice per axis, default all) of the
+    tensor grid of ``coords``: (m1, .., d) float64. Soft boundary: center + scale N(xi); exact:
+    scale b(xi) N(xi) + TFI(xi), the TFI from ``tfi_terms`` (:func:`exact_boundary_terms`, made on
+    the whole grid). A node's value is the same sequence of operations in any block (the network's
+    per-node arithmetic is fixed: ``meshgen.neural.mlp_numpy.forward_tile``), so a mesh made block
+    by block equals the whole-grid one bit for bit."""
+    dim = len(coords)
+    block = tuple(block) if block is not None else (slice(None),) * dim
+    sub_coords = [c[b] for c, b in zip(coords, block)]
+    shape = tuple(len(c) for c in sub_coords)
+    X = evaluate_network(model, sub_coords, workers=workers, device=device).reshape(*shape, dim)
+    scale = float(model["scale"])
+    if not model["exact_boundary"]:
+        X *= scale
+        X += np.asarray(model["center"], dtype=float)
+        return X
+    X *= (scale * bubble_on_grid(sub_coords))[..., None]
+    return add_face_terms(tfi_terms, coords, X, block)
+
+
 def mesh_from_model(
     model: dict, coords, geometry=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu"
 ) -> np.ndarray:
@@ -50,37 +96,43 @@ def mesh_from_model(
     ``coords``: the node array X, shape (len(coords[0]), ..., d), float64.
 
     Soft boundary: X = center + scale N(xi). Exact boundary: X = TFI(xi) + scale b(xi) N(xi), which
-    needs ``geometry`` (the bound Geometry the model was trained on).
+    needs ``geometry`` (the bound Geometry the model was trained on). ``chunk`` is kept for
+    callers of 0.2; the result does not depend on it.
     """
     coords = [np.asarray(c, dtype=float) for c in coords]
-    shape = tuple(len(c) for c in coords)
-    dim = len(coords)
-    X = evaluate_network(model, coords, chunk=chunk, workers=workers, device=device).reshape(*shape, dim)
-    scale = float(model["scale"])
-    if not model["exact_boundary"]:
-        X *= scale
-        X += np.asarray(model["center"], dtype=float)
-        return X
+    if not model["exact_boundary"] or spans_cube(coords):
+        return map_on_block(model, coords, None, exact_boundary_terms(model, geometry, coords), workers, device)
     if geometry is None:
         raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
-    X *= (scale * bubble_on_grid(coords))[..., None]
-    if coords and all(c[0] == 0.0 and c[-1] == 1.0 for c in coords):
-        transfinite_on_grid(geometry.boundary, coords, out=X)
-    else:  # a grid that does not span the cube: the direct form
-        X += tfi(geometry, None, coords)
+    # a grid that does not span the cube: the direct form
+    shape = tuple(len(c) for c in coords)
+    X = evaluate_network(model, coords, workers=workers, device=device).reshape(*shape, len(coords))
+    X *= (float(model["scale"]) * bubble_on_grid(coords))[..., None]
+    X += tfi(geometry, None, coords)
     return X
 
 
-def model_boundary_errors(model: dict, geometry, coords, device: str = "cpu") -> list[np.ndarray]:
+def model_boundary_errors(model: dict, geometry, coords, device: str = "cpu", values=None) -> list[np.ndarray]:
     """:func:`boundary_errors` of the map of ``model`` (a ``checkpoint["model"]`` description) on
     the tensor grid of ``coords``, for a caller that never holds the whole node array: the map is
-    evaluated on each face of the grid alone (face-sized work), as :func:`mesh_from_model` would
-    evaluate those nodes in the whole grid."""
+    evaluated on each face of the grid alone (face-sized work) by :func:`map_on_block`, the same
+    bits as in the whole grid. ``values``: the boundary map at the face nodes
+    (``meshgen.methods.tfi.face_values``), when the caller has them."""
+    coords = [np.asarray(c, dtype=float) for c in coords]
+    if not spans_cube(coords):  # the direct form's map, face by face
+        errors = []
+        for index, points in boundary_faces(coords):
+            axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
+            face_coords = list(coords)
+            face_coords[axis] = coords[axis][[index[axis]]]
+            on_face = np.take(mesh_from_model(model, face_coords, geometry, device=device), 0, axis=axis)
+            errors.append(geometry.boundary(points).reshape(on_face.shape) - on_face)
+        return errors
+    values = face_values(geometry.boundary, coords) if values is None else values
+    terms = exact_boundary_terms(model, geometry, coords)
     errors = []
-    for index, points in boundary_faces(coords):
-        axis = next(d for d, i in enumerate(index) if not isinstance(i, slice))
-        face_coords = [np.asarray(c, dtype=float) for c in coords]
-        face_coords[axis] = face_coords[axis][[index[axis]]]
-        values = np.take(mesh_from_model(model, face_coords, geometry, device=device), 0, axis=axis)
-        errors.append(geometry.boundary(points).reshape(values.shape) - values)
+    for face, g in zip(cube.faces(len(coords)), values):
+        end = len(coords[face.axis]) - 1 if face.side else 0
+        block = tuple(slice(end, end + 1) if d == face.axis else slice(None) for d in range(len(coords)))
+        errors.append(g - np.take(map_on_block(model, coords, block, terms, device=device), 0, axis=face.axis))
     return errors

@@ -5,8 +5,10 @@ A TFI or neural mesh is a map evaluated node by node, so it can be computed bloc
 - TFI: the six face terms D_as of the axis-by-axis Boolean sum (``meshgen.methods.tfi.face_terms``,
   O(n^2) memory) are computed once; a block is then their blend on the block's nodes
   (``add_face_terms``), bit for bit the in-memory mesh.
-- neural: the network on the block's parametric coordinates (``evaluate_on_grid``), the exact-
-  boundary form's TFI from the precomputed face terms. The boundary is corrected as
+- neural: the network on the block's parametric coordinates (``map_on_block``), the exact-
+  boundary form's TFI from the precomputed face terms; every matrix product of the forward pass
+  has one shape (``meshgen.neural.mlp_numpy.forward_tile``), so this too is the in-memory mesh
+  bit for bit, at any block size. The boundary is corrected as
   X = M + TFI[g - M] (M the network's map, g the geometry's boundary map): the six face error
   arrays g - M are O(n^2) and computed up front, their TFI on a block is block-local. It moves the
   boundary nodes exactly onto g and the interior smoothly with them.
@@ -38,12 +40,11 @@ import numpy as np
 from meshgen.errors import MeshgenError
 from meshgen.formats import check_output_path, check_patches, format_named, streaming_writer
 from meshgen.formats.streamed import NodeFile, write_streamed
-from meshgen.geometry import cube
 from meshgen.geometry.grid import BLOCK_NODES, block_slices
 from meshgen.geometry.patches import geometry_patches
-from meshgen.methods.correction import add_correction_terms, correction_terms, error_figures
+from meshgen.methods.correction import add_correction_terms, correction_terms, error_figures, snap_to_boundary
 from meshgen.methods.tfi import add_face_terms, face_terms, face_values
-from meshgen.neural.network_map import bubble_on_grid, evaluate_network, model_boundary_errors
+from meshgen.neural.network_map import map_on_block, model_boundary_errors
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
 from meshgen.run.atomic import atomic_path
@@ -55,7 +56,6 @@ __all__ = [
     "CHUNKED_METHODS",
     "MESH_BYTES_PER_BLOCK_NODE",
     "mesh_block_nodes",
-    "network_map_block",
     "neural_array",
     "run_fraction",
     "scratch_path",
@@ -128,43 +128,20 @@ def tfi_array(geometry, coords, block_nodes: int | None = None):
     return _node_array(_tfi_block, (coords, terms), shape, len(coords), block_nodes)
 
 
-def network_map_block(model: dict, sub_coords, tfi_block=None) -> np.ndarray:
-    """The map M of a trained network (``checkpoint["model"]``) on the tensor grid of
-    ``sub_coords``: center + scale N (soft boundary) or TFI + scale b N (exact boundary, whose TFI
-    on these nodes is ``tfi_block``). Shape (len(sub_coords[0]), ..., d), float64."""
-    shape = tuple(len(c) for c in sub_coords)
-    dim = len(sub_coords)
-    N = evaluate_network(model, sub_coords, workers=1).reshape(*shape, dim)
-    scale = float(model["scale"])
-    if not model["exact_boundary"]:
-        N *= scale
-        N += np.asarray(model["center"], dtype=float)
-        return N
-    N *= (scale * bubble_on_grid(sub_coords))[..., None]
-    N += tfi_block
-    return N
-
-
 def _neural_block(shared, block):
     model, coords, tfi_terms, error_terms, boundary_values = shared
-    sub_coords = [c[s] for c, s in zip(coords, block)]
-    tfi_block = add_face_terms(tfi_terms, coords, block=block) if tfi_terms else None
-    X = network_map_block(model, sub_coords, tfi_block)
+    X = map_on_block(model, coords, block, tfi_terms, workers=1)
     if error_terms:
         add_correction_terms(error_terms, coords, X, block)  # X + TFI[g - M] on the block
-        # The network's float32 values on a face differ from those of a block in the last bits (other
-        # batch sizes): the boundary nodes take the boundary map's values exactly.
-        for face, values in zip(cube.faces(len(coords)), boundary_values):
-            end = len(coords[face.axis]) - 1 if face.side else 0
-            if block[face.axis].start <= end < block[face.axis].stop:
-                index = tuple(end - s.start if d == face.axis else slice(None) for d, s in enumerate(block))
-                X[index] = values[tuple(s for d, s in enumerate(block) if d != face.axis)]
+        snap_to_boundary(X, boundary_values, coords, block)  # the boundary nodes exactly g, as in memory
     return X
 
 
 def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int | None = None):
     """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
-    a dask array, and what the boundary correction did (JSON-ready).
+    a dask array, and what the boundary correction did (JSON-ready). Bit for bit the in-memory mesh
+    (``meshgen.neural.network_map.mesh_from_model``, then ``meshgen.methods.correction.correct_boundary``)
+    at any block size: every node sees the same arithmetic in any block (``map_on_block``).
 
     ``correct_boundary``: X = M + TFI[g - M] (``meshgen.methods.correction.add_boundary_correction``
     block by block, the face errors computed once on the faces alone); else the network's map M.
@@ -175,7 +152,7 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     info = {"corrected": False}
     error_terms = None
     if correct_boundary:
-        errors = model_boundary_errors(model, geometry, coords)
+        errors = model_boundary_errors(model, geometry, coords, values=boundary_values)
         info = {"corrected": True, "error_before": error_figures(errors, geometry)}
         error_terms = correction_terms(errors, coords)
     shape = tuple(len(c) for c in coords)
