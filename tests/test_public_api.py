@@ -88,7 +88,7 @@ def test_the_top_level_holds_the_public_names_only_and_stays_cheap():
     from meshgen.methods.tfi import transfinite
 
     assert callable(transfinite) and callable(build_elliptic)
-    assert meshgen.methods.tfi.__module__ == "meshgen.api" and meshgen.methods.elliptic.__module__ == "meshgen.api"
+    assert meshgen.tfi.__module__ == "meshgen.api" and meshgen.elliptic.__module__ == "meshgen.api"
     code = (
         "import sys, meshgen\n"
         "[getattr(meshgen, name) for name in meshgen.__all__]\n"
