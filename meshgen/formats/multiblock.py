@@ -15,7 +15,7 @@ from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
 from meshgen.formats._cgns import read_zones, write_zones, zone_count
 from meshgen.formats._gmsh import write_elements as write_msh_elements
-from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, FV_SOLUTION
+from meshgen.formats._openfoam import EXTRUDED_PATCH, check_extrusion_patch, write_case
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
 from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
@@ -119,7 +119,7 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
             write_zones(temporary, zones, metadata, connectivity_records(block_set))
         return path
     if fmt.name == "openfoam":
-        _write_openfoam(path, block_set, Xs)
+        _write_openfoam(path, block_set, Xs, metadata)
         return path
     if fmt.name in SOLVER_FORMATS:
         points, cells, _ = merged_mesh(block_set, Xs)
@@ -146,15 +146,20 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
     return path
 
 
-def _write_openfoam(case, block_set: BlockSet, Xs) -> None:
-
+def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
+    """The OpenFOAM case of the merged mesh (interfaces as internal faces) through the one case
+    writer of a single block (``meshgen.formats._openfoam.write_case``): the same system files,
+    ``0/U`` and ``0/p`` from the patches' types and roles, re-mesh rules and atomic publication."""
     points, cells, _ = merged_mesh(block_set, Xs)
-    patches = patch_faces(block_set)
+    faces = patch_faces(block_set)
     if block_set.dim == 2:
-        if any(name == EXTRUDED_PATCH for name, _, _ in patches):
-            raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
-        points, cells, walls, front_back, _ = extrude_quads(points, cells, [faces for _, _, faces in patches])
-        patches = [(name, kind, faces) for (name, kind, _), faces in zip(patches, walls)]
-        patches.append((EXTRUDED_PATCH, "empty", front_back))
-    control = {"controlDict": CONTROL_DICT, "fvSchemes": FV_SCHEMES, "fvSolution": FV_SOLUTION}
-    write_poly_mesh(case, points, cells, patches, control)
+        check_extrusion_patch([Patch(name, kind, ()) for name, kind, _ in faces], 2)
+        points, cells, walls, front_back, _ = extrude_quads(points, cells, [elements for _, _, elements in faces])
+        faces = [(name, kind, elements) for (name, kind, _), elements in zip(faces, walls)]
+        faces.append((EXTRUDED_PATCH, "empty", front_back))
+    patches = [Patch(name, kind, ()) for name, kind, _ in faces if name != EXTRUDED_PATCH]
+
+    def write_folder(folder, _patches):
+        write_poly_mesh(folder, points, cells, faces)
+
+    write_case(case, (0,) * block_set.dim, metadata, patches, write_folder, block_set=block_set.name)
