@@ -109,6 +109,7 @@ LAYERS = [
         "meshgen.quality.smoothness_compiled",
         "meshgen.quality.smoothness",
         "meshgen.quality.report",
+        "meshgen.quality.merged",
         "meshgen.quality.worker",
         "meshgen.quality.text",
         "meshgen.quality.sketch",

@@ -25,6 +25,8 @@ from meshgen.quality import (
     write_mesh_alone,
     write_mesh_with_quality,
 )
+from meshgen.quality.deviation import block_set_deviation
+from meshgen.quality.merged import merged_reports
 from meshgen.run.publish import publishing
 
 __all__ = ["Mesh", "run_metadata"]
@@ -113,8 +115,11 @@ class Mesh:
     def _measure(self) -> dict:
         if self.blocks is None:
             return quality_report(self.X, self.geometry)
-        points, cells, _ = merged_mesh(self.geometry, self.blocks)
-        return {"structured": False, **quality_report((points, cells))}
+        # Measured merged, interfaces as interior faces, with the block set's boundary deviation.
+        points, cells, owner = merged_mesh(self.geometry, self.blocks)
+        shapes = [tuple(n - 1 for n in X.shape[:-1]) for X in self.blocks]
+        deviation = block_set_deviation(self.geometry, self.blocks)
+        return merged_reports(points, cells, owner, self.geometry.names, shapes, self.geometry, deviation)[0]
 
 
 def run_metadata(method: str, geometry, dims, cluster=()) -> dict:

@@ -15,9 +15,9 @@ from pathlib import Path
 
 from meshgen.errors import MeshgenError, ParameterError
 from meshgen.formats.multiblock import check_block_output
-from meshgen.geometry.blocks import BlockSet, is_multiblock, load_block_set, tfi_blocks
+from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
-from meshgen.geometry.plugins import Geometry, available_names, load_geometry, plugin_module
+from meshgen.geometry.plugins import Geometry, load_geometry
 from meshgen.methods.elliptic_blocks import elliptic_blocks
 from meshgen.neural.block_inference import is_block_model, neural_blocks
 from meshgen.neural.device import inference_device
@@ -39,25 +39,6 @@ _SINGLE_BLOCK_ONLY = (
     ("chunked", "chunked"),
     ("scheduler", "scheduler"),
 )
-
-
-def block_spec(geometry) -> str | None:
-    """The plugin spec (name or path) of ``geometry`` (a name, a path or a loaded Geometry) when it
-    declares blocks, else None."""
-    if geometry is None:
-        return None
-    if isinstance(geometry, Geometry):
-        if geometry.name in available_names() and plugin_module(geometry.name)[1] == geometry.source:
-            spec = geometry.name
-        elif geometry.source and Path(geometry.source).is_file():
-            spec = geometry.source
-        else:
-            return None
-    else:
-        spec = str(geometry)
-    if Path(spec).suffix.lower() not in ("", ".py"):
-        return None  # a shape file is one block
-    return spec if is_multiblock(spec) else None
 
 
 def checkpoint_block_spec(checkpoint) -> str | None:
