@@ -268,9 +268,7 @@ def distance_to_boundary(points, geometry, parametric_guess=None, faces=None) ->
         todo = todo[distance[todo] > ON_BOUNDARY * length]
     allowed = None if faces is None else np.array([face.name in faces for face in cube_faces(dim)])
     if len(todo) and (allowed is None or allowed.any()):
-        point, face, uv, bound = _coarse_candidates(
-            points[todo], geometry.boundary, dim, distance[todo], own_face[todo], allowed
-        )
+        point, face, uv, bound = _coarse_candidates(points[todo], geometry.boundary, dim, distance[todo], own_face[todo], allowed)
         found, _ = project_to_faces(points[todo][point], face, uv, geometry.boundary, dim)
         np.minimum.at(bound, point, found)
         distance[todo] = np.minimum(distance[todo], bound)

@@ -306,7 +306,9 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
                 "no boundary deviation (pass -g PATH to use it)"
             )
         except GeometryError as exc:
-            notes.append(f"recorded block set {excerpt(repr(metadata['block_set']))} is not available ({exc}); no boundary deviation")
+            notes.append(
+                f"recorded block set {excerpt(repr(metadata['block_set']))} is not available ({exc}); no boundary deviation"
+            )
         return None, source, notes
     if isinstance(geometry, str):
         geometry = load_geometry(geometry, params)
