@@ -123,7 +123,6 @@ LAYERS = [
         "meshgen.run.chunked",
         "meshgen.methods.registry",
         "meshgen.run.meshing",
-        "meshgen.run.meshing_blocks",
         "meshgen.quality.fidelity",
         "meshgen.quality.gates",
         "meshgen.cli.tables",
