@@ -132,9 +132,9 @@ def test_block_set_deviation_is_the_distance_to_the_pipe(run_cli, tmp_path):
         assert deviation["max"] == pytest.approx(expected.max(), rel=1e-9)
         assert deviation["mean"] == pytest.approx(expected.mean(), rel=1e-9)
         assert deviation["source"] == "--geometry"
-    # The .cgns records its block set: evaluated without -g, the same figure.
-    recorded = json.loads(run_cli("evaluate", "m.cgns", "--json", "-").stdout)["boundary_deviation"]
-    assert recorded["max"] == pytest.approx(expected.max(), rel=1e-9) and recorded["source"] == "recorded in the mesh file"
+        # The file records its block set: evaluated without -g, the same figure.
+        recorded = json.loads(run_cli("evaluate", name, "--json", "-").stdout)["boundary_deviation"]
+        assert recorded["max"] == pytest.approx(expected.max(), rel=1e-9) and recorded["source"] == "recorded in the mesh file"
 
 
 def test_in_memory_block_set_report_has_deviation_even_where_nodes_slid():

@@ -1,8 +1,9 @@
 """Writing block-set meshes (a ``BlockSet`` and its node arrays, one per block): ``.cgns`` one
 structured zone per block with 1-to-1 connectivity, an OpenFOAM case with the interfaces as
-internal faces, one merged unstructured mesh for the formats meshio writes (``.vtu``, ``.vtk``,
-``.xdmf``) and for ``.su2`` (a marker per patch) and ``.msh`` (a physical group per patch), the
-boundary elements outward (2D: the domain on their left).
+internal faces, one merged unstructured mesh for ``.vtu`` (the single block's writer, metadata
+included), for the formats meshio writes (``.vtk``, ``.xdmf``) and for ``.su2`` (a marker per
+patch) and ``.msh`` (a physical group per patch), the boundary elements outward (2D: the domain
+on their left).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
 from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
 from meshgen.formats._vtm import write_blocks_vtm
+from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
@@ -137,6 +139,10 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
 
     points, cells, owner = merged_mesh(block_set, Xs)
     padded = np.hstack([points, np.zeros((len(points), 3 - block_set.dim))]) if block_set.dim == 2 else points
+    if fmt.name == "vtu":  # the single block's writer: its compression, and meshgen's metadata as field data
+        with atomic_write(path, FormatError) as temporary:
+            write_vtu_cells(temporary, padded, cells, block_set.dim, {"block": owner.astype(float)}, metadata)
+        return path
     cell_type = "hexahedron" if block_set.dim == 3 else "quad"
 
     field_data = {METADATA_KEY: np.frombuffer(metadata_json(metadata).encode(), dtype=np.uint8).copy()} if metadata else {}
