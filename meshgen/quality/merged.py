@@ -91,26 +91,33 @@ def _cell_sizes(points, cells, dim) -> np.ndarray:
 
 def _face_geometry(points3, cells, cyclic) -> tuple[np.ndarray, np.ndarray]:
     """OpenFOAM's centres and area vectors (F, M, 3) of every face of every cell (corners in
-    ``cyclic`` order: area vectors along +axis on a right-handed cell)."""
+    ``cyclic`` order: area vectors along +axis on a right-handed cell), component by component as
+    ``meshgen.quality.faces_openfoam.face_centres_and_areas`` computes them."""
+    xyz = [np.ascontiguousarray(points3[:, c]) for c in range(3)]
+    columns = np.ascontiguousarray(cells.T)
     centres = np.empty((len(cyclic), len(cells), 3))
     areas = np.empty_like(centres)
     for f, corners in enumerate(cyclic):
-        P = [points3[cells[:, k]] for k in corners]
-        estimate = 0.25 * (P[0] + P[1] + P[2] + P[3])
-        sum_n = np.zeros_like(estimate)
+        P = [[x[columns[k]] for x in xyz] for k in corners]
+        estimate = [0.25 * (P[0][c] + P[1][c] + P[2][c] + P[3][c]) for c in range(3)]
+        sum_n = [np.zeros(len(cells)) for _ in range(3)]
         sum_a = np.zeros(len(cells))
-        sum_ac = np.zeros_like(estimate)
+        sum_ac = [np.zeros(len(cells)) for _ in range(3)]
         for m in range(4):
             point, following = P[m], P[(m + 1) % 4]
-            n = np.cross(following - point, estimate - point)
-            a = _norm(n)
+            e = [following[c] - point[c] for c in range(3)]
+            g = [estimate[c] - point[c] for c in range(3)]
+            n = (e[1] * g[2] - e[2] * g[1], e[2] * g[0] - e[0] * g[2], e[0] * g[1] - e[1] * g[0])
+            a = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
             sum_a += a
-            sum_n += n
-            sum_ac += a[:, None] * (point + following + estimate)
+            for c in range(3):
+                sum_n[c] += n[c]
+                sum_ac[c] += a * (point[c] + following[c] + estimate[c])
         with np.errstate(divide="ignore", invalid="ignore"):
             scale = np.where(sum_a > 0, 1.0 / (3.0 * sum_a), 0.0)
-        centres[f] = np.where((sum_a > 0)[:, None], sum_ac * scale[:, None], estimate)
-        areas[f] = 0.5 * sum_n
+        for c in range(3):
+            centres[f, :, c] = np.where(sum_a > 0, sum_ac[c] * scale, estimate[c])
+            areas[f, :, c] = 0.5 * sum_n[c]
     return centres, areas
 
 
@@ -199,35 +206,44 @@ def merged_solver_figures(points, cells, block=None, names=(), cell_shapes=()) -
     partner, _ = match_faces([c.astype(np.int64) for c in columns])
     slot_face, slot_cell = np.divmod(np.arange(n_faces * n_cells), n_cells)
     inner = np.flatnonzero(partner >= 0)
-    other = partner[inner]
-    f_p, c_p, f_n, c_n = slot_face[inner], slot_cell[inner], slot_face[other], slot_cell[other]
+    c_p, c_n = slot_cell[inner], slot_cell[partner[inner]]
 
-    # Expansion ratio: the sizes along the edges that leave the shared face, both sides.
+    # Expansion ratio: the sizes along the edges that leave the shared face, both sides; face by
+    # face, each cell at most once per face (no scatter needed).
     sizes = _cell_sizes(points, cells, dim)
     axis_of = np.array([a for a, _ in axes])
-    mine, theirs = sizes[c_p, axis_of[f_p]], sizes[c_n, axis_of[f_n]]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.maximum(mine, theirs) / np.minimum(mine, theirs)
-    ratio = np.where(np.isnan(ratio), np.inf, ratio)
     expansion = np.ones(n_cells)
-    np.fmax.at(expansion, c_p, ratio)
+    for f, (axis, _) in enumerate(axes):
+        mine = np.flatnonzero(partner[f * n_cells : (f + 1) * n_cells] >= 0)
+        other = partner[f * n_cells + mine]
+        a, b = sizes[mine, axis], sizes[other % n_cells, axis_of[other // n_cells]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.maximum(a, b) / np.minimum(a, b)
+        expansion[mine] = np.fmax(expansion[mine], np.where(np.isnan(ratio), np.inf, ratio))
 
-    # Grid smoothness: at each face corner n, p across the cell, q across the neighbour.
-    corners_p = cyclic[f_p]  # (K, corners) VTK corner numbers in the cell
-    corners_n = cyclic[f_n]
-    nodes_p = np.take_along_axis(cells[c_p], corners_p, axis=1)
-    nodes_n = np.take_along_axis(cells[c_n], corners_n, axis=1)
+    # Grid smoothness: at each corner n of each internal face (once, from its owner's side), p
+    # across the owner, q across the neighbour; a node's value the largest of its triples.
+    owned = inner[c_p < c_n]
+    f_p, o_p = slot_face[owned], slot_cell[owned]
+    f_n, o_n = slot_face[partner[owned]], slot_cell[partner[owned]]
+    nodes_p = cells[o_p[:, None], cyclic[f_p]]  # (K, corners)
+    nodes_n = cells[o_n[:, None], cyclic[f_n]]
     position = np.argmax(nodes_p[:, :, None] == nodes_n[:, None, :], axis=2)  # where each of P's corners is in N's face
-    p_nodes = np.take_along_axis(cells[c_p], across[f_p], axis=1)
-    q_nodes = np.take_along_axis(cells[c_n], np.take_along_axis(across[f_n], position, axis=1), axis=1)
-    n_xyz, p_xyz, q_xyz = points[nodes_p], points[p_nodes], points[q_nodes]
-    forward, backward = q_xyz - n_xyz, n_xyz - p_xyz
+    p_nodes = cells[o_p[:, None], across[f_p]]
+    q_nodes = cells[o_n[:, None], across[f_n][np.arange(len(owned))[:, None], position]]
+    n_xyz = points[nodes_p]
+    forward, backward = points[q_nodes] - n_xyz, n_xyz - points[p_nodes]
     second = _norm(forward - backward)
     spacing = 0.5 * (_norm(forward) + _norm(backward))
     with np.errstate(divide="ignore", invalid="ignore"):
-        value = np.where(spacing > 0, second / spacing, np.where(second > 0, np.inf, 0.0))
+        value = np.where(spacing > 0, second / spacing, np.where(second > 0, np.inf, 0.0)).reshape(-1)
+    flat = nodes_p.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    flat = flat[order]
+    starts = np.flatnonzero(np.concatenate([[True], flat[1:] != flat[:-1]])) if len(flat) else np.zeros(0, dtype=np.int64)
     node_value = np.zeros(len(points))
-    np.fmax.at(node_value, nodes_p.reshape(-1), value.reshape(-1))
+    if len(flat):
+        node_value[flat[starts]] = np.fmax(0.0, np.fmax.reduceat(value[order], starts))
     smoothness = np.fmax.reduce(node_value[cells], axis=1)
 
     # Non-orthogonality (checkMesh's), on the hexahedra (a quad mesh extruded).
@@ -239,8 +255,7 @@ def merged_solver_figures(points, cells, block=None, names=(), cell_shapes=()) -
     orientation = 1.0 if float(np.einsum("fmi,fmi->", centres, outward)) >= 0 else -1.0
     outward *= orientation
     C = _cell_centres(centres, outward)
-    owned = inner[c_p < c_n]  # each internal face once, from its owner (the lower-numbered cell)
-    o_face, o_cell, o_other = slot_face[owned], slot_cell[owned], slot_cell[partner[owned]]
+    o_face, o_cell, o_other = f_p, o_p, o_n  # each internal face once, from its owner (the lower-numbered cell)
     internal = _cosines(C[o_other] - C[o_cell], outward[o_face, o_cell])
     open_slots = np.flatnonzero(partner < 0)
     b_face, b_cell = slot_face[open_slots], slot_cell[open_slots]
