@@ -85,7 +85,7 @@ _MOVED = {
     "meshgen.layout_start": "meshgen.geometry.layout_start",
     "meshgen.limits": "meshgen.run.limits",
     "meshgen.meshing": "meshgen.run.meshing",
-    "meshgen.meshing_blocks": "meshgen.run.meshing_blocks",
+    "meshgen.meshing_blocks": "meshgen.run.meshing",
     "meshgen.mlp_numpy": "meshgen.neural.mlp_numpy",
     "meshgen.orthogonal": "meshgen.methods.orthogonal",
     "meshgen.patches": "meshgen.geometry.patches",

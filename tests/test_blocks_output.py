@@ -2,6 +2,7 @@
 record has its reciprocal and the coordinates match; cgnscheck; VTK's CGNS reader shows every
 patch), OpenFOAM (checkMesh, potentialFoam's uniform flow through the pipe), merged .vtu."""
 
+import json
 import re
 import shutil
 import subprocess
@@ -11,7 +12,8 @@ import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam, read_vector_field, run_tool, solver_residuals, write_potential_flow
 
-from meshgen.formats import write_mesh
+from meshgen.errors import FormatError
+from meshgen.formats import read_mesh, write_mesh
 from meshgen.formats._cgns import read_zones
 from meshgen.formats.multiblock import write_blocks
 from meshgen.geometry.blocks import load_block_set, tfi_blocks
@@ -259,3 +261,56 @@ def test_vtm_lists_a_vts_per_block(tmp_path, pipe):
         points = vtk_to_numpy(output.GetBlock(index).GetPoints().GetData())
         # VTK's structured points run i fastest: the node array transposed.
         np.testing.assert_array_equal(points, np.transpose(X, (2, 1, 0, 3)).reshape(-1, 3))
+
+
+@needs_openfoam
+def test_openfoam_block_set_case_runs_potential_foam_from_its_own_fields(tmp_path):
+    """A block set's case is as runnable as a single block's: ``meshgen mesh -g pipe --format
+    openfoam`` writes ``0/U`` and ``0/p`` from the patches' types (inlet, outlet, wall), and
+    potentialFoam runs on them with no file of ours: the pipe is an extrusion of its section, so
+    the flow from the inlet's uniform 1 m/s (normal, into the domain) is uniform along +z."""
+    case = tmp_path / "pipe"
+    result = subprocess.run(
+        ["meshgen", "mesh", "-g", "pipe", "--dims", "6", "3", "4", "--method", "tfi", "--format", "openfoam", "-o", str(case)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in (case / "0").iterdir()) == ["U", "p"]
+    record = json.loads((case / "constant" / "polyMesh" / "meshgen.json").read_text())
+    assert record["block_set"] == "pipe" and "node_shape" not in record
+    assert set(record["fields"]) == {"U", "p"}
+    solved = run_tool("potentialFoam", case)
+    assert solved.returncode == 0 and "\nEnd" in solved.stdout, solved.stdout[-3000:]
+    U = read_vector_field(case / "0" / "U")
+    assert U.shape == (load_block_set("pipe", None, (6, 3, 4)).cells, 3)
+    assert np.max(np.abs(U - [0.0, 0.0, 1.0])) < 1e-5
+    # Re-meshing follows the single-block rules (meshgen.formats._foam_fields): the solved fields
+    # are meshgen's and are rewritten for the new mesh; a user's edit is kept, with a warning.
+    result = subprocess.run(
+        ["meshgen", "mesh", "-g", "pipe", "--dims", "6", "3", "4", "--method", "tfi", "--format", "openfoam", "-o", str(case)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0 and "kept" not in result.stderr, result.stderr
+    assert "internalField   uniform (0 0 0)" in (case / "0" / "U").read_text()
+    (case / "0" / "p").write_text((case / "0" / "p").read_text().replace("uniform 0;", "uniform 5;"))
+    result = subprocess.run(
+        ["meshgen", "mesh", "-g", "pipe", "--dims", "6", "3", "4", "--method", "tfi", "--format", "openfoam", "-o", str(case)],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0 and "kept 0/p" in result.stderr, result.stderr
+    with pytest.raises(FormatError, match="block set 'pipe'"):
+        read_mesh(case)
+
+
+@needs_openfoam
+def test_openfoam_2d_block_set_case_has_fields_with_empty_front_and_back(tmp_path, dfg):
+    block_set, Xs = dfg
+    case = write_blocks(tmp_path / "dfg", block_set, Xs, format_name="openfoam")
+    text = (case / "0" / "p").read_text()
+    for name, entry in (("inlet", "zeroGradient"), ("outlet", "fixedValue"), ("frontAndBack", "empty")):
+        assert re.search(rf"{name}\s*\{{\s*type {entry};", text), text
+    solved = run_tool("potentialFoam", case)
+    assert solved.returncode == 0 and "\nEnd" in solved.stdout, solved.stdout[-3000:]

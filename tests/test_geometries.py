@@ -339,3 +339,49 @@ def test_discontinuous_plugin_is_rejected_with_its_name(tmp_path):
     # and the independent edge test above would have caught it too
     unchecked = load_geometry(str(path), check=False)
     assert edge_jumps(unchecked, 1e-7).max() > 0.04
+
+
+def test_geometries_show_of_a_block_set_is_its_closed_boundary(tmp_path):
+    """A multi-block geometry is shown as its blocks' patch faces (interfaces left out): the pipe's
+    surface is closed, every vertex lies on the cylinder or an end disc, and its volume is the
+    section polygon of its wall vertices times the length (the wall's quads are planar
+    rectangles), computed here from the vertices alone."""
+    import meshio
+    import trimesh
+
+    n, radius, length = 6, 0.7, 3.0
+    args = ["--param", f"radius={radius}", "--param", f"length={length}", "--resolution", str(n)]
+    result = CliRunner().invoke(cli, ["geometries", "show", "pipe", "-o", str(tmp_path / "p.stl"), *args])
+    assert result.exit_code == 0, result.output
+    assert "watertight" in result.output
+    surface = trimesh.load(tmp_path / "p.stl", process=True)
+    assert surface.is_watertight
+    v = np.asarray(surface.vertices)
+    r = np.hypot(v[:, 0], v[:, 1])
+    on_wall, on_end = np.isclose(r, radius, atol=1e-7), np.isclose(v[:, 2], 0, atol=1e-7) | np.isclose(v[:, 2], length, atol=1e-7)
+    assert np.all(on_wall | on_end) and np.all(r <= radius + 1e-7)
+    ring = v[on_wall & np.isclose(v[:, 2], 0, atol=1e-7)]
+    assert len(ring) == 4 * n  # four wall blocks, n cells each around the circumference
+    ring = ring[np.argsort(np.arctan2(ring[:, 1], ring[:, 0]))]
+    x, y = ring[:, 0], ring[:, 1]
+    section = 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    assert surface.volume == pytest.approx(section * length, rel=1e-6)  # STL stores float32
+    # .vtu: each triangle's block, face and patch; the inlet is every block's zeta0 face.
+    result = CliRunner().invoke(cli, ["geometries", "show", "pipe", "-o", str(tmp_path / "p.vtu"), *args])
+    assert result.exit_code == 0, result.output
+    mesh = meshio.read(tmp_path / "p.vtu")
+    block, face = mesh.cell_data["block"][0], mesh.cell_data["cube_face"][0]
+    centroid_z = mesh.points[mesh.cells[0].data][:, :, 2].mean(axis=1)
+    inlet = face == 4  # zeta0
+    assert sorted(set(block[inlet])) == [0, 1, 2, 3, 4] and np.allclose(centroid_z[inlet], 0)
+    assert np.count_nonzero(inlet) == 5 * 2 * n * n
+
+
+def test_geometries_show_of_a_2d_block_set_fills_the_domain(tmp_path):
+    result = CliRunner().invoke(cli, ["geometries", "show", "dfg-cylinder", "-o", str(tmp_path / "d.ply"), "--resolution", "24"])
+    assert result.exit_code == 0, result.output
+    import trimesh
+
+    channel = 2.2 * 0.41 - np.pi * 0.05**2  # the DFG benchmark's channel (2.2 x 0.41) less its cylinder (d = 0.1)
+
+    assert trimesh.load(tmp_path / "d.ply").area == pytest.approx(channel, rel=1e-4)

@@ -7,8 +7,8 @@ import re
 import click
 
 from meshgen.errors import GeometryError
+from meshgen.geometry.blocks import block_spec
 from meshgen.geometry.plugins import load_geometry, parse_params
-from meshgen.run.meshing_blocks import block_spec
 
 __all__ = ["DimsCommand", "block_nodes_option", "dims_option", "geometry_options", "load_selected_geometry", "parse_dims"]
 

@@ -15,6 +15,7 @@ from meshgen.cli._options import block_nodes_option, geometry_options
 from meshgen.cli._progress import progress_display
 from meshgen.cli.tables import METRIC_LABELS, markdown_table, print_table
 from meshgen.cli.tables import number as _number
+from meshgen.geometry.blocks import block_spec
 from meshgen.geometry.plugins import load_geometry, parse_params
 from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_json
 from meshgen.quality.files import zone_reports
@@ -56,7 +57,8 @@ def solver_figure_rows(report) -> list[tuple[str, str]]:
     rows = []
     for name, label in (("expansion_ratio", "expansion ratio"), ("grid_smoothness", "grid smoothness")):
         figure = figures[name]
-        text = f"{_number(figure['max'])} at cell {_cell(figure['worst_cell'])} (mean {_number(figure['mean'])}"
+        block = f" of block {figure['worst_block']}" if "worst_block" in figure else ""
+        text = f"{_number(figure['max'])} at cell {_cell(figure['worst_cell'])}{block} (mean {_number(figure['mean'])}"
         if "max_by_axis" in figure:
             lines = zip(("xi", "eta", "zeta"), figure["max_by_axis"])
             text += "; along " + ", ".join(f"{axis} lines {_number(value)}" for axis, value in lines)
@@ -69,6 +71,7 @@ def solver_figure_rows(report) -> list[tuple[str, str]]:
         if figure["max"] is not None:
             face = figure["worst_face"]
             where = f"face normal to axis {face['axis']} at {_cell(face['index'])}"
+            where += f" of block {face['block']}" if "block" in face else ""
             rows.append((f"{label} max", f"{_number(figure['max'])} deg at {where} (average {_number(figure['average'])})"))
     return rows
 
@@ -177,7 +180,8 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     if markdown_path:
         check_output_file(markdown_path, "report.md")
     parsed_params = parse_params(params)
-    chosen = load_geometry(geometry, parsed_params) if geometry else None
+    # A multi-block geometry goes by name: evaluate_file measures against its block set.
+    chosen = load_geometry(geometry, parsed_params) if geometry and not block_spec(geometry) else geometry
     address = scheduler_address(scheduler)
     if address is not None and chunked is False:
         raise click.UsageError("--scheduler runs the chunked path; leave out --in-memory")
@@ -186,12 +190,23 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     interactive = not quiet and json_path != "-" and sys.stdout.isatty()
     try:
         options = {"chunked": True if client else chunked, "client": client, "block_nodes": block_nodes}
-        reports = [_evaluate_one(path, chosen, None if chosen else parsed_params, interactive, options) for path in meshes]
+        if per_block:
+            options["per_block"] = True
+        by_name = isinstance(chosen, str)
+        reports = [
+            _evaluate_one(path, chosen, parsed_params if by_name or not chosen else None, interactive, options) for path in meshes
+        ]
     finally:
         if client is not None:
             client.close()
-    if per_block:  # each block of a block set after the whole mesh (meshgen.quality.files.zone_reports)
-        reports = [entry for path, report in zip(meshes, reports) for entry in (report, *zone_reports(path))]
+    # Each block of a block set after the whole mesh (evaluate_file's per_block); the blocks of a
+    # chunked evaluation (no block reports of its own) read again.
+    if per_block:
+        reports = [
+            entry
+            for path, report in zip(meshes, reports)
+            for entry in (report, *(report.pop("blocks") if "blocks" in report else zone_reports(path)))
+        ]
 
     gate_results = []
     try:

@@ -9,8 +9,10 @@ import click
 
 from meshgen.cli._options import load_selected_geometry
 from meshgen.errors import GeometryError
+from meshgen.geometry.block_surface import write_block_set_surface
+from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
 from meshgen.geometry.blocks import describe as describe_blocks
-from meshgen.geometry.plugins import available_names, load_geometry
+from meshgen.geometry.plugins import available_names, load_geometry, parse_params
 from meshgen.geometry.shapes.loader import FORMAT_HELP
 from meshgen.geometry.shapes.show import write_face_surface
 from meshgen.geometry.surface import check_surface_path, write_surface
@@ -75,19 +77,22 @@ def show(name, params, output, resolution):
     """Write the closed boundary surface of geometry NAME (2D: the filled domain in z = 0). With a
     .vtu output: the surface with the cell arrays cube_face (0..5: xi0 xi1 eta0 eta1 zeta0 zeta1)
     and patch, to check a shape file's face assignment before meshing (a triangulated surface's own
-    triangles; otherwise the boundary map sampled)."""
+    triangles; otherwise the boundary map sampled). A multi-block geometry: its blocks' patch
+    faces (interfaces left out), --resolution cells per block edge; a .vtu adds the cell array block."""
 
     if output.lower().endswith(".vtu"):
         check_output_file(output, "faces.vtu")
-        geometry = load_selected_geometry(name, params)
+        geometry = _shown(name, params)
         if geometry.dim != 3:
             raise click.BadParameter("a .vtu of cube faces needs a 3D geometry", param_hint="--output")
         path, count = write_face_surface(geometry, output, resolution)
-        click.echo(f"wrote {path}: {count} triangles with cell arrays cube_face and patch")
+        arrays = "block, cube_face and patch" if isinstance(geometry, BlockSet) else "cube_face and patch"
+        click.echo(f"wrote {path}: {count} triangles with cell arrays {arrays}")
         return
     check_surface_path(output)  # before loading: a bad path fails fast, whatever the geometry
-    geometry = load_selected_geometry(name, params)
-    path, surface = write_surface(geometry, output, resolution)
+    geometry = _shown(name, params)
+    write = write_block_set_surface if isinstance(geometry, BlockSet) else write_surface
+    path, surface = write(geometry, output, resolution)
     click.echo(
         f"wrote {path}: {len(surface.vertices)} vertices, {len(surface.faces)} triangles"
         + (
@@ -96,3 +101,11 @@ def show(name, params, output, resolution):
             else f", area {surface.area:.6g}"
         )
     )
+
+
+def _shown(name, params):
+    """The geometry to show: a multi-block one as its block set (its blocks' patch faces)."""
+    spec = block_spec(name)
+    if spec is not None:
+        return measured_block_set(spec, parse_params(params))
+    return load_selected_geometry(name, params)

@@ -199,24 +199,30 @@ def check_extrusion_patch(patches, dim: int) -> None:
         raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
 
 
-def write_case(case, node_shape, metadata, patches, write_poly_mesh) -> None:
+def write_case(case, node_shape, metadata, patches, write_poly_mesh, block_set: str | None = None) -> None:
     """Write the case of a mesh of ``node_shape`` nodes (2D: extruded one cell) with ``patches``:
     ``write_poly_mesh(folder, patches)`` fills a new polyMesh folder (the patches with the
     extrusion's ``frontAndBack`` in 2D), which is swapped in atomically with the system files,
-    the starting fields and meshgen's record, in one publication."""
+    the starting fields and meshgen's record, in one publication.
+
+    ``block_set``: the name of the block set whose merged mesh this is (``node_shape`` then gives
+    only the dimension, e.g. ``(0, 0, 0)``): the record says ``"block_set"`` instead of a
+    ``node_shape`` the structured reader would rebuild a grid from."""
     case = Path(case)
     shape = [int(n) for n in node_shape]
     dim = len(shape)
     check_extrusion_patch(patches, dim)
     if dim == 2:
         patches = list(patches) + [_extrusion_patch()]
-    check_node_shape(shape)
+    if block_set is None:
+        check_node_shape(shape)
     fields = starting_fields(patches, foam_header) if _has_inlet_and_outlet(patches) else {}
     write_fields, kept = fields_to_write(case / "0", fields, previous_fields(case / "constant" / "polyMesh" / RECORD_NAME))
     # The record names the fields as meshgen writes them, kept ones included: a kept field is the
     # user's, so it stays unlike the recorded text until the user deletes it.
+    grid = f'"node_shape": {shape}' if block_set is None else f'"block_set": {json.dumps(block_set)}'
     record = (
-        f'{{"node_shape": {shape}, "extruded_2d": {json.dumps(dim == 2)}, "fields": {json.dumps(field_record(write_fields))}, '
+        f'{{{grid}, "extruded_2d": {json.dumps(dim == 2)}, "fields": {json.dumps(field_record(write_fields))}, '
         f'"metadata": {metadata_json(metadata)}}}'
     )
 
@@ -420,6 +426,11 @@ def _record(folder: Path) -> dict:
         record = json.loads(_input_bytes(path, limit=16 * 2**20))
     except ValueError as exc:
         raise FormatError(f"{path}: {excerpt(exc)}") from None
+    if isinstance(record, dict) and "block_set" in record:
+        raise FormatError(
+            f"{folder}: the merged mesh of the block set {excerpt(repr(record['block_set']))}: meshgen reads back the "
+            "structured grid of single-block cases; read the block set's .cgns (a zone per block), or check the case with checkMesh"
+        )
     shape = record.get("node_shape") if isinstance(record, dict) else None
     if not (isinstance(shape, list) and len(shape) in (2, 3) and all(isinstance(n, int) and n >= 2 for n in shape)):
         raise FormatError(f"{path}: no node_shape of 2 or 3 counts of at least 2: not a case meshgen wrote")

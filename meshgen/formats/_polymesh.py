@@ -12,8 +12,6 @@ A 2D mesh is extruded one cell along +z (``extrude_quads``) with the ``empty`` p
 
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -102,48 +100,28 @@ def poly_mesh(points, cells, patches):
     return np.concatenate(all_faces), np.concatenate(all_owner), neighbour, entries
 
 
-def write_poly_mesh(case, points3, cells, patches, control_files: dict) -> None:
-    """Write ``case/constant/polyMesh`` (ASCII) of hexahedra ``cells`` on ``points3`` (N, 3) with
-    ``patches`` [(name, type, faces)], atomically (a new polyMesh beside the old one, swapped in),
-    the ``system`` files of ``control_files`` ({name: text}) where missing, and ``CASE.foam``."""
+def write_poly_mesh(folder, points3, cells, patches) -> None:
+    """Write the polyMesh files (ASCII) of hexahedra ``cells`` on ``points3`` (N, 3) with
+    ``patches`` [(name, type, faces)] into ``folder`` (a new polyMesh folder, which
+    ``meshgen.formats._openfoam.write_case`` swaps in with the case's other files)."""
     faces, owner, neighbour, entries = poly_mesh(points3, cells, patches)
-    case = Path(case)
-    constant = case / "constant"
-    constant.mkdir(parents=True, exist_ok=True)
-    (case / "system").mkdir(exist_ok=True)
-    temporary = constant / f".polyMesh.tmp-{os.getpid()}"
-    shutil.rmtree(temporary, ignore_errors=True)
-    temporary.mkdir()
-    try:
-        note = f"nPoints:{len(points3)} nCells:{len(cells)} nFaces:{len(faces)} nInternalFaces:{len(neighbour)}"
-        _write(temporary / "points", "vectorField", "points", points3, "({:.17g} {:.17g} {:.17g})")
-        _write(temporary / "faces", "faceList", "faces", faces, "4({} {} {} {})")
-        _write(temporary / "owner", "labelList", "owner", owner, "{}", note)
-        _write(temporary / "neighbour", "labelList", "neighbour", neighbour, "{}", note)
-        lines = [
-            BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"),
-            f"{len(entries)}\n(\n",
-        ]
-        for name, kind, count, first in entries:
-            group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
-            lines.append(
-                f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
-            )
-        lines.append(")\n")
-        (temporary / "boundary").write_text("".join(lines))
-        target = constant / "polyMesh"
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(temporary, target)
-    finally:
-        shutil.rmtree(temporary, ignore_errors=True)
-    for name, text in control_files.items():
-        path = case / "system" / name
-        if not path.exists():
-            path.write_text(BANNER.format(class_name="dictionary", location="system", name=name) + text)
-    foam = case / f"{case.resolve().name}.foam"
-    if not foam.exists():
-        foam.write_text("")
+    folder = Path(folder)
+    note = f"nPoints:{len(points3)} nCells:{len(cells)} nFaces:{len(faces)} nInternalFaces:{len(neighbour)}"
+    _write(folder / "points", "vectorField", "points", points3, "({:.17g} {:.17g} {:.17g})")
+    _write(folder / "faces", "faceList", "faces", faces, "4({} {} {} {})")
+    _write(folder / "owner", "labelList", "owner", owner, "{}", note)
+    _write(folder / "neighbour", "labelList", "neighbour", neighbour, "{}", note)
+    lines = [
+        BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"),
+        f"{len(entries)}\n(\n",
+    ]
+    for name, kind, count, first in entries:
+        group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
+        lines.append(
+            f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
+        )
+    lines.append(")\n")
+    (folder / "boundary").write_text("".join(lines))
 
 
 def _write(path: Path, class_name: str, name: str, values: np.ndarray, row: str, note: str = "") -> None:

@@ -61,6 +61,7 @@ __all__ = [
     "cpu_count",
     "read",
     "write",
+    "write_cells",
 ]
 
 # ISA-L's level 1 (of 0-3): on the 1e6-hexahedron mesh with its seven quality arrays 3% larger
@@ -88,7 +89,17 @@ def write(path, X, cell_data, metadata, level=LEVEL, block_bytes=BLOCK_BYTES):
     ``block_bytes``: uncompressed bytes per block, a multiple of 8 (meshio decodes each block
     into whole values)."""
     node_shape = X.shape[:-1]
-    cell_count = int(np.prod([n - 1 for n in node_shape]))
+    write_cells(
+        path, lambda: flat_points(X), lambda: _connectivity(node_shape), len(node_shape), cell_data, metadata, level, block_bytes
+    )
+
+
+def write_cells(path, points, cells, dim: int, cell_data, metadata, level=LEVEL, block_bytes=BLOCK_BYTES):
+    """Write an unstructured mesh as :func:`write` writes a node array: ``points`` (N, 3) float64
+    and ``cells`` (C, 8 or 4) int64 in VTK corner order (each an array, or a callable returning
+    it, called in that order once the arrays before it are handed to the compressing threads),
+    hexahedra (``dim`` 3) or quads (2); ``cell_data`` and ``metadata`` as :func:`write` takes them
+    (a block set's merged mesh: ``meshgen.formats.multiblock``)."""
     compress = functools.partial(compress_block, level=level)
     pool = ThreadPoolExecutor(max_workers=cpu_count())
     arrays = []  # (element, name, further attributes, type, bytes, compressed blocks) in file order
@@ -103,22 +114,23 @@ def write(path, X, cell_data, metadata, level=LEVEL, block_bytes=BLOCK_BYTES):
         if metadata:
             codes = np.frombuffer(metadata_json(metadata).encode("ascii"), dtype=np.uint8)
             add("FieldData", METADATA_KEY, {"NumberOfTuples": codes.size}, codes)
-        add("Points", "Points", {"NumberOfComponents": 3}, flat_points(X))
-        connectivity = _connectivity(node_shape)
-        corner_count = connectivity.shape[1]
+        points = points() if callable(points) else points
+        add("Points", "Points", {"NumberOfComponents": 3}, points)
+        connectivity = cells() if callable(cells) else cells
+        cell_count, corner_count = connectivity.shape
         add("Cells", "connectivity", {}, connectivity)
         add("Cells", "offsets", {}, np.arange(1, cell_count + 1, dtype=np.int64) * corner_count)
-        add("Cells", "types", {}, np.full(cell_count, VTK_HEXAHEDRON if len(node_shape) == 3 else VTK_QUAD, dtype=np.uint8))
+        add("Cells", "types", {}, np.full(cell_count, VTK_HEXAHEDRON if dim == 3 else VTK_QUAD, dtype=np.uint8))
         if callable(cell_data):
             cell_data = cell_data()
-        for name, values in cell_data.items():
+        for name, values in (cell_data or {}).items():
             add("CellData", name, {}, values)
 
         with open(path, "wb") as file:
             file.write(FILE_HEAD)
             for element, group in itertools.groupby(arrays, key=lambda array: array[0]):
                 if element == "Points":
-                    file.write(f'<Piece NumberOfPoints="{int(np.prod(node_shape))}" NumberOfCells="{cell_count}">\n'.encode())
+                    file.write(f'<Piece NumberOfPoints="{len(points)}" NumberOfCells="{cell_count}">\n'.encode())
                 file.write(f"<{element}>\n".encode())
                 for _, name, more, dtype, nbytes, blocks in group:
                     streams = [block.result() for block in blocks]

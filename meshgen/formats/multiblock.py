@@ -1,8 +1,9 @@
 """Writing block-set meshes (a ``BlockSet`` and its node arrays, one per block): ``.cgns`` one
 structured zone per block with 1-to-1 connectivity, an OpenFOAM case with the interfaces as
-internal faces, one merged unstructured mesh for the formats meshio writes (``.vtu``, ``.vtk``,
-``.xdmf``) and for ``.su2`` (a marker per patch) and ``.msh`` (a physical group per patch), the
-boundary elements outward (2D: the domain on their left).
+internal faces, one merged unstructured mesh for ``.vtu`` (the single block's writer, metadata
+included), for the formats meshio writes (``.vtk``, ``.xdmf``) and for ``.su2`` (a marker per
+patch) and ``.msh`` (a physical group per patch), the boundary elements outward (2D: the domain
+on their left).
 """
 
 from __future__ import annotations
@@ -15,11 +16,12 @@ from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
 from meshgen.formats._cgns import read_zones, write_zones, zone_count
 from meshgen.formats._gmsh import write_elements as write_msh_elements
-from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, FV_SOLUTION
+from meshgen.formats._openfoam import EXTRUDED_PATCH, check_extrusion_patch, write_case
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
 from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
 from meshgen.formats._vtm import write_blocks_vtm
+from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
@@ -119,7 +121,7 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
             write_zones(temporary, zones, metadata, connectivity_records(block_set))
         return path
     if fmt.name == "openfoam":
-        _write_openfoam(path, block_set, Xs)
+        _write_openfoam(path, block_set, Xs, metadata)
         return path
     if fmt.name in SOLVER_FORMATS:
         points, cells, _ = merged_mesh(block_set, Xs)
@@ -137,6 +139,10 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
 
     points, cells, owner = merged_mesh(block_set, Xs)
     padded = np.hstack([points, np.zeros((len(points), 3 - block_set.dim))]) if block_set.dim == 2 else points
+    if fmt.name == "vtu":  # the single block's writer: its compression, and meshgen's metadata as field data
+        with atomic_write(path, FormatError) as temporary:
+            write_vtu_cells(temporary, padded, cells, block_set.dim, {"block": owner.astype(float)}, metadata)
+        return path
     cell_type = "hexahedron" if block_set.dim == 3 else "quad"
 
     field_data = {METADATA_KEY: np.frombuffer(metadata_json(metadata).encode(), dtype=np.uint8).copy()} if metadata else {}
@@ -146,15 +152,20 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
     return path
 
 
-def _write_openfoam(case, block_set: BlockSet, Xs) -> None:
-
+def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
+    """The OpenFOAM case of the merged mesh (interfaces as internal faces) through the one case
+    writer of a single block (``meshgen.formats._openfoam.write_case``): the same system files,
+    ``0/U`` and ``0/p`` from the patches' types and roles, re-mesh rules and atomic publication."""
     points, cells, _ = merged_mesh(block_set, Xs)
-    patches = patch_faces(block_set)
+    faces = patch_faces(block_set)
     if block_set.dim == 2:
-        if any(name == EXTRUDED_PATCH for name, _, _ in patches):
-            raise FormatError(f"patch name '{EXTRUDED_PATCH}' is the front and back of an extruded 2D mesh: pick another")
-        points, cells, walls, front_back, _ = extrude_quads(points, cells, [faces for _, _, faces in patches])
-        patches = [(name, kind, faces) for (name, kind, _), faces in zip(patches, walls)]
-        patches.append((EXTRUDED_PATCH, "empty", front_back))
-    control = {"controlDict": CONTROL_DICT, "fvSchemes": FV_SCHEMES, "fvSolution": FV_SOLUTION}
-    write_poly_mesh(case, points, cells, patches, control)
+        check_extrusion_patch([Patch(name, kind, ()) for name, kind, _ in faces], 2)
+        points, cells, walls, front_back, _ = extrude_quads(points, cells, [elements for _, _, elements in faces])
+        faces = [(name, kind, elements) for (name, kind, _), elements in zip(faces, walls)]
+        faces.append((EXTRUDED_PATCH, "empty", front_back))
+    patches = [Patch(name, kind, ()) for name, kind, _ in faces if name != EXTRUDED_PATCH]
+
+    def write_folder(folder, _patches):
+        write_poly_mesh(folder, points, cells, faces)
+
+    write_case(case, (0,) * block_set.dim, metadata, patches, write_folder, block_set=block_set.name)

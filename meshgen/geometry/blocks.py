@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -29,7 +30,7 @@ from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
-from meshgen.geometry.plugins import Geometry, bind, load_geometry, plugin_module
+from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
 from meshgen.geometry.shapes.loader import is_shape_file
 from meshgen.methods.tfi import tfi
 
@@ -37,6 +38,7 @@ __all__ = [
     "BlockSet",
     "Interface",
     "block_patches",
+    "block_spec",
     "check_interfaces",
     "connectivity_records",
     "describe",
@@ -46,6 +48,7 @@ __all__ = [
     "inverse_transform",
     "is_multiblock",
     "load_block_set",
+    "measured_block_set",
     "merged_mesh",
     "tfi_blocks",
     "unify_interfaces",
@@ -93,6 +96,34 @@ class BlockSet:
     @property
     def cells(self) -> int:
         return int(sum(np.prod([n - 1 for n in shape]) for shape in self.node_shapes))
+
+
+def block_spec(geometry) -> str | None:
+    """The plugin spec (name or path) of ``geometry`` (a name, a path or a loaded Geometry) when it
+    declares blocks, else None."""
+    if geometry is None:
+        return None
+    if isinstance(geometry, Geometry):
+        if geometry.name in available_names() and plugin_module(geometry.name)[1] == geometry.source:
+            spec = geometry.name
+        elif geometry.source and Path(geometry.source).is_file():
+            spec = geometry.source
+        else:
+            return None
+    else:
+        spec = str(geometry)
+    if Path(spec).suffix.lower() not in ("", ".py"):
+        return None  # a shape file is one block
+    return spec if is_multiblock(spec) else None
+
+
+def measured_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet:
+    """The block set of plugin ``spec`` to measure a mesh against or to show: with the cell counts
+    ``dims`` its mesh was made with (its coordinates then seed the boundary deviation), else 4
+    cells per --dims number (the blocks' maps, patches and interfaces do not depend on them)."""
+    dim = load_geometry(spec, params, check=False).dim
+    dims = tuple(int(n) for n in dims) if dims is not None and len(dims) == dim else (4,) * dim
+    return load_block_set(spec, params, dims)
 
 
 def is_multiblock(spec: str) -> bool:

@@ -11,12 +11,12 @@ from meshgen.geometry.cube import faces as cube_faces
 from meshgen.methods.tfi import tfi
 from meshgen.run.atomic import atomic_write, check_output_file
 
-__all__ = ["SURFACE_EXTENSIONS", "boundary_surface", "check_surface_path", "write_surface"]
+__all__ = ["SURFACE_EXTENSIONS", "boundary_surface", "check_surface_path", "grid_triangles", "write_surface"]
 
 SURFACE_EXTENSIONS = (".stl", ".ply", ".obj", ".off")
 
 
-def _grid_triangles(n: int, flip: bool) -> np.ndarray:
+def grid_triangles(n: int, flip: bool) -> np.ndarray:
     """Two triangles per cell of an (n+1) x (n+1) node grid (C-order), shape (2 n^2, 3)."""
     index = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
     a, b = index[:-1, :-1].ravel(), index[1:, :-1].ravel()
@@ -36,14 +36,14 @@ def boundary_surface(geometry, resolution: int = 64):
     if geometry.dim == 2:
         X = tfi(geometry, (n, n)).reshape(-1, 2)
         vertices = np.column_stack([X, np.zeros(len(X))])
-        return trimesh.Trimesh(vertices, _grid_triangles(n, flip=False), process=False)
+        return trimesh.Trimesh(vertices, grid_triangles(n, flip=False), process=False)
     lattice, faces = [], []
     for face in cube_faces(3):
         axis = face.axis
         b, c = (axis + 1) % 3, (axis + 2) % 3  # cyclic, so that side 1 faces outward unflipped
         nodes = np.empty((len(u), 3), dtype=np.int64)
         nodes[:, axis], nodes[:, b], nodes[:, c] = face.side * n, u, v
-        faces.append(_grid_triangles(n, flip=face.side == 0) + sum(len(x) for x in lattice))
+        faces.append(grid_triangles(n, flip=face.side == 0) + sum(len(x) for x in lattice))
         lattice.append(nodes)
     lattice = np.concatenate(lattice)
     # Faces share their edge nodes: merge them by integer lattice position, so the surface is closed.

@@ -22,8 +22,12 @@ face gives for any boundary that is smooth on that scale.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import global_numbering
 from meshgen.geometry.cube import faces as cube_faces
 from meshgen.geometry.layout import unsmoothed
 
@@ -33,6 +37,7 @@ __all__ = [
     "ITERATIONS",
     "METHOD",
     "ON_BOUNDARY",
+    "block_set_deviation",
     "boundary_deviation",
     "distance_to_boundary",
     "grid_boundary_nodes",
@@ -198,13 +203,14 @@ def _nearest_sample(points, samples):
     return index, distance
 
 
-def _coarse_candidates(points, boundary_map, dim, upper, exclude):
+def _coarse_candidates(points, boundary_map, dim, upper, exclude, allowed=None):
     """Starting points for the projection: (point index, face, start parameters) triples, and
     an upper bound (K,) of each point's distance (its nearest coarse sample, or ``upper``).
 
     A face is searched for a point only if the point is within ``upper`` of the face's bounding
     box, and becomes a candidate if its nearest sample, less its sampling radius, is within the
-    best bound. ``exclude`` (K,): a face per point already projected onto (-1: none)."""
+    best bound. ``exclude`` (K,): a face per point already projected onto (-1: none).
+    ``allowed`` (F,) bool: the faces that are boundary at all (None: every face)."""
     faces, _ = _faces(dim)
     grid, samples, radius = _face_samples(boundary_map, dim)
     n = COARSE_INTERVALS[dim]
@@ -220,6 +226,8 @@ def _coarse_candidates(points, boundary_map, dim, upper, exclude):
     outside = np.maximum(np.maximum(low[None] - points[:, None], points[:, None] - high[None]), 0.0)
     searched = np.linalg.norm(outside, axis=2) <= upper[:, None] * (1 + 1e-9)
     searched &= np.arange(len(faces))[None, :] != np.asarray(exclude)[:, None]
+    if allowed is not None:
+        searched &= np.asarray(allowed, dtype=bool)[None, :]
     nearest = np.full((len(points), len(faces)), np.inf)
     start = np.zeros((len(points), len(faces)), dtype=np.int64)
     for f in range(len(faces)):
@@ -232,11 +240,13 @@ def _coarse_candidates(points, boundary_map, dim, upper, exclude):
     return point, face, grid[start[point, face]], best
 
 
-def distance_to_boundary(points, geometry, parametric_guess=None) -> np.ndarray:
+def distance_to_boundary(points, geometry, parametric_guess=None, faces=None) -> np.ndarray:
     """Distance (K,) of each point (K, dim) to the geometry's true boundary; NaN for non-finite points.
 
     ``parametric_guess`` (K, dim): optional positions on the unit cube's boundary to start from
-    (for the boundary nodes of a structured block: their index positions)."""
+    (for the boundary nodes of a structured block: their index positions). ``faces``: the cube
+    faces (names, e.g. ``("xi1", "zeta0")``) that make the boundary (a block of a block set: its
+    patch faces, not its interfaces); None: all of them."""
     geometry = unsmoothed(geometry)  # the surface is the same for every boundary layout: use its own map
     points = np.asarray(points, dtype=float)
     dim = geometry.dim
@@ -256,8 +266,9 @@ def distance_to_boundary(points, geometry, parametric_guess=None) -> np.ndarray:
         distance[todo], _ = project_to_faces(points[todo], face, uv, geometry.boundary, dim)
         own_face[todo] = face
         todo = todo[distance[todo] > ON_BOUNDARY * length]
-    if len(todo):
-        point, face, uv, bound = _coarse_candidates(points[todo], geometry.boundary, dim, distance[todo], own_face[todo])
+    allowed = None if faces is None else np.array([face.name in faces for face in cube_faces(dim)])
+    if len(todo) and (allowed is None or allowed.any()):
+        point, face, uv, bound = _coarse_candidates(points[todo], geometry.boundary, dim, distance[todo], own_face[todo], allowed)
         found, _ = project_to_faces(points[todo][point], face, uv, geometry.boundary, dim)
         np.minimum.at(bound, point, found)
         distance[todo] = np.minimum(distance[todo], bound)
@@ -319,3 +330,50 @@ def deviation_figures(nodes: int, total: float, largest, nonfinite: int, geometr
         "params": dict(geometry.values),
         "method": METHOD,
     }
+
+
+def block_set_deviation(block_set, Xs=None, points=None) -> dict:
+    """The boundary deviation of a block set's mesh (``meshgen.geometry.blocks.BlockSet``): its true
+    boundary is the union of the blocks' patch faces (an interface face is inside the domain).
+
+    ``Xs``: the blocks' node arrays. Each patch face's nodes start on their own face at their
+    parametric positions (the block set's coordinates where the shapes match, else the index
+    positions); a node found off its own block's patch faces (an elliptic mesh's nodes slide in
+    their planes, across the blocks' maps) is measured against every block's patch faces. A node
+    on several blocks' faces is counted once. ``points`` (K, dim) instead: the boundary nodes of
+    the merged mesh (a file without blocks), each measured against every block's patch faces.
+    Distances are to points of the true boundary: never below the true distance."""
+    names = cube.face_names(block_set.dim)
+    faces_of = [tuple(face for face in names if (block, face) in block_set.patches) for block in range(len(block_set.names))]
+    if Xs is None:
+        points = np.asarray(points, dtype=float)
+        distance = np.full(len(points), np.inf)
+        pending = np.arange(len(points))
+    else:
+        numbering, count = global_numbering(block_set)
+        points = np.full((count, block_set.dim), np.nan)
+        distance, measured = np.full(count, np.nan), np.zeros(count, dtype=bool)
+        for block, (X, ids, geometry, faces) in enumerate(zip(Xs, numbering, block_set.geometries, faces_of)):
+            points[ids.reshape(-1)] = X.reshape(-1, block_set.dim)
+            coords = block_set.coords[block]
+            if tuple(len(t) for t in coords) != X.shape[:-1]:
+                coords = [np.linspace(0.0, 1.0, n) for n in X.shape[:-1]]
+            for name in faces:
+                face = cube.face_named(name, block_set.dim)
+                found = distance_to_boundary(
+                    X[face.node_index].reshape(-1, block_set.dim), geometry, face.points(coords), faces=faces
+                )
+                where = ids[face.node_index].reshape(-1)
+                distance[where] = np.fmin(distance[where], found)  # NaN only where every measure is NaN
+                measured[where] = True
+        keep = np.flatnonzero(measured)
+        points, distance = points[keep], distance[keep]
+        pending = np.flatnonzero(distance > ON_BOUNDARY * block_set.length)
+    for geometry, faces in zip(block_set.geometries, faces_of):
+        if faces and len(pending):
+            distance[pending] = np.fmin(distance[pending], distance_to_boundary(points[pending], geometry, faces=faces))
+    distance[~np.isfinite(points).all(axis=1)] = np.nan
+    nonfinite = int(np.count_nonzero(np.isnan(distance)))
+    finite = distance[~np.isnan(distance)]
+    named = SimpleNamespace(characteristic_length=block_set.length, name=block_set.name, values=block_set.values)
+    return deviation_figures(len(distance), float(finite.sum()), float(finite.max()) if len(finite) else None, nonfinite, named)

@@ -15,18 +15,21 @@ from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
 from meshgen.formats.multiblock import read_zones, zone_count
+from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import geometry_patches
-from meshgen.geometry.plugins import load_geometry, load_recorded_geometry
+from meshgen.geometry.plugins import Geometry, load_geometry, load_recorded_geometry
 from meshgen.quality.chunked import chunked_report
+from meshgen.quality.deviation import block_set_deviation
 from meshgen.quality.faces import cells_for_quality
+from meshgen.quality.merged import merged_reports
 from meshgen.quality.report import assess, build_report, quality_report, report_in_parallel
 from meshgen.quality.structured import check_node_array
 from meshgen.run.atomic import atomic_path
 from meshgen.run.inputs import read_input_text
 from meshgen.run.publish import publishing
 from meshgen.run.resources import needs_chunking
-from meshgen.run.trust import UntrustedGeometry
+from meshgen.run.trust import UntrustedGeometry, recorded_spec
 
 __all__ = [
     "zone_reports",
@@ -177,6 +180,7 @@ def evaluate_file(
     client=None,
     progress=None,
     block_nodes: int | None = None,
+    per_block: bool = False,
 ) -> dict:
     """Quality report of a mesh file (any format ``meshgen.formats.read_mesh`` reads), with
     ``file`` and ``structured`` keys added.
@@ -193,6 +197,12 @@ def evaluate_file(
     metrics, report; block by block on the chunked path), so a long evaluation is never silent.
     ``block_nodes``: nodes per block of the chunked path (default
     ``meshgen.quality.chunked.evaluate_block_nodes()``).
+
+    A mesh made of blocks (a multi-zone .cgns, a merged file with the cell data ``block``, or any
+    file evaluated against a block set) is measured merged, interfaces as interior faces
+    (``meshgen.quality.merged``), with the block set's boundary deviation
+    (``meshgen.quality.deviation.block_set_deviation``); ``per_block``: its blocks' reports too,
+    under ``blocks`` (``file`` named ``<path>:<block>``).
     """
     progress = progress or (lambda done, **figures: None)
     path = Path(path)
@@ -214,6 +224,15 @@ def evaluate_file(
         raise MeshgenError(f"{path}: {exc}") from None
     metadata = recorded_metadata(path, mesh)
     geometry, source, notes = _geometry_for(path, geometry, params, metadata, len(cells))
+    blocks = _cell_blocks(mesh, len(cells))
+    if isinstance(geometry, BlockSet) or blocks is not None:
+        progress(0.3, phase="metrics")
+        reports = _block_set_reports(path, points, cells, blocks, geometry, metadata)
+        progress(1.0, phase="done")
+        report = _finish_file_report(path, reports[0], source, notes, metadata, False)
+        if per_block:
+            report["blocks"] = [{"file": f"{path}:{r.pop('block')}", **r} for r in reports[1:]]
+        return report
     dims = metadata.get("dims")
     X = None
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
@@ -272,6 +291,25 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
         metadata.clear()  # a sidecar of another mesh that once had this name
     notes = []
     source = "--geometry"
+    spec = block_spec(geometry)
+    if spec is not None:  # a multi-block geometry: its block set, with the cell counts recorded
+        values = {**(geometry.values if isinstance(geometry, Geometry) else {}), **(params or {})}
+        return measured_block_set(spec, values, _recorded_block_dims(metadata)), source, notes
+    if geometry is None and metadata.get("block_set") and not params:
+        source = f"recorded in the {'mesh file' if metadata['source'] == 'file' else 'sidecar ' + sidecar_path(path).name}"
+        try:
+            spec = recorded_spec(metadata["block_set"], source.removeprefix("recorded in ").replace("the ", "", 1))
+            return measured_block_set(spec, _recorded_params(metadata), _recorded_block_dims(metadata)), source, notes
+        except UntrustedGeometry:
+            notes.append(
+                f"recorded block set is the plugin file {excerpt(metadata['block_set'])}, which a file cannot make meshgen run: "
+                "no boundary deviation (pass -g PATH to use it)"
+            )
+        except GeometryError as exc:
+            notes.append(
+                f"recorded block set {excerpt(repr(metadata['block_set']))} is not available ({exc}); no boundary deviation"
+            )
+        return None, source, notes
     if isinstance(geometry, str):
         geometry = load_geometry(geometry, params)
     elif geometry is not None and params:
@@ -320,8 +358,61 @@ def _finish_file_report(path, report, source, notes, metadata, structured) -> di
 
 
 def zone_reports(path) -> list[dict]:
-    """The quality report of each zone of a multi-zone .cgns file (one block each), ``file`` named
-    ``<path>:<zone>``; [] for any other file."""
-    if Path(path).suffix.lower() != ".cgns" or zone_count(path) < 2:
-        return []
-    return [{"file": f"{path}:{zone['name']}", "structured": True, **quality_report(zone["X"])} for zone in read_zones(path)]
+    """The quality report of each block of a mesh made of blocks (``evaluate_file``'s
+    ``per_block``), ``file`` named ``<path>:<block>``; [] for any other file."""
+    return evaluate_file(path, chunked=False, per_block=True).get("blocks", [])
+
+
+def _recorded_block_dims(metadata) -> tuple | None:
+    dims = metadata.get("block_dims")
+    if isinstance(dims, list) and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in dims):
+        return tuple(dims)
+    return None
+
+
+def _cell_blocks(mesh, n_cells: int) -> np.ndarray | None:
+    """The block of each cell of a merged block-set file (its cell data ``block``: a multi-zone
+    .cgns read merged, a .vtu meshgen wrote), or None (one block, or no such data)."""
+    data = getattr(mesh, "cell_data", {}).get("block")
+    if not data or len(data) != 1 or len(data[0]) != n_cells:
+        return None
+    blocks = np.asarray(data[0])
+    if not np.all(np.isfinite(blocks)) or np.any(blocks < 0) or np.any(blocks != np.round(blocks)):
+        return None
+    blocks = blocks.astype(np.int64)
+    if blocks.max() < 1 or np.any(np.diff(blocks) < 0):  # one block, or cells not block after block
+        return None
+    return blocks
+
+
+def _block_set_reports(path, points, cells, blocks, block_set, metadata) -> list[dict]:
+    """[whole, each block's] reports of a mesh made of blocks (``meshgen.quality.merged``). Blocks
+    are named and shaped by the .cgns zones, else the block set's (when the cell counts fit), else
+    numbered (cells located by their number in the block)."""
+    zones = read_zones(path) if path.suffix.lower() == ".cgns" and zone_count(path) > 1 else None
+    counts = np.bincount(blocks) if blocks is not None else None
+    if zones is not None:
+        names = tuple(zone["name"] for zone in zones)
+        shapes = [tuple(n - 1 for n in zone["X"].shape[:-1]) for zone in zones]
+    elif block_set is not None and counts is not None and len(counts) == len(block_set.names):
+        names, shapes = block_set.names, [tuple(n - 1 for n in s) for s in block_set.node_shapes]
+    elif counts is not None:
+        names, shapes = tuple(str(b) for b in range(len(counts))), [(int(n),) for n in counts]
+    else:
+        names, shapes = (), []
+    if counts is not None and [int(np.prod(s)) for s in shapes] != [int(n) for n in counts]:
+        names, shapes = tuple(str(b) for b in range(len(counts))), [(int(n),) for n in counts]
+    deviation = None
+    if block_set is not None:
+        Xs = [zone["X"] for zone in zones] if zones is not None else None
+        if Xs is not None and names == block_set.names and [X.shape[:-1] for X in Xs] == block_set.node_shapes:
+            deviation = block_set_deviation(block_set, Xs)
+        else:
+
+            def deviation(boundary_points):
+                return block_set_deviation(block_set, points=boundary_points)
+
+    try:
+        return merged_reports(points, cells, blocks, names, shapes, block_set, deviation)
+    except MeshgenError as exc:
+        raise MeshgenError(f"{path}: {exc}") from None

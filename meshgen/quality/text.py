@@ -36,11 +36,15 @@ def summary_lines(report: dict) -> list[str]:
     figures = report.get("solver_figures")
     if figures:
         internal, boundary = figures["non_orthogonality_internal"], figures["non_orthogonality_boundary"]
+        expansion, smoothness = figures["expansion_ratio"], figures["grid_smoothness"]
+        if "max_by_axis" in smoothness:
+            where = f"; by axis {', '.join(_format(v, 2) for v in smoothness['max_by_axis'])}"
+        else:  # a block set's merged mesh: the worst cell's block
+            where = f" of block {smoothness.get('worst_block')}"
         lines.append(
-            f"  expansion ratio max {_format(figures['expansion_ratio']['max'], 3)} "
-            f"(cell {tuple(figures['expansion_ratio']['worst_cell'])}), grid smoothness max "
-            f"{_format(figures['grid_smoothness']['max'], 3)} (cell {tuple(figures['grid_smoothness']['worst_cell'])}; by axis "
-            f"{', '.join(_format(v, 2) for v in figures['grid_smoothness']['max_by_axis'])}), "
+            f"  expansion ratio max {_format(expansion['max'], 3)} (cell {tuple(expansion['worst_cell'])}"
+            + (f" of block {expansion['worst_block']}" if "worst_block" in expansion else "")
+            + f"), grid smoothness max {_format(smoothness['max'], 3)} (cell {tuple(smoothness['worst_cell'])}{where}), "
             f"checkMesh non-orthogonality max {_format(internal['max'], 3)} average {_format(internal['average'], 3)} deg "
             f"(boundary faces max {_format(boundary['max'], 3)})"
         )

@@ -1,21 +1,39 @@
-"""What a mesh request returns: the ``Mesh`` (node array, how it was made, what it measured) and
-the one description of a run that every written file records (``run_metadata``). A block set's
-mesh (``meshgen.geometry.blocks``) is a Mesh too: ``X`` None, ``blocks`` its node arrays, ``geometry`` the
-``BlockSet``."""
+"""What a mesh request makes: the ``Mesh`` (node array, how it was made, what it measured), the
+one description of a run that every written file records (``run_metadata``), and the mesh of a
+block set (``mesh_block_set``).
+
+A block set's mesh (``meshgen.geometry.blocks``) is a Mesh too: ``X`` None, ``blocks`` its node
+arrays, ``geometry`` the ``BlockSet``. ``meshgen.run.request.carry_out`` hands a geometry that
+declares blocks to ``mesh_block_set`` (design notes §14, §20): the checks of what a block set takes
+(before any work), the mesh of every block (``tfi`` per block with shared interface nodes;
+``elliptic`` with the interface nodes solved as interior nodes; ``neural`` with the block set's
+trained model, ``meshgen.neural.inference``; ``auto`` is ``neural`` when a model of the block
+set is found, else ``elliptic``, one note line saying so), and the write through
+``meshgen.formats.multiblock`` with the merged mesh's quality sidecar (``meshgen.quality.merged``:
+interfaces as interior faces, the block set's boundary deviation).
+"""
 
 from __future__ import annotations
 
 import os
+import statistics
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from meshgen import __version__
-from meshgen.errors import FormatError
-from meshgen.formats.multiblock import write_blocks
-from meshgen.geometry.blocks import merged_mesh
-from meshgen.geometry.patches import Patch, as_records
+from meshgen.errors import FormatError, MeshgenError, ParameterError
+from meshgen.formats.multiblock import check_block_output, write_blocks
+from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
+from meshgen.geometry.patches import Patch, as_records, geometry_patches
+from meshgen.geometry.plugins import Geometry, load_geometry
+from meshgen.methods.elliptic_blocks import elliptic_blocks
+from meshgen.neural.inference import is_block_model, neural_blocks
+from meshgen.neural.device import inference_device
+from meshgen.neural.models import TrainedModel, find_model
 from meshgen.quality import (
     cell_metrics,
     cell_metrics_unstructured,
@@ -25,9 +43,11 @@ from meshgen.quality import (
     write_mesh_alone,
     write_mesh_with_quality,
 )
+from meshgen.quality.deviation import block_set_deviation
+from meshgen.quality.merged import merged_reports
 from meshgen.run.publish import publishing
 
-__all__ = ["Mesh", "run_metadata"]
+__all__ = ["BLOCK_METHODS", "Mesh", "block_spec", "checkpoint_block_spec", "mesh_block_set", "run_metadata"]
 
 
 @dataclass
@@ -94,7 +114,11 @@ class Mesh:
         ``<path>.quality.json``, the quality report returned; without, the mesh alone (and a
         previous sidecar under that name removed) and None."""
         if self.blocks is None:
-            options = {"format": format_name} if format_name else {}
+            # The patches the mesh was named with, else its geometry's, whether or not the quality
+            # is written (without, the file carried one patch per cube face named after it).
+            options = {"patches": list(self.patches) or geometry_patches(self.geometry)}
+            if format_name:
+                options["format"] = format_name
             if quality:
                 return write_mesh_with_quality(path, self.X, self.geometry, self.metadata(), **options)
             write_mesh_alone(path, self.X, self.metadata(), **options)
@@ -113,8 +137,11 @@ class Mesh:
     def _measure(self) -> dict:
         if self.blocks is None:
             return quality_report(self.X, self.geometry)
-        points, cells, _ = merged_mesh(self.geometry, self.blocks)
-        return {"structured": False, **quality_report((points, cells))}
+        # Measured merged, interfaces as interior faces, with the block set's boundary deviation.
+        points, cells, owner = merged_mesh(self.geometry, self.blocks)
+        shapes = [tuple(n - 1 for n in X.shape[:-1]) for X in self.blocks]
+        deviation = block_set_deviation(self.geometry, self.blocks)
+        return merged_reports(points, cells, owner, self.geometry.names, shapes, self.geometry, deviation)[0]
 
 
 def run_metadata(method: str, geometry, dims, cluster=()) -> dict:
@@ -128,3 +155,166 @@ def run_metadata(method: str, geometry, dims, cluster=()) -> dict:
         "dims": list(dims),
         **({"cluster": list(cluster)} if cluster else {}),
     }
+
+
+# ---------------------------------------------------------------------------------------------
+# the mesh of a block set
+
+
+BLOCK_METHODS = ("tfi", "elliptic", "neural")
+AUTO_METHOD = "elliptic"  # what ``auto`` meshes a block set with when no trained model of it is found
+NEURAL_OPTIONS = ("checkpoint", "correct", "polish", "device")  # request fields only the neural method takes
+
+# Request fields that single-block meshes take and block sets do not: (field, parameter named).
+_SINGLE_BLOCK_ONLY = (
+    ("boundary_layout", "boundary_layout"),
+    ("orthogonal", "orthogonal"),
+    ("patches", "patch"),
+    ("ascii", "ascii"),
+    ("chunked", "chunked"),
+    ("scheduler", "scheduler"),
+)
+
+
+def checkpoint_block_spec(checkpoint) -> str | None:
+    """The block-set spec a checkpoint (a path or a loaded ``TrainedModel``) was trained on, else
+    None (a single-shape model, or a file the single-block path will report on)."""
+    from meshgen.neural.checkpoint import load_checkpoint  # brings torch: only when a checkpoint is given
+
+    try:
+        loaded = checkpoint.checkpoint if hasattr(checkpoint, "checkpoint") else load_checkpoint(checkpoint)
+    except MeshgenError:
+        return None
+    entry = loaded.get("geometry", {})
+    return str(entry["spec"]) if "blocks" in entry else None
+
+
+def _block_model(request, block_set_name: str, params: dict, fallback: bool, warn=None):
+    """The block model to mesh with (``meshgen.neural.models.find_model``: the checkpoint given, else
+    the newest run of the geometry), or None with ``fallback`` when there is none."""
+    checkpoint = request.checkpoint
+    try:
+        if isinstance(checkpoint, TrainedModel):
+            model = checkpoint
+        else:
+            model = find_model(
+                checkpoint, geometry_name=block_set_name, params=params, default_geometry=block_set_name, warn=warn
+            )
+    except MeshgenError:
+        if fallback and checkpoint is None:
+            return None
+        raise
+    if not is_block_model(model.checkpoint["model"]):
+        raise ParameterError("checkpoint", f"{{name}} {model.path} holds a one-block model, not one of '{block_set_name}'")
+    return model
+
+
+def mesh_block_set(request, spec: str, say, progress) -> Mesh:
+    """Carry out ``request`` (a ``meshgen.run.request.MeshRequest``) for the block-set plugin ``spec``.
+    ``say``, ``progress``: as ``carry_out`` takes them. Returns the Mesh (``blocks``, the
+    BlockSet as ``geometry``, ``notes``)."""
+    method, block_set, output, notes, model = _check(request, spec, say)
+    timings = []
+    with progress(f"{method} mesh", method != "tfi") as callback:
+        for _ in range(max(1, int(request.timing_repeats))):
+            start = time.perf_counter()
+            if method == "tfi":
+                Xs, info = tfi_blocks(block_set), {}
+            elif method == "neural":
+                Xs, info = _neural(request, block_set, model, callback)
+            else:
+                Xs, info = elliptic_blocks(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
+            timings.append(time.perf_counter() - start)
+    if request.first_cell:
+        asked = parse_first_cell(request.first_cell, block_set)
+        measured = first_cell_heights(block_set, Xs, asked)
+        info["first_cell"] = {name: {"asked": asked[name], **measured[name]} for name in asked}
+    mesh = Mesh(
+        None,
+        block_set,
+        method,
+        tuple(request.dims),
+        tuple(request.clusters),
+        info,
+        statistics.median(timings),
+        timings=tuple(timings),
+        notes=tuple(notes),
+        blocks=Xs,
+    )
+    if output is None:
+        mesh.quality_report = mesh.report() if request.quality else None
+        return mesh
+    mesh.output = Path(output)
+    mesh.write(output, request.format, quality=request.quality)
+    return mesh
+
+
+def _neural(request, block_set: BlockSet, model, progress=None):
+    """The neural mesh of the block set (``meshgen.neural.inference.neural_blocks``) and its
+    info; with ``polish`` (True only: not by default, unlike one block's) the multi-block elliptic
+    solver started from it. The default stays the network's conforming mesh (one forward pass):
+    polishing it is an elliptic solve that takes as many sweeps as the one from the TFI (the pipe's
+    benchmark model at 8 4 4 and 16 8 4: 30 and 36 sweeps to 0.17 and 0.16 deg of mean min angle
+    above the elliptic mesh, whose solve from the TFI takes 21 and 26; design notes §20)."""
+    device = inference_device(request.device or "auto")
+    correct = request.correct is not False
+    Xs, correction = neural_blocks(block_set, model.checkpoint["model"], correct=correct, device=device)
+    info = {"model": model.metadata(), "correction": correction}
+    if correct and request.polish:
+        start = [X.copy() for X in Xs]
+        Xs, solved = elliptic_blocks(block_set, tol=request.tol, max_iter=request.max_iter, progress=progress, initial=start)
+        moved = max(float(abs(X - S).max()) for X, S in zip(Xs, start)) / block_set.length
+        info["polish"] = {
+            "polished": True,
+            "sweeps": int(solved["sweeps"]),
+            "final_update": float(solved.get("final_update", 0.0)),
+            "converged": bool(solved["converged"]),
+            "largest_move_rel": moved,
+        }
+        info["warnings"] = solved.get("warnings", [])
+    return Xs, info
+
+
+def _check(request, spec: str, say):
+    """(method, block set, checked output path or None, notes, model or None), or the error, before any work."""
+    for field_name, parameter in _SINGLE_BLOCK_ONLY:
+        if getattr(request, field_name) not in (None, False, (), []):
+            raise ParameterError(parameter, f"{{name}}: not available for the multi-block geometry '{spec}'")
+    method, notes, model = request.method, [], None
+    if method not in BLOCK_METHODS + ("auto",):
+        raise ParameterError(
+            "method", f"method '{method}' does not mesh multi-block geometries (methods that do: {', '.join(BLOCK_METHODS)})"
+        )
+    if method not in ("neural", "auto"):
+        for name in NEURAL_OPTIONS:
+            if getattr(request, name) is not None:
+                raise ParameterError(name, f"{{name}} applies to the neural method, not to '{method}'")
+    params = dict(request.geometry.values) if isinstance(request.geometry, Geometry) else {}
+    params.update(request.params or {})
+    if method in ("neural", "auto"):
+        name = load_geometry(spec, check=False).name
+        model = _block_model(request, name, dict(request.params or {}), fallback=method == "auto")
+        if model is None:
+            method = AUTO_METHOD
+            notes.append(
+                f"note: no trained model for the multi-block geometry '{spec}': meshing with {AUTO_METHOD} "
+                f"(meshgen train -g {spec} trains one)"
+            )
+        else:
+            method = "neural"
+            params = {**dict(model.geometry_entry["params"]), **params}  # the geometry it was trained on
+            notes.append(f"model: {model.describe()}")
+    if method == "tfi" or (method == "neural" and not (request.polish and request.correct is not False)):
+        for name in ("tol", "max_iter"):
+            if getattr(request, name) is not None:
+                raise ParameterError(
+                    name, f"{{name}} applies to the elliptic method (and the neural mesh's polish), not to '{method}'"
+                )
+    block_set = load_block_set(spec, params, request.dims)
+    if request.first_cell or request.clusters:
+        heights = parse_first_cell(request.first_cell, block_set)
+        block_set = graded_block_set(block_set, heights, parse_wall_clusters(request.clusters, block_set))
+    output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
+    for line in notes:
+        say(line)
+    return method, block_set, output, notes, model

@@ -6,7 +6,7 @@ to write it) and ``carry_out(request) -> Mesh``, which ``meshgen mesh``, every m
 geometry, else ``elliptic`` with a note saying so), decides between the in-memory and the chunked
 path, names the boundary patches, records the run (``meshgen.run.meshing.run_metadata``) and writes
 the file with its quality sidecar. A geometry that declares blocks goes to
-``meshgen.run.meshing_blocks`` (the Mesh's ``blocks`` hold one node array per block). Bad input raises MeshgenError (ParameterError naming the
+``meshgen.run.meshing.mesh_block_set`` (the Mesh's ``blocks`` hold one node array per block). Bad input raises MeshgenError (ParameterError naming the
 parameter) before any work is done or any file is written.
 """
 
@@ -40,8 +40,7 @@ from meshgen.run.chunked import (
     write_chunked_mesh,
 )
 from meshgen.run.limits import check_mesh_memory
-from meshgen.run.meshing import Mesh
-from meshgen.run.meshing_blocks import block_spec, checkpoint_block_spec, mesh_block_set
+from meshgen.run.meshing import Mesh, block_spec, checkpoint_block_spec, mesh_block_set
 from meshgen.run.resources import check_block_nodes, check_free_space, needs_chunking
 from meshgen.run.scheduler import connect, scheduler_address
 
@@ -127,7 +126,7 @@ def carry_out(request: MeshRequest, *, say=None, warn=None, progress=None) -> Me
     spec = block_spec(request.geometry)
     if spec is None and request.geometry is None and request.checkpoint is not None:
         spec = checkpoint_block_spec(request.checkpoint)  # a block set's model names its geometry
-    if spec is not None:  # a geometry of several blocks: meshgen.run.meshing_blocks
+    if spec is not None:  # a geometry of several blocks: meshgen.run.meshing.mesh_block_set
         return mesh_block_set(request, spec, say, progress)
     plan = _plan(request, say, warn)
     if plan.chunked:

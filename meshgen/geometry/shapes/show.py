@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.geometry import cube
+from meshgen.geometry.block_surface import block_set_surface
+from meshgen.geometry.blocks import BlockSet
 from meshgen.geometry.patches import geometry_patches
 from meshgen.geometry.surface import boundary_surface
 from meshgen.run.atomic import atomic_write, check_output_file
@@ -30,10 +32,18 @@ def face_surface(geometry, resolution: int = 32) -> tuple[np.ndarray, np.ndarray
 def write_face_surface(geometry, path, resolution: int = 32) -> tuple[Path, int]:
     """Write ``face_surface`` as VTU with cell arrays ``cube_face`` (0..5: xi0, xi1, eta0, eta1,
     zeta0, zeta1) and ``patch`` (the index of the face's patch in the geometry's patch list),
-    atomically. Returns the path and the triangle count."""
+    atomically; of a block set (``meshgen.geometry.blocks.BlockSet``) its patch faces with
+    ``block`` too (``meshgen.geometry.surface.block_set_surface``). Returns the path and the
+    triangle count."""
     import meshio
 
     path = check_output_file(path, "faces.vtu")
+    if isinstance(geometry, BlockSet):  # the blocks' patch faces: which block, face and patch each triangle is
+        points, triangles, block, face, patch = block_set_surface(geometry, resolution)
+        data = {"block": [block.astype(np.int32)], "cube_face": [face.astype(np.int32)], "patch": [patch.astype(np.int32)]}
+        with atomic_write(path, what="surface ") as temporary:
+            meshio.Mesh(points, [("triangle", triangles)], cell_data=data).write(temporary, file_format="vtu")
+        return path, len(triangles)
     points, triangles, face = face_surface(geometry, resolution)
     patch_of_face = np.zeros(6, dtype=np.int64)
     for index, patch in enumerate(geometry_patches(geometry)):
