@@ -31,8 +31,8 @@ from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
 from meshgen.geometry.plugins import Geometry, load_geometry
 from meshgen.methods.elliptic_blocks import elliptic_blocks
-from meshgen.neural.inference import is_block_model, neural_blocks
 from meshgen.neural.device import inference_device
+from meshgen.neural.inference import is_block_model, neural_blocks
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.quality import (
     cell_metrics,
