@@ -18,7 +18,7 @@ from meshgen.formats.multiblock import check_block_output
 from meshgen.geometry.blocks import BlockSet, is_multiblock, load_block_set, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.plugins import Geometry, available_names, load_geometry, plugin_module
-from meshgen.methods.elliptic_blocks import elliptic_blocks
+from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.block_inference import is_block_model, neural_blocks
 from meshgen.neural.device import inference_device
 from meshgen.neural.models import TrainedModel, find_model
