@@ -20,8 +20,6 @@ import numpy as np
 from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.geometry.blocks import global_numbering, tfi_blocks
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
-from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
-from meshgen.methods.interfaces import gather, mean_length
 from meshgen.methods.multigrid import (
     COARSEST_CELLS,
     COARSEST_SWEEPS,
@@ -43,9 +41,9 @@ from meshgen.methods.multigrid import (
     uses_kernels,
     v_cycle,
 )
-from meshgen.methods.multigrid_set import set_levels, v_cycle_set
+from meshgen.methods.multigrid_set import solve_set
 from meshgen.methods.orthogonal import inner_block, parse_walls, straighten_first_layer
-from meshgen.methods.sliding import local_cell_sizes, planar_sliding
+from meshgen.methods.sliding import planar_sliding
 from meshgen.methods.tfi import check_axes, parametric_grid, tfi
 
 __all__ = [
@@ -222,33 +220,10 @@ def elliptic_blocks(
             Xs[0], block_set.coords[0], tol=tol, max_iter=max_cycles, length=block_set.length, progress=progress
         )
         return [X], {**info, "sweeps": info["iterations"], "seconds": time.perf_counter() - start}
-    lengths = [(mean_length(Xs[i.a], i.face_a.axis), mean_length(Xs[i.b], i.face_b.axis)) for i in block_set.interfaces]
-    levels = set_levels(block_set, Xs, lengths, slide=slide)
-    sizes = local_cell_sizes(block_set, Xs, numbering, count)
-    values = gather(Xs, numbering, count)
-    mixing = AndersonMixing(ANDERSON_DEPTH)
-    update, cycles, first = np.inf, 0, None
-    while cycles < max_cycles:
-        before = values
-        output = v_cycle_set(levels, 0, values, None)
-        cycles += 1
-        previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1) / sizes))
-        if not np.isfinite(update):  # diverged: hand back the last finite state
-            values = before
-            break
-        first = first or update
-        if progress is not None:
-            done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
-            progress(float(np.clip(done, 0.0, 1.0)), cycle=cycles, update=update)
-        if update < tol:
-            values = output
-            break
-        if update > previous:
-            mixing.restart()
-        values = mixing.next_iterate(before, output)
+    values, cycles, update, levels = solve_set(block_set, Xs, tol, max_cycles, slide, progress)
     Xs = [values[ids] for ids in numbering]
     info = {
-        "solver": "nonlinear multigrid over the block set (FAS V(1,1) cycles on every block, halo layers at the "
+        "solver": "nonlinear multigrid over the block set (FAS V(2,2) cycles on every block, halo layers at the "
         "interfaces, sliding nodes and junctions relaxed on every level, Anderson mixing)",
         "sweeps": cycles,
         "iterations": cycles,
@@ -257,7 +232,7 @@ def elliptic_blocks(
         "tol": float(tol),
         "converged": bool(update < tol),
         "seconds": time.perf_counter() - start,
-        "levels": [[[len(t) - 1 for t in c] for c in level.block_set.coords] for level in levels],
+        "levels": levels,
     }
     if not info["converged"]:
         info["warnings"] = [
