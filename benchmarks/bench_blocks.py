@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples" / "dfg"))
 
 from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks  # noqa: E402
-from meshgen.methods.elliptic_blocks import elliptic_blocks  # noqa: E402
+from meshgen.methods.elliptic import elliptic_blocks  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 
 DFG_DIMS = [(17, 10), (34, 20), (68, 40)]  # a refinement series: the last two are the 10k and the 40k rows

@@ -75,7 +75,7 @@ _MOVED = {
     "meshgen.deviation": "meshgen.quality.deviation",
     "meshgen.domain": "meshgen.geometry.domain",
     "meshgen.elliptic": "meshgen.methods.elliptic",
-    "meshgen.elliptic_blocks": "meshgen.methods.elliptic_blocks",
+    "meshgen.elliptic_blocks": "meshgen.methods.elliptic",
     "meshgen.fidelity": "meshgen.quality.fidelity",
     "meshgen.gates": "meshgen.quality.gates",
     "meshgen.grid": "meshgen.geometry.grid",

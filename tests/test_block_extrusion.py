@@ -13,7 +13,7 @@ import meshgen
 from meshgen.errors import MeshgenError
 from meshgen.geometry.blocks import face_index, load_block_set, tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
-from meshgen.methods.elliptic_blocks import elliptic_blocks
+from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.train import train

@@ -8,7 +8,7 @@ from blocks_helpers import cell_measures, size_ratios
 from meshgen.errors import GeometryError
 from meshgen.geometry.blocks import global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
 from meshgen.geometry.plugins import load_geometry
-from meshgen.methods.elliptic_blocks import elliptic_blocks
+from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.quality import quality_report
 
 

@@ -209,7 +209,7 @@ def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
     """The pipe's mesh is an extrusion of its section (the elliptic one too: its inlet and outlet
     nodes slide in their planes; the neural one by construction: the benchmark model's section,
     extruded): the finite-volume potential flow from a uniform inlet is uniform to solver accuracy."""
-    from meshgen.methods.elliptic_blocks import elliptic_blocks
+    from meshgen.methods.elliptic import elliptic_blocks
     from meshgen.neural.checkpoint import load_checkpoint
     from meshgen.neural.inference import neural_blocks
 

@@ -1,12 +1,12 @@
 """The multi-block elliptic solver's stopping rule measures node updates against each node's local
-cell size (meshgen.methods.elliptic_blocks.local_cell_sizes): the sizes checked against the edges of the
+cell size (meshgen.methods.sliding.local_cell_sizes): the sizes checked against the edges of the
 merged unstructured mesh, an independent path (cells' corner lists, not the block arrays)."""
 
 import numpy as np
 import pytest
 
 from meshgen.geometry.blocks import global_numbering, load_block_set, merged_mesh, tfi_blocks
-from meshgen.methods.elliptic_blocks import local_cell_sizes
+from meshgen.methods.sliding import local_cell_sizes
 
 # Corner pairs of the edges of a quadrilateral and of a hexahedron (VTK corner order).
 QUAD_EDGES = [(0, 1), (1, 2), (2, 3), (3, 0)]

@@ -1,6 +1,6 @@
 """The compiled multigrid kernels (meshgen.methods.winslow_compiled) against the NumPy code they replace on
 large grids: the Winslow residual and coefficients (meshgen.methods.winslow.winslow_operator), one line-ADI
-sweep (meshgen.methods.elliptic.smooth), the multigrid transfers (dense matrices along each axis) and a
+sweep (meshgen.methods.multigrid.smooth), the multigrid transfers (dense matrices along each axis) and a
 whole solve, on small distorted grids with uniform and stretched axes. The kernels' work is split
 over threads on every call here (``THREADED_NODES`` 0), as it is on large grids."""
 
@@ -9,12 +9,12 @@ import sys
 import numpy as np
 import pytest
 
-import meshgen.methods.elliptic  # noqa: F401  (the module; ``meshgen.methods.elliptic`` the attribute is the function)
+import meshgen.methods.multigrid  # noqa: F401  (the module that holds the one-grid multigrid)
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods import winslow_compiled
 from meshgen.methods.winslow import component_array, winslow_operator
 
-elliptic_module = sys.modules["meshgen.methods.elliptic"]
+elliptic_module = sys.modules["meshgen.methods.multigrid"]
 Level, along_axes, smooth, solve_winslow = (
     elliptic_module.Level,
     elliptic_module.along_axes,

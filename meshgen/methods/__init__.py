@@ -2,9 +2,11 @@
 
 - ``registry``: the methods by name (``tfi``, ``elliptic``, the neural ones) for every caller;
 - ``tfi``: transfinite interpolation; ``clustering``: wall-clustered node coordinates;
-- ``elliptic``: the Winslow equations solved by nonlinear multigrid, with its operator
-  (``winslow``), compiled kernels (``winslow_compiled``), ``anderson`` acceleration and
-  ``orthogonal`` walls; ``elliptic_blocks``: the same for block sets;
+- ``elliptic``: the one elliptic solver's entry points (a geometry: ``elliptic``; a block set:
+  ``elliptic_blocks``), the Winslow equations solved by nonlinear multigrid: ``multigrid`` (one
+  grid), ``multigrid_set`` (every block of a set on every level), ``interfaces`` (halo layers,
+  junctions), ``sliding`` (nodes on flat patches), the operator (``winslow``), compiled kernels
+  (``winslow_compiled``, ``winslow_compiled_2d``), ``anderson`` acceleration, ``orthogonal`` walls;
 - ``polish``: Winslow cycles from a network's mesh; ``correction``: the boundary correction of a
   mapped grid. The networks themselves are ``meshgen.neural``.
 

@@ -1,4 +1,4 @@
-"""The 3D multigrid Winslow kernels of ``meshgen.methods.elliptic`` as compiled numba code.
+"""The 3D multigrid Winslow kernels of ``meshgen.methods.multigrid`` as compiled numba code.
 
 Four kernels, free of temporaries; the Winslow arithmetic at a node (``_node``) is that of
 ``meshgen.methods.winslow.winslow_operator``, one pass over the nodes instead of about forty array-sized
@@ -9,7 +9,7 @@ temporaries:
 - ``_lines_*``: the tridiagonal solves of a line-ADI sweep, one kernel per axis;
 - ``_transfer_*``: a banded 1D matrix along one axis (the multigrid transfers, a few non-zeros per row).
 
-``operator``, ``defect``, ``relax`` (one sweep of ``meshgen.methods.elliptic.smooth``) and ``transfer``
+``operator``, ``defect``, ``relax`` (one sweep of ``meshgen.methods.multigrid.smooth``) and ``transfer``
 call them. Each kernel works on a range of planes (``start``, ``stop``) of the axis it runs
 across, and ``_across`` hands the planes to a pool of threads in chunks (the kernels release the
 GIL): plain serial kernels compile in a fraction of a second each, where numba's ``parallel=True``
@@ -271,12 +271,18 @@ def _lines_third(step, axial, inverse_centre, w, pivot, R, damping, start, stop)
                     R[c, i + 1, j + 1, k + 1] += damping * step[c, i, j, k]
 
 
-def relax(R, f, weights, damping: float, measure: bool) -> float:
+def relax(R, f, weights, damping: float, measure: bool, frozen=None) -> float:
     """One line-ADI sweep of N(R) = f on the interior nodes of R (3, n1+1, n2+1, n3+1), in place
-    (``meshgen.methods.elliptic.smooth``); ``f``: None or (3, n1-1, n2-1, n3-1); ``weights``: the six
+    (``meshgen.methods.multigrid.smooth``); ``f``: None or (3, n1-1, n2-1, n3-1); ``weights``: the six
     (3, n_a - 1) arrays (first derivative per axis, then second). Returns the largest Jacobi step
-    (Euclidean norm over the nodes) of the starting state when ``measure``, else inf."""
+    (Euclidean norm over the nodes) of the starting state when ``measure``, else inf. ``frozen``:
+    None, or a bool array (n1-1, n2-1, n3-1) of interior nodes that do not move (their line rows
+    become identities with a zero right-hand side: fixed ends of the lines through them)."""
     step, axial, inverse_centre, largest = _jacobi_step(R, f, weights)
+    if frozen is not None:
+        step[:, frozen] = 0.0
+        axial[:, frozen] = 0.0
+        inverse_centre[frozen] = 0.0
     pivot = np.empty(inverse_centre.shape)
     m1, m2 = inverse_centre.shape[:2]
     _across(_lines_first, m2, step, axial, inverse_centre, weights[3], pivot)

@@ -5,7 +5,7 @@ mesh.
 - L1, the Winslow residual: inside every block on its own randomly shifted finite-difference grid
   (as a single shape), and across every interface on stencils whose normal neighbours lie in the
   two blocks (block a's network on a's side, b's on b's side, the normal step scaled by the
-  blocks' mean lengths as ``meshgen.methods.elliptic_blocks`` glues them), so interface nodes are solved
+  blocks' mean lengths as ``meshgen.methods.interfaces`` pads them), so interface nodes are solved
   as interior nodes of the whole mesh, as the multi-block elliptic mesh solves them;
 - L2, the boundary: each block's network fitted to its boundary map on its patch faces (on a flat
   patch only the distance from the plane counts: nodes slide in it, as in the elliptic mesh), and
@@ -24,7 +24,7 @@ import torch
 
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet
-from meshgen.methods.elliptic_blocks import junction_nodes, mean_length
+from meshgen.methods.interfaces import junction_nodes, mean_length
 from meshgen.methods.tfi import tfi, transfinite
 from meshgen.neural.derivatives import grid_derivatives, grid_from_draws
 from meshgen.neural.inference import face_plane
@@ -186,7 +186,7 @@ def block_problem(block_set: BlockSet, device: torch.device, center=None, scale=
 
 def junction_pool(block_set: BlockSet, device, lengths=None) -> dict | None:
     """The parallelogram rule's quadrilaterals at the junction nodes of ``block_set``'s grid (its
-    ``coords``; ``meshgen.methods.elliptic_blocks.junction_nodes``: where three or more blocks meet, on no
+    ``coords``; ``meshgen.methods.interfaces.junction_nodes``: where three or more blocks meet, on no
     patch), as the elliptic mesh takes them (in 3D those across the block edge the node is on, in
     its layer), each rescaled about the node to a physically square one of side ``JUNCTION_STEP``
     times the shortest mean block length around the junction. Returns None without junctions, else

@@ -30,7 +30,7 @@ from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
 from meshgen.geometry.plugins import Geometry, load_geometry
-from meshgen.methods.elliptic_blocks import elliptic_blocks
+from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.device import inference_device
 from meshgen.neural.inference import is_block_model, neural_blocks
 from meshgen.neural.models import TrainedModel, find_model

@@ -1,0 +1,246 @@
+"""The elliptic solver's multigrid for a block set: the FAS V-cycles of ``meshgen.methods.multigrid``
+run on every block at every level, with the interface nodes as interior nodes of the whole mesh.
+
+Levels: the blocks coarsen together. An axis of one block and the axis of its neighbour that runs
+along the same interface are one family (union over the interfaces' Transforms); a family coarsens
+while it has more than ``COARSEST_CELLS`` cells, so the blocks' coarse grids share their interface
+nodes (``coarser_coordinates`` picks nodes by index, the same on both sides). A block whose axes
+are all coarse stays as it is on the coarser levels.
+
+On each level (``SetLevel``) each block is padded with a halo layer on its interface faces
+(``meshgen.methods.interfaces.Halo``). The state is the unique nodes (count, dim). A relaxation
+sweep is: every block's padded array from the unique nodes, one line-ADI sweep of the Winslow
+equations per block (the block's edges and corners frozen: they are junctions or on patches), the
+unique nodes back (an interface node from its owner block), then one Jacobi step of the sliding
+nodes' and the junctions' equations (``meshgen.methods.sliding``, ``meshgen.methods.interfaces``).
+Residuals are restricted per block (the Winslow residual with the residual restriction, the
+boundary rules' residuals by interpolation along the patch), corrections prolonged per block.
+The fixed point is the finest level's equations at every node: block interiors, interface nodes
+(the two blocks glued), sliding nodes and junctions.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from meshgen.geometry.blocks import global_numbering
+from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
+from meshgen.methods.interfaces import Halo, JunctionRule, faces_holding, gather, junction_nodes, junction_stencil, mean_length
+from meshgen.methods.multigrid import COARSEST_CELLS, DAMPING, Level, coarser_coordinates, stencil_weights
+from meshgen.methods.sliding import SlideRule, local_cell_sizes, planar_sliding
+
+SMOOTHING = 2  # relaxation sweeps before and after the coarse-grid correction (1: half as many cycles more)
+COARSEST_SET_SWEEPS = (
+    10  # relaxation sweeps on the coarsest level (40 for one grid: 10 gave the same cycles in 3D, 4 more in 2D, in less time)
+)
+
+__all__ = ["COARSEST_SET_SWEEPS", "SMOOTHING", "SetLevel", "axis_families", "relax_set", "set_levels", "solve_set", "v_cycle_set"]
+
+
+def axis_families(block_set) -> np.ndarray:
+    """(blocks, dim) family number of each block axis: axes that run along a common interface share one."""
+    dim = block_set.dim
+    parent = np.arange(len(block_set.coords) * dim)
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for interface in block_set.interfaces:  # a loop over interfaces, not nodes
+        for axis in interface.face_a.tangent_axes:
+            a, b = root(interface.a * dim + axis), root(interface.b * dim + abs(interface.transform[axis]) - 1)
+            parent[max(a, b)] = min(a, b)
+    return np.array([root(i) for i in range(len(parent))]).reshape(-1, dim)
+
+
+class SetLevel:
+    """One grid of the block set's hierarchy: the halo, per block the smoother's grid (padded
+    coordinates) and the transfers to the next coarser grid (own coordinates), the sliding nodes
+    and junctions with their stencils."""
+
+    def __init__(self, block_set, Xs, lengths, coarse_coords=None, compiled: bool = False, slide: bool = True):
+        self.block_set = block_set
+        self.halo = Halo(block_set, lengths)
+        self.smoothers = [Level(c, compiled=compiled) for c in self.halo.padded_coords]
+        self.weights = [stencil_weights(s.grid) if block_set.dim == 2 else None for s in self.smoothers]
+        self.transfers = None
+        if coarse_coords is not None:
+            self.transfers = [Level(c, cc, compiled=compiled) for c, cc in zip(block_set.coords, coarse_coords)]
+        numbering, count = self.halo.numbering, self.halo.count
+        values = gather(Xs, numbering, count)
+        self.rules = []  # the boundary rules: sliding nodes, junctions
+        sliding = planar_sliding(block_set, Xs, numbering, count) if slide else None
+        if sliding is not None:
+            self.rules.append(SlideRule(sliding, values))
+        junctions, _, _ = junction_nodes(block_set)
+        if len(junctions):
+            self.rules.append(JunctionRule(junction_stencil(block_set, numbering, junctions), values))
+        self.frozen = []  # per block: the nodes the line relaxation keeps (edges, corners, patch faces)
+        for block, ids in enumerate(self.halo.numbering):
+            frozen = faces_holding(ids.shape) >= 2
+            for face in self.halo.ghost_faces[block]:
+                frozen[face.node_index] = True
+            self.frozen.append(frozen)
+
+    def own(self, values: np.ndarray) -> list[np.ndarray]:
+        """Each block's own component-first array (dim, ...) from the unique nodes."""
+        return [np.ascontiguousarray(np.moveaxis(values[ids], -1, 0)) for ids in self.halo.numbering]
+
+
+def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
+    """The hierarchy of ``block_set`` (finest first) from the start node arrays ``Xs`` (each
+    level's sliding nodes are classified on the start mesh restricted to it) and the interfaces'
+    mean lengths."""
+    families = axis_families(block_set)
+    compiled = block_set.dim == 3
+    levels, sets, starts = [], [block_set], [list(Xs)]
+    while True:
+        current = sets[-1]
+        cells = np.array([[len(t) - 1 for t in c] for c in current.coords])
+        coarsen = np.zeros(families.max() + 1, dtype=bool)
+        coarsen[families[cells > COARSEST_CELLS]] = True
+        coarsen = coarsen[families] & (cells > COARSEST_CELLS)
+        if not coarsen.any():
+            break
+        coarse = tuple(
+            tuple(
+                coarser_coordinates(np.asarray(t, dtype=float)) if c else np.asarray(t, dtype=float) for t, c in zip(block, flags)
+            )
+            for block, flags in zip(current.coords, coarsen)
+        )
+        sets.append(dataclasses.replace(current, coords=coarse))
+    for index, current in enumerate(sets):
+        coarse = sets[index + 1].coords if index + 1 < len(sets) else None
+        level = SetLevel(current, starts[index], lengths, coarse, compiled, slide)
+        levels.append(level)
+        if coarse is not None:
+            restricted = [
+                np.moveaxis(t.transfer("restrict_solution", np.moveaxis(X, -1, 0)), 0, -1)
+                for t, X in zip(level.transfers, starts[index])
+            ]
+            starts.append(restricted)
+    return levels
+
+
+def _relax_block(R: np.ndarray, f, level: Level, weights, frozen) -> None:
+    """One line-ADI sweep of N(R) = f on the padded block R (in place), the ``frozen`` nodes kept:
+    the compiled sweep of ``meshgen.methods.multigrid.smooth`` with fixed line ends inside the
+    grid (``weights``: the 2D kernels' stencil weights, None in 3D)."""
+    from meshgen.methods import winslow_compiled, winslow_compiled_2d  # numba: loaded on first use
+
+    if weights is not None:
+        winslow_compiled_2d.relax(R, f, weights, DAMPING, frozen)
+    else:
+        winslow_compiled.relax(R, f, level.weights, DAMPING, False, frozen)
+
+
+def _defect_block(R: np.ndarray, f, level: Level, weights) -> np.ndarray:
+    from meshgen.methods import winslow_compiled_2d
+
+    return winslow_compiled_2d.defect(R, f, weights) if weights is not None else level.defect(R, f)
+
+
+def _operator_block(R: np.ndarray, level: Level, weights) -> np.ndarray:
+    from meshgen.methods import winslow_compiled_2d
+
+    return (winslow_compiled_2d.operator(R, weights) if weights is not None else level.operator(R))[0]
+
+
+def relax_set(level: SetLevel, values: np.ndarray, f, sweeps: int) -> np.ndarray:
+    """``sweeps`` relaxation sweeps of the block set's equations on ``level`` from the unique nodes
+    ``values`` (count, dim); ``f``: None, or (per block the padded interior right-hand side,
+    per rule the right-hand side at its nodes). Returns the new unique nodes."""
+    halo = level.halo
+    for _ in range(sweeps):
+        padded = halo.padded(values)
+        for block, R in enumerate(padded):
+            rhs = None if f is None else f[0][block]
+            _relax_block(R, rhs, level.smoothers[block], level.weights[block], level.frozen[block])
+        values = halo.unique([R[halo.inside(block)] for block, R in enumerate(padded)], out=values.copy())
+        for number, rule in enumerate(level.rules):
+            residual = rule.residual(values)
+            values[rule.nodes] += residual if f is None else residual - f[1][number]
+    return values
+
+
+def _defects(level: SetLevel, values: np.ndarray, f) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Per block: the Winslow defect f - N at its own nodes (zero at frozen and boundary nodes),
+    and the rules' defect f - S at its own nodes (zero elsewhere), both component-first."""
+    halo = level.halo
+    winslow = []
+    for block, R in enumerate(halo.padded(values)):
+        smoother = level.smoothers[block]
+        with np.errstate(all="ignore"):
+            full = _defect_block(R, None if f is None else f[0][block], smoother, level.weights[block])
+        full[smoother.interior][:, level.frozen[block]] = 0.0
+        winslow.append(np.ascontiguousarray(full[halo.inside(block)]))
+    rule_defect = np.zeros_like(values)  # per cell size to the rule's power: compared across levels so
+    for number, rule in enumerate(level.rules):
+        residual = rule.residual(values)
+        rule_defect[rule.nodes] = (-residual if f is None else f[1][number] - residual) / rule.spacing[:, None] ** rule.power
+    return winslow, level.own(rule_defect)
+
+
+def v_cycle_set(levels: list[SetLevel], index: int, values: np.ndarray, f) -> np.ndarray:
+    """One FAS V-cycle of the block set's equations on ``levels[index]`` from the unique nodes
+    ``values``; returns the new unique nodes."""
+    level = levels[index]
+    if index == len(levels) - 1:
+        return relax_set(level, values, f, COARSEST_SET_SWEEPS)
+    values = relax_set(level, values, f, SMOOTHING)
+    coarse = levels[index + 1]
+    transfers = level.transfers
+    own = level.own(values)
+    start = coarse.halo.unique([t.transfer("restrict_solution", R) for t, R in zip(transfers, own)])
+    winslow, rules = _defects(level, values, f)
+    coarse_winslow = []
+    for block, (t, defect, R) in enumerate(zip(transfers, winslow, coarse.halo.padded(start))):
+        smoother = coarse.smoothers[block]
+        with np.errstate(all="ignore"):
+            operator = _operator_block(R, smoother, coarse.weights[block])
+        padded = np.zeros_like(R)
+        padded[coarse.halo.inside(block)] = t.transfer("restrict_residual", defect)
+        coarse_winslow.append(operator + padded[smoother.interior])
+    restricted = coarse.halo.unique([t.transfer("restrict_solution", D) for t, D in zip(transfers, rules)])
+    coarse_rules = [rule.residual(start) + restricted[rule.nodes] * rule.spacing[:, None] ** rule.power for rule in coarse.rules]
+    solved = v_cycle_set(levels, index + 1, start.copy(), (coarse_winslow, coarse_rules))
+    correction = coarse.own(solved - start)
+    values = values + level.halo.unique([t.transfer("prolong", C) for t, C in zip(transfers, correction)])
+    return relax_set(level, values, f, SMOOTHING)
+
+
+def solve_set(block_set, Xs, tol: float, max_cycles: int, slide: bool = True, progress=None):
+    """V-cycles of the block set's equations from the conforming node arrays ``Xs`` until a cycle
+    moves no node by more than ``tol`` times its local cell size (``local_cell_sizes`` of ``Xs``)
+    or ``max_cycles`` cycles, Anderson mixing of the cycles as for one block. Returns (unique nodes
+    (count, dim) in ``global_numbering``'s order, cycles, last update, the levels' cell counts)."""
+    numbering, count = global_numbering(block_set)
+    lengths = [(mean_length(Xs[i.a], i.face_a.axis), mean_length(Xs[i.b], i.face_b.axis)) for i in block_set.interfaces]
+    levels = set_levels(block_set, Xs, lengths, slide=slide)
+    sizes = local_cell_sizes(block_set, Xs, numbering, count)
+    values = gather(Xs, numbering, count)
+    mixing = AndersonMixing(ANDERSON_DEPTH)
+    update, cycles, first = np.inf, 0, None
+    while cycles < max_cycles:
+        before = values
+        output = v_cycle_set(levels, 0, values, None)
+        cycles += 1
+        previous, update = update, float(np.max(np.linalg.norm(output - before, axis=-1) / sizes))
+        if not np.isfinite(update):  # diverged: hand back the last finite state
+            values = before
+            break
+        first = first or update
+        if progress is not None:
+            done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
+            progress(float(np.clip(done, 0.0, 1.0)), cycle=cycles, update=update)
+        if update < tol:
+            values = output
+            break
+        if update > previous:
+            mixing.restart()
+        values = mixing.next_iterate(before, output)
+    cells = [[[len(t) - 1 for t in c] for c in level.block_set.coords] for level in levels]
+    return values, cycles, update, cells
