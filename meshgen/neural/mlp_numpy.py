@@ -1,5 +1,8 @@
-"""The trained network's forward pass without torch: a small tanh MLP, each layer a compiled
-fixed-order float32 kernel (``dense_kernel``), so meshing with a trained model needs no torch.
+"""The trained network's forward pass without torch: a small tanh MLP, each layer fixed-order
+float32 arithmetic per node, so meshing with a trained model needs no torch. Each layer is a
+compiled kernel (``dense_kernel``, numba) or, for grids below ``NUMPY_WORK`` multiply-adds (a
+fresh process then never imports numba, about a second), the same operations in NumPy
+(``dense_numpy``): the same bits either way (tested), chosen by size alone (``compiled_for``).
 
 ``forward_on_grid(model, coords)`` is ``meshgen.neural.inference.evaluate_on_grid`` without torch:
 the same inputs u = 2 xi - 1 in float32, the same layers (W h + b, tanh between), float32
@@ -54,7 +57,9 @@ __all__ = [
 CHUNK_NODES = 8192
 TILE_ROWS = 1024  # nodes per tile of the forward pass (its activations: 1024 x 85 float32, 350 kB)
 KERNEL_NODES = 256  # nodes per run inside the compiled kernel (a 48-wide layer's inputs: 48 kB)
-NUMPY_WORK = 500_000_000  # multiply-adds below which the forward pass is NumPy's (1e5 nodes of [48]*3)
+NUMPY_WORK = (
+    1_000_000_000  # multiply-adds below which the pass is NumPy (2e5 nodes of [48]*3: break-even with a fresh numba import)
+)
 
 
 @functools.lru_cache(maxsize=1)
@@ -170,16 +175,18 @@ def dense_numpy(h: np.ndarray, weight: np.ndarray, bias: np.ndarray, out: np.nda
     np.add(out, bias[:, None], out=out)
 
 
-def multiply_adds(layers) -> int:
-    """Multiply-adds per node of the network of ``layers`` (:func:`network_arrays`)."""
-    return sum(weight.size for weight, _ in layers)
+def multiply_adds(model: dict) -> int:
+    """Multiply-adds per node of the network of ``model`` (a ``checkpoint["model"]`` description)."""
+    sizes = [int(model["dim"]), *(int(w) for w in model["widths"]), int(model["dim"])]
+    return sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
 
 
-def compiled_for(layers, nodes: int) -> bool:
-    """Whether a forward pass over ``nodes`` nodes takes the compiled kernel (from ``NUMPY_WORK``
-    multiply-adds up) rather than :func:`dense_numpy` (no numba import, about a second in a fresh
-    process). By size alone, so a request always takes the same path; both give the same bits."""
-    return nodes * multiply_adds(layers) >= NUMPY_WORK
+def compiled_for(model: dict, nodes: int) -> bool:
+    """Whether a forward pass of ``model`` over ``nodes`` nodes takes the compiled kernel (from
+    ``NUMPY_WORK`` multiply-adds up) rather than :func:`dense_numpy` (no numba import, about a
+    second in a fresh process). By size alone, so a request always takes the same path (a chunked
+    mesh: give the whole grid's nodes); both give the same bits."""
+    return nodes * multiply_adds(model) >= NUMPY_WORK
 
 
 def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
@@ -314,7 +321,7 @@ def forward_on_grid(
     if out is None:
         out = np.empty((count, dim))
     if compiled is None:
-        compiled = compiled_for(layers, count)
+        compiled = compiled_for(model, count)
 
     def run(first: int) -> None:
         # each task owns its buffers: chunks run on any worker thread
