@@ -26,11 +26,12 @@ def random_model(dim, widths, seed):
 
 @pytest.mark.parametrize("dim, widths", [(3, [85, 85, 85, 85]), (2, [16, 24])])
 @pytest.mark.parametrize("workers", [1, 2])
-def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers):
+@pytest.mark.parametrize("compiled", [True, False])
+def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers, compiled):
     network, model = random_model(dim, widths, seed=dim)
     coords = [np.sort(np.random.default_rng(d).random(n)) for d, n in zip(range(dim), (13, 11, 9)[:dim])]
     # uneven chunks: the grid's 1287 or 143 nodes in chunks of 100
-    mine = forward_on_grid(model, coords, chunk=100, workers=workers)
+    mine = forward_on_grid(model, coords, chunk=100, workers=workers, compiled=compiled)
     grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, dim)
     with torch.no_grad():
         expected = network(torch.from_numpy(grid).float()).double().numpy()
@@ -38,7 +39,7 @@ def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers):
     np.testing.assert_allclose(mine, expected, rtol=0, atol=2e-6 * max(1.0, np.abs(expected).max()))
     # numpy arrays in the state dict work as well as tensors
     plain = dict(model, state_dict={k: v.numpy() for k, v in model["state_dict"].items()})
-    np.testing.assert_array_equal(forward_on_grid(plain, coords, chunk=100, workers=workers), mine)
+    np.testing.assert_array_equal(forward_on_grid(plain, coords, chunk=100, workers=workers, compiled=compiled), mine)
 
 
 def test_the_checkpoint_reads_as_torch_loads_it(tmp_path):
@@ -140,7 +141,8 @@ def test_auto_device_is_cpu_without_a_visible_gpu(monkeypatch):
         assert inference_device("auto") == "cpu"
 
 
-def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid(compiled):
     """The forward pass per node is W h summed k = 0, 1, .. with every product and sum rounded to
     float32 (no FMA, no reordering), then + b and tanh: a NumPy oracle doing exactly that,
     column by column, gives the same bits; and so does any sub-grid, batch or worker count (a BLAS
@@ -157,8 +159,60 @@ def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid():
         for k in range(weight.shape[1]):
             total = total + hidden[:, k : k + 1] * weight[:, k]  # float32 product, then float32 sum
         hidden = np.tanh(total + bias) if index < 2 else total + bias
-    whole = forward_on_grid(model, coords, workers=2)
+    whole = forward_on_grid(model, coords, workers=2, compiled=compiled)
     np.testing.assert_array_equal(whole, hidden.astype(np.float64))
     part = [coords[0][3:8], coords[1][[0, 5]], coords[2][1:2]]
     expected = whole.reshape(11, 7, 9, 3)[3:8][:, [0, 5]][:, :, 1:2].reshape(-1, 3)
-    np.testing.assert_array_equal(forward_on_grid(model, part, chunk=3, workers=1), expected)
+    np.testing.assert_array_equal(forward_on_grid(model, part, chunk=3, workers=1, compiled=compiled), expected)
+
+
+@pytest.mark.parametrize("fan_in", [1, 2, 3, 5, 8, 48])
+@pytest.mark.parametrize("fan_out", [1, 3, 7, 8, 13, 48])
+def test_the_compiled_layer_and_the_numpy_layer_are_the_same_bits_as_a_scalar_oracle(fan_in, fan_out):
+    """``dense_kernel`` (outputs in groups of eight and a remainder, inputs in pairs and a
+    remainder, nodes in runs of ``KERNEL_NODES`` and a partial run) and ``dense_numpy`` against
+    float32 scalars summed k = 0, 1, .. one node at a time: every shape's remainders, bit for bit.
+    Values spread over decades, so that a reordered sum or a fused multiply-add would differ."""
+    from meshgen.neural.mlp_numpy import KERNEL_NODES, dense_kernel, dense_numpy
+
+    rng = np.random.default_rng(fan_in * 100 + fan_out)
+    nodes = 2 * KERNEL_NODES + 37
+    h = (rng.standard_normal((fan_in, nodes)) * 10.0 ** rng.integers(-3, 4, (fan_in, nodes))).astype(np.float32)
+    weight = (rng.standard_normal((fan_out, fan_in)) * 10.0 ** rng.integers(-3, 4, (fan_out, fan_in))).astype(np.float32)
+    bias = rng.standard_normal(fan_out).astype(np.float32)
+    compiled, plain = np.full((fan_out, nodes), np.nan, np.float32), np.full((fan_out, nodes), np.nan, np.float32)
+    dense_kernel()(h, weight, bias, compiled)
+    dense_numpy(h, weight, bias, plain, np.empty_like(plain))
+    for r in rng.choice(nodes, 12, replace=False).tolist() + [0, KERNEL_NODES - 1, KERNEL_NODES, nodes - 1]:
+        for j in range(fan_out):
+            total = np.float32(0.0)
+            for k in range(fan_in):
+                total = np.float32(total + np.float32(weight[j, k] * h[k, r]))
+            assert compiled[j, r] == np.float32(total + bias[j]), (j, r)
+    np.testing.assert_array_equal(compiled.view(np.int32), plain.view(np.int32))
+
+
+def test_a_small_mesh_never_imports_numba_and_is_the_compiled_mesh(tmp_path):
+    """``meshgen mesh --dims 20 20 20`` (the bundled network) in a fresh process takes the NumPy
+    layers (below ``NUMPY_WORK``: no numba import, about a second); the network's values there
+    are the compiled kernel's bits."""
+    import os
+    import subprocess
+    import sys
+
+    from meshgen.methods.tfi import parametric_grid
+    from meshgen.neural.mlp_numpy import compiled_for
+    from meshgen.neural.models import find_model
+
+    script = (
+        "import sys; from meshgen.cli import main; sys.argv = ['meshgen', 'mesh', '--dims', '20', '20', '20', '-o', 's.vtu', '-q'];"
+        "\ntry:\n    main()\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\nprint('numba' in sys.modules)"
+    )
+    environment = {**os.environ, "PYTHONPATH": str(BUNDLED.parents[3]), "CUDA_VISIBLE_DEVICES": ""}
+    done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=environment, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "False"
+    model = find_model(geometry_name="semicylinder").checkpoint["model"]
+    coords = parametric_grid((20, 20, 20))
+    assert not compiled_for(model, 21**3) and compiled_for(model, 101**3)
+    np.testing.assert_array_equal(forward_on_grid(model, coords, compiled=False), forward_on_grid(model, coords, compiled=True))

@@ -1,5 +1,8 @@
-"""The trained network's forward pass without torch: a small tanh MLP, each layer a compiled
-fixed-order float32 kernel (``dense_kernel``), so meshing with a trained model needs no torch.
+"""The trained network's forward pass without torch: a small tanh MLP, each layer fixed-order
+float32 arithmetic per node, so meshing with a trained model needs no torch. Each layer is a
+compiled kernel (``dense_kernel``, numba) or, for grids below ``NUMPY_WORK`` multiply-adds (a
+fresh process then never imports numba, about a second), the same operations in NumPy
+(``dense_numpy``): the same bits either way (tested), chosen by size alone (``compiled_for``).
 
 ``forward_on_grid(model, coords)`` is ``meshgen.neural.gpu_forward.evaluate_on_grid`` without torch:
 the same inputs u = 2 xi - 1 in float32, the same layers (W h + b, tanh between), float32
@@ -36,18 +39,27 @@ from meshgen.errors import MeshgenError
 
 __all__ = [
     "CHUNK_NODES",
+    "KERNEL_NODES",
+    "NUMPY_WORK",
     "TILE_ROWS",
+    "compiled_for",
+    "dense_kernel",
+    "dense_numpy",
     "finite_output",
     "forward_on_grid",
-    "dense_kernel",
     "forward_tile",
+    "multiply_adds",
     "network_arrays",
     "openblas_thread_functions",
     "read_checkpoint",
 ]
 
 CHUNK_NODES = 8192
-TILE_ROWS = 1024  # nodes per tile of the compiled forward pass (its activations: 1024 x 85 float32, 350 kB)
+TILE_ROWS = 1024  # nodes per tile of the forward pass (its activations: 1024 x 85 float32, 350 kB)
+KERNEL_NODES = 256  # nodes per run inside the compiled kernel (a 48-wide layer's inputs: 48 kB)
+NUMPY_WORK = (
+    1_000_000_000  # multiply-adds below which the pass is NumPy (2e5 nodes of [48]*3: break-even with a fresh numba import)
+)
 
 
 @functools.lru_cache(maxsize=1)
@@ -55,48 +67,155 @@ def dense_kernel():
     """The compiled layer ``out = W h + b`` on a tile (numba, loaded on first use): ``h`` (fan_in,
     nodes), ``W`` (fan_out, fan_in), ``b`` (fan_out,), ``out`` (fan_out, nodes), float32.
 
-    Each output is (((W_0 h_0 + W_1 h_1) + W_2 h_2) + ...) + b, products and sums rounded one by one
-    (no fused multiply-add, no reordering: ``fastmath`` off), vectorised across the nodes. So a
-    node's value is the same bits in any grid, block, batch or thread, on any CPU: IEEE float32
-    arithmetic in a fixed order, where a BLAS product's rounding depends on the node's row in it
-    (OpenBLAS's AVX2 kernel treats rows by their index modulo 6)."""
-    from numba import njit
+    Each output is (((0 + W_0 h_0) + W_1 h_1) + ...) + b, products and sums rounded one by one (no
+    fused multiply-add, no reordering: ``fastmath`` off), vectorised across the nodes. So a node's
+    value is the same bits in any grid, block, batch or thread, on any CPU: IEEE float32 arithmetic
+    in a fixed order, where a BLAS product's rounding depends on the node's row in it (OpenBLAS's
+    AVX2 kernel treats rows by their index modulo 6). :func:`dense_numpy` is the same arithmetic.
 
-    @njit(cache=True, fastmath=False, nogil=True, error_model="numpy")
+    For speed (not for the result): nodes in runs of ``KERNEL_NODES`` (the run's inputs stay in L1
+    across the outputs), eight outputs at once over two inputs k per pass (their sums in a small
+    accumulator array: fewer loads and stores per multiply-add, eight independent chains of adds),
+    the last fan_out % 8 outputs one at a time over four inputs per pass; the node loops in vectors
+    of 16 floats (one AVX-512 register, two AVX2 ones: about a third faster than LLVM's choice of 8
+    here), for this function's compilation only (under numba's compiler lock, so no other function
+    compiles meanwhile). Compiled for C-contiguous float32 arrays, the only ones it accepts."""
+    import llvmlite.binding as llvm
+    from numba import njit
+    from numba.core.compiler_lock import global_compiler_lock
+
+    # Raised as meshgen.quality.compiled does: the loop reads 10 rows and writes 8, more overlap
+    # checks than LLVM's default limits allow, without which it would not vectorise. It changes
+    # what loops may be vectorised, never the arithmetic of one.
+    llvm.set_option("", "-runtime-memory-check-threshold=1024")
+    llvm.set_option("", "-vectorize-memory-check-threshold=1024")
+    run = KERNEL_NODES
+
+    @njit(cache=True, fastmath=False, nogil=True, error_model="numpy", boundscheck=False)
     def dense(h, weight, bias, out):
         fan_in, nodes = h.shape
-        for j in range(weight.shape[0]):
-            for r in range(nodes):
-                out[j, r] = 0.0
-            for k in range(fan_in):
-                w = weight[j, k]
-                for r in range(nodes):
-                    out[j, r] += w * h[k, r]
-            for r in range(nodes):
-                out[j, r] += bias[j]
+        fan_out = weight.shape[0]
+        acc = np.empty((8, run), dtype=np.float32)
+        for r0 in range(0, nodes, run):
+            n = min(run, nodes - r0)
+            for j in range(0, fan_out - 7, 8):  # outputs j .. j+7
+                a0, a1, a2, a3 = acc[0, :n], acc[1, :n], acc[2, :n], acc[3, :n]
+                a4, a5, a6, a7 = acc[4, :n], acc[5, :n], acc[6, :n], acc[7, :n]
+                acc[:, :n] = 0.0
+                for k in range(0, fan_in - 1, 2):  # a = (a + w_k h_k) + w_k+1 h_k+1, rounded one by one
+                    h0, h1 = h[k, r0 : r0 + n], h[k + 1, r0 : r0 + n]
+                    u0, u1, u2, u3 = weight[j, k], weight[j + 1, k], weight[j + 2, k], weight[j + 3, k]
+                    u4, u5, u6, u7 = weight[j + 4, k], weight[j + 5, k], weight[j + 6, k], weight[j + 7, k]
+                    v0, v1, v2, v3 = weight[j, k + 1], weight[j + 1, k + 1], weight[j + 2, k + 1], weight[j + 3, k + 1]
+                    v4, v5, v6, v7 = weight[j + 4, k + 1], weight[j + 5, k + 1], weight[j + 6, k + 1], weight[j + 7, k + 1]
+                    for r in range(n):
+                        x, y = h0[r], h1[r]
+                        a0[r] = (a0[r] + u0 * x) + v0 * y
+                        a1[r] = (a1[r] + u1 * x) + v1 * y
+                        a2[r] = (a2[r] + u2 * x) + v2 * y
+                        a3[r] = (a3[r] + u3 * x) + v3 * y
+                        a4[r] = (a4[r] + u4 * x) + v4 * y
+                        a5[r] = (a5[r] + u5 * x) + v5 * y
+                        a6[r] = (a6[r] + u6 * x) + v6 * y
+                        a7[r] = (a7[r] + u7 * x) + v7 * y
+                if fan_in % 2:  # the last of an odd number of inputs
+                    k = fan_in - 1
+                    h0 = h[k, r0 : r0 + n]
+                    u0, u1, u2, u3 = weight[j, k], weight[j + 1, k], weight[j + 2, k], weight[j + 3, k]
+                    u4, u5, u6, u7 = weight[j + 4, k], weight[j + 5, k], weight[j + 6, k], weight[j + 7, k]
+                    for r in range(n):
+                        x = h0[r]
+                        a0[r] = a0[r] + u0 * x
+                        a1[r] = a1[r] + u1 * x
+                        a2[r] = a2[r] + u2 * x
+                        a3[r] = a3[r] + u3 * x
+                        a4[r] = a4[r] + u4 * x
+                        a5[r] = a5[r] + u5 * x
+                        a6[r] = a6[r] + u6 * x
+                        a7[r] = a7[r] + u7 * x
+                for row in range(8):
+                    b, o, a = bias[j + row], out[j + row, r0 : r0 + n], acc[row, :n]
+                    for r in range(n):
+                        o[r] = a[r] + b
+            for j in range(fan_out - fan_out % 8, fan_out):  # the last fan_out % 8 outputs, one by one
+                a = acc[0, :n]
+                a[:] = 0.0
+                for k in range(0, fan_in - 3, 4):  # four inputs per pass, added in order
+                    h0, h1, h2, h3 = h[k, r0 : r0 + n], h[k + 1, r0 : r0 + n], h[k + 2, r0 : r0 + n], h[k + 3, r0 : r0 + n]
+                    u0, u1, u2, u3 = weight[j, k], weight[j, k + 1], weight[j, k + 2], weight[j, k + 3]
+                    for r in range(n):
+                        a[r] = (((a[r] + u0 * h0[r]) + u1 * h1[r]) + u2 * h2[r]) + u3 * h3[r]
+                for k in range(fan_in - fan_in % 4, fan_in):
+                    h0, u0 = h[k, r0 : r0 + n], weight[j, k]
+                    for r in range(n):
+                        a[r] = a[r] + u0 * h0[r]
+                b, o = bias[j], out[j, r0 : r0 + n]
+                for r in range(n):
+                    o[r] = a[r] + b
 
+    with global_compiler_lock:
+        llvm.set_option("", "-force-vector-width=16")
+        try:
+            dense.compile("(float32[:, ::1], float32[:, ::1], float32[::1], float32[:, ::1])")
+        finally:
+            llvm.set_option("", "-force-vector-width=0")  # LLVM's default: its own choice
+    dense.disable_compile()
     return dense
+
+
+def dense_numpy(h: np.ndarray, weight: np.ndarray, bias: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
+    """:func:`dense_kernel`'s layer in NumPy, the same float32 operations in the same order (so the
+    same bits): ``out`` = 0, then ``out`` + W_k h_k for k = 0, 1, .., then + b, each product and sum
+    a separate float32 ufunc (rounded one by one). A Python loop over the inputs k, vectorised over
+    outputs and nodes. ``h`` (fan_in, nodes), ``out`` and ``scratch`` (fan_out, nodes) float32."""
+    out[...] = 0.0
+    for k in range(h.shape[0]):
+        np.multiply(weight[:, k : k + 1], h[k], out=scratch)
+        np.add(out, scratch, out=out)
+    np.add(out, bias[:, None], out=out)
+
+
+def multiply_adds(model: dict) -> int:
+    """Multiply-adds per node of the network of ``model`` (a ``checkpoint["model"]`` description)."""
+    sizes = [int(model["dim"]), *(int(w) for w in model["widths"]), int(model["dim"])]
+    return sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
+
+
+def compiled_for(model: dict, nodes: int) -> bool:
+    """Whether a forward pass of ``model`` over ``nodes`` nodes takes the compiled kernel (from
+    ``NUMPY_WORK`` multiply-adds up) rather than :func:`dense_numpy` (no numba import, about a
+    second in a fresh process). By size alone, so a request always takes the same path (a chunked
+    mesh: give the whole grid's nodes); both give the same bits."""
+    return nodes * multiply_adds(model) >= NUMPY_WORK
 
 
 def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
     """A tile's float32 buffers: its inputs (dim, ``TILE_ROWS``), then one (width, ``TILE_ROWS``)
-    per layer."""
-    return [np.zeros((dim, TILE_ROWS), dtype=np.float32)] + [
-        np.empty((b.shape[0], TILE_ROWS), dtype=np.float32) for _, b in layers
-    ]
+    per layer, then a scratch buffer (widest layer, ``TILE_ROWS``) for :func:`dense_numpy`."""
+    widths = [b.shape[0] for _, b in layers]
+    return (
+        [np.zeros((dim, TILE_ROWS), dtype=np.float32)]
+        + [np.empty((width, TILE_ROWS), dtype=np.float32) for width in widths]
+        + [np.empty((max(widths), TILE_ROWS), dtype=np.float32)]
+    )
 
 
-def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray]) -> np.ndarray:
+def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray], compiled: bool = True) -> np.ndarray:
     """The network of ``layers`` (:func:`network_arrays`) at up to ``TILE_ROWS`` float32 input rows
     ``inputs`` (rows, d): the first ``rows`` columns of the returned (d, ``TILE_ROWS``) float32
-    buffer. Every layer is :func:`dense_kernel` (fixed-order arithmetic per node), then ``tanh``
-    (elementwise); a short tile is padded with zeros. ``buffers``: :func:`_tile_buffers`."""
-    dense = dense_kernel()
+    buffer. Every layer is :func:`dense_kernel` (``compiled``) or :func:`dense_numpy` (the same
+    bits), then ``tanh`` (elementwise, NumPy's in both); a short tile is padded with zeros.
+    ``buffers``: :func:`_tile_buffers`."""
+    dense = dense_kernel() if compiled else None
+    scratch = buffers[-1]
     hidden = buffers[0]
     hidden[:, : len(inputs)] = inputs.T
     hidden[:, len(inputs) :] = 0.0
-    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:])):
-        dense(hidden, weight, bias, result)
+    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:-1])):
+        if compiled:
+            dense(hidden, weight, bias, result)
+        else:
+            dense_numpy(hidden, weight, bias, result, scratch[: result.shape[0]])
         if index < len(layers) - 1:
             np.tanh(result, out=result)
         hidden = result
@@ -115,7 +234,7 @@ def network_arrays(model: dict) -> list[tuple[np.ndarray, np.ndarray]]:
         bias = np.asarray(state[f"layers.{index}.bias"], dtype=np.float32)
         if weight.shape != (fan_out, fan_in) or bias.shape != (fan_out,):
             raise MeshgenError(f"the network's layer {index} has shape {weight.shape}, expected {(fan_out, fan_in)}")
-        layers.append((np.ascontiguousarray(weight), bias))
+        layers.append((np.ascontiguousarray(weight), np.ascontiguousarray(bias)))
     return layers
 
 
@@ -179,11 +298,19 @@ def _grid_inputs(axes, start: int, stop: int) -> np.ndarray:
     return inputs
 
 
-def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: int = CHUNK_NODES, workers: int | None = None):
+def forward_on_grid(
+    model: dict,
+    coords,
+    out: np.ndarray | None = None,
+    chunk: int = CHUNK_NODES,
+    workers: int | None = None,
+    compiled: bool | None = None,
+):
     """The network N(xi) of ``model`` (a ``checkpoint["model"]`` description) at the tensor grid of
     the 1D parametric coordinates ``coords`` (values in [0, 1]): (n1 * n2 [* n3], d) float64, nodes
     in C order, written into ``out`` when given. ``workers``: threads over chunks (default: the
-    CPUs this process may use)."""
+    CPUs this process may use). ``compiled``: the numba kernel or NumPy (the same bits; default
+    :func:`compiled_for` this grid's size)."""
     layers = network_arrays(model)
     dim = int(model["dim"])
     if len(coords) != dim:
@@ -193,6 +320,8 @@ def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: i
     count = int(np.prod([len(c) for c in coords]))
     if out is None:
         out = np.empty((count, dim))
+    if compiled is None:
+        compiled = compiled_for(model, count)
 
     def run(first: int) -> None:
         # each task owns its buffers: chunks run on any worker thread
@@ -202,7 +331,7 @@ def forward_on_grid(model: dict, coords, out: np.ndarray | None = None, chunk: i
             inputs = _grid_inputs(axes, start, stop)
             for tile in range(0, stop - start, TILE_ROWS):
                 rows = min(TILE_ROWS, stop - start - tile)
-                result = forward_tile(layers, inputs[tile : tile + rows], buffers)
+                result = forward_tile(layers, inputs[tile : tile + rows], buffers, compiled)
                 out[start + tile : start + tile + rows] = result[:, :rows].T
 
     if workers is None:

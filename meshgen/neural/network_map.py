@@ -2,9 +2,10 @@
 soft or exact boundary), ``model_boundary_errors`` (its boundary error from the grid's faces alone)
 and ``evaluate_network``, the forward pass on the device asked for.
 
-On a CPU the forward pass is NumPy's (``meshgen.neural.mlp_numpy``: a tanh MLP is a few float32 matrix
-products), so meshing with a trained model imports no torch; torch (``meshgen.neural.gpu_forward``)
-runs it on a GPU only: ``--device cuda``, or ``auto`` where ``meshgen.neural.device`` finds one.
+On a CPU the forward pass is ``meshgen.neural.mlp_numpy``'s (fixed-order float32 arithmetic per
+node: a numba kernel, or NumPy for small grids, the same bits), so meshing with a trained model
+imports no torch; torch (``meshgen.neural.gpu_forward``) runs it on a GPU only: ``--device cuda``, or
+``auto`` where ``meshgen.neural.device`` finds one.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from meshgen.geometry import cube
 from meshgen.methods.tfi import add_face_terms, boundary_faces, face_terms, face_values, tfi
 from meshgen.neural.checkpoint_data import check_network
 from meshgen.neural.device import inference_device
-from meshgen.neural.mlp_numpy import CHUNK_NODES, finite_output, forward_on_grid
+from meshgen.neural.mlp_numpy import CHUNK_NODES, compiled_for, finite_output, forward_on_grid
 
 __all__ = [
     "CHUNK_NODES",
@@ -30,17 +31,20 @@ __all__ = [
 ]
 
 
-def evaluate_network(model: dict, coords, out=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu") -> np.ndarray:
+def evaluate_network(
+    model: dict, coords, out=None, chunk: int = CHUNK_NODES, workers=None, device: str = "cpu", compiled=None
+) -> np.ndarray:
     """The network N(xi) of ``model`` (a ``checkpoint["model"]`` description, weights as NumPy
     arrays or tensors) at the tensor grid of the 1D parametric coordinates ``coords``: (n1 * n2
     [* n3], d) float64, nodes in C order, written into ``out`` when given. ``device``: "cpu",
-    "cuda" or "auto" (``inference_device``); only cuda imports torch."""
+    "cuda" or "auto" (``inference_device``); only cuda imports torch. ``compiled``: on a CPU, the
+    numba kernel or NumPy (the same bits; default by this grid's size: ``compiled_for``)."""
     if inference_device(device) == "cuda":
         from meshgen.neural.gpu_forward import evaluate_on_grid  # torch
 
         return evaluate_on_grid(model, coords, out=out, device="cuda")
     check_network(model)
-    return finite_output(forward_on_grid(model, coords, out=out, chunk=chunk, workers=workers))
+    return finite_output(forward_on_grid(model, coords, out=out, chunk=chunk, workers=workers, compiled=compiled))
 
 
 def bubble_on_grid(coords) -> np.ndarray:
@@ -74,12 +78,14 @@ def map_on_block(model: dict, coords, block=None, tfi_terms=None, workers=None, 
     scale b(xi) N(xi) + TFI(xi), the TFI from ``tfi_terms`` (:func:`exact_boundary_terms`, made on
     the whole grid). A node's value is the same sequence of operations in any block (the network's
     per-node arithmetic is fixed: ``meshgen.neural.mlp_numpy.forward_tile``), so a mesh made block
-    by block equals the whole-grid one bit for bit."""
+    by block equals the whole-grid one bit for bit. The compiled kernel or NumPy is chosen by the
+    whole grid's size, so every block of a mesh takes the whole mesh's path."""
     dim = len(coords)
     block = tuple(block) if block is not None else (slice(None),) * dim
     sub_coords = [c[b] for c, b in zip(coords, block)]
     shape = tuple(len(c) for c in sub_coords)
-    X = evaluate_network(model, sub_coords, workers=workers, device=device).reshape(*shape, dim)
+    compiled = compiled_for(model, int(np.prod([len(c) for c in coords])))  # by the whole grid: one path per mesh
+    X = evaluate_network(model, sub_coords, workers=workers, device=device, compiled=compiled).reshape(*shape, dim)
     scale = float(model["scale"])
     if not model["exact_boundary"]:
         X *= scale
