@@ -19,6 +19,7 @@ from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, 
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
 from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
+from meshgen.formats._vtm import check_target as check_vtm_target
 from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
@@ -46,7 +47,9 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
     """The path to write, checked before any work (FormatError for a format that takes no block set)."""
 
     if format_name is None and Path(path).suffix.lower() == ".vtm":  # a .vts per block and the .vtm listing them
-        return check_output_file(path, "mesh.vtm")
+        path = check_output_file(path, "mesh.vtm")
+        check_vtm_target(path)  # its pieces folder must be its own: never a folder of the user's files
+        return path
     fmt = format_for(path, format_name)
     if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS, *SOLVER_FORMATS):
         raise FormatError(

@@ -10,10 +10,18 @@ import contextlib
 import os
 from pathlib import Path
 
-from meshgen.errors import MeshgenError
-from meshgen.run.publish import current_publication, reason, remove_path, remove_stale_temporaries, replace_into, temporary_path
+from meshgen.errors import FormatError, MeshgenError
+from meshgen.run.publish import (
+    TEMPORARY_PATTERN,
+    current_publication,
+    reason,
+    remove_path,
+    remove_stale_temporaries,
+    replace_into,
+    temporary_path,
+)
 
-__all__ = ["atomic_path", "atomic_write", "check_output_file"]
+__all__ = ["atomic_path", "atomic_write", "check_output_file", "check_pieces_folder"]
 
 
 @contextlib.contextmanager
@@ -73,3 +81,19 @@ def check_output_file(path: str | os.PathLike, example_name: str) -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise MeshgenError(f"output folder {folder} is not writable")
     return path
+
+
+def check_pieces_folder(path: str | os.PathLike, is_piece, pieces: str) -> None:
+    """FormatError when the folder ``<name>/`` beside ``path`` (where a .pvts or .vtm writes its
+    pieces) exists and is not that file's own pieces folder: a link, not a folder, or holding an
+    entry that ``is_piece(entry name)`` does not claim (meshgen's own temporaries aside). Writing
+    would replace a file of the user's. ``pieces`` says what the pieces are called."""
+    folder = Path(path).with_suffix("")
+    if not os.path.lexists(folder):
+        return
+    if (
+        folder.is_symlink()
+        or not folder.is_dir()
+        or any(not (is_piece(entry.name) or TEMPORARY_PATTERN.match(entry.name)) for entry in os.scandir(folder))
+    ):
+        raise FormatError(f"{folder} exists and is not the pieces folder of {Path(path).name} ({pieces}): pick another name")
