@@ -12,13 +12,13 @@ A 2D mesh is extruded one cell along +z (``extrude_quads``) with the ``empty`` p
 
 from __future__ import annotations
 
-import os
-import shutil
 from pathlib import Path
 
 import numpy as np
 
 from meshgen.errors import FormatError
+from meshgen.run.atomic import atomic_path
+from meshgen.run.publish import publishing, remove_stale_temporaries
 
 __all__ = ["HEX_FACES", "extrude_quads", "write_poly_mesh"]
 
@@ -109,41 +109,35 @@ def write_poly_mesh(case, points3, cells, patches, control_files: dict) -> None:
     faces, owner, neighbour, entries = poly_mesh(points3, cells, patches)
     case = Path(case)
     constant = case / "constant"
-    constant.mkdir(parents=True, exist_ok=True)
-    (case / "system").mkdir(exist_ok=True)
-    temporary = constant / f".polyMesh.tmp-{os.getpid()}"
-    shutil.rmtree(temporary, ignore_errors=True)
-    temporary.mkdir()
-    try:
+    # One publication (meshgen.run.publish): the polyMesh (a new temporary folder, renamed over the
+    # old one), the missing system files and CASE.foam take their names together under the case's
+    # lock; every name goes through atomic_path, so a link planted in the case is never followed.
+    with publishing(case, FormatError) as publication:
+        for folder in (case, constant, case / "system"):
+            publication.make_folder(folder)
+            remove_stale_temporaries(folder)
         note = f"nPoints:{len(points3)} nCells:{len(cells)} nFaces:{len(faces)} nInternalFaces:{len(neighbour)}"
-        _write(temporary / "points", "vectorField", "points", points3, "({:.17g} {:.17g} {:.17g})")
-        _write(temporary / "faces", "faceList", "faces", faces, "4({} {} {} {})")
-        _write(temporary / "owner", "labelList", "owner", owner, "{}", note)
-        _write(temporary / "neighbour", "labelList", "neighbour", neighbour, "{}", note)
-        lines = [
-            BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"),
-            f"{len(entries)}\n(\n",
-        ]
-        for name, kind, count, first in entries:
-            group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
-            lines.append(
-                f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
-            )
-        lines.append(")\n")
-        (temporary / "boundary").write_text("".join(lines))
-        target = constant / "polyMesh"
-        if target.exists():
-            shutil.rmtree(target)
-        os.replace(temporary, target)
-    finally:
-        shutil.rmtree(temporary, ignore_errors=True)
-    for name, text in control_files.items():
-        path = case / "system" / name
-        if not path.exists():
-            path.write_text(BANNER.format(class_name="dictionary", location="system", name=name) + text)
-    foam = case / f"{case.resolve().name}.foam"
-    if not foam.exists():
-        foam.write_text("")
+        with atomic_path(constant / "polyMesh", folder=True) as temporary:
+            _write(temporary / "points", "vectorField", "points", points3, "({:.17g} {:.17g} {:.17g})")
+            _write(temporary / "faces", "faceList", "faces", faces, "4({} {} {} {})")
+            _write(temporary / "owner", "labelList", "owner", owner, "{}", note)
+            _write(temporary / "neighbour", "labelList", "neighbour", neighbour, "{}", note)
+            lines = [
+                BANNER.format(class_name="polyBoundaryMesh", location="constant/polyMesh", name="boundary"),
+                f"{len(entries)}\n(\n",
+            ]
+            for name, kind, count, first in entries:
+                group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
+                lines.append(
+                    f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
+                )
+            lines.append(")\n")
+            (temporary / "boundary").write_text("".join(lines))
+        for name, text in control_files.items():
+            with atomic_path(case / "system" / name, keep_existing=True) as temporary:
+                temporary.write_text(BANNER.format(class_name="dictionary", location="system", name=name) + text)
+        with atomic_path(case / f"{case.resolve().name}.foam", keep_existing=True) as temporary:
+            temporary.write_text("")
 
 
 def _write(path: Path, class_name: str, name: str, values: np.ndarray, row: str, note: str = "") -> None:

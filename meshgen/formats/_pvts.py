@@ -92,8 +92,7 @@ def _write_pieces(path, node_shape, pieces, cell_names, metadata, patches) -> No
     target = Path(publication.output if publication is not None else path)
     folder = target.with_suffix("")
     lines = []
-    with atomic_path(folder) as temporary:
-        temporary.mkdir()
+    with atomic_path(folder, folder=True) as temporary:
         for number, (block, X, cell_data) in enumerate(pieces):
             name = f"{folder.name}_{number}.vts"
             write_piece(temporary / name, X, cell_data, metadata, patches, block, node_shape)

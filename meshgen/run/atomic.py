@@ -1,6 +1,6 @@
-"""Atomic file replacement: write to a temporary name in the target folder (it carries the pid:
-``meshgen.run.publish.temporary_path``), then rename, so an interrupted or failed write never leaves a
-partial file under the real name and keeps the old one. Inside a publication
+"""Atomic file replacement: write to a new temporary in the target folder (its name carries the
+pid and a random token; made with ``O_EXCL | O_NOFOLLOW``: ``meshgen.run.publish.temporary_path``),
+then rename, so an interrupted or failed write never leaves a partial file under the real name and keeps the old one. Inside a publication
 (``meshgen.run.publish.publishing``) the rename waits for the publication's end, so a mesh and its
 sidecar take their names together."""
 
@@ -25,15 +25,15 @@ __all__ = ["atomic_path", "atomic_write", "check_output_file", "check_pieces_fol
 
 
 @contextlib.contextmanager
-def atomic_path(target: str | os.PathLike, keep_existing: bool = False):
-    """Yield a temporary path beside ``target`` (same suffix; the caller makes a file or a folder
-    there); on success it replaces ``target``, on any exception (also KeyboardInterrupt, SIGTERM)
+def atomic_path(target: str | os.PathLike, keep_existing: bool = False, folder: bool = False):
+    """Yield a new temporary beside ``target`` (same suffix; ``meshgen.run.publish.temporary_path``:
+    an empty file the caller writes over, or with ``folder`` an empty folder it fills); on success it replaces ``target``, on any exception (also KeyboardInterrupt, SIGTERM)
     it is removed and ``target`` is untouched. ``keep_existing``: an existing ``target`` wins (the
     temporary is dropped). Temporaries of ``target`` left by processes that are gone are removed
     first. Inside a publication the rename happens when the publication ends."""
     target = Path(target)
     remove_stale_temporaries(target.parent, target)
-    temporary = temporary_path(target)
+    temporary = temporary_path(target, folder)
     publication = current_publication()
     try:
         yield temporary
