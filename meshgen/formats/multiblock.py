@@ -13,7 +13,7 @@ import numpy as np
 
 from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
-from meshgen.formats._cgns import read_zones, write_zones, zone_count
+from meshgen.formats._cgns import MultiZoneError, read_zones, write_zones, zone_count
 from meshgen.formats._gmsh import write_elements as write_msh_elements
 from meshgen.formats._openfoam import CONTROL_DICT, EXTRUDED_PATCH, FV_SCHEMES, FV_SOLUTION
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
@@ -31,6 +31,7 @@ from meshgen.run.atomic import atomic_write, check_output_file
 __all__ = [
     "MERGED_FORMATS",
     "SOLVER_FORMATS",
+    "MultiZoneError",
     "check_block_output",
     "merged_boundary",
     "patch_faces",
