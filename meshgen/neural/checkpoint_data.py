@@ -157,10 +157,11 @@ def check_resumable_state(checkpoint: dict, path: Path) -> None:
             f"checkpoint {path} lacks its training state's {', '.join(missing)} (or holds another kind of value): "
             "the file is damaged, it cannot be resumed"
         )
+    words = {"optimizer": "optimiser state", "scheduler": "scheduler state", "reweighting": "reweighting state"}
     for key in ("optimizer", "scheduler", "reweighting", "elapsed_seconds"):
         if _non_finite(checkpoint.get(key)):
             raise CheckpointError(
-                f"checkpoint {path}: its {key.replace('optimizer', 'optimiser').replace('_', ' ')} holds non-finite numbers (NaN or infinity): the file is damaged, "
+                f"checkpoint {path}: its {words.get(key, 'elapsed seconds')} holds non-finite numbers (NaN or infinity): the file is damaged, "
                 "it cannot be resumed"
             )
 
