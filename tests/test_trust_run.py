@@ -1,4 +1,4 @@
-"""Trust on the surfaces added since 0.2 (issue 38): block sets' sizes and parameters, multi-zone
+"""Trust on the surfaces added since 0.2: block sets' sizes and parameters, multi-zone
 .cgns headers, the .vtm's pieces folder, links planted at the names meshgen writes through, and a
 resumed checkpoint's optimiser state. Each case drives the real command line: exit 2, one line
 that names the problem, nothing written or changed (the quality worker's stop: test_quality_worker.py)."""
