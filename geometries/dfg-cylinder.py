@@ -74,7 +74,7 @@ def geometric(cells: int, first: float, length: float) -> np.ndarray:
     low, high = 0.2, 5.0  # ratio bounds; the first cell's share falls as the ratio grows
     for _ in range(200):
         ratio = 0.5 * (low + high)
-        share = (ratio - 1.0) / (ratio**cells - 1.0)
+        share = (ratio - 1.0) / (ratio**cells - 1.0) if ratio != 1.0 else 1.0 / cells
         low, high = (ratio, high) if share > target else (low, ratio)
     steps = ratio ** np.arange(cells)
     return np.concatenate([[0.0], np.cumsum(steps) / steps.sum()])
@@ -90,8 +90,10 @@ def block_coords(dims, wake_growth=params["wake_growth"]):
     box = np.linspace(0.0, 1.0, n + 1)
     # The O-grid: last cell of size h at the box's side (distance BOX - RADIUS): fine at the cylinder.
     ring = 1.0 - geometric(m, h, BOX - RADIUS)[::-1]
-    growth = 1.0 + wake_growth / n
-    downstream = int(np.ceil(np.log(1.0 + (LENGTH - _X[2]) * (growth - 1.0) / h) / np.log(growth)))
+    # Cells downstream: growing by 1 + wake_growth / N from h over LENGTH - _X[2]. log1p keeps the
+    # count right for a growth too close to 1 to show in 1 + g (g = 1e-300: even cells of size h).
+    step = wake_growth / n
+    downstream = int(np.ceil(np.log1p((LENGTH - _X[2]) * step / h) / np.log1p(step)))
     columns = [np.linspace(0.0, 1.0, max(1, round(_X[1] / h)) + 1), box, geometric(downstream, h, LENGTH - _X[2])]
     rows = [np.linspace(0.0, 1.0, max(1, round((_Y[i + 1] - _Y[i]) / h)) + 1) for i in range(3)]
     rows[1] = box

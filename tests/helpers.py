@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["files_in"]
+__all__ = ["files_in", "full_disk_temporaries"]
 
 
 def files_in(folder: Path, skip=()) -> dict:
@@ -16,3 +16,25 @@ def files_in(folder: Path, skip=()) -> dict:
         for p in sorted(Path(folder).rglob("*"))
         if "__pycache__" not in p.parts and p.name not in skip and not p.name.startswith("stalled")
     }
+
+
+def full_disk_temporaries(monkeypatch, target_name: str) -> list[Path]:
+    """Make this process's next temporaries of an output named ``target_name`` links to /dev/full
+    (every write to them fails with the kernel's own ENOSPC). meshgen creates its temporaries with
+    O_EXCL under random names, so a link cannot be planted from outside: the test swaps the link in
+    right after ``meshgen.run.publish.temporary_path`` made the file. Returns the temporaries so made."""
+    from meshgen.run import atomic, publish
+
+    made = []
+    real = publish.temporary_path
+
+    def planted(target, folder=False):
+        path = real(target, folder)
+        if Path(target).name == target_name and not folder:
+            path.unlink()
+            path.symlink_to("/dev/full")
+            made.append(path)
+        return path
+
+    monkeypatch.setattr(atomic, "temporary_path", planted)
+    return made

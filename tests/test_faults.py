@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 from helpers import files_in as snapshot
+from helpers import full_disk_temporaries
 from neural_helpers import TINY
 
 from meshgen.cli import cli
@@ -101,9 +102,14 @@ def test_two_meshes_written_at_once_end_as_the_mesh_and_sidecar_of_one_run(tmp_p
     )
     second = start(tmp_path, "mesh", "-m", "elliptic", "-g", "semidisk", "--dims", 5, 9, "-o", "x.vtu", "-q")
     children.append(second)
-    staged = [f".x.tmp-{second.pid}.vtu", f".x.vtu.quality.tmp-{second.pid}.json"]
+    staged = [rf"\.x\.tmp-{second.pid}-[0-9a-f]+\.vtu", rf"\.x\.vtu\.quality\.tmp-{second.pid}-[0-9a-f]+\.json"]
+
+    def all_staged():
+        names = os.listdir(tmp_path)
+        return all(any(re.fullmatch(pattern, name) for name in names) for pattern in staged)
+
     deadline = time.time() + 60
-    while not all((tmp_path / name).exists() for name in staged) and second.poll() is None and time.time() < deadline:
+    while not all_staged() and second.poll() is None and time.time() < deadline:
         time.sleep(0.02)
     time.sleep(0.5)
     assert second.poll() is None, second.communicate()  # waits for the first run's lock
@@ -299,14 +305,15 @@ def test_a_full_disk_writing_cgns_is_one_line_and_leaves_nothing(full_disk, chil
     assert os.listdir(folder) == []
 
 
-def test_a_full_disk_at_the_sidecar_keeps_the_previous_mesh_and_sidecar(tmp_path):
+def test_a_full_disk_at_the_sidecar_keeps_the_previous_mesh_and_sidecar(tmp_path, monkeypatch):
     """The mesh is written whole, then its sidecar hits a full disk (/dev/full: the kernel's
     ENOSPC): neither takes its name, and the previous pair stays byte for byte."""
     mesh = ["mesh", "-m", "tfi", "-g", "semidisk", "-o", "m.vtu", "-q", "--dims"]
     assert invoke(*mesh, 3, 2).exit_code == 0
     before = snapshot(tmp_path)
-    (tmp_path / f".m.vtu.quality.tmp-{os.getpid()}.json").symlink_to("/dev/full")
+    made = full_disk_temporaries(monkeypatch, "m.vtu.quality.json")
     result = invoke(*mesh, 6, 5)
+    assert len(made) == 1 and not os.path.lexists(made[0])
     assert result.exit_code == 2, result.output
     one_line(result.stderr, "m.vtu.quality.json", "No space left on device")
     assert snapshot(tmp_path) == before

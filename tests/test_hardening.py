@@ -177,6 +177,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 from helpers import files_in as snapshot
+from helpers import full_disk_temporaries
 from neural_helpers import TINY, tiny_config
 
 from meshgen.cli import cli
@@ -514,15 +515,8 @@ def test_readme_says_plugins_are_code():
 
 
 # ---------------------------------------------------------------------------------------------
-# full disk: the temporary file of the write is a link to /dev/full, so every write to it fails
-# with the kernel's own ENOSPC (not a mocked exception), through the real writers.
-
-
-def fill_disk_for(target: Path) -> Path:
-    """Make the next atomic write of ``target`` by this process hit a full disk."""
-    temporary = target.with_name(f".{target.stem}.tmp-{os.getpid()}{target.suffix}")
-    temporary.symlink_to("/dev/full")
-    return temporary
+# full disk: the temporary file of the write is a link to /dev/full (helpers.full_disk_temporaries),
+# so every write to it fails with the kernel's own ENOSPC (not a mocked exception), through the real writers.
 
 
 FULL_DISK = {
@@ -553,8 +547,10 @@ def test_full_disk(row, tmp_path, monkeypatch, semidisk_checkpoint):
         assert first.exit_code == 0, first.output
     previous = target.read_bytes()
     before = snapshot(tmp_path)
-    temporary = fill_disk_for(target)
+    made = full_disk_temporaries(monkeypatch, target.name)
     result = invoke(*args)
+    assert len(made) == 1, made
+    temporary = made[0]
     assert_one_line_error(
         result, "No space left on device", str(target.relative_to(tmp_path)), after_progress=row == "train-checkpoint"
     )
@@ -564,6 +560,8 @@ def test_full_disk(row, tmp_path, monkeypatch, semidisk_checkpoint):
     assert not temporary.exists() and not temporary.is_symlink()
     assert not [p.name for p in target.parent.iterdir() if TEMPORARY.match(p.name)]
     if row == "train-checkpoint":  # the kept checkpoint still resumes
+        monkeypatch.undo()
+        monkeypatch.chdir(tmp_path)
         resumed = invoke(*args)
         assert resumed.exit_code == 0, resumed.output
         assert torch.load(target, weights_only=True)["stage"] == "done"

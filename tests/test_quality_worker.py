@@ -49,6 +49,13 @@ main()
 FAILURES = {
     "raises": "def failing(dim):\n    raise MemoryError('no memory in the worker')\nworker.load_compiled_kernels = failing",
     "dies": "import os\ndef dying(dim):\n    os._exit(9)\nworker.load_compiled_kernels = dying",
+    # SIGSTOP (a debugger, a job-control stop): seen in /proc at once, the worker killed
+    "stopped": "import os, signal\ndef stopping(dim):\n    os.kill(os.getpid(), signal.SIGSTOP)\nworker.load_compiled_kernels = stopping",
+    # alive but making no progress: the wait ends at worker_timeout (shortened here to 1 s)
+    "stuck": (
+        "import time\ndef stuck(dim):\n    time.sleep(3600)\nworker.load_compiled_kernels = stuck\n"
+        "worker.WAIT_BASE_SECONDS, worker.WAIT_SECONDS_PER_CELL = 1.0, 0.0"
+    ),
 }
 
 
@@ -115,11 +122,34 @@ def test_the_worker_computes_the_in_process_report(tmp_path, expected):
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
 @pytest.mark.parametrize("failure", sorted(FAILURES))
 def test_a_failing_worker_leaves_the_result_unchanged(tmp_path, expected, failure):
+    """A worker that raises, dies, is stopped or is stuck: the command computes the report itself
+    (no hang: ``run_mesh`` times out), and no worker is left behind."""
     result = run_mesh(tmp_path, FAILURES[failure])
     assert result.returncode == 0, result.stderr
-    assert "worker " in result.stderr  # a worker was forked, and failed
+    worker = int(result.stderr.split("worker ", 1)[1].split()[0])  # a worker was forked, and failed
     assert "metrics from the worker" not in result.stderr and "Traceback" not in result.stderr
     check_result(tmp_path, expected)
+    deadline = time.monotonic() + 10.0  # killed by the command; its exit may wait a moment to be reaped
+    while alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(worker)
+
+
+def test_the_wait_for_a_worker_is_bounded_by_the_mesh_size():
+    from meshgen.quality.worker import WAIT_BASE_SECONDS, WAIT_SECONDS_PER_CELL, is_stopped, worker_timeout
+
+    assert worker_timeout(0) == WAIT_BASE_SECONDS and worker_timeout(10**6) == WAIT_BASE_SECONDS + 10**6 * WAIT_SECONDS_PER_CELL
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        assert not is_stopped(child.pid)
+        os.kill(child.pid, signal.SIGSTOP)
+        deadline = time.monotonic() + 10.0
+        while not is_stopped(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert is_stopped(child.pid)
+    finally:
+        child.kill()
+        child.wait()
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")

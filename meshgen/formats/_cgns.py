@@ -84,6 +84,7 @@ __all__ = [
     "CGNS_VERSION",
     "COORDINATE_NAMES",
     "LENGTH_EXPONENTS",
+    "MultiZoneError",
     "NAME_LENGTH",
     "SOLUTION_NAME",
     "ZONE_BC_NAME",
@@ -291,9 +292,14 @@ def read(path):
 # --- reading in blocks (meshes larger than memory) ----------------------------------------
 
 
+class MultiZoneError(FormatError):
+    """A file of several zones given to a reader of one zone (``_single_zone``)."""
+
+
 def zone_header(path) -> tuple[tuple[int, ...], dict]:
-    """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of the first structured zone,
-    without reading the coordinates."""
+    """(node shape (ni, nj[, nk]), meshgen's metadata dict or {}) of the file's structured zone,
+    without reading the coordinates; MultiZoneError for a file of several zones (the block-by-block
+    readers read one)."""
     import h5py
 
     try:
@@ -302,6 +308,7 @@ def zone_header(path) -> tuple[tuple[int, ...], dict]:
         raise FormatError(f"could not read {path}: {exc}") from None
     with root:
         base, _, node_shape = _structured_zone(root, path)
+        _single_zone(base, path)
         metadata = {}
         if METADATA_KEY in base and node_label(base[METADATA_KEY]) == "Descriptor_t":
             try:
@@ -374,10 +381,28 @@ def _structured_zone(root, path):
     """(base, zone, node shape) of the first zone of the first base; FormatError unless structured."""
     base = child_with_label(root, "CGNSBase_t", path)
     zone = child_with_label(base, "Zone_t", path)
+    return base, zone, _zone_shape(zone, path)
+
+
+def _zone_shape(zone, path) -> tuple[int, ...]:
+    """The node shape of ``zone``, checked before anything is allocated: a zone typed
+    ``Structured`` (an ``Unstructured`` zone's header means something else), whose header the
+    file's coordinate arrays bear out (``_checked_node_shape``). Every reader of a zone calls it."""
     zone_type = node_text(zone["ZoneType"]) if "ZoneType" in zone else ""
     if zone_type != "Structured":
         raise FormatError(f"{path}: zone '{node_name(zone)}' is {zone_type or 'untyped'}, meshgen reads structured zones")
-    return base, zone, _checked_node_shape(zone, path)
+    return _checked_node_shape(zone, path)
+
+
+def _single_zone(base, path) -> None:
+    """MultiZoneError when the base holds several zones: a reader of one zone (block by block,
+    ``zone_header``) would measure the first block only, a wrong answer given as the whole."""
+    count = len(children_with_label(base, "Zone_t"))
+    if count > 1:
+        raise MultiZoneError(
+            f"{path} holds {count} zones (a block set): the block-by-block path (--chunked) reads a single zone; "
+            "evaluate it without --chunked (every zone, in memory; --per-block for each zone)"
+        )
 
 
 def _checked_node_shape(zone, path) -> tuple[int, ...]:
@@ -456,8 +481,9 @@ def read_zones(path) -> list[dict]:
     zones = []
     with h5py.File(path, "r") as root:
         base = child_with_label(root, "CGNSBase_t", path)
-        for zone in children_with_label(base, "Zone_t"):
-            node_shape = tuple(int(n) for n in node_data(zone)[0])
+        found = children_with_label(base, "Zone_t")
+        shapes = [_zone_shape(zone, path) for zone in found]  # every zone's header, before any is read
+        for zone, node_shape in zip(found, shapes):
             X = np.stack([c_order(a[()], node_shape, path) for a in _coordinate_arrays(zone, len(node_shape), path)], axis=-1)
             connections = []
             for connectivity in children_with_label(zone, "ZoneGridConnectivity_t"):
@@ -479,7 +505,11 @@ def zone_count(path) -> int:
     """How many zones the first base holds."""
     import h5py
 
-    with h5py.File(path, "r") as root:
+    try:
+        root = h5py.File(path, "r")
+    except OSError as exc:
+        raise FormatError(f"could not read {path}: {exc}") from None
+    with root:
         return len(children_with_label(child_with_label(root, "CGNSBase_t", path), "Zone_t"))
 
 

@@ -234,8 +234,7 @@ def write_case(case, node_shape, metadata, patches, write_poly_mesh, block_set: 
         for folder in (case, case / "constant", case / "system"):
             publication.make_folder(folder)
             remove_stale_temporaries(folder)
-        with atomic_path(case / "constant" / "polyMesh") as temporary:
-            temporary.mkdir()
+        with atomic_path(case / "constant" / "polyMesh", folder=True) as temporary:
             write_poly_mesh(temporary, patches)
             (temporary / RECORD_NAME).write_text(record)
         for name, text in (("controlDict", CONTROL_DICT), ("fvSchemes", FV_SCHEMES), ("fvSolution", FV_SOLUTION)):

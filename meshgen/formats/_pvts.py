@@ -32,7 +32,7 @@ from meshgen.formats._vts import read_patches as read_piece_patches
 from meshgen.formats._vts import write as write_piece
 from meshgen.formats.streamed import NodeFile, slab_slices
 from meshgen.geometry.grid import cell_connectivity
-from meshgen.run.atomic import atomic_path
+from meshgen.run.atomic import atomic_path, check_pieces_folder
 from meshgen.run.publish import current_publication
 
 __all__ = ["PIECE_NODES", "check_target", "piece_slices", "read", "read_patches", "write", "write_streamed"]
@@ -43,13 +43,10 @@ PIECE_NODES = 1 << 22  # nodes per piece, at most about: 100 MB of coordinates
 def check_target(path) -> None:
     """FormatError when ``<name>/`` beside ``path`` exists and is not the pieces folder of an
     earlier .pvts (files ``<name>_N.vts`` only): writing would replace it."""
-    folder = Path(path).with_suffix("")
-    if not folder.exists():
-        return
-    if not folder.is_dir() or any(re.fullmatch(rf"{re.escape(folder.name)}_\d+\.vts", p.name) is None for p in folder.iterdir()):
-        raise FormatError(
-            f"{folder} exists and is not the pieces folder of {Path(path).name} (files {folder.name}_N.vts): pick another name"
-        )
+    name = re.escape(Path(path).stem)
+    check_pieces_folder(
+        path, lambda entry: re.fullmatch(rf"{name}_\d+\.vts", entry) is not None, f"files {Path(path).stem}_N.vts"
+    )
 
 
 def piece_slices(node_shape, piece_nodes: int = PIECE_NODES) -> list[slice]:
@@ -95,8 +92,7 @@ def _write_pieces(path, node_shape, pieces, cell_names, metadata, patches) -> No
     target = Path(publication.output if publication is not None else path)
     folder = target.with_suffix("")
     lines = []
-    with atomic_path(folder) as temporary:
-        temporary.mkdir()
+    with atomic_path(folder, folder=True) as temporary:
         for number, (block, X, cell_data) in enumerate(pieces):
             name = f"{folder.name}_{number}.vts"
             write_piece(temporary / name, X, cell_data, metadata, patches, block, node_shape)

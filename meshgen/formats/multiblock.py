@@ -14,12 +14,13 @@ import numpy as np
 
 from meshgen.errors import FormatError
 from meshgen.formats import check_output_path, format_for
-from meshgen.formats._cgns import read_zones, write_zones, zone_count
+from meshgen.formats._cgns import MultiZoneError, read_zones, write_zones, zone_count
 from meshgen.formats._gmsh import write_elements as write_msh_elements
 from meshgen.formats._openfoam import EXTRUDED_PATCH, check_extrusion_patch, write_case
 from meshgen.formats._polymesh import extrude_quads, write_poly_mesh
 from meshgen.formats._structured import boundary_elements, orientation
 from meshgen.formats._su2 import write_elements as write_su2_elements
+from meshgen.formats._vtm import check_target as check_vtm_target
 from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
@@ -32,6 +33,7 @@ from meshgen.run.atomic import atomic_write, check_output_file
 __all__ = [
     "MERGED_FORMATS",
     "SOLVER_FORMATS",
+    "MultiZoneError",
     "check_block_output",
     "merged_boundary",
     "patch_faces",
@@ -48,7 +50,9 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
     """The path to write, checked before any work (FormatError for a format that takes no block set)."""
 
     if format_name is None and Path(path).suffix.lower() == ".vtm":  # a .vts per block and the .vtm listing them
-        return check_output_file(path, "mesh.vtm")
+        path = check_output_file(path, "mesh.vtm")
+        check_vtm_target(path)  # its pieces folder must be its own: never a folder of the user's files
+        return path
     fmt = format_for(path, format_name)
     if fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS, *SOLVER_FORMATS):
         raise FormatError(

@@ -21,6 +21,7 @@ matching the two faces' corners and then checked node by node.
 from __future__ import annotations
 
 import itertools
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
 from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
 from meshgen.geometry.shapes.loader import is_shape_file
 from meshgen.methods.tfi import tfi
+from meshgen.run.limits import check_block_set_memory
 
 __all__ = [
     "BlockSet",
@@ -148,12 +150,7 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     if dims is None or len(dims) != dim:
         got = "none" if dims is None else len(dims)
         raise GeometryError(f"geometry '{base.name}' is {dim}D: --dims needs {dim} numbers ({module.dims_meaning}), got {got}")
-    try:
-        coords = module.block_coords(tuple(int(n) for n in dims), **base.values)
-    except MeshgenError:
-        raise
-    except Exception as exc:
-        raise GeometryError(f"geometry '{base.name}' ({source}): block_coords() raised {type(exc).__name__}: {exc}") from exc
+    coords = _block_coords(module, base, source, dims)
     geometries = []
     for block in names:
         patches = dict(module.block_patches.get(block, {}))
@@ -176,6 +173,12 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
         if block not in coords or len(coords[block]) != dim:
             raise GeometryError(f"geometry '{base.name}': block_coords() gives no {dim} axes for block '{block}'")
     block_coords = tuple(tuple(np.asarray(t, dtype=float) for t in coords[block]) for block in names)
+    if not all(t.ndim == 1 and len(t) >= 2 and np.isfinite(t).all() for axes in block_coords for t in axes):
+        raise GeometryError(
+            f"geometry '{base.name}'{_with_params(base)}: block_coords() gives an axis that is not finite numbers"
+        )
+    # Every block's size through the limits a single block's takes, before anything is allocated.
+    check_block_set_memory([tuple(len(t) - 1 for t in axes) for axes in block_coords], base.name)
     length = float(base.length_map(**base.values)) if base.length_map is not None else 1.0
     patches = {}
     for block, faces in module.block_patches.items():
@@ -205,6 +208,30 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     block_set = BlockSet(**{**block_set.__dict__, "interfaces": interfaces})
     check_interfaces(block_set)
     return block_set
+
+
+def _with_params(base) -> str:
+    """`` with a=1, b=2`` naming the geometry's parameters as given, or ``""`` when it has none."""
+    values = dict(base.values)
+    return " with " + ", ".join(f"{k}={v!r}" for k, v in values.items()) if values else ""
+
+
+def _block_coords(module, base, source, dims) -> dict:
+    """The plugin's ``block_coords(dims, **params)``; a failure, or a floating-point warning
+    (a division by zero, an overflow: parameters inside their range that break the geometry), is
+    one GeometryError naming the parameters."""
+    try:
+        with np.errstate(all="raise"), warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            return module.block_coords(tuple(int(n) for n in dims), **base.values)
+    except MeshgenError:
+        raise
+    except Exception as exc:
+        words = " ".join(str(exc).split())[:200]
+        raise GeometryError(
+            f"geometry '{base.name}' ({source}){_with_params(base)}: block_coords() raised {type(exc).__name__}: {words}"
+            + (" (the parameters break the geometry: try other values)" if base.values else "")
+        ) from exc
 
 
 def _block_map(boundary, block: str):

@@ -28,11 +28,18 @@ from pathlib import Path
 
 import torch
 
-from meshgen.neural.checkpoint_data import FORMAT, FORMAT_VERSION, CheckpointError, check_checkpoint, check_readable
+from meshgen.neural.checkpoint_data import (
+    FORMAT,
+    FORMAT_VERSION,
+    CheckpointError,
+    check_checkpoint,
+    check_readable,
+    check_resumable_state,
+)
 from meshgen.run.atomic import atomic_path
 from meshgen.run.publish import reason
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
+__all__ = ["FORMAT", "FORMAT_VERSION", "CheckpointError", "check_resumable_state", "load_checkpoint", "save_checkpoint"]
 
 
 def save_checkpoint(path: str | os.PathLike, checkpoint: dict) -> None:

@@ -27,6 +27,7 @@ __all__ = [
     "check_checkpoint",
     "check_network",
     "check_readable",
+    "check_resumable_state",
     "read_plain_checkpoint",
 ]
 
@@ -102,6 +103,67 @@ def check_checkpoint(checkpoint, path: Path) -> dict:
         ):
             raise CheckpointError(f"checkpoint {path}: its training state (stage, step) is damaged")
     return checkpoint
+
+
+# The entries a resumed run reads, besides the model: (key, the type it must have).
+RESUME_ENTRIES = (
+    ("optimizer", dict),
+    ("scheduler", dict),
+    ("rng", dict),
+    ("guard", dict),
+    ("history", dict),
+    ("elapsed_seconds", (int, float)),
+)
+NESTING = 8  # optimiser and scheduler states are dicts of lists of tensors: deeper is not one
+
+
+def _non_finite(value, depth: int = 0) -> bool:
+    """Whether ``value`` (plain data: tensors, arrays, numbers, dicts, lists) holds NaN or infinity
+    anywhere, or nests deeper than ``NESTING``."""
+    if depth > NESTING:
+        return True
+    if isinstance(value, dict):
+        return any(_non_finite(v, depth + 1) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_non_finite(v, depth + 1) for v in value)
+    if _is_weight(value):
+        array = as_array(value)
+        return array.dtype.kind in "fc" and not np.isfinite(array).all()
+    if isinstance(value, float):
+        return not np.isfinite(value)
+    return False
+
+
+def check_resumable_state(checkpoint: dict, path: Path) -> None:
+    """CheckpointError unless the training state of ``checkpoint`` (checked as a whole by
+    ``check_checkpoint`` already) is one a run can go on from: every entry a resumed run reads
+    (``RESUME_ENTRIES``, ``rng["sampler"]``, ``guard["lr_reductions"]``, the reweighting of a
+    one-shape or block run) present, and its optimiser, scheduler and reweighting states finite,
+    as the weights are. Checked before the run folder is touched; the optimiser state's shapes
+    against the network are checked where the network is made (``meshgen.neural.stages.check_resumable``)."""
+    missing = [key for key, kind in RESUME_ENTRIES if not isinstance(checkpoint.get(key), kind)]
+    if not missing:
+        if "sampler" not in checkpoint["rng"]:
+            missing.append("rng.sampler")
+        if not isinstance(checkpoint["guard"].get("lr_reductions"), int):
+            missing.append("guard.lr_reductions")
+        optimizer = checkpoint["optimizer"]
+        if optimizer and not (isinstance(optimizer.get("state"), dict) and isinstance(optimizer.get("param_groups"), list)):
+            missing.append("optimizer.state/param_groups")
+    if "family" not in checkpoint and not isinstance(checkpoint.get("reweighting"), dict):
+        missing.append("reweighting")
+    if missing:
+        raise CheckpointError(
+            f"checkpoint {path} lacks its training state's {', '.join(missing)} (or holds another kind of value): "
+            "the file is damaged, it cannot be resumed"
+        )
+    words = {"optimizer": "optimiser state", "scheduler": "scheduler state", "reweighting": "reweighting state"}
+    for key in ("optimizer", "scheduler", "reweighting", "elapsed_seconds"):
+        if _non_finite(checkpoint.get(key)):
+            raise CheckpointError(
+                f"checkpoint {path}: its {words.get(key, 'elapsed seconds')} holds non-finite numbers (NaN or infinity): the file is damaged, "
+                "it cannot be resumed"
+            )
 
 
 def _is_weight(value) -> bool:

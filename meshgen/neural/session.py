@@ -124,7 +124,7 @@ def prepare_run(
     if resume is not None and vary:
         raise ConfigError("--vary does not apply with --resume: the checkpoint sets the ranges")
     if resume is not None:
-        from meshgen.neural.checkpoint import CheckpointError, load_checkpoint  # imports torch
+        from meshgen.neural.checkpoint import CheckpointError, check_resumable_state, load_checkpoint  # imports torch
 
         for flag, value in (("--preset", preset), ("--config", config_file), ("--seed", seed)):
             if value is not None:
@@ -139,6 +139,7 @@ def prepare_run(
                 f"checkpoint {resume_path} is of a finished run: nothing to resume (start a new run with "
                 f"--config {resume_path.parent / 'config.yaml'})"
             )
+        check_resumable_state(checkpoint, resume_path)  # its optimiser state checked as its weights are, before any work
         config = from_dict(checkpoint["config"])
         for text in list(overrides) + ([f"adam.steps={steps}"] if steps is not None else []):
             key, value = parse_override(text)

@@ -27,11 +27,13 @@ from meshgen.neural.steps import Training
 
 __all__ = [
     "CONFIG_HEADER",
+    "OPTIMIZER_KEYS",
     "CheckpointWriter",
     "Job",
     "Stage",
     "TrainResult",
     "TrainingDiverged",
+    "check_optimizer_state",
     "check_resumable",
     "run_stages",
 ]
@@ -125,7 +127,8 @@ class CheckpointWriter:
 
 def check_resumable(stage_table, training: Training, resume: dict) -> None:
     """CheckpointError unless the optimiser and scheduler states of ``resume`` load into its stage's
-    own (a damaged or stitched checkpoint fails here, before the run folder is written)."""
+    own and fit its network (``check_optimizer_state``): a damaged or stitched checkpoint fails
+    here, before the run folder is written."""
     for stage in stage_table:
         if stage.name != resume["stage"] or not resume.get("optimizer"):
             continue
@@ -134,10 +137,47 @@ def check_resumable(stage_table, training: Training, resume: dict) -> None:
             optimizer.load_state_dict(resume["optimizer"])
             if scheduler is not None:
                 scheduler.load_state_dict(resume["scheduler"])
-        except (KeyError, TypeError, ValueError, RuntimeError, IndexError) as exc:
+        except (KeyError, TypeError, ValueError, RuntimeError, IndexError, AttributeError) as exc:
             raise checkpoints.CheckpointError(
                 f"the checkpoint's optimiser state does not fit its stage '{stage.name}' ({type(exc).__name__}): the file is damaged"
             ) from None
+        check_optimizer_state(optimizer, stage.name)
+
+
+# The entries of one parameter's state that each optimiser needs to take a step.
+OPTIMIZER_KEYS = {torch.optim.Adam: ("step", "exp_avg", "exp_avg_sq"), torch.optim.LBFGS: ("func_evals", "n_iter")}
+
+
+def check_optimizer_state(optimizer, stage: str) -> None:
+    """CheckpointError unless every parameter's loaded state has the entries its optimiser needs
+    (``OPTIMIZER_KEYS``) and every tensor in it the parameter's shape (Adam's moments), a scalar
+    (its step), or (L-BFGS, state on the first parameter) one flat vector of all of them."""
+    flat = sum(p.numel() for group in optimizer.param_groups for p in group["params"])
+    needed = OPTIMIZER_KEYS.get(type(optimizer), ())
+    for group in optimizer.param_groups:
+        for parameter in group["params"]:
+            state = optimizer.state.get(parameter)
+            if not state:
+                continue
+            missing = [key for key in needed if key not in state]
+            values = [v for value in state.values() for v in (value if isinstance(value, (list, tuple)) else [value])]
+            wrong = [
+                tuple(v.shape)
+                for v in values
+                if isinstance(v, torch.Tensor)
+                and v.dim() > 0
+                and tuple(v.shape) != tuple(parameter.shape)
+                and not (v.dim() == 1 and v.numel() == flat)
+            ]
+            if missing or wrong:
+                what = (
+                    f"lacks {', '.join(missing)}"
+                    if missing
+                    else f"holds a tensor of shape {wrong[0]} for a parameter of shape {tuple(parameter.shape)}"
+                )
+                raise checkpoints.CheckpointError(
+                    f"the checkpoint's optimiser state of stage '{stage}' {what}: the file is damaged, it cannot be resumed"
+                )
 
 
 def run_stages(

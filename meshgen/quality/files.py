@@ -14,7 +14,7 @@ import numpy as np
 from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
 from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
-from meshgen.formats.multiblock import read_zones, zone_count
+from meshgen.formats.multiblock import MultiZoneError, read_zones, zone_count
 from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import geometry_patches
@@ -211,8 +211,7 @@ def evaluate_file(
     if path.is_file() and path.stat().st_size == 0 and path.suffix.lower() != ".foam":
         raise MeshgenError(f"mesh file {path} is empty")
     if chunked is None and mesh is None and path.suffix.lower() == ".cgns":
-        node_shape, _ = read_header(path)
-        chunked = client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
+        chunked = _chunked_by_default(path, client)
     if chunked:
         return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
     if mesh is None:
@@ -257,6 +256,19 @@ def evaluate_file(
     report = build_report(metrics, degenerate, info, geometry)
     progress(1.0, phase="done")
     return _finish_file_report(path, report, source, notes, metadata, X is not None)
+
+
+def _chunked_by_default(path, client) -> bool:
+    """Whether a .cgns file is evaluated block by block when the caller did not say: with a
+    ``client``, or when the in-memory path would need more than half of the memory. A multi-zone
+    file (a block set) is read in memory: the block-by-block path reads one zone."""
+    try:
+        node_shape, _ = read_header(path)
+    except MultiZoneError:
+        if client is not None:
+            raise
+        return False
+    return client is not None or needs_chunking(int(np.prod(node_shape)), EVALUATE_BYTES_PER_NODE)
 
 
 def _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes=None) -> dict:

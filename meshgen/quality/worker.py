@@ -14,7 +14,13 @@ parent hands it:
   (the same functions on the same values: the report and the metric arrays are those of the
   parent's own path to the bit), copies the metrics into the shared memory, says so, then sends
   the report;
-- ``metrics()`` and ``report()`` wait for those.
+- ``metrics()`` and ``report()`` wait for those, never for ever: the wait ends, the child is
+  killed and the caller computes the report in its own process, as soon as the child is dead or
+  stopped (state ``T`` or ``t`` in ``/proc``: SIGSTOP, a debugger), or once ``worker_timeout``
+  seconds have passed since ``submit`` (a child that is alive but makes no progress: swapped out,
+  stuck). The timeout is ``WAIT_BASE_SECONDS`` (loading the kernels into a cold numba cache took
+  184 s on a loaded two-core machine) plus ``WAIT_SECONDS_PER_CELL`` per cell (about eight times
+  the measured 2.4 microseconds a cell of the report takes there).
 
 The child ignores Ctrl-C and the termination signals' handlers (the parent handles them and kills
 the child), never runs the parent's cleanup (``os._exit``), and ends when its pipe closes (the
@@ -34,6 +40,7 @@ import mmap
 import os
 import signal
 import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -45,10 +52,36 @@ from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import structured_metrics, use_compiled
 from meshgen.run.signals import TERMINATING_SIGNALS
 
-__all__ = ["QualityWorker", "load_compiled_kernels", "quality_worker", "worker_fits"]
+__all__ = [
+    "WAIT_BASE_SECONDS",
+    "WAIT_SECONDS_PER_CELL",
+    "QualityWorker",
+    "is_stopped",
+    "load_compiled_kernels",
+    "quality_worker",
+    "worker_fits",
+    "worker_timeout",
+]
 
 
-PARENT_CHECK_SECONDS = 0.5  # how often a waiting child checks that its parent lives
+PARENT_CHECK_SECONDS = 0.5  # how often a waiting child checks that its parent lives (and the parent the child)
+WAIT_BASE_SECONDS = 600.0  # the parent's longest wait for a child, whatever the mesh's size (module text)
+WAIT_SECONDS_PER_CELL = 2e-5  # and for each cell of the mesh
+
+
+def worker_timeout(cells: int) -> float:
+    """Seconds the parent waits, from ``submit``, for a worker's results on a mesh of ``cells`` cells."""
+    return WAIT_BASE_SECONDS + WAIT_SECONDS_PER_CELL * int(cells)
+
+
+def is_stopped(pid: int) -> bool:
+    """Whether process ``pid`` is stopped (SIGSTOP, a debugger's stop: ``T`` or ``t`` in
+    ``/proc/<pid>/stat``); False where that cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as handle:
+            return handle.read().rsplit(b")", 1)[1].split()[0] in (b"T", b"t")
+    except (OSError, IndexError):
+        return False
 
 
 def worker_fits(node_shape) -> bool:
@@ -96,6 +129,8 @@ class QualityWorker:
         self._process.start()
         child_end.close()
         self._failed = False
+        self._timeout = worker_timeout(cells)
+        self._deadline = float("inf")
 
     def submit(self, X: np.ndarray) -> bool:
         """Hand node array ``X`` to the child; False (and every later call fails) when its shape is
@@ -104,6 +139,7 @@ class QualityWorker:
             self._failed = True
             return False
         np.copyto(self._nodes, X)
+        self._deadline = time.monotonic() + self._timeout
         return self._send("go")
 
     def metrics(self) -> dict | None:
@@ -136,11 +172,16 @@ class QualityWorker:
         if self._failed:
             return None
         try:
+            while not self._connection.poll(PARENT_CHECK_SECONDS):
+                if not self._process.is_alive() or is_stopped(self._process.pid) or time.monotonic() > self._deadline:
+                    raise TimeoutError("the worker is gone, stopped or late")
             kind, value = self._connection.recv()
-        except (EOFError, OSError, ValueError):
+        except (EOFError, OSError, ValueError):  # TimeoutError is an OSError
             kind, value = "failed", None
         if kind != expected:
             self._failed = True
+            with contextlib.suppress(OSError, ValueError, AttributeError):
+                self._process.kill()  # a stopped or stuck child is not waited for again
             return None
         return True if value is None else value
 

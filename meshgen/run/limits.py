@@ -20,6 +20,7 @@ __all__ = [
     "CHUNKED_FACE_COPIES",
     "MAX_COORDINATE",
     "TRAIN_BYTES_PER_ACTIVATION",
+    "check_block_set_memory",
     "check_finite",
     "check_memory",
     "check_mesh_memory",
@@ -109,6 +110,18 @@ def check_mesh_memory(dims, chunked: bool) -> None:
             "meshgen mesh --chunked -o FILE.cgns (or .vts, .su2, .msh, .xyz, --format openfoam; methods tfi, neural) "
             "writes meshes larger than memory block by block",
         )
+
+
+def check_block_set_memory(block_dims, name: str) -> None:
+    """MeshgenError unless the block set ``name`` of blocks of ``block_dims`` cells [(n1, n2[, n3])]
+    fits in memory: a block set is meshed in memory (no chunked path), ``IN_MEMORY_BYTES_PER_NODE``
+    per node of all its blocks, the limit a single block's mesh takes (``check_mesh_memory``)."""
+    nodes = sum(node_count(dims) for dims in block_dims)
+    check_memory(
+        nodes * IN_MEMORY_BYTES_PER_NODE,
+        f"the multi-block geometry '{name}' at these --dims ({len(block_dims)} blocks, {nodes:.3g} nodes) in memory",
+        "pick fewer cells (block sets are meshed in memory)",
+    )
 
 
 def training_bytes(widths, dim: int, points: int, history: int) -> int:

@@ -1,5 +1,8 @@
 """Publishing outputs: every file or folder meshgen writes for the user is first written under a
-temporary name that carries the writer's pid, then takes its real name by a rename. Several
+temporary name that carries the writer's pid and a random token (``temporary_path``: created
+with ``O_CREAT | O_EXCL | O_NOFOLLOW``, or ``mkdir`` for a folder, so a link or file planted at a
+name meshgen would use is never followed nor written: the name cannot be guessed, and a taken
+name is never reused), then takes its real name by a rename. Several
 outputs that belong together (a mesh and its ``.quality.json`` sidecar; a case's polyMesh, its
 ``system`` files and its sidecar) form one *publication*: they take their names together, under
 one lock per output, or none of them does (design notes, "Concurrency, faults and reproducible
@@ -11,7 +14,9 @@ output").
   succeeded (a failure puts them back). An error or a signal in the block removes what was staged
   and any folder the publication made (``make_folder``), never anything another run made.
 - ``output_lock(output)``: ``fcntl.flock`` on ``.<name>.lock`` beside the output, so two runs that
-  write the same output publish one after the other, each whole.
+  write the same output publish one after the other, each whole. Its name is shared by every run
+  (it cannot be random): it is opened with ``O_NOFOLLOW`` and must be a regular file, so a link
+  or FIFO planted there is refused in one line, never followed.
 - ``remove_stale_temporaries``: temporaries of processes that are gone (killed by SIGKILL, a power
   cut) are removed by the next run that writes there; a previous file that such a process had set
   aside is put back if nothing took its name.
@@ -21,10 +26,13 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import errno
 import os
 import re
+import secrets
 import shutil
 import signal
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +49,7 @@ __all__ = [
     "is_alive",
     "make_folder",
     "make_fresh_folder",
+    "open_lock_file",
     "output_lock",
     "publishing",
     "reason",
@@ -49,26 +58,51 @@ __all__ = [
     "replace_into",
     "set_aside_path",
     "temporary_path",
+    "temporary_token",
 ]
 
-# Temporaries (".<stem>.tmp-<pid><suffix>") and files set aside (".<name>.old-<pid>").
-TEMPORARY_PATTERN = re.compile(r"^\.(?P<base>.+)\.(?P<kind>tmp|old)-(?P<pid>\d+)(?P<suffix>\.[^.]*)?$")
+# Temporaries (".<stem>.tmp-<pid>-<token><suffix>") and files set aside (".<name>.old-<pid>-<token>");
+# names without a token are 0.2's, still cleaned up.
+TEMPORARY_PATTERN = re.compile(r"^\.(?P<base>.+)\.(?P<kind>tmp|old)-(?P<pid>\d+)(?:-(?P<token>[0-9a-f]+))?(?P<suffix>\.[^.]*)?$")
 # Signals held back while files are renamed, so a publication is never left half renamed.
 HELD_SIGNALS = {signal.SIGINT, signal.SIGTERM} | ({signal.SIGHUP} if hasattr(signal, "SIGHUP") else set())
+# Flags of a new temporary file: created here or not at all, never through a link.
+NEW_FILE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+NAME_TRIES = 100  # fresh tokens tried before a folder is said to refuse new names
 
 _current: contextvars.ContextVar = contextvars.ContextVar("meshgen_publication", default=None)
 
 
-def temporary_path(target: str | os.PathLike) -> Path:
-    """``.<stem>.tmp-<pid><suffix>`` beside ``target``: the name a write goes to first."""
+def temporary_token() -> str:
+    """The random part of a temporary's name (64 bits from ``secrets``): not guessable from the pid."""
+    return secrets.token_hex(8)
+
+
+def temporary_path(target: str | os.PathLike, folder: bool = False) -> Path:
+    """Create and return a new temporary beside ``target``, ``.<stem>.tmp-<pid>-<token><suffix>``:
+    an empty file made with ``O_CREAT | O_EXCL | O_NOFOLLOW`` (mode as the umask gives), or with
+    ``folder`` an empty folder (``os.mkdir``, which never follows a link). A name that is taken
+    (a planted link, a file) is never opened: another token is drawn. The one function that
+    names and makes meshgen's temporaries; the caller writes there, then renames it."""
     target = Path(target)
-    return target.with_name(f".{target.stem}.tmp-{os.getpid()}{target.suffix}")
+    for _ in range(NAME_TRIES):
+        path = target.with_name(f".{target.stem}.tmp-{os.getpid()}-{temporary_token()}{target.suffix}")
+        try:
+            if folder:
+                os.mkdir(path)
+            else:
+                os.close(os.open(path, NEW_FILE_FLAGS, 0o666))
+            return path
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f"no free temporary name beside {target} after {NAME_TRIES} tries")
 
 
 def set_aside_path(target: str | os.PathLike) -> Path:
-    """``.<name>.old-<pid>`` beside ``target``: where the previous file waits while a new one is published."""
+    """``.<name>.old-<pid>-<token>`` beside ``target``: where the previous file waits while a new
+    one is published (a fresh name: ``os.link`` and ``os.replace`` to it never follow a link)."""
     target = Path(target)
-    return target.with_name(f".{target.name}.old-{os.getpid()}")
+    return target.with_name(f".{target.name}.old-{os.getpid()}-{temporary_token()}")
 
 
 def is_alive(pid: int) -> bool:
@@ -119,7 +153,7 @@ def remove_stale_temporaries(folder: str | os.PathLike, target: str | os.PathLik
         path = folder / name
         with contextlib.suppress(OSError):
             original = folder / match["base"]
-            if match["kind"] == "old" and match["suffix"] is None and not os.path.lexists(original):
+            if match["kind"] == "old" and match["suffix"] is None and not path.is_symlink() and not os.path.lexists(original):
                 os.replace(path, original)
                 continue
             remove_path(path)
@@ -261,6 +295,23 @@ def make_fresh_folder(base: str | os.PathLike) -> Path:
     raise MeshgenError(f"no free folder name {base}-N under {base.parent}")
 
 
+def open_lock_file(lock: Path) -> int:
+    """A descriptor of the lock file ``lock`` (created if missing), opened with ``O_NOFOLLOW``: a
+    link at its name (or anything but a regular file) is a MeshgenError, never followed."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    refused = f"{lock} (meshgen's lock file) is not a regular file: remove it (meshgen never follows a link there)"
+    try:
+        descriptor = os.open(lock, flags, 0o644)
+    except OSError as exc:
+        if exc.errno in (errno.ELOOP, errno.ENXIO, errno.EISDIR):
+            raise MeshgenError(refused) from None
+        raise
+    if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+        os.close(descriptor)
+        raise MeshgenError(refused)
+    return descriptor
+
+
 @contextlib.contextmanager
 def output_lock(output: str | os.PathLike, wait: bool = True):
     """Hold ``fcntl.flock`` on ``.<name>.lock`` beside ``output``: waiting for another run that
@@ -272,7 +323,7 @@ def output_lock(output: str | os.PathLike, wait: bool = True):
         return
     lock = output.with_name(f".{output.name}.lock")
     while True:
-        descriptor = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        descriptor = open_lock_file(lock)
         try:
             try:
                 fcntl.flock(descriptor, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
