@@ -19,10 +19,12 @@ from meshgen.run.resources import IN_MEMORY_BYTES_PER_NODE, available_memory
 __all__ = [
     "CHUNKED_FACE_COPIES",
     "MAX_COORDINATE",
+    "SHAPE_BYTES_PER_FILE_BYTE",
     "TRAIN_BYTES_PER_ACTIVATION",
     "check_finite",
     "check_memory",
     "check_mesh_memory",
+    "check_shape_memory",
     "check_training_memory",
     "chunked_mesh_bytes",
     "gigabytes",
@@ -40,6 +42,10 @@ CHUNKED_FACE_COPIES = 4
 # Training: bytes per (point, hidden unit) held for one step: float32 activations, their first and
 # second derivatives (the Winslow residual), and the gradients of all of them; measured order.
 TRAIN_BYTES_PER_ACTIVATION = 4 * 24
+# A triangulated shape file's memory while it is read, per byte of the file: a binary STL's 50
+# bytes a triangle become 72 of corner points, then the weld's scaled copies, integer cells and
+# sort (about 10 copies); an ASCII STL's 250 bytes a triangle need less. Measured order, rounded up.
+SHAPE_BYTES_PER_FILE_BYTE = 16
 
 
 def check_finite(value, what: str) -> float:
@@ -109,6 +115,12 @@ def check_mesh_memory(dims, chunked: bool) -> None:
             "meshgen mesh --chunked -o FILE.cgns (or .vts, .su2, .msh, .xyz, --format openfoam; methods tfi, neural) "
             "writes meshes larger than memory block by block",
         )
+
+
+def check_shape_memory(file_bytes: int, what: str) -> None:
+    """MeshgenError unless a triangulated shape file of ``file_bytes`` bytes can be read and welded
+    in the memory available now (``SHAPE_BYTES_PER_FILE_BYTE``)."""
+    check_memory(int(file_bytes) * SHAPE_BYTES_PER_FILE_BYTE, f"{what} ({gigabytes(file_bytes)})", "a smaller surface file")
 
 
 def training_bytes(widths, dim: int, points: int, history: int) -> int:
