@@ -20,11 +20,14 @@ __all__ = [
     "CHUNKED_FACE_COPIES",
     "MAX_COORDINATE",
     "SHAPE_BYTES_PER_FILE_BYTE",
+    "CAD_BYTES_PER_FILE_BYTE",
+    "CAD_MIN_BYTES",
     "TRAIN_BYTES_PER_ACTIVATION",
     "check_finite",
     "check_memory",
     "check_mesh_memory",
     "check_shape_memory",
+    "cad_read_bytes",
     "check_training_memory",
     "chunked_mesh_bytes",
     "gigabytes",
@@ -46,6 +49,11 @@ TRAIN_BYTES_PER_ACTIVATION = 4 * 24
 # bytes a triangle become 72 of corner points, then the weld's scaled copies, integer cells and
 # sort (about 10 copies); an ASCII STL's 250 bytes a triangle need less. Measured order, rounded up.
 SHAPE_BYTES_PER_FILE_BYTE = 16
+# The memory the CAD reader (gmsh, OpenCASCADE) may take to read a file: this many bytes per byte
+# of the file, at least CAD_MIN_BYTES (a 45 kB STEP loft takes about 60 MB). A malformed STEP can
+# make OCC allocate without end; the bound makes that a failed read in a second.
+CAD_BYTES_PER_FILE_BYTE = 256
+CAD_MIN_BYTES = 2**30
 
 
 def check_finite(value, what: str) -> float:
@@ -121,6 +129,15 @@ def check_shape_memory(file_bytes: int, what: str) -> None:
     """MeshgenError unless a triangulated shape file of ``file_bytes`` bytes can be read and welded
     in the memory available now (``SHAPE_BYTES_PER_FILE_BYTE``)."""
     check_memory(int(file_bytes) * SHAPE_BYTES_PER_FILE_BYTE, f"{what} ({gigabytes(file_bytes)})", "a smaller surface file")
+
+
+def cad_read_bytes(file_bytes: int) -> int:
+    """The memory the CAD reader may allocate to read a CAD file of ``file_bytes`` bytes
+    (``CAD_BYTES_PER_FILE_BYTE``, at least ``CAD_MIN_BYTES``); MeshgenError when even that
+    is more than the memory available now."""
+    needed = max(CAD_MIN_BYTES, int(file_bytes) * CAD_BYTES_PER_FILE_BYTE)
+    check_memory(needed, f"reading a CAD file of {gigabytes(file_bytes)}", "a smaller CAD file")
+    return needed
 
 
 def training_bytes(widths, dim: int, points: int, history: int) -> int:

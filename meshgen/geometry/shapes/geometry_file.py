@@ -31,7 +31,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, shape_geometry
-from meshgen.geometry.shapes.cad import cad_block
+from meshgen.geometry.shapes.cad_process import cad_block
 from meshgen.geometry.shapes.faces import FACE_NAMES
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.run.inputs import InputError, load_yaml_file, named_input_file

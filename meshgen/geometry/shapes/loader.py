@@ -24,7 +24,7 @@ from meshgen.geometry.shapes.assemble import (
     content_hash,
     shape_geometry,
 )
-from meshgen.geometry.shapes.cad import cad_block
+from meshgen.geometry.shapes.cad_process import cad_block
 from meshgen.geometry.shapes.geometry_file import load_geometry_file
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.run.inputs import InputError, check_input_file
