@@ -7,7 +7,7 @@ and serves three requests over a pipe: read a file into a block (``cad.read_cad_
 evaluate one of its edge or face maps at an array of points. Only plain values cross the pipe
 (names, face assignment, corner points, volume, box; (N,) or (N, 2) arrays in, (N, 3) arrays
 out), so the parent's ``BoundaryPieces`` evaluates the true CAD surfaces as before, one round trip
-per call (a call maps a whole array of boundary points).
+per call of the boundary map (a call maps a whole array of boundary points).
 
 The child ignores Ctrl-C and keeps the default action of SIGTERM (the parent handles both and
 kills it), dies with the parent (``PR_SET_PDEATHSIG``; and its pipe closes), cannot use more
@@ -63,8 +63,20 @@ def cad_block(path, given_faces: dict | None = None, content_hash: str = "", giv
     names, assignment, corners, reflect, volume, face_tags, box = found
     edges = {edge.name: _remote_map(path, load, "edge", edge.name) for edge in cube.edges()}
     faces = {name: _remote_map(path, load, "face", name) for name in assignment}
-    pieces = BoundaryPieces(faces, edges, corners, reflect_eta=reflect, content_hash=content_hash, what=str(path))
+    pieces = _RemotePieces(faces, edges, corners, reflect_eta=reflect, content_hash=content_hash, what=str(path))
+    pieces.load = load
     return ContainedCadBlock(names, assignment, pieces, volume, face_tags, box)
+
+
+class _RemotePieces(BoundaryPieces):
+    """The CAD block's boundary map: a call maps all its points in the CAD process in one round
+    trip (that process's own ``BoundaryPieces``, ``reflect_eta`` included); ``faces`` and
+    ``edges`` map one piece each there."""
+
+    load = None
+
+    def __call__(self, points, **_values):
+        return _request(Path(self.what), ("pieces", self.load, None, np.ascontiguousarray(points, dtype=float)))
 
 
 def _remote_map(path: Path, load, kind: str, name: str):
@@ -209,6 +221,8 @@ def _serve(connection, parent_end) -> None:
                         tuple(int(tag) for tag in block.face_tags),
                         tuple(np.asarray(corner, dtype=float) for corner in block.extent()),
                     )
+                elif kind == "pieces":
+                    value = np.asarray(block.pieces(points), dtype=float)
                 else:
                     maps = block.pieces.edges if kind == "edge" else block.pieces.faces
                     value = np.asarray(maps[name](points), dtype=float)
