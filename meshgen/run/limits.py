@@ -20,6 +20,7 @@ __all__ = [
     "CHUNKED_FACE_COPIES",
     "MAX_COORDINATE",
     "SHAPE_BYTES_PER_FILE_BYTE",
+    "READ_BYTES_PER_NODE",
     "CAD_BYTES_PER_FILE_BYTE",
     "CAD_MIN_BYTES",
     "TRAIN_BYTES_PER_ACTIVATION",
@@ -45,6 +46,9 @@ CHUNKED_FACE_COPIES = 4
 # Training: bytes per (point, hidden unit) held for one step: float32 activations, their first and
 # second derivatives (the Winslow residual), and the gradients of all of them; measured order.
 TRAIN_BYTES_PER_ACTIVATION = 4 * 24
+# Reading a structured mesh file whole: the points (float64, padded to 3), the cells' connectivity
+# (8 int64 a hexahedron), a copy of each while it is reordered: about this many bytes a node.
+READ_BYTES_PER_NODE = 200
 # A triangulated shape file's memory while it is read, per byte of the file: a binary STL's 50
 # bytes a triangle become 72 of corner points, then the weld's scaled copies, integer cells and
 # sort (about 10 copies); an ASCII STL's 250 bytes a triangle need less. Measured order, rounded up.
