@@ -22,6 +22,7 @@ from pathlib import Path
 from meshgen.errors import MeshgenError
 
 __all__ = [
+    "MAX_DEFLATE_RATIO",
     "MAX_TEXT_BYTES",
     "MAX_YAML_BYTES",
     "MAX_YAML_DEPTH",
@@ -38,6 +39,7 @@ __all__ = [
 MAX_TEXT_BYTES = 256 * 2**20  # a sidecar, a history, an OpenFOAM list read whole
 MAX_YAML_BYTES = 2**20  # a configuration file: a few kB in practice
 MAX_YAML_DEPTH = 32  # nested mappings and lists
+MAX_DEFLATE_RATIO = 1032  # deflate (zlib, gzip) never inflates a byte to more than this many
 
 
 class InputError(MeshgenError):
