@@ -2,7 +2,7 @@
 a 455-byte file whose edge refers to itself) or make it allocate without end, and neither may take
 meshgen with it.
 
-``cad_block`` forks (once per meshgen process, on the first CAD file) a child that imports gmsh
+``cad_block`` forks (``os.fork``, once per meshgen process, on the first CAD file) a child that imports gmsh
 and serves three requests over a pipe: read a file into a block (``cad.read_cad_block``), and
 evaluate one of its edge or face maps at an array of points. Only plain values cross the pipe
 (names, face assignment, corner points, volume, box; (N,) or (N, 2) arrays in, (N, 3) arrays
@@ -24,6 +24,7 @@ import atexit
 import os
 import signal
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,8 @@ def cad_block(path, given_faces: dict | None = None, content_hash: str = "", giv
     """Read a CAD file and assign its six faces to the cube's (``cad.read_cad_block``), in the CAD
     process; GeometryError for anything wrong with the file, its crash included."""
     path = Path(path)
-    load = (str(path), given_faces, content_hash, None if given_corners is None else np.asarray(given_corners, dtype=float))
+    corners = None if given_corners is None else np.asarray(given_corners, dtype=float)
+    load = (os.getcwd(), str(path), given_faces, content_hash, corners)  # the child reads in this folder
     found = _request(path, ("block", load, None, None))
     names, assignment, corners, reflect, volume, face_tags, box = found
     edges = {edge.name: _remote_map(path, load, "edge", edge.name) for edge in cube.edges()}
@@ -88,35 +90,70 @@ def _remote_map(path: Path, load, kind: str, name: str):
 
 # --- the parent's end --------------------------------------------------------------------------
 
-_SERVER: dict = {}  # pid -> (process, connection): a forked meshgen process starts its own
+_SERVER: dict = {}  # pid -> _Child: a forked meshgen process starts its own
 
 
-def _server():
-    found = _SERVER.get(os.getpid())
-    if found is not None and found[0].is_alive():
-        return found
+class _Child:
+    """A forked process (``os.fork``: a daemonic multiprocessing worker, such as the quality
+    worker, may not start multiprocessing children) and this process's end of its pipe."""
+
+    def __init__(self):
+        from multiprocessing import Pipe
+
+        self.connection, child_end = Pipe()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self.pid = os.fork()
+        if self.pid == 0:  # the child: never returns
+            try:
+                _serve(child_end, self.connection)
+            finally:
+                os._exit(1)
+        child_end.close()
+        self.status = None
+
+    def alive(self) -> bool:
+        if self.status is None:
+            pid, status = os.waitpid(self.pid, os.WNOHANG)
+            if pid:
+                self.status = status
+        return self.status is None
+
+    def end(self, wait: float = 0.0) -> None:
+        """Wait up to ``wait`` seconds for the child to end by itself, then kill it; reap it."""
+        deadline = time.monotonic() + wait
+        while self.alive() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if self.alive():
+            os.kill(self.pid, signal.SIGKILL)
+            self.status = os.waitpid(self.pid, 0)[1]
+        self.connection.close()
+
+    def how_it_ended(self) -> str:
+        if self.status is not None and os.WIFSIGNALED(self.status):
+            number = os.WTERMSIG(self.status)
+            try:
+                return f"signal {number}, {signal.Signals(number).name}"
+            except ValueError:
+                return f"signal {number}"
+        return f"exit status {os.WEXITSTATUS(self.status) if self.status is not None else 'unknown'}"
+
+
+def _server() -> _Child:
+    child = _SERVER.get(os.getpid())
+    if child is not None and child.alive():
+        return child
+    close_cad_process()
     _SERVER.clear()  # one inherited from the parent is not ours to use
-    import multiprocessing
-
-    context = multiprocessing.get_context("fork")
-    connection, child_end = context.Pipe()
-    process = context.Process(target=_serve, args=(child_end, connection), name="meshgen-cad", daemon=True)
-    process.start()
-    child_end.close()
-    _SERVER[os.getpid()] = (process, connection)
-    return process, connection
+    child = _SERVER[os.getpid()] = _Child()
+    return child
 
 
 def close_cad_process() -> None:
     """End this process's CAD process, if it started one."""
-    found = _SERVER.pop(os.getpid(), None)
-    if found is None:
-        return
-    process, connection = found
-    if process.is_alive():
-        process.kill()
-    process.join()
-    connection.close()
+    child = _SERVER.pop(os.getpid(), None)
+    if child is not None:
+        child.end()
 
 
 atexit.register(close_cad_process)
@@ -125,27 +162,20 @@ atexit.register(close_cad_process)
 def _request(path: Path, message):
     """The CAD process's answer to ``message``; GeometryError when it reports one or dies. Any
     interruption (Ctrl-C, SIGTERM) while it works ends it before passing on."""
-    process, connection = _server()
+    child = _server()
+    connection = child.connection
     try:
         connection.send(message)
         while not connection.poll(PARENT_CHECK_SECONDS):
-            if not process.is_alive():
+            if not child.alive():
                 break
         kind, value = connection.recv()
     except (EOFError, OSError):
-        process.join(5)
-        code = process.exitcode
-        close_cad_process()
-        if code is not None and code < 0:
-            how = (
-                f"signal {-code}, {signal.Signals(-code).name}"
-                if -code in signal.Signals._value2member_map_
-                else f"signal {-code}"
-            )
-        else:
-            how = f"exit status {code}"
+        _SERVER.pop(os.getpid(), None)
+        child.end(wait=5.0)
         raise GeometryError(
-            f"{path}: the CAD reader (gmsh, OpenCASCADE) crashed on it ({how}): a malformed or unsupported CAD file"
+            f"{path}: the CAD reader (gmsh, OpenCASCADE) crashed on it ({child.how_it_ended()}): "
+            "a malformed or unsupported CAD file"
         ) from None
     except BaseException:
         close_cad_process()  # interrupted mid-request: the child's answer would be out of step
@@ -204,7 +234,8 @@ def _serve(connection, parent_end) -> None:
             try:
                 block = blocks.get(_key(load))
                 if block is None:
-                    path, faces, content_hash, corners = load
+                    folder, path, faces, content_hash, corners = load
+                    os.chdir(folder)  # the parent's working folder now, for a relative path
                     _limit_memory(cad_read_bytes(os.stat(path).st_size))  # OCC may allocate without end
                     try:
                         block = blocks[_key(load)] = read_cad_block(path, faces, content_hash, corners)
@@ -231,7 +262,7 @@ def _serve(connection, parent_end) -> None:
                 answer = ("error", str(error))
             except Exception as error:  # noqa: BLE001 - gmsh raises bare Exceptions; one line for the parent
                 text = " ".join(str(error).split()) or type(error).__name__
-                answer = ("error", f"{load[0]}: the CAD reader failed: {text}")
+                answer = ("error", f"{load[1]}: the CAD reader failed: {text}")
             connection.send(answer)
     except (EOFError, OSError, KeyboardInterrupt):  # the parent is gone, or closed the pipe
         status = 1
@@ -241,5 +272,10 @@ def _serve(connection, parent_end) -> None:
 
 
 def _key(load) -> tuple:
-    path, faces, content_hash, corners = load
-    return (path, content_hash, repr(sorted((faces or {}).items())), None if corners is None else corners.tobytes())
+    folder, path, faces, content_hash, corners = load
+    return (
+        os.path.join(folder, path),
+        content_hash,
+        repr(sorted((faces or {}).items())),
+        None if corners is None else corners.tobytes(),
+    )
