@@ -2,9 +2,9 @@
 a 455-byte file whose edge refers to itself) or make it allocate without end, and neither may take
 meshgen with it.
 
-``cad_block`` forks (``os.fork``, once per meshgen process, on the first CAD file) a child that imports gmsh
-and serves three requests over a pipe: read a file into a block (``cad.read_cad_block``), and
-evaluate one of its edge or face maps at an array of points. Only plain values cross the pipe
+``cad_block`` forks (``os.fork``, once per meshgen process, on the first CAD file) a child that
+imports gmsh and serves requests over a pipe: read a file into a block (``cad.read_cad_block``),
+and evaluate its boundary map (or one edge or face map) at an array of points. Only plain values cross the pipe
 (names, face assignment, corner points, volume, box; (N,) or (N, 2) arrays in, (N, 3) arrays
 out), so the parent's ``BoundaryPieces`` evaluates the true CAD surfaces as before, one round trip
 per call of the boundary map (a call maps a whole array of boundary points).
@@ -12,8 +12,8 @@ per call of the boundary map (a call maps a whole array of boundary points).
 The child ignores Ctrl-C and keeps the default action of SIGTERM (the parent handles both and
 kills it), dies with the parent (``PR_SET_PDEATHSIG``; and its pipe closes), cannot use more
 address space than it had plus, while it reads a file, ``limits.cad_read_bytes`` (``RLIMIT_AS``:
-an endless allocation fails in the child within a second instead of filling the machine), and has ``faulthandler`` off (a
-crash prints nothing). When it dies, the request that was in flight is one ``GeometryError``
+an endless allocation fails in the child within a second instead of filling the machine), and
+has ``faulthandler`` off (a crash prints nothing). When it dies, the request that was in flight is one ``GeometryError``
 naming the file and the signal; the next request starts a fresh child, which reads a file it
 does not know again (each request carries the file's reading arguments).
 """
