@@ -24,6 +24,7 @@ import atexit
 import os
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -139,10 +140,15 @@ class _Child:
         return f"exit status {os.WEXITSTATUS(self.status) if self.status is not None else 'unknown'}"
 
 
-def _server() -> _Child:
+def _server(path: Path) -> _Child:
     child = _SERVER.get(os.getpid())
     if child is not None and child.alive():
         return child
+    if "numba" in sys.modules and threading.current_thread() is not threading.main_thread():
+        # Forking from a thread of a process whose numba (TBB) threads run is unsafe: the forked
+        # quality worker evaluating the deviation lands here, fails, and its parent computes the
+        # report itself with its own CAD process.
+        raise GeometryError(f"{path}: the CAD process is not started from a thread of a process running numba")
     close_cad_process()
     _SERVER.clear()  # one inherited from the parent is not ours to use
     child = _SERVER[os.getpid()] = _Child()
@@ -162,7 +168,7 @@ atexit.register(close_cad_process)
 def _request(path: Path, message):
     """The CAD process's answer to ``message``; GeometryError when it reports one or dies. Any
     interruption (Ctrl-C, SIGTERM) while it works ends it before passing on."""
-    child = _server()
+    child = _server(path)
     connection = child.connection
     try:
         connection.send(message)
