@@ -128,7 +128,7 @@ def test_a_file_that_is_not_what_its_extension_says_or_is_empty(run_cli, tmp_pat
 def test_a_missing_or_unreadable_file(run_cli, tmp_path):
     refused(run_cli, tmp_path, "nowhere.stl", "does not exist")
     (tmp_path / "folder.stl").mkdir()
-    refused(run_cli, tmp_path, "folder.stl", "is not a file")
+    refused(run_cli, tmp_path, "folder.stl", "is a folder: meshgen reads regular files only")
 
 
 def test_a_missing_file_named_in_the_yaml(run_cli, tmp_path):

@@ -78,6 +78,7 @@ from meshgen.formats.metadata import METADATA_KEY
 from meshgen.geometry import cube
 from meshgen.geometry.grid import cell_connectivity, flat_points
 from meshgen.geometry.patches import Patch, flow_role
+from meshgen.run.inputs import MAX_DEFLATE_RATIO
 
 __all__ = [
     "BASE_NAME",
@@ -407,8 +408,8 @@ def _single_zone(base, path) -> None:
 
 def _checked_node_shape(zone, path) -> tuple[int, ...]:
     """The zone's node shape, verified against what the file holds before anything is allocated:
-    2 or 3 counts of at least 2, coordinate arrays of that shape, and (uncompressed arrays) the
-    bytes stored for them. A header is data: it may claim more nodes than the file carries."""
+    2 or 3 counts of at least 2, coordinate arrays of that shape, and the bytes stored for them
+    (``_stored_too_little``, compressed arrays included). A header is data: it may claim more nodes than the file carries."""
     sizes = np.asarray(node_data(zone))
     if sizes.ndim != 2 or sizes.shape[0] < 1 or sizes.shape[1] not in (2, 3) or sizes.dtype.kind not in "iu":
         raise FormatError(f"{path}: zone '{node_name(zone)}' has a malformed size header (shape {sizes.shape})")
@@ -421,12 +422,33 @@ def _checked_node_shape(zone, path) -> tuple[int, ...]:
                 f"{path}: zone '{node_name(zone)}' claims {node_shape} nodes but a coordinate array holds {array.shape[::-1]}"
             )
         claimed = int(np.prod(node_shape, dtype=np.int64)) * array.dtype.itemsize
-        if array.id.get_create_plist().get_nfilters() == 0 and array.id.get_storage_size() < claimed:
+        problem = _stored_too_little(array, claimed)
+        if problem:
             raise FormatError(
                 f"{path}: zone '{node_name(zone)}' claims {node_shape} nodes ({claimed / 1e9:.3g} GB of coordinates) "
-                f"but the file stores {array.id.get_storage_size() / 1e9:.3g} GB of them: truncated or not a mesh"
+                f"but {problem}: truncated or not a mesh"
             )
     return node_shape
+
+
+def _stored_too_little(array, claimed: int) -> str | None:
+    """Why the HDF5 dataset ``array`` cannot hold the ``claimed`` bytes it declares, or None: an
+    uncompressed one stores fewer bytes; a compressed one stores fewer than ``claimed /
+    MAX_DEFLATE_RATIO`` (more than deflate can inflate) or leaves chunks unwritten (HDF5 reads
+    them as fill values: a header of 1001^3 nodes over no data at all)."""
+    stored = array.id.get_storage_size()
+    if array.id.get_create_plist().get_nfilters() == 0:
+        if stored < claimed:
+            return f"the file stores {stored / 1e9:.3g} GB of them"
+        return None
+    if stored * MAX_DEFLATE_RATIO < claimed:
+        return f"the file stores only {stored} compressed bytes of them (deflate inflates a byte to at most {MAX_DEFLATE_RATIO})"
+    if array.chunks:
+        expected = int(np.prod([-(-n // c) for n, c in zip(array.shape, array.chunks)], dtype=np.int64))
+        written = array.id.get_num_chunks()
+        if written < expected:
+            return f"the file stores {written} of their {expected} compressed chunks"
+    return None
 
 
 def _coordinate_arrays(zone, dim: int, path) -> list:

@@ -34,13 +34,12 @@ from __future__ import annotations
 import base64
 import json
 import xml.etree.ElementTree as ET
-import zlib
 from concurrent.futures import ThreadPoolExecutor
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from meshgen.errors import FormatError
+from meshgen.errors import FormatError, MeshgenError
 from meshgen.formats._vtu import (
     BLOCK_BYTES,
     VTK_TYPES,
@@ -53,6 +52,8 @@ from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import as_records, from_records
+from meshgen.run.inputs import InputError, inflate
+from meshgen.run.limits import READ_BYTES_PER_NODE, check_memory, node_count
 
 __all__ = [
     "FILE_TAIL",
@@ -215,40 +216,77 @@ def _parse(path):
     return root, appended
 
 
-def _decode(element, root, appended=None) -> np.ndarray:
+def _decode(element, root, appended=None, count: int | None = None, what: str = "a DataArray") -> np.ndarray:
     """The values of a DataArray: ascii, inline binary, or raw appended, with or without zlib
-    compression."""
+    compression. ``count``: the number of values the file's extent implies; the sizes the array
+    declares are compared with it before anything is inflated, and each zlib stream is inflated
+    to at most its declared size (``inputs.inflate``): a stream of a few MB that would inflate to
+    gigabytes is refused, not inflated. FormatError for an array that does not hold its values."""
     dtype = np.dtype(NUMPY_TYPES[element.get("type")])
     header_type = np.dtype(NUMPY_TYPES[root.get("header_type", "UInt32")])
     compressed = root.get("compressor") == "vtkZLibDataCompressor"
-    if element.get("format") == "appended":
-        raw = appended[int(element.get("offset")) :]
-        if not compressed:
-            size = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
-            return np.frombuffer(raw[header_type.itemsize : header_type.itemsize + size], dtype=dtype)
-        blocks = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
-        header = np.frombuffer(raw[: (3 + blocks) * header_type.itemsize], dtype=header_type)
-        start = (3 + blocks) * header_type.itemsize
-        bounds = start + np.concatenate([[0], np.cumsum(header[3:].astype(np.int64))])
-        return np.frombuffer(b"".join(zlib.decompress(raw[bounds[n] : bounds[n + 1]]) for n in range(blocks)), dtype=dtype)
-    text = (element.text or "").strip()
+    expected = None if count is None else int(count) * dtype.itemsize
     if element.get("format") == "ascii":
-        return np.array(text.split(), dtype=dtype)
+        values = np.array((element.text or "").split(), dtype=dtype)
+        return _counted(values, count, what)
+    if element.get("format") == "appended":
+        if appended is None:
+            raise FormatError(f"{what} is appended but the file has no appended data")
+        raw = appended[int(element.get("offset")) :]
+    else:
+        text = (element.text or "").strip()
+        raw = None
     if not compressed:
-        raw = base64.b64decode(text)
-        size = int(np.frombuffer(raw[: header_type.itemsize], dtype=header_type)[0])
-        return np.frombuffer(raw[header_type.itemsize : header_type.itemsize + size], dtype=dtype)
-    # The header and the streams are base64-encoded separately (as VTK writes them).
-    first = base64.b64decode(text[: 4 * -(-header_type.itemsize // 3)])
-    blocks = int(np.frombuffer(first[: header_type.itemsize], dtype=header_type)[0])
-    header_bytes = (3 + blocks) * header_type.itemsize
-    header_chars = 4 * -(-header_bytes // 3)
-    header = np.frombuffer(base64.b64decode(text[:header_chars])[:header_bytes], dtype=header_type)
-    sizes = header[3:].astype(np.int64)
-    data = base64.b64decode(text[header_chars:])
+        if raw is None:
+            raw = base64.b64decode(text)
+        size = int(np.frombuffer(bytes(raw[: header_type.itemsize]), dtype=header_type)[0])
+        _check_size(size, expected, what)
+        body = raw[header_type.itemsize : header_type.itemsize + size]
+        if len(body) < size:
+            raise FormatError(f"{what} declares {size} bytes but the file holds {len(body)}: truncated")
+        return _counted(np.frombuffer(body, dtype=dtype), count, what)
+    if raw is not None:  # appended: the header, then the streams
+        blocks = int(np.frombuffer(bytes(raw[: header_type.itemsize]), dtype=header_type)[0])
+        header_bytes = (3 + blocks) * header_type.itemsize
+        if header_bytes > len(raw):
+            raise FormatError(f"{what} declares {blocks} compressed blocks but the file ends before their sizes")
+        header = np.frombuffer(bytes(raw[:header_bytes]), dtype=header_type).astype(np.int64)
+        stream = raw[header_bytes:]
+    else:  # inline: the header and the streams are base64-encoded separately (as VTK writes them)
+        first = base64.b64decode(text[: 4 * -(-header_type.itemsize // 3)])
+        blocks = int(np.frombuffer(first[: header_type.itemsize], dtype=header_type)[0])
+        header_bytes = (3 + blocks) * header_type.itemsize
+        header_chars = 4 * -(-header_bytes // 3)
+        if header_chars > len(text):
+            raise FormatError(f"{what} declares {blocks} compressed blocks but the file ends before their sizes")
+        header = np.frombuffer(base64.b64decode(text[:header_chars])[:header_bytes], dtype=header_type).astype(np.int64)
+        stream = base64.b64decode(text[header_chars:])
+    block_size, last_size, sizes = int(header[1]), int(header[2]), header[3:]
+    inflated = [block_size] * blocks
+    if blocks and last_size:
+        inflated[-1] = last_size
+    _check_size(sum(inflated), expected, what)
     offsets = np.concatenate([[0], np.cumsum(sizes)])
-    raw = b"".join(zlib.decompress(data[offsets[n] : offsets[n + 1]]) for n in range(blocks))
-    return np.frombuffer(raw, dtype=dtype)
+    if blocks and offsets[-1] > len(stream):
+        raise FormatError(f"{what} declares {int(offsets[-1])} compressed bytes but the file holds {len(stream)}: truncated")
+    try:
+        values = b"".join(
+            inflate(stream[offsets[n] : offsets[n + 1]], inflated[n], f"{what}, block {n + 1}") for n in range(blocks)
+        )
+    except InputError as exc:
+        raise FormatError(str(exc)) from None
+    return _counted(np.frombuffer(values, dtype=dtype), count, what)
+
+
+def _check_size(size: int, expected: int | None, what: str) -> None:
+    if expected is not None and size != expected:
+        raise FormatError(f"{what} declares {size} bytes but the file's extent implies {expected}: not this grid's array")
+
+
+def _counted(values: np.ndarray, count: int | None, what: str) -> np.ndarray:
+    if count is not None and len(values) != count:
+        raise FormatError(f"{what} holds {len(values)} values but the file's extent implies {count}")
+    return values
 
 
 def read(path):
@@ -271,14 +309,29 @@ def read(path):
         array = values.reshape(tuple(reversed(shape)) + ((components,) if components > 1 else ()))
         return np.transpose(array, order + ((dim,) if components > 1 else ())).reshape((-1, components) if components > 1 else -1)
 
-    points = c_order(_decode(pieces[0].find("Points/DataArray"), root, appended).astype(float), node_shape, 3)
+    if any(n < 1 for n in counts):
+        raise FormatError(f"{path}: extent {bounds} holds no nodes")
+    nodes = node_count(n - 1 for n in node_shape)
+    try:
+        check_memory(nodes * READ_BYTES_PER_NODE, f"{path}: reading its {' x '.join(map(str, node_shape))} nodes")
+    except MeshgenError as exc:
+        raise FormatError(str(exc)) from None
+    cells = int(np.prod([n - 1 for n in node_shape]))
+
+    def decode(element, count, name):
+        if element is None:
+            raise FormatError(f"{path}: no {name} array")
+        return _decode(element, root, appended, count, f"{path}: the {name} array")
+
+    points = c_order(decode(pieces[0].find("Points/DataArray"), 3 * nodes, "points").astype(float), node_shape, 3)
     cell_shape = tuple(n - 1 for n in node_shape)
     cell_data = {
-        a.get("Name"): [c_order(_decode(a, root, appended).astype(float), cell_shape)]
+        a.get("Name"): [c_order(decode(a, cells, f"cell data {a.get('Name')!r}").astype(float), cell_shape)]
         for a in pieces[0].findall("CellData/DataArray")
     }
     point_data = {
-        a.get("Name"): c_order(_decode(a, root, appended), node_shape) for a in pieces[0].findall("PointData/DataArray")
+        a.get("Name"): c_order(decode(a, nodes, f"point data {a.get('Name')!r}"), node_shape)
+        for a in pieces[0].findall("PointData/DataArray")
     }
     field_data = {a.get("Name"): _decode(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
     field_data = {k: v for k, v in field_data.items() if k in (METADATA_KEY, PATCHES_KEY)}

@@ -5,24 +5,33 @@ as ``/dev/zero`` (or a link to one) would be read until memory runs out. ``check
 says so before a library (h5py, meshio, torch, VTK) is handed the path; ``read_input_bytes`` and
 ``read_input_text`` open the file without blocking, check what was opened (not only what the path
 named a moment before) and read at most a limit. ``load_yaml`` reads YAML with limits: no aliases
-(an alias bomb expands a few hundred bytes into gigabytes), bounded nesting and size.
+(an alias bomb expands a few hundred bytes into gigabytes), bounded nesting and size;
+``load_yaml_file`` reads a YAML file (``--config``, a geometry file) that way. ``named_input_file``
+is the one way to follow a name written inside an input file (a geometry file's surface files):
+the same regular-file check. ``inflate`` decompresses a zlib stream without ever producing more
+than the size its file declared (a few kB can inflate to gigabytes).
 """
 
 from __future__ import annotations
 
 import os
 import stat
+import zlib
 from pathlib import Path
 
 from meshgen.errors import MeshgenError
 
 __all__ = [
+    "MAX_DEFLATE_RATIO",
     "MAX_TEXT_BYTES",
     "MAX_YAML_BYTES",
     "MAX_YAML_DEPTH",
     "InputError",
     "check_input_file",
+    "inflate",
     "load_yaml",
+    "load_yaml_file",
+    "named_input_file",
     "read_input_bytes",
     "read_input_text",
 ]
@@ -30,6 +39,7 @@ __all__ = [
 MAX_TEXT_BYTES = 256 * 2**20  # a sidecar, a history, an OpenFOAM list read whole
 MAX_YAML_BYTES = 2**20  # a configuration file: a few kB in practice
 MAX_YAML_DEPTH = 32  # nested mappings and lists
+MAX_DEFLATE_RATIO = 1032  # deflate (zlib, gzip) never inflates a byte to more than this many
 
 
 class InputError(MeshgenError):
@@ -49,19 +59,30 @@ def _kind(mode: int) -> str:
     return "not a regular file"
 
 
+def _problem(path: Path, folder: bool = False) -> str | None:
+    """What keeps meshgen from reading ``path`` (links followed), or None for a regular file (or,
+    with ``folder``, a folder). Reads nothing, so it never blocks."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        return "does not exist"
+    except OSError as exc:
+        return f"cannot be read: {exc.strerror or exc}"
+    if stat.S_ISREG(mode) or (folder and stat.S_ISDIR(mode)):
+        return None
+    return f"is {_kind(mode)}: meshgen reads regular files only"
+
+
 def check_input_file(path, what: str = "input file", folder: bool = False) -> Path:
     """``path`` when it names a regular file (links followed), or with ``folder`` a folder; else
     InputError. Reads nothing, so it never blocks."""
     path = Path(path)
-    try:
-        mode = os.stat(path).st_mode
-    except FileNotFoundError:
-        raise InputError(f"{what} {path} cannot be read: it does not exist") from None
-    except OSError as exc:
-        raise InputError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
-    if stat.S_ISREG(mode) or (folder and stat.S_ISDIR(mode)):
-        return path
-    raise InputError(f"{what} {path} is {_kind(mode)}: meshgen reads regular files only")
+    problem = _problem(path, folder)
+    if problem == "does not exist":
+        problem = "cannot be read: it does not exist"
+    if problem is not None:
+        raise InputError(f"{what} {path} {problem}")
+    return path
 
 
 def read_input_bytes(path, what: str = "input file", limit: int = MAX_TEXT_BYTES) -> bytes:
@@ -112,3 +133,38 @@ def load_yaml(text: str, what: str):
         elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
             depth -= 1
     return yaml.safe_load(text)
+
+
+def load_yaml_file(path, what: str):
+    """The YAML file ``path`` read as ``read_input_text`` does (at most ``MAX_YAML_BYTES``) and
+    parsed by ``load_yaml`` (no aliases, bounded nesting)."""
+    return load_yaml(read_input_text(path, what, MAX_YAML_BYTES), f"{what} {path}")
+
+
+def named_input_file(base, name, what: str) -> Path:
+    """The file ``name`` (relative to the folder ``base``) that an input file names, through the
+    check of ``check_input_file`` (a name inside a file is as untrusted as the file); the message
+    is ``what`` followed by the problem."""
+    if not isinstance(name, str) or not name or "\0" in name:
+        raise InputError(f"{what} is not a file name")
+    path = (Path(base) / name).expanduser()
+    problem = _problem(path)
+    if problem is not None:
+        raise InputError(f"{what} {problem}")
+    return path
+
+
+def inflate(data, size: int, what: str) -> bytes:
+    """The zlib stream ``data`` inflated to exactly ``size`` bytes, the size its file declares:
+    InputError, before more than ``size`` bytes are produced, when it inflates to more (a stream
+    of a few MB can inflate to gigabytes), to fewer, or is not zlib data."""
+    decompressor = zlib.decompressobj()
+    try:
+        out = decompressor.decompress(data, max(int(size), 0) + 1)
+    except zlib.error as exc:
+        raise InputError(f"{what} is not a zlib stream ({exc})") from None
+    if len(out) > size or decompressor.unconsumed_tail:
+        raise InputError(f"{what} inflates to more than the {size} bytes its file declares")
+    if len(out) < size:
+        raise InputError(f"{what} inflates to {len(out)} bytes, not the {size} its file declares")
+    return out

@@ -19,11 +19,17 @@ from meshgen.run.resources import IN_MEMORY_BYTES_PER_NODE, available_memory
 __all__ = [
     "CHUNKED_FACE_COPIES",
     "MAX_COORDINATE",
+    "SHAPE_BYTES_PER_FILE_BYTE",
+    "READ_BYTES_PER_NODE",
+    "CAD_BYTES_PER_FILE_BYTE",
+    "CAD_MIN_BYTES",
     "TRAIN_BYTES_PER_ACTIVATION",
     "check_block_set_memory",
     "check_finite",
     "check_memory",
     "check_mesh_memory",
+    "check_shape_memory",
+    "cad_read_bytes",
     "check_training_memory",
     "chunked_mesh_bytes",
     "gigabytes",
@@ -41,6 +47,18 @@ CHUNKED_FACE_COPIES = 4
 # Training: bytes per (point, hidden unit) held for one step: float32 activations, their first and
 # second derivatives (the Winslow residual), and the gradients of all of them; measured order.
 TRAIN_BYTES_PER_ACTIVATION = 4 * 24
+# Reading a structured mesh file whole: the points (float64, padded to 3), the cells' connectivity
+# (8 int64 a hexahedron), a copy of each while it is reordered: about this many bytes a node.
+READ_BYTES_PER_NODE = 200
+# A triangulated shape file's memory while it is read, per byte of the file: a binary STL's 50
+# bytes a triangle become 72 of corner points, then the weld's scaled copies, integer cells and
+# sort (about 10 copies); an ASCII STL's 250 bytes a triangle need less. Measured order, rounded up.
+SHAPE_BYTES_PER_FILE_BYTE = 16
+# The memory the CAD reader (gmsh, OpenCASCADE) may take to read a file: this many bytes per byte
+# of the file, at least CAD_MIN_BYTES (a 45 kB STEP loft takes about 60 MB). A malformed STEP can
+# make OCC allocate without end; the bound makes that a failed read in a second.
+CAD_BYTES_PER_FILE_BYTE = 256
+CAD_MIN_BYTES = 2**30
 
 
 def check_finite(value, what: str) -> float:
@@ -122,6 +140,21 @@ def check_block_set_memory(block_dims, name: str) -> None:
         f"the multi-block geometry '{name}' at these --dims ({len(block_dims)} blocks, {nodes:.3g} nodes) in memory",
         "pick fewer cells (block sets are meshed in memory)",
     )
+
+
+def check_shape_memory(file_bytes: int, what: str) -> None:
+    """MeshgenError unless a triangulated shape file of ``file_bytes`` bytes can be read and welded
+    in the memory available now (``SHAPE_BYTES_PER_FILE_BYTE``)."""
+    check_memory(int(file_bytes) * SHAPE_BYTES_PER_FILE_BYTE, f"{what} ({gigabytes(file_bytes)})", "a smaller surface file")
+
+
+def cad_read_bytes(file_bytes: int) -> int:
+    """The memory the CAD reader may allocate to read a CAD file of ``file_bytes`` bytes
+    (``CAD_BYTES_PER_FILE_BYTE``, at least ``CAD_MIN_BYTES``); MeshgenError when even that
+    is more than the memory available now."""
+    needed = max(CAD_MIN_BYTES, int(file_bytes) * CAD_BYTES_PER_FILE_BYTE)
+    check_memory(needed, f"reading a CAD file of {gigabytes(file_bytes)}", "a smaller CAD file")
+    return needed
 
 
 def training_bytes(widths, dim: int, points: int, history: int) -> int:

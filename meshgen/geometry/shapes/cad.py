@@ -6,7 +6,8 @@ point is the face's own surface evaluated (``gmsh.model.getValue``) at the Coons
 face's (u, v) parameters, of its four sides (``reparametrizeOnSurface``), so every boundary node
 lies on the true CAD surface, not on a tessellation of it.
 
-gmsh is imported only here, when a CAD file is loaded. It is global state: meshgen initialises it
+gmsh is imported only here, in the process that reads CAD files (``cad_process``: OpenCASCADE
+can crash on a malformed file, and that must not take meshgen with it). It is global state: meshgen initialises it
 once if nobody has (without reading the user's gmsh configuration, without installing its
 interrupt handler), keeps one gmsh model per file (named by the file's content hash) and makes
 that model current before every evaluation; if gmsh was finalised meanwhile, the file is read
@@ -35,7 +36,7 @@ from meshgen.geometry.shapes.faces import (
     swap_eta,
 )
 
-__all__ = ["CadBlock", "cad_block", "gmsh_model", "quiet_stdout"]
+__all__ = ["CadBlock", "gmsh_model", "quiet_stdout", "read_cad_block"]
 
 ARC_SAMPLES = 2001  # parameter samples per curve for its arc length
 SIDE_SAMPLES = 513  # arc-length samples per face side for its (u, v) trace
@@ -172,8 +173,9 @@ class _Curve:
         return np.interp(np.asarray(s, dtype=float), self.fraction, self.t)
 
 
-def cad_block(path, given_faces: dict | None = None, content_hash: str = "", given_corners=None) -> CadBlock:
-    """Read a CAD file and assign its six faces to the cube's (``faces.assign_faces``)."""
+def read_cad_block(path, given_faces: dict | None = None, content_hash: str = "", given_corners=None) -> CadBlock:
+    """Read a CAD file and assign its six faces to the cube's (``faces.assign_faces``), in this
+    process: meshgen calls it only in the CAD reader's own process (``cad_process.cad_block``)."""
     path = Path(path)
     model = f"meshgen-{content_hash[:16]}"
     gmsh = gmsh_model(path, model)

@@ -31,9 +31,10 @@ import numpy as np
 
 from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, shape_geometry
-from meshgen.geometry.shapes.cad import cad_block
+from meshgen.geometry.shapes.cad_process import cad_block
 from meshgen.geometry.shapes.faces import FACE_NAMES
 from meshgen.geometry.shapes.triangulated import surface_block
+from meshgen.run.inputs import InputError, load_yaml_file, named_input_file
 
 __all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "read_geometry_file"]
 
@@ -45,17 +46,15 @@ def read_geometry_file(path: Path) -> dict:
     import yaml
 
     try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise GeometryError(f"geometry file {path} cannot be read: {getattr(exc, 'strerror', None) or exc}") from None
-    if not text.strip():
-        raise GeometryError(f"geometry file {path} is empty")
-    try:
-        data = yaml.safe_load(text)
+        data = load_yaml_file(path, "geometry file")  # the limits of --config: size, no aliases, depth
+    except InputError as exc:
+        raise GeometryError(str(exc)) from None
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         line = f" (line {where.line + 1})" if where is not None else ""
         raise GeometryError(f"geometry file {path} is not valid YAML{line}") from None
+    if data is None:
+        raise GeometryError(f"geometry file {path} is empty")
     if not isinstance(data, dict):
         raise GeometryError(f"geometry file {path} must be a mapping with 'surface' or 'patches'")
     unknown = [k for k in data if k not in GEOMETRY_FILE_KEYS]
@@ -91,10 +90,10 @@ def read_geometry_file(path: Path) -> dict:
 def _named_file(base: Path, value, path: Path, what: str) -> Path:
     if not isinstance(value, str) or not value:
         raise GeometryError(f"geometry file {path}: {what} must be a file name")
-    file = (base / value).expanduser()
-    if not file.is_file():
-        raise GeometryError(f"geometry file {path}: the file {value} named for {what} does not exist")
-    return file
+    try:
+        return named_input_file(base, value, f"geometry file {path}: the file {value} named for {what}")
+    except InputError as exc:
+        raise GeometryError(str(exc)) from None
 
 
 def load_geometry_file(path) -> object:

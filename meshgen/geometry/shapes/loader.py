@@ -24,9 +24,10 @@ from meshgen.geometry.shapes.assemble import (
     content_hash,
     shape_geometry,
 )
-from meshgen.geometry.shapes.cad import cad_block
+from meshgen.geometry.shapes.cad_process import cad_block
 from meshgen.geometry.shapes.geometry_file import load_geometry_file
 from meshgen.geometry.shapes.triangulated import surface_block
+from meshgen.run.inputs import InputError, check_input_file
 
 __all__ = ["FORMAT_HELP", "is_shape_file", "load_shape"]
 
@@ -47,10 +48,10 @@ def load_shape(spec) -> Geometry:
     """The Geometry of a shape file (module docstring); GeometryError for anything wrong with it."""
     path = Path(str(spec))
     suffix = path.suffix.lower()
-    if not path.exists():
-        raise GeometryError(f"geometry file {path} does not exist")
-    if not path.is_file():
-        raise GeometryError(f"geometry file {path} is not a file")
+    try:
+        check_input_file(path, "geometry file")  # a FIFO or a device is never opened
+    except InputError as exc:
+        raise GeometryError(str(exc).replace(" cannot be read: it does not exist", " does not exist")) from None
     stat = path.stat()
     key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
     if key in _LOADED:

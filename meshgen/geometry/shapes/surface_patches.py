@@ -9,13 +9,17 @@ three or more patches are the patches' corners.
 
 from __future__ import annotations
 
+import io
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from meshgen.errors import GeometryError
+from meshgen.errors import GeometryError, MeshgenError
+from meshgen.run.inputs import InputError, read_input_bytes
+from meshgen.run.limits import check_shape_memory
 
 __all__ = [
     "DEFAULT_FEATURE_ANGLE",
@@ -47,16 +51,44 @@ class Surface:
     names: tuple
 
 
+MAX_SURFACE_BYTES = 2**34  # beyond memory checks: the file's size is checked against memory first
+
+
 def _read_bytes(path: Path) -> bytes:
+    """The bytes of the surface file ``path``: a regular file (``read_input_bytes``: a FIFO or a
+    device is never read) whose size fits in memory once read as a surface."""
     try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise GeometryError(f"surface file {path} does not exist") from None
-    except OSError as exc:
-        raise GeometryError(f"surface file {path} cannot be read: {exc.strerror or exc}") from None
+        check_shape_memory(os.stat(path).st_size, f"surface file {path}")
+    except OSError:
+        pass  # read_input_bytes says what is wrong
+    except MeshgenError as exc:
+        raise GeometryError(str(exc)) from None
+    try:
+        data = read_input_bytes(path, "surface file", MAX_SURFACE_BYTES)
+    except InputError as exc:
+        raise GeometryError(str(exc).replace(" cannot be read: it does not exist", " does not exist")) from None
     if not data.strip():
         raise GeometryError(f"surface file {path} is empty")
     return data
+
+
+def _check_binary_stl(data: bytes, path: Path) -> None:
+    """GeometryError unless ``data`` is as long as its binary STL header says: 80 bytes, the
+    triangle count (uint32), 50 bytes a triangle."""
+    if len(data) < 84:
+        raise GeometryError(f"{path} is not an STL file: {len(data)} bytes, shorter than a binary STL's 84-byte header")
+    count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
+    whole, rest = divmod(len(data) - 84, 50)
+    if rest:
+        raise GeometryError(
+            f"{path} is a truncated binary STL: it ends {rest} bytes into triangle {whole + 1} "
+            f"({len(data)} bytes; its header counts {count} triangles, {84 + 50 * count} bytes)"
+        )
+    if whole != count:
+        raise GeometryError(
+            f"{path}: the binary STL header's triangle count ({count}, {84 + 50 * count} bytes) disagrees with the "
+            f"file's size ({len(data)} bytes, {whole} triangles)"
+        )
 
 
 def _ascii_stl_solids(data: bytes, path: Path):
@@ -72,6 +104,11 @@ def _ascii_stl_solids(data: bytes, path: Path):
             points = np.array(_VERTEX.findall(block), dtype=float)
         except ValueError:
             raise GeometryError(f"{path}: solid {index + 1} has a vertex that is not three numbers") from None
+        if not np.all(np.isfinite(points)):
+            bad = int(np.flatnonzero(~np.all(np.isfinite(points), axis=1))[0])
+            raise GeometryError(
+                f"{path}: solid {index + 1}, vertex {bad + 1} is not finite ({', '.join(f'{c:g}' for c in points[bad])})"
+            )
         if len(points) == 0 and not block.strip(b" \t\r\n"):
             continue  # an empty solid (some exporters write one per unused region)
         if len(points) == 0 or len(points) % 3:
@@ -116,7 +153,9 @@ def read_surfaces(paths, names=None) -> Surface:
             else:
                 groups.extend(solids)
             continue
-        groups.append((given or path.stem, _trimesh_corners(path, suffix)))
+        if suffix == ".stl":
+            _check_binary_stl(data, path)
+        groups.append((given or path.stem, _trimesh_corners(data, path, suffix)))
     corner_points = np.concatenate([points for _, points in groups])
     vertices, triangles = _weld(corner_points)
     if len(paths) == 1 and len(groups) == 1:
@@ -130,12 +169,16 @@ def read_surface(path) -> Surface:
     return read_surfaces([path])
 
 
-def _trimesh_corners(path: Path, suffix: str) -> np.ndarray:
-    """Triangle corner points (m, 3, 3) of a binary STL, OBJ or PLY file, read by trimesh."""
+def _trimesh_corners(data: bytes, path: Path, suffix: str) -> np.ndarray:
+    """Triangle corner points (m, 3, 3) of a binary STL, OBJ or PLY file's bytes ``data``, read by
+    trimesh from memory, with a resolver that refuses every file the data names (an OBJ's
+    ``mtllib``, a texture): trimesh never opens a file itself (a FIFO named there would block)."""
     import trimesh
 
     try:
-        mesh = trimesh.load(str(path), file_type=suffix.lstrip("."), force="mesh", process=False)
+        mesh = trimesh.load(
+            io.BytesIO(data), file_type=suffix.lstrip("."), force="mesh", process=False, resolver=_no_files_resolver()
+        )
     except Exception as exc:  # trimesh raises many kinds for a file that is not what it says
         raise GeometryError(
             f"{path} is not a readable {suffix.lstrip('.').upper()} surface: {type(exc).__name__}: {exc}"
@@ -144,9 +187,39 @@ def _trimesh_corners(path: Path, suffix: str) -> np.ndarray:
     vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=float)
     if faces.ndim != 2 or len(faces) == 0 or faces.shape[1] != 3:
         raise GeometryError(f"{path} is not a {suffix.lstrip('.').upper()} surface of triangles (none found)")
+    if faces.dtype.kind not in "iu" or faces.min() < 0 or faces.max() >= len(vertices):
+        bad = int(np.flatnonzero((faces < 0).any(axis=1) | (faces >= len(vertices)).any(axis=1))[0])
+        raise GeometryError(
+            f"{path}: face {bad + 1} names vertex {int(faces[bad][np.argmax((faces[bad] < 0) | (faces[bad] >= len(vertices)))])} "
+            f"but the file has {len(vertices)} vertices (0 to {len(vertices) - 1})"
+        )
     if not np.all(np.isfinite(vertices)):
         raise GeometryError(f"{path}: a vertex is not a finite number")
     return vertices[faces]
+
+
+def _no_files_resolver():
+    """A trimesh resolver that opens nothing: every name a surface file gives is refused (trimesh
+    then loads the surface without it)."""
+    from trimesh.resolvers import Resolver
+
+    class NoFiles(Resolver):
+        def __init__(self):
+            pass
+
+        def get(self, name):
+            raise OSError(f"meshgen does not open files a surface file names ({name})")
+
+        def keys(self):
+            return iter(())
+
+        def write(self, name, data):
+            raise OSError("read only")
+
+        def namespaced(self, namespace):
+            return self
+
+    return NoFiles()
 
 
 def check_closed(surface: Surface, what: str) -> None:
