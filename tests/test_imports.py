@@ -81,7 +81,6 @@ LAYERS = [
         "meshgen.geometry.surface",
         "meshgen.geometry.domain",
         "meshgen.geometry.blocks",
-        "meshgen.geometry.block_surface",
         "meshgen.geometry.shapes",
         "meshgen.run.trust",
         "meshgen.geometry.plugin_calls",

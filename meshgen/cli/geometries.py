@@ -9,8 +9,7 @@ import click
 
 from meshgen.cli._options import load_selected_geometry
 from meshgen.errors import GeometryError
-from meshgen.geometry.block_surface import write_block_set_surface
-from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
+from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set, write_block_set_surface
 from meshgen.geometry.blocks import describe as describe_blocks
 from meshgen.geometry.plugins import available_names, load_geometry, parse_params
 from meshgen.geometry.shapes.loader import FORMAT_HELP

@@ -8,8 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.block_surface import block_set_surface
-from meshgen.geometry.blocks import BlockSet
+from meshgen.geometry.blocks import BlockSet, block_set_surface
 from meshgen.geometry.patches import geometry_patches
 from meshgen.geometry.surface import boundary_surface
 from meshgen.run.atomic import atomic_write, check_output_file
