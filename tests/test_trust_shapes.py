@@ -1,4 +1,4 @@
-"""Hostile shape and mesh files through the command line (issue 38): each is one line on stderr
+"""Hostile shape and mesh files through the command line: each is one line on stderr
 naming the problem, exit status 2, nothing written, no hang and no stray process. The files are
 made here, small: an alias bomb, 5000 nested brackets, a geometry file naming a FIFO, NaN and
 infinite STL vertices, a truncated binary STL and one whose triangle count lies, a PLY face
