@@ -36,7 +36,17 @@ COARSEST_SET_SWEEPS = (
     10  # relaxation sweeps on the coarsest level (40 for one grid: 10 gave the same cycles in 3D, 4 more in 2D, in less time)
 )
 
-__all__ = ["COARSEST_SET_SWEEPS", "SMOOTHING", "SetLevel", "axis_families", "relax_set", "set_levels", "solve_set", "v_cycle_set"]
+__all__ = [
+    "COARSEST_SET_SWEEPS",
+    "SMOOTHING",
+    "SetLevel",
+    "axis_families",
+    "relax_set",
+    "set_levels",
+    "solve_set",
+    "v_cycle_set",
+    "wall_rows",
+]
 
 
 def axis_families(block_set) -> np.ndarray:
@@ -84,10 +94,63 @@ class SetLevel:
             for face in self.halo.ghost_faces[block]:
                 frozen[face.node_index] = True
             self.frozen.append(frozen)
+        self.slide_rule = self.rules[0] if sliding is not None else None
+        self.walls = [
+            wall_rows(self.slide_rule, self.halo, block, self.smoothers[block].grid) if sliding is not None else None
+            for block in range(len(self.halo.numbering))
+        ]
 
     def own(self, values: np.ndarray) -> list[np.ndarray]:
         """Each block's own component-first array (dim, ...) from the unique nodes."""
         return [np.ascontiguousarray(np.moveaxis(values[ids], -1, 0)) for ids in self.halo.numbering]
+
+
+def wall_rows(rule: SlideRule, halo: Halo, block: int, grid):
+    """The sliding nodes of ``block`` whose rule the line relaxation solves with the interior (a
+    Neumann row at the end of the grid line normal to their face): nodes inside a patch face whose
+    plane is normal to a coordinate axis (the projector diagonal, its entries 0 or 1), one inner
+    neighbour each. Returns None when there are none, else (index of the nodes in the block's own
+    array (tuple of (S,) arrays), the face's axis (S,), 1 / the second-derivative weight coupling
+    the node to its inner neighbour (S,), the nodes' rows in ``rule``'s residual (S,), passes: per
+    group of components with the same tangential nodes (components, bool (S,) the nodes tangential
+    in them))."""
+    ids = halo.numbering[block]
+    dim = ids.ndim
+    inner, projector = rule.terms
+    single = rule.count[rule.slot] == 1
+    pair_of = np.full(len(rule.nodes), -1)
+    pair_of[rule.slot[single]] = np.flatnonzero(single)
+    interior_face = faces_holding(ids.shape) == 1
+    weights = stencil_weights(grid)[dim:]
+    index, axes, couplings, slots = [], [], [], []
+    for face in halo.ghost_faces[block]:
+        on_face = np.zeros(ids.shape, dtype=bool)
+        on_face[face.node_index] = True
+        local = np.argwhere(on_face & interior_face)
+        gids = ids[tuple(local.T)]
+        slot = np.clip(np.searchsorted(rule.nodes, gids), 0, len(rule.nodes) - 1)
+        pair = np.where(rule.nodes[slot] == gids, pair_of[slot], -1)
+        neighbour = local.copy()
+        neighbour[:, face.axis] += -1 if face.side else 1
+        P = projector[np.maximum(pair, 0)]
+        aligned = np.all(np.abs(P - np.round(P)) < 1e-9, axis=(1, 2)) & np.all(
+            np.abs(P - np.einsum("pii->pi", P)[:, :, None] * np.eye(dim)) < 1e-9, axis=(1, 2)
+        )
+        keep = (pair >= 0) & aligned & (inner[np.maximum(pair, 0), 0] == ids[tuple(neighbour.T)])
+        w = weights[face.axis]
+        coupling = 1.0 / (w[0, -1] if face.side else w[2, 0])  # the row's coupling, times this, is -1
+        index.append(local[keep])
+        axes.append(np.full(int(keep.sum()), face.axis))
+        couplings.append(np.full(int(keep.sum()), coupling))
+        slots.append(slot[keep])
+    if not sum(len(a) for a in axes):
+        return None
+    local, slots = np.concatenate(index), np.concatenate(slots)
+    tangential = np.round(np.einsum("pii->pi", projector[pair_of[slots]])) == 1
+    passes = {}
+    for component in range(dim):
+        passes.setdefault(tangential[:, component].tobytes(), ([], tangential[:, component]))[0].append(component)
+    return tuple(local.T), np.concatenate(axes), np.concatenate(couplings), slots, list(passes.values())
 
 
 def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
@@ -125,16 +188,43 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     return levels
 
 
-def _relax_block(R: np.ndarray, f, level: Level, weights, frozen) -> None:
+def _relax_block(R: np.ndarray, f, level: Level, weights, frozen, walls=None, wall_step=None) -> None:
     """One line-ADI sweep of N(R) = f on the padded block R (in place), the ``frozen`` nodes kept:
     the compiled sweep of ``meshgen.methods.multigrid.smooth`` with fixed line ends inside the
-    grid (``weights``: the 2D kernels' stencil weights, None in 3D)."""
+    grid (``weights``: the 2D kernels' stencil weights, None in 3D).
+
+    ``walls`` (``wall_rows``), ``wall_step`` (S, dim): the sliding rule's Jacobi step at those
+    nodes. Their tangential components are solved in the line normal to their face, a Neumann row
+    delta_node - delta_inner = step (their normal component stays a fixed line end): one line
+    solve per group of components with the same tangential nodes. A wave of tangential error
+    along a flat wall, which fixed line ends pass on by one node per sweep, is solved at once."""
     from meshgen.methods import winslow_compiled, winslow_compiled_2d  # numba: loaded on first use
 
-    if weights is not None:
-        winslow_compiled_2d.relax(R, f, weights, DAMPING, frozen)
-    else:
-        winslow_compiled.relax(R, f, level.weights, DAMPING, False, frozen)
+    if walls is None:
+        if weights is not None:
+            winslow_compiled_2d.relax(R, f, weights, DAMPING, frozen)
+        else:
+            winslow_compiled.relax(R, f, level.weights, DAMPING, False, frozen)
+        return
+    kernels, weights = (winslow_compiled_2d, weights) if weights is not None else (winslow_compiled, level.weights)
+    step, axial, inverse_centre = kernels.jacobi_step(R, f, weights)
+    step[:, frozen] = 0.0
+    axial[:, frozen] = 0.0
+    inverse_centre[frozen] = 0.0
+    index, axes, couplings, _, passes = walls
+    moved = np.zeros_like(R)
+    for number, (components, rows) in enumerate(passes):
+        last = number == len(passes) - 1
+        s, a, c = (step, axial, inverse_centre) if last else (step.copy(), axial.copy(), inverse_centre.copy())
+        nodes = tuple(i[rows] for i in index)
+        a[(slice(None),) + nodes] = 0.0
+        a[(axes[rows],) + nodes] = 1.0
+        c[nodes] = couplings[rows]
+        s[(slice(None),) + nodes] = wall_step[rows].T
+        kernels.lines(s, a, c, weights, moved, DAMPING)
+        R[components] += moved[components]
+        if not last:
+            moved[:] = 0.0
 
 
 def _defect_block(R: np.ndarray, f, level: Level, weights) -> np.ndarray:
@@ -156,9 +246,16 @@ def relax_set(level: SetLevel, values: np.ndarray, f, sweeps: int) -> np.ndarray
     halo = level.halo
     for _ in range(sweeps):
         padded = halo.padded(values)
+        slide_step = None
+        if level.slide_rule is not None:
+            slide_step = level.slide_rule.residual(values)
+            if f is not None:
+                slide_step -= f[1][0]
         for block, R in enumerate(padded):
             rhs = None if f is None else f[0][block]
-            _relax_block(R, rhs, level.smoothers[block], level.weights[block], level.frozen[block])
+            walls = level.walls[block]
+            wall_step = None if walls is None else slide_step[walls[3]]
+            _relax_block(R, rhs, level.smoothers[block], level.weights[block], level.frozen[block], walls, wall_step)
         values = halo.unique([R[halo.inside(block)] for block, R in enumerate(padded)], out=values.copy())
         for number, rule in enumerate(level.rules):
             residual = rule.residual(values)

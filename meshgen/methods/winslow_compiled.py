@@ -30,7 +30,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-__all__ = ["defect", "operator", "relax", "threads", "transfer"]
+__all__ = ["defect", "jacobi_step", "lines", "operator", "relax", "threads", "transfer"]
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 CHUNKS_PER_THREAD = 4  # work split finer than the threads: a thread that the OS delays holds up less
@@ -339,3 +339,20 @@ def transfer(F, columns, values, axis: int) -> np.ndarray:
     else:  # across the planes i
         _across((_transfer_second, _transfer_third)[axis - 1], F.shape[1], F, columns, values, out)
     return out
+
+
+def jacobi_step(R, f, weights):
+    """The Jacobi step (N(R) - f) / centre (3, m1, m2, m3), the axial coefficients (3, m1, m2, m3)
+    and 1 / centre (m1, m2, m3) at the interior nodes of R (3, m1+2, m2+2, m3+2)."""
+    return _jacobi_step(R, f, weights)[:3]
+
+
+def lines(step, axial, inverse_centre, weights, R, damping: float) -> None:
+    """The line-ADI step's tridiagonal solves of ``step`` (in place; rows from ``axial`` and
+    ``inverse_centre`` as ``jacobi_step`` gives them), then R's interior += damping * step
+    (``relax``'s second half)."""
+    pivot = np.empty(inverse_centre.shape)
+    m1, m2 = inverse_centre.shape[:2]
+    _across(_lines_first, m2, step, axial, inverse_centre, weights[3], pivot)
+    _across(_lines_second, m1, step, axial, inverse_centre, weights[4], pivot)
+    _across(_lines_third, m1, step, axial, inverse_centre, weights[5], pivot, R, damping)
