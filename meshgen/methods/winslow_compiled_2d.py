@@ -93,15 +93,15 @@ def _lines(step, axial, inverse_centre, w0, w1, pivot, R, damping):
             sup = -w0[2, i - 1] * axial[0, i - 1, j] * inverse_centre[i - 1, j]
             factor = sub / pivot[i - 1, j]
             pivot[i, j] = 1.0 - factor * sup
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] -= factor * step[c, i - 1, j]
     for j in range(m2):
-        for c in range(2):
+        for c in range(step.shape[0]):
             step[c, m1 - 1, j] /= pivot[m1 - 1, j]
     for i in range(m1 - 2, -1, -1):
         for j in range(m2):
             sup = -w0[2, i] * axial[0, i, j] * inverse_centre[i, j]
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] = (step[c, i, j] - sup * step[c, i + 1, j]) / pivot[i, j]
     for i in range(m1):
         pivot[i, 0] = 1.0
@@ -110,16 +110,16 @@ def _lines(step, axial, inverse_centre, w0, w1, pivot, R, damping):
             sup = -w1[2, j - 1] * axial[1, i, j - 1] * inverse_centre[i, j - 1]
             factor = sub / pivot[i, j - 1]
             pivot[i, j] = 1.0 - factor * sup
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] -= factor * step[c, i, j - 1]
-        for c in range(2):
+        for c in range(step.shape[0]):
             step[c, i, m2 - 1] /= pivot[i, m2 - 1]
         for j in range(m2 - 2, -1, -1):
             sup = -w1[2, j] * axial[1, i, j] * inverse_centre[i, j]
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] = (step[c, i, j] - sup * step[c, i, j + 1]) / pivot[i, j]
         for j in range(m2):
-            for c in range(2):
+            for c in range(step.shape[0]):
                 R[c, i + 1, j + 1] += damping * step[c, i, j]
 
 
@@ -159,6 +159,7 @@ def relax(R, f, weights, damping: float, frozen=None) -> None:
 
 
 def lines(step, axial, inverse_centre, weights, R, damping: float) -> None:
-    """The line-ADI step's tridiagonal solves of ``step`` (in place; rows from ``axial`` and
-    ``inverse_centre`` as ``jacobi_step`` gives them), then R's interior += damping * step."""
+    """The line-ADI step's tridiagonal solves of ``step`` (k, m1, m2) (in place; k: any of the
+    components, each with the same rows, from ``axial`` and ``inverse_centre`` as ``jacobi_step``
+    gives them), then R's interior += damping * step, R (k, m1+2, m2+2)."""
     _lines(step, axial, inverse_centre, weights[2], weights[3], np.empty(inverse_centre.shape), R, damping)
