@@ -29,6 +29,7 @@ from meshgen.methods.sliding import Rule
 
 __all__ = [
     "Halo",
+    "Layout",
     "JunctionRule",
     "faces_holding",
     "gather",
@@ -248,3 +249,64 @@ class Halo:
         for R, (flat, ids) in zip(arrays, self.writes):
             values[ids] = R.reshape(R.shape[0], -1)[:, flat].T
         return values
+
+
+class Layout:
+    """The padded blocks of a ``Halo`` as one flat buffer, so that moving values between the
+    blocks is one array operation: block b's padded component-first array (dim, ...) is the
+    contiguous slice ``[offset_b, offset_b + dim n_b)`` of the buffer (n_b: its padded node count).
+
+    Every unique node has one owner position (the block that gives it in ``Halo.unique``); the
+    other copies of it (halo and ghost layers, a non-owner's interface face, the block edges that
+    several blocks hold) are ``targets`` filled from ``sources`` by ``exchange``: after a
+    relaxation sweep only these, about the blocks' surfaces, move, not the whole mesh."""
+
+    def __init__(self, halo: Halo, dim: int):
+        self.dim = dim
+        self.shapes = [ids.shape for ids in halo.padded_ids]
+        sizes = [ids.size for ids in halo.padded_ids]
+        self.offsets = np.concatenate([[0], np.cumsum([dim * n for n in sizes])])
+        components = np.arange(dim)[:, None]
+        self.positions = np.concatenate(  # (dim, all padded nodes): each padded node's positions
+            [offset + components * n + np.arange(n) for offset, n in zip(self.offsets, sizes)], axis=1
+        )
+        self.ids = np.concatenate([ids.reshape(-1) for ids in halo.padded_ids])
+        self.owner = np.empty((dim, halo.count), dtype=np.int64)  # the owner position of each unique node
+        for block, (flat, ids) in enumerate(halo.writes):  # later blocks override, as in Halo.unique
+            own = np.unravel_index(flat, halo.numbering[block].shape)
+            padded = np.ravel_multi_index(tuple(i + p[0] for i, p in zip(own, halo.pad[block])), self.shapes[block])
+            self.owner[:, ids] = self.offsets[block] + components * sizes[block] + padded
+        copies = self.positions[0] != self.owner[0, self.ids]
+        self.targets = self.positions[:, copies].reshape(-1)
+        self.sources = self.owner[:, self.ids[copies]].reshape(-1)
+        self.size = int(self.offsets[-1])
+
+    def load(self, values: np.ndarray) -> np.ndarray:
+        """The buffer from the unique nodes (count, dim)."""
+        buffer = np.empty(self.size)
+        buffer[self.positions] = values[self.ids].T
+        return buffer
+
+    def views(self, buffer: np.ndarray) -> list[np.ndarray]:
+        """Each block's padded component-first array (dim, ...): a view of the buffer."""
+        return [
+            buffer[start:stop].reshape((self.dim,) + shape)
+            for start, stop, shape in zip(self.offsets[:-1], self.offsets[1:], self.shapes)
+        ]
+
+    def unique(self, buffer: np.ndarray) -> np.ndarray:
+        """The unique nodes (count, dim) from their owners' positions."""
+        return buffer[self.owner].T.copy()
+
+    def read(self, buffer: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """The nodes ``ids`` (len, dim) from their owners' positions."""
+        return buffer[self.owner[:, ids]].T
+
+    def write(self, buffer: np.ndarray, ids: np.ndarray, values: np.ndarray) -> None:
+        """Set the owners' positions of the nodes ``ids`` to ``values`` (len, dim); ``exchange``
+        hands them on to the copies."""
+        buffer[self.owner[:, ids]] = values.T
+
+    def exchange(self, buffer: np.ndarray) -> None:
+        """Every copy of a node from its owner (in place)."""
+        buffer[self.targets] = buffer[self.sources]

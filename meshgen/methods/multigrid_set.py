@@ -3,16 +3,21 @@ run on every block at every level, with the interface nodes as interior nodes of
 
 Levels: the blocks coarsen together. An axis of one block and the axis of its neighbour that runs
 along the same interface are one family (union over the interfaces' Transforms); a family coarsens
-while it has more than ``COARSEST_CELLS`` cells, so the blocks' coarse grids share their interface
-nodes (``coarser_coordinates`` picks nodes by index, the same on both sides). A block whose axes
-are all coarse stays as it is on the coarser levels.
+while it has more than ``COARSEST_CELLS`` cells and one of its axes is coupled at least
+``SEMI_COARSENING`` times as strongly as its block's strongest coarsenable axis (the one-block
+hierarchy's semi-coarsening: a pipe's cells, long along the pipe, couple ~100 times more weakly
+along it), so the blocks' coarse grids share their interface nodes (``coarser_coordinates`` picks
+nodes by index, the same on both sides). A block whose axes are all coarse stays as it is.
 
 On each level (``SetLevel``) each block is padded with a halo layer on its interface faces
-(``meshgen.methods.interfaces.Halo``). The state is the unique nodes (count, dim). A relaxation
-sweep is: every block's padded array from the unique nodes, one line-ADI sweep of the Winslow
-equations per block (the block's edges and corners frozen: they are junctions or on patches), the
-unique nodes back (an interface node from its owner block), then one Jacobi step of the sliding
-nodes' and the junctions' equations (``meshgen.methods.sliding``, ``meshgen.methods.interfaces``).
+(``meshgen.methods.interfaces.Halo``), all of them slices of one flat buffer
+(``meshgen.methods.interfaces.Layout``). Between the grids the state is the unique nodes (count,
+dim). A relaxation sweep is: one line-ADI sweep of the Winslow equations per block (the block's
+edges and corners frozen: they are junctions or on patches; a sliding node on an axis-aligned
+flat patch is the Neumann end of its normal line, ``wall_rows``), one Jacobi step of the sliding
+nodes' and the junctions' equations (``meshgen.methods.sliding``, ``meshgen.methods.interfaces``)
+at their owners, then every copy of a node (halos, ghosts, shared faces) from its owner: only the
+blocks' surfaces move between sweeps.
 Residuals are restricted per block (the Winslow residual with the residual restriction, the
 boundary rules' residuals by interpolation along the patch), corrections prolonged per block.
 The fixed point is the finest level's equations at every node: block interiors, interface nodes
@@ -27,16 +32,37 @@ import numpy as np
 
 from meshgen.geometry.blocks import global_numbering
 from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
-from meshgen.methods.interfaces import Halo, JunctionRule, faces_holding, gather, junction_nodes, junction_stencil, mean_length
-from meshgen.methods.multigrid import COARSEST_CELLS, DAMPING, Level, coarser_coordinates, stencil_weights
+from meshgen.methods.interfaces import (
+    Halo,
+    JunctionRule,
+    Layout,
+    faces_holding,
+    gather,
+    junction_nodes,
+    junction_stencil,
+    mean_length,
+)
+from meshgen.methods.multigrid import COARSEST_CELLS, DAMPING, SEMI_COARSENING, Level, coarser_coordinates, stencil_weights
 from meshgen.methods.sliding import SlideRule, local_cell_sizes, planar_sliding
+from meshgen.methods.winslow import component_array
 
 SMOOTHING = 2  # relaxation sweeps before and after the coarse-grid correction (1: half as many cycles more)
 COARSEST_SET_SWEEPS = (
     10  # relaxation sweeps on the coarsest level (40 for one grid: 10 gave the same cycles in 3D, 4 more in 2D, in less time)
 )
 
-__all__ = ["COARSEST_SET_SWEEPS", "SMOOTHING", "SetLevel", "axis_families", "relax_set", "set_levels", "solve_set", "v_cycle_set"]
+__all__ = [
+    "COARSEST_SET_SWEEPS",
+    "SMOOTHING",
+    "SetLevel",
+    "axis_families",
+    "axis_weights",
+    "relax_set",
+    "set_levels",
+    "solve_set",
+    "v_cycle_set",
+    "wall_rows",
+]
 
 
 def axis_families(block_set) -> np.ndarray:
@@ -61,9 +87,10 @@ class SetLevel:
     coordinates) and the transfers to the next coarser grid (own coordinates), the sliding nodes
     and junctions with their stencils."""
 
-    def __init__(self, block_set, Xs, lengths, coarse_coords=None, compiled: bool = False, slide: bool = True):
+    def __init__(self, block_set, Xs, lengths, coarse_coords=None, compiled: bool = False, slide: bool = True, strong=None):
         self.block_set = block_set
         self.halo = Halo(block_set, lengths)
+        self.layout = Layout(self.halo, block_set.dim)
         self.smoothers = [Level(c, compiled=compiled) for c in self.halo.padded_coords]
         self.weights = [stencil_weights(s.grid) if block_set.dim == 2 else None for s in self.smoothers]
         self.transfers = None
@@ -83,11 +110,97 @@ class SetLevel:
             frozen = faces_holding(ids.shape) >= 2
             for face in self.halo.ghost_faces[block]:
                 frozen[face.node_index] = True
-            self.frozen.append(frozen)
+            self.frozen.append(np.nonzero(frozen))  # as indices: the block's faces, a small part of it
+        self.slide_rule = self.rules[0] if sliding is not None else None
+        terms = [t for rule in self.rules for t in rule.terms if t.dtype.kind in "iu"]
+        self.moved = np.unique(np.concatenate([rule.nodes for rule in self.rules])) if self.rules else np.zeros(0, int)
+        self.touched = np.unique(np.concatenate([self.moved] + [t.reshape(-1) for t in terms]))  # what the rules read
+        self.walls = [
+            wall_rows(
+                self.slide_rule,
+                self.halo,
+                block,
+                self.weights[block] or self.smoothers[block].weights,
+                None if strong is None else strong[block],
+            )
+            if sliding is not None
+            else None
+            for block in range(len(self.halo.numbering))
+        ]
 
     def own(self, values: np.ndarray) -> list[np.ndarray]:
         """Each block's own component-first array (dim, ...) from the unique nodes."""
         return [np.ascontiguousarray(np.moveaxis(values[ids], -1, 0)) for ids in self.halo.numbering]
+
+
+def wall_rows(rule: SlideRule, halo: Halo, block: int, weights, strong=None):
+    """The sliding nodes of ``block`` whose rule the line relaxation solves with the interior (a
+    Neumann row at the end of the grid line normal to their face): nodes inside a patch face whose
+    plane is normal to a coordinate axis (the projector diagonal, its entries 0 or 1), one inner
+    neighbour each, on faces normal to a ``strong`` axis (bool per axis; None: all): along a weakly
+    coupled axis (a pipe's, along its length) a fixed line end passes little error on, and the
+    extra line solve does not pay. ``weights``: the block's ``stencil_weights``. Returns None when there are none,
+    else (the nodes' rows in ``rule``'s residual (S,), passes): per group of components with the
+    same tangential nodes, a pass (components, which of the S nodes are tangential in them, and for
+    those: index of the step's rows, of the axial coefficient along their face's axis, of the
+    nodes (tuples of index arrays into the block's own array), 1 / the second-derivative weight
+    that couples a node to its inner neighbour)."""
+    ids = halo.numbering[block]
+    dim = ids.ndim
+    inner, projector = rule.terms
+    single = rule.count[rule.slot] == 1
+    pair_of = np.full(len(rule.nodes), -1)
+    pair_of[rule.slot[single]] = np.flatnonzero(single)
+    interior_face = faces_holding(ids.shape) == 1
+    weights = weights[dim:]  # the second-derivative weights per axis (``stencil_weights``)
+    index, axes, couplings, slots = [], [], [], []
+    for face in halo.ghost_faces[block]:
+        if strong is not None and not strong[face.axis]:
+            continue
+        on_face = np.zeros(ids.shape, dtype=bool)
+        on_face[face.node_index] = True
+        local = np.argwhere(on_face & interior_face)
+        gids = ids[tuple(local.T)]
+        slot = np.clip(np.searchsorted(rule.nodes, gids), 0, len(rule.nodes) - 1)
+        pair = np.where(rule.nodes[slot] == gids, pair_of[slot], -1)
+        neighbour = local.copy()
+        neighbour[:, face.axis] += -1 if face.side else 1
+        P = projector[np.maximum(pair, 0)]
+        aligned = np.all(np.abs(P - np.round(P)) < 1e-9, axis=(1, 2)) & np.all(
+            np.abs(P - np.einsum("pii->pi", P)[:, :, None] * np.eye(dim)) < 1e-9, axis=(1, 2)
+        )
+        keep = (pair >= 0) & aligned & (inner[np.maximum(pair, 0), 0] == ids[tuple(neighbour.T)])
+        w = weights[face.axis]
+        coupling = 1.0 / (w[0, -1] if face.side else w[2, 0])  # the row's coupling, times this, is -1
+        index.append(local[keep])
+        axes.append(np.full(int(keep.sum()), face.axis))
+        couplings.append(np.full(int(keep.sum()), coupling))
+        slots.append(slot[keep])
+    if not sum(len(a) for a in axes):
+        return None
+    local, slots = np.concatenate(index), np.concatenate(slots)
+    tangential = np.round(np.einsum("pii->pi", projector[pair_of[slots]])) == 1
+    axes, couplings = np.concatenate(axes), np.concatenate(couplings)
+    passes = {}
+    for component in range(dim):
+        rows = tangential[:, component]
+        nodes = tuple(i[rows] for i in local.T)
+        passes.setdefault(
+            rows.tobytes(), ([], np.flatnonzero(rows), (slice(None),) + nodes, (axes[rows],) + nodes, nodes, couplings[rows])
+        )
+        passes[rows.tobytes()][0].append(component)
+    return slots, list(passes.values())
+
+
+def axis_weights(block_set, Xs, compiled: bool) -> np.ndarray:
+    """(blocks, dim) the median over each block's interior nodes of the Winslow equations' axial
+    coefficient A_aa / trace per axis on the start mesh ``Xs``: an axis's coupling on a grid is
+    this over its parametric cell size squared (``meshgen.methods.multigrid.hierarchy``)."""
+    rows = []
+    for X, coords in zip(Xs, block_set.coords):
+        _, axial = Level(coords, compiled=compiled).operator(component_array(X))
+        rows.append([float(np.median(a)) for a in axial])
+    return np.array(rows)
 
 
 def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
@@ -96,13 +209,20 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     mean lengths."""
     families = axis_families(block_set)
     compiled = block_set.dim == 3
+    weights = axis_weights(block_set, Xs, compiled)
+    spans = np.array([[t[-1] - t[0] for t in c] for c in block_set.coords], dtype=float)
+    finest = weights * (np.array([[len(t) - 1 for t in c] for c in block_set.coords]) / spans) ** 2
+    strong = finest >= SEMI_COARSENING * finest.max(axis=1, keepdims=True)  # per block axis, for wall_rows
     levels, sets, starts = [], [block_set], [list(Xs)]
     while True:
         current = sets[-1]
         cells = np.array([[len(t) - 1 for t in c] for c in current.coords])
+        strength = weights * (cells / spans) ** 2
+        coarsenable = cells > COARSEST_CELLS
+        strongest = np.where(coarsenable, strength, 0.0).max(axis=1, keepdims=True)
         coarsen = np.zeros(families.max() + 1, dtype=bool)
-        coarsen[families[cells > COARSEST_CELLS]] = True
-        coarsen = coarsen[families] & (cells > COARSEST_CELLS)
+        coarsen[families[coarsenable & (strength >= SEMI_COARSENING * strongest)]] = True
+        coarsen = coarsen[families] & coarsenable
         if not coarsen.any():
             break
         coarse = tuple(
@@ -114,7 +234,7 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
         sets.append(dataclasses.replace(current, coords=coarse))
     for index, current in enumerate(sets):
         coarse = sets[index + 1].coords if index + 1 < len(sets) else None
-        level = SetLevel(current, starts[index], lengths, coarse, compiled, slide)
+        level = SetLevel(current, starts[index], lengths, coarse, compiled, slide, strong)
         levels.append(level)
         if coarse is not None:
             restricted = [
@@ -125,16 +245,41 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     return levels
 
 
-def _relax_block(R: np.ndarray, f, level: Level, weights, frozen) -> None:
-    """One line-ADI sweep of N(R) = f on the padded block R (in place), the ``frozen`` nodes kept:
+def _relax_block(R: np.ndarray, f, level: Level, weights, frozen, walls=None, wall_step=None) -> None:
+    """One line-ADI sweep of N(R) = f on the padded block R (in place), the ``frozen`` nodes (a
+    tuple of index arrays into the block's own nodes) kept:
     the compiled sweep of ``meshgen.methods.multigrid.smooth`` with fixed line ends inside the
-    grid (``weights``: the 2D kernels' stencil weights, None in 3D)."""
+    grid (``weights``: the 2D kernels' stencil weights, None in 3D).
+
+    ``walls`` (``wall_rows``), ``wall_step`` (S, dim): the sliding rule's Jacobi step at those
+    nodes. Their tangential components are solved in the line normal to their face, a Neumann row
+    delta_node - delta_inner = step (their normal component stays a fixed line end): one line
+    solve per group of components with the same tangential nodes. A wave of tangential error
+    along a flat wall, which fixed line ends pass on by one node per sweep, is solved at once."""
     from meshgen.methods import winslow_compiled, winslow_compiled_2d  # numba: loaded on first use
 
-    if weights is not None:
-        winslow_compiled_2d.relax(R, f, weights, DAMPING, frozen)
-    else:
-        winslow_compiled.relax(R, f, level.weights, DAMPING, False, frozen)
+    kernels, weights = (winslow_compiled_2d, weights) if weights is not None else (winslow_compiled, level.weights)
+    step, axial, inverse_centre = kernels.jacobi_step(R, f, weights)
+    step[(slice(None),) + frozen] = 0.0  # fixed line ends: identity rows, zero right-hand side
+    axial[(slice(None),) + frozen] = 0.0
+    inverse_centre[frozen] = 0.0
+    if walls is None:
+        kernels.lines(step, axial, inverse_centre, weights, R, DAMPING)
+        return
+    _, passes = walls
+    for components, rows, all_axes, normal_axis, nodes, couplings in passes:
+        part = step[components]  # a copy: the kernels solve only these components' lines
+        if len(couplings):
+            saved = axial[all_axes].copy(), inverse_centre[nodes].copy()
+            axial[all_axes] = 0.0
+            axial[normal_axis] = 1.0
+            inverse_centre[nodes] = couplings
+            part[(slice(None),) + nodes] = wall_step[rows][:, components].T
+        moved = np.zeros(part.shape[:1] + R.shape[1:])
+        kernels.lines(part, axial, inverse_centre, weights, moved, DAMPING)
+        R[components] += moved
+        if len(couplings):
+            axial[all_axes], inverse_centre[nodes] = saved
 
 
 def _defect_block(R: np.ndarray, f, level: Level, weights) -> np.ndarray:
@@ -153,17 +298,30 @@ def relax_set(level: SetLevel, values: np.ndarray, f, sweeps: int) -> np.ndarray
     """``sweeps`` relaxation sweeps of the block set's equations on ``level`` from the unique nodes
     ``values`` (count, dim); ``f``: None, or (per block the padded interior right-hand side,
     per rule the right-hand side at its nodes). Returns the new unique nodes."""
-    halo = level.halo
+    layout = level.layout
+    buffer = layout.load(values)
+    padded = layout.views(buffer)
+    values = values.copy()  # up to date at ``level.touched``, the nodes the rules read
     for _ in range(sweeps):
-        padded = halo.padded(values)
+        slide_step = None
+        if level.slide_rule is not None:
+            slide_step = level.slide_rule.residual(values)
+            if f is not None:
+                slide_step -= f[1][0]
         for block, R in enumerate(padded):
             rhs = None if f is None else f[0][block]
-            _relax_block(R, rhs, level.smoothers[block], level.weights[block], level.frozen[block])
-        values = halo.unique([R[halo.inside(block)] for block, R in enumerate(padded)], out=values.copy())
+            walls = level.walls[block]
+            wall_step = None if walls is None else slide_step[walls[0]]
+            _relax_block(R, rhs, level.smoothers[block], level.weights[block], level.frozen[block], walls, wall_step)
+        if len(level.touched):
+            values[level.touched] = layout.read(buffer, level.touched)
         for number, rule in enumerate(level.rules):
             residual = rule.residual(values)
             values[rule.nodes] += residual if f is None else residual - f[1][number]
-    return values
+        if len(level.moved):
+            layout.write(buffer, level.moved, values[level.moved])
+        layout.exchange(buffer)
+    return layout.unique(buffer)
 
 
 def _defects(level: SetLevel, values: np.ndarray, f) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -171,11 +329,11 @@ def _defects(level: SetLevel, values: np.ndarray, f) -> tuple[list[np.ndarray], 
     and the rules' defect f - S at its own nodes (zero elsewhere), both component-first."""
     halo = level.halo
     winslow = []
-    for block, R in enumerate(halo.padded(values)):
+    for block, R in enumerate(level.layout.views(level.layout.load(values))):
         smoother = level.smoothers[block]
         with np.errstate(all="ignore"):
             full = _defect_block(R, None if f is None else f[0][block], smoother, level.weights[block])
-        full[smoother.interior][:, level.frozen[block]] = 0.0
+        full[smoother.interior][(slice(None),) + level.frozen[block]] = 0.0
         winslow.append(np.ascontiguousarray(full[halo.inside(block)]))
     rule_defect = np.zeros_like(values)  # per cell size to the rule's power: compared across levels so
     for number, rule in enumerate(level.rules):
@@ -197,7 +355,7 @@ def v_cycle_set(levels: list[SetLevel], index: int, values: np.ndarray, f) -> np
     start = coarse.halo.unique([t.transfer("restrict_solution", R) for t, R in zip(transfers, own)])
     winslow, rules = _defects(level, values, f)
     coarse_winslow = []
-    for block, (t, defect, R) in enumerate(zip(transfers, winslow, coarse.halo.padded(start))):
+    for block, (t, defect, R) in enumerate(zip(transfers, winslow, coarse.layout.views(coarse.layout.load(start)))):
         smoother = coarse.smoothers[block]
         with np.errstate(all="ignore"):
             operator = _operator_block(R, smoother, coarse.weights[block])

@@ -30,7 +30,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
-__all__ = ["defect", "operator", "relax", "threads", "transfer"]
+__all__ = ["defect", "jacobi_step", "lines", "operator", "relax", "threads", "transfer"]
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 CHUNKS_PER_THREAD = 4  # work split finer than the threads: a thread that the OS delays holds up less
@@ -205,15 +205,15 @@ def _lines_first(step, axial, inverse_centre, w, pivot, start, stop):
                 sup = -w[2, i - 1] * axial[0, i - 1, j, k] * inverse_centre[i - 1, j, k]
                 factor = sub / pivot[i - 1, j, k]
                 pivot[i, j, k] = 1.0 - factor * sup
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] -= factor * step[c, i - 1, j, k]
         for k in range(m3):
-            for c in range(3):
+            for c in range(step.shape[0]):
                 step[c, m1 - 1, j, k] /= pivot[m1 - 1, j, k]
         for i in range(m1 - 2, -1, -1):
             for k in range(m3):
                 sup = -w[2, i] * axial[0, i, j, k] * inverse_centre[i, j, k]
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] = (step[c, i, j, k] - sup * step[c, i + 1, j, k]) / pivot[i, j, k]
 
 
@@ -230,15 +230,15 @@ def _lines_second(step, axial, inverse_centre, w, pivot, start, stop):
                 sup = -w[2, j - 1] * axial[1, i, j - 1, k] * inverse_centre[i, j - 1, k]
                 factor = sub / pivot[i, j - 1, k]
                 pivot[i, j, k] = 1.0 - factor * sup
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] -= factor * step[c, i, j - 1, k]
         for k in range(m3):
-            for c in range(3):
+            for c in range(step.shape[0]):
                 step[c, i, m2 - 1, k] /= pivot[i, m2 - 1, k]
         for j in range(m2 - 2, -1, -1):
             for k in range(m3):
                 sup = -w[2, j] * axial[1, i, j, k] * inverse_centre[i, j, k]
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] = (step[c, i, j, k] - sup * step[c, i, j + 1, k]) / pivot[i, j, k]
 
 
@@ -255,17 +255,17 @@ def _lines_third(step, axial, inverse_centre, w, pivot, R, damping, start, stop)
                 sup = -w[2, k - 1] * axial[2, i, j, k - 1] * inverse_centre[i, j, k - 1]
                 factor = sub / pivot[i, j, k - 1]
                 pivot[i, j, k] = 1.0 - factor * sup
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] -= factor * step[c, i, j, k - 1]
         for j in range(m2):
-            for c in range(3):
+            for c in range(step.shape[0]):
                 step[c, i, j, m3 - 1] /= pivot[i, j, m3 - 1]
         for k in range(m3 - 2, -1, -1):
             for j in range(m2):
                 sup = -w[2, k] * axial[2, i, j, k] * inverse_centre[i, j, k]
-                for c in range(3):
+                for c in range(step.shape[0]):
                     step[c, i, j, k] = (step[c, i, j, k] - sup * step[c, i, j, k + 1]) / pivot[i, j, k]
-        for c in range(3):
+        for c in range(step.shape[0]):
             for j in range(m2):
                 for k in range(m3):
                     R[c, i + 1, j + 1, k + 1] += damping * step[c, i, j, k]
@@ -339,3 +339,20 @@ def transfer(F, columns, values, axis: int) -> np.ndarray:
     else:  # across the planes i
         _across((_transfer_second, _transfer_third)[axis - 1], F.shape[1], F, columns, values, out)
     return out
+
+
+def jacobi_step(R, f, weights):
+    """The Jacobi step (N(R) - f) / centre (3, m1, m2, m3), the axial coefficients (3, m1, m2, m3)
+    and 1 / centre (m1, m2, m3) at the interior nodes of R (3, m1+2, m2+2, m3+2)."""
+    return _jacobi_step(R, f, weights)[:3]
+
+
+def lines(step, axial, inverse_centre, weights, R, damping: float) -> None:
+    """The line-ADI step's tridiagonal solves of ``step`` (k, m1, m2, m3) (in place; k: any of the
+    components, each with the same rows, from ``axial`` and ``inverse_centre`` as ``jacobi_step``
+    gives them), then R's interior += damping * step, R (k, m1+2, m2+2, m3+2) (``relax``'s second half)."""
+    pivot = np.empty(inverse_centre.shape)
+    m1, m2 = inverse_centre.shape[:2]
+    _across(_lines_first, m2, step, axial, inverse_centre, weights[3], pivot)
+    _across(_lines_second, m1, step, axial, inverse_centre, weights[4], pivot)
+    _across(_lines_third, m1, step, axial, inverse_centre, weights[5], pivot, R, damping)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["defect", "operator", "relax"]
+__all__ = ["defect", "jacobi_step", "lines", "operator", "relax"]
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 
@@ -93,15 +93,15 @@ def _lines(step, axial, inverse_centre, w0, w1, pivot, R, damping):
             sup = -w0[2, i - 1] * axial[0, i - 1, j] * inverse_centre[i - 1, j]
             factor = sub / pivot[i - 1, j]
             pivot[i, j] = 1.0 - factor * sup
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] -= factor * step[c, i - 1, j]
     for j in range(m2):
-        for c in range(2):
+        for c in range(step.shape[0]):
             step[c, m1 - 1, j] /= pivot[m1 - 1, j]
     for i in range(m1 - 2, -1, -1):
         for j in range(m2):
             sup = -w0[2, i] * axial[0, i, j] * inverse_centre[i, j]
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] = (step[c, i, j] - sup * step[c, i + 1, j]) / pivot[i, j]
     for i in range(m1):
         pivot[i, 0] = 1.0
@@ -110,20 +110,22 @@ def _lines(step, axial, inverse_centre, w0, w1, pivot, R, damping):
             sup = -w1[2, j - 1] * axial[1, i, j - 1] * inverse_centre[i, j - 1]
             factor = sub / pivot[i, j - 1]
             pivot[i, j] = 1.0 - factor * sup
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] -= factor * step[c, i, j - 1]
-        for c in range(2):
+        for c in range(step.shape[0]):
             step[c, i, m2 - 1] /= pivot[i, m2 - 1]
         for j in range(m2 - 2, -1, -1):
             sup = -w1[2, j] * axial[1, i, j] * inverse_centre[i, j]
-            for c in range(2):
+            for c in range(step.shape[0]):
                 step[c, i, j] = (step[c, i, j] - sup * step[c, i, j + 1]) / pivot[i, j]
         for j in range(m2):
-            for c in range(2):
+            for c in range(step.shape[0]):
                 R[c, i + 1, j + 1] += damping * step[c, i, j]
 
 
-def _jacobi_step(R, f, weights):
+def jacobi_step(R, f, weights):
+    """The Jacobi step (N(R) - f) / centre (2, m1, m2), the axial coefficients (2, m1, m2) and
+    1 / centre (m1, m2) at the interior nodes of R (2, m1+2, m2+2); ``f``: None or (2, m1, m2)."""
     m1, m2 = R.shape[1] - 2, R.shape[2] - 2
     step, axial, inverse_centre = np.empty((2, m1, m2)), np.empty((2, m1, m2)), np.empty((m1, m2))
     _jacobi(R, R if f is None else f, f is not None, *weights, step, axial, inverse_centre)
@@ -133,7 +135,7 @@ def _jacobi_step(R, f, weights):
 def operator(R, weights):
     """Normalised Winslow residual (2, m1, m2) and axial coefficients (2, m1, m2) at the interior
     nodes of R (2, m1+2, m2+2); ``weights``: first- and second-derivative weights per axis (3, m_a)."""
-    step, axial, inverse_centre = _jacobi_step(R, None, weights)
+    step, axial, inverse_centre = jacobi_step(R, None, weights)
     return step / inverse_centre, axial
 
 
@@ -148,9 +150,16 @@ def defect(R, f, weights) -> np.ndarray:
 def relax(R, f, weights, damping: float, frozen=None) -> None:
     """One line-ADI sweep of N(R) = f on the interior nodes of R (2, n1+1, n2+1), in place;
     ``frozen``: as ``meshgen.methods.winslow_compiled.relax`` takes them."""
-    step, axial, inverse_centre = _jacobi_step(R, f, weights)
+    step, axial, inverse_centre = jacobi_step(R, f, weights)
     if frozen is not None:
         step[:, frozen] = 0.0
         axial[:, frozen] = 0.0
         inverse_centre[frozen] = 0.0
+    _lines(step, axial, inverse_centre, weights[2], weights[3], np.empty(inverse_centre.shape), R, damping)
+
+
+def lines(step, axial, inverse_centre, weights, R, damping: float) -> None:
+    """The line-ADI step's tridiagonal solves of ``step`` (k, m1, m2) (in place; k: any of the
+    components, each with the same rows, from ``axial`` and ``inverse_centre`` as ``jacobi_step``
+    gives them), then R's interior += damping * step, R (k, m1+2, m2+2)."""
     _lines(step, axial, inverse_centre, weights[2], weights[3], np.empty(inverse_centre.shape), R, damping)
