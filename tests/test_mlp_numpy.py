@@ -141,12 +141,13 @@ def test_auto_device_is_cpu_without_a_visible_gpu(monkeypatch):
         assert inference_device("auto") == "cpu"
 
 
-@pytest.mark.parametrize("compiled", [True, False])
-def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid(compiled):
-    """The forward pass per node is W h summed k = 0, 1, .. with every product and sum rounded to
-    float32 (no FMA, no reordering), then + b and tanh: a NumPy oracle doing exactly that,
-    column by column, gives the same bits; and so does any sub-grid, batch or worker count (a BLAS
-    product rounds a node by its row in the product, so it would not)."""
+def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid():
+    """The compiled forward pass per node is W h summed k = 0, 1, .. with every product and sum
+    rounded to float32 (no FMA, no reordering), then + b and tanh: a NumPy oracle doing exactly
+    that, column by column, gives the same bits; and so does any sub-grid, batch or worker count (a
+    BLAS product rounds a node by its row in the product, so it would not: the small-grid BLAS
+    path is evaluated whole instead, ``test_chunked``)."""
+    compiled = True
     _, model = random_model(3, [20, 17], seed=5)
     coords = [np.linspace(0.0, 1.0, n) ** 1.3 for n in (11, 7, 9)]
     grid = np.stack(np.meshgrid(*coords, indexing="ij"), axis=-1).reshape(-1, 3).astype(np.float32)
@@ -193,9 +194,10 @@ def test_the_compiled_layer_and_the_numpy_layer_are_the_same_bits_as_a_scalar_or
 
 
 def test_a_small_mesh_never_imports_numba_and_is_the_compiled_mesh(tmp_path):
-    """``meshgen mesh --dims 20 20 20`` (the bundled network) in a fresh process takes the NumPy
+    """``meshgen mesh --dims 20 20 20`` (the bundled network) in a fresh process takes the BLAS
     layers (below ``NUMPY_WORK``: no numba import, about a second); the network's values there
-    are the compiled kernel's bits."""
+    are the compiled kernel's to float32 round-off (the two sum in different orders, so bits would
+    test one BLAS build's rounding)."""
     import os
     import subprocess
     import sys
@@ -215,4 +217,10 @@ def test_a_small_mesh_never_imports_numba_and_is_the_compiled_mesh(tmp_path):
     model = find_model(geometry_name="semicylinder").checkpoint["model"]
     coords = parametric_grid((20, 20, 20))
     assert not compiled_for(model, 21**3) and compiled_for(model, 101**3)
-    np.testing.assert_array_equal(forward_on_grid(model, coords, compiled=False), forward_on_grid(model, coords, compiled=True))
+    blas, kernel = forward_on_grid(model, coords, compiled=False), forward_on_grid(model, coords, compiled=True)
+    # float32 round-off of the last layer's sum, whose terms (|W| times tanh values up to 1) are far
+    # larger than this network's outputs (an exact-boundary network's N is small where b is)
+    state = model["state_dict"]
+    last = len(model["widths"])
+    terms = np.abs(np.asarray(state[f"layers.{last}.weight"])).sum(axis=1) + np.abs(np.asarray(state[f"layers.{last}.bias"]))
+    np.testing.assert_allclose(blas, kernel, rtol=0, atol=1e-5 * terms.max())

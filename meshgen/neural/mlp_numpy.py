@@ -1,15 +1,17 @@
-"""The trained network's forward pass without torch: a small tanh MLP, each layer fixed-order
-float32 arithmetic per node, so meshing with a trained model needs no torch. Each layer is a
-compiled kernel (``dense_kernel``, numba) or, for grids below ``NUMPY_WORK`` multiply-adds (a
-fresh process then never imports numba, about a second), the same operations in NumPy
-(``dense_numpy``): the same bits either way (tested), chosen by size alone (``compiled_for``).
+"""The trained network's forward pass without torch: a small tanh MLP, so meshing with a trained
+model needs no torch. On grids from ``NUMPY_WORK`` multiply-adds up each layer is a compiled kernel
+(``dense_kernel``, numba) of fixed-order float32 arithmetic per node: a node's value is the same
+bits in any grid, block, batch or thread count, on any CPU, so a chunked mesh equals the in-memory
+one bit for bit. Below it (a fresh process then never imports numba, about a second) each layer
+is a BLAS product, whose rounding of a node depends on its column in the product (OpenBLAS's AVX2
+kernel: the column index modulo 6), so such a grid is always evaluated whole, in the one fixed
+partition below (``meshgen.neural.network_map.small_grid_network``). ``dense_numpy`` is the
+kernel's arithmetic in NumPy, its reference in the tests. The path is chosen by size alone
+(``compiled_for``).
 
 ``forward_on_grid(model, coords)`` is ``meshgen.neural.gpu_forward.evaluate_on_grid`` without torch:
 the same inputs u = 2 xi - 1 in float32, the same layers (W h + b, tanh between), float32
 throughout, the result as float64. It agrees with torch's forward to float32 round-off (tested).
-Unlike a BLAS product, whose rounding of a node depends on the node's row in the product (the
-batch's shape, OpenBLAS's kernel for the CPU), a node's value here is the same bits in any grid,
-block, batch or thread count: a chunked mesh equals the in-memory one bit for bit.
 
 The grid goes through in chunks of ``CHUNK_NODES`` nodes (worker threads take chunks in turn:
 the kernel and ``tanh`` release the GIL), each in tiles of ``TILE_ROWS`` nodes whose activations
@@ -182,10 +184,12 @@ def multiply_adds(model: dict) -> int:
 
 
 def compiled_for(model: dict, nodes: int) -> bool:
-    """Whether a forward pass of ``model`` over ``nodes`` nodes takes the compiled kernel (from
-    ``NUMPY_WORK`` multiply-adds up) rather than :func:`dense_numpy` (no numba import, about a
-    second in a fresh process). By size alone, so a request always takes the same path (a chunked
-    mesh: give the whole grid's nodes); both give the same bits."""
+    """Whether a forward pass of ``model`` over ``nodes`` nodes takes the compiled fixed-order kernel
+    (from ``NUMPY_WORK`` multiply-adds up) rather than BLAS products (no numba import, about a
+    second in a fresh process, and ten times faster than :func:`dense_numpy` on small grids). By
+    size alone, so a request always takes the same path (a chunked mesh: give the whole grid's
+    nodes). BLAS rounds a node by its position in the product, so a grid below the threshold is
+    evaluated whole, in one fixed partition (``meshgen.neural.network_map.map_on_block``)."""
     return nodes * multiply_adds(model) >= NUMPY_WORK
 
 
@@ -203,19 +207,19 @@ def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
 def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray], compiled: bool = True) -> np.ndarray:
     """The network of ``layers`` (:func:`network_arrays`) at up to ``TILE_ROWS`` float32 input rows
     ``inputs`` (rows, d): the first ``rows`` columns of the returned (d, ``TILE_ROWS``) float32
-    buffer. Every layer is :func:`dense_kernel` (``compiled``) or :func:`dense_numpy` (the same
-    bits), then ``tanh`` (elementwise, NumPy's in both); a short tile is padded with zeros.
+    buffer. Every layer is :func:`dense_kernel` (``compiled``) or a BLAS product (whose rounding
+    of a node depends on its column), then ``tanh`` (elementwise, NumPy's in both); a short tile is padded with zeros.
     ``buffers``: :func:`_tile_buffers`."""
     dense = dense_kernel() if compiled else None
-    scratch = buffers[-1]
     hidden = buffers[0]
     hidden[:, : len(inputs)] = inputs.T
     hidden[:, len(inputs) :] = 0.0
     for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:-1])):
         if compiled:
             dense(hidden, weight, bias, result)
-        else:
-            dense_numpy(hidden, weight, bias, result, scratch[: result.shape[0]])
+        else:  # BLAS: fast, but its rounding of a node depends on the node's column in the product
+            np.matmul(weight, hidden, out=result)
+            np.add(result, bias[:, None], out=result)
         if index < len(layers) - 1:
             np.tanh(result, out=result)
         hidden = result
@@ -309,7 +313,7 @@ def forward_on_grid(
     """The network N(xi) of ``model`` (a ``checkpoint["model"]`` description) at the tensor grid of
     the 1D parametric coordinates ``coords`` (values in [0, 1]): (n1 * n2 [* n3], d) float64, nodes
     in C order, written into ``out`` when given. ``workers``: threads over chunks (default: the
-    CPUs this process may use). ``compiled``: the numba kernel or NumPy (the same bits; default
+    CPUs this process may use). ``compiled``: the numba kernel or BLAS products (default
     :func:`compiled_for` this grid's size)."""
     layers = network_arrays(model)
     dim = int(model["dim"])

@@ -2,13 +2,16 @@
 soft or exact boundary), ``model_boundary_errors`` (its boundary error from the grid's faces alone)
 and ``evaluate_network``, the forward pass on the device asked for.
 
-On a CPU the forward pass is ``meshgen.neural.mlp_numpy``'s (fixed-order float32 arithmetic per
-node: a numba kernel, or NumPy for small grids, the same bits), so meshing with a trained model
+On a CPU the forward pass is ``meshgen.neural.mlp_numpy``'s (a numba kernel of fixed-order
+float32 arithmetic per node on large grids; BLAS on small grids, always evaluated whole: either way
+a mesh made block by block equals the whole-grid one bit for bit), so meshing with a trained model
 imports no torch; torch (``meshgen.neural.gpu_forward``) runs it on a GPU only: ``--device cuda``, or
 ``auto`` where ``meshgen.neural.device`` finds one.
 """
 
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 
@@ -20,6 +23,8 @@ from meshgen.neural.device import inference_device
 from meshgen.neural.mlp_numpy import CHUNK_NODES, compiled_for, finite_output, forward_on_grid
 
 __all__ = [
+    "SMALL_GRIDS_KEPT",
+    "small_grid_network",
     "CHUNK_NODES",
     "bubble_on_grid",
     "evaluate_network",
@@ -29,6 +34,8 @@ __all__ = [
     "model_boundary_errors",
     "spans_cube",
 ]
+
+SMALL_GRIDS_KEPT = 2  # small grids whose network values are remembered (a mesh and its faces, per request)
 
 
 def evaluate_network(
@@ -72,20 +79,46 @@ def exact_boundary_terms(model: dict, geometry, coords):
     return face_terms(face_values(geometry.boundary, coords), coords)
 
 
+_SMALL_GRIDS: list = []  # [(model, coordinate bytes, network values)]: the last few small grids evaluated
+_SMALL_GRIDS_LOCK = threading.Lock()
+
+
+def small_grid_network(model: dict, coords, workers=None) -> np.ndarray:
+    """N(xi) of ``model`` on the whole tensor grid of ``coords`` (m1, .., d) float64, by BLAS
+    products in the one partition of ``forward_on_grid`` (so the same bits on every call, whatever
+    the thread count), remembered for the last few grids: the blocks and faces of a small mesh made
+    block by block (the chunked path, a boundary-error pass) take their values from it."""
+    key = tuple(np.asarray(c, dtype=float).tobytes() for c in coords)
+    with _SMALL_GRIDS_LOCK:
+        for known, known_key, values in _SMALL_GRIDS:
+            if known is model and known_key == key:
+                return values
+        shape = tuple(len(c) for c in coords)
+        values = evaluate_network(model, coords, workers=workers, compiled=False).reshape(*shape, len(coords))
+        values.setflags(write=False)
+        _SMALL_GRIDS.insert(0, (model, key, values))
+        del _SMALL_GRIDS[SMALL_GRIDS_KEPT:]
+        return values
+
+
 def map_on_block(model: dict, coords, block=None, tfi_terms=None, workers=None, device: str = "cpu") -> np.ndarray:
     """The physical map of ``model`` on the nodes ``block`` (one slice per axis, default all) of the
     tensor grid of ``coords``: (m1, .., d) float64. Soft boundary: center + scale N(xi); exact:
     scale b(xi) N(xi) + TFI(xi), the TFI from ``tfi_terms`` (:func:`exact_boundary_terms`, made on
     the whole grid). A node's value is the same sequence of operations in any block (the network's
     per-node arithmetic is fixed: ``meshgen.neural.mlp_numpy.forward_tile``), so a mesh made block
-    by block equals the whole-grid one bit for bit. The compiled kernel or NumPy is chosen by the
-    whole grid's size, so every block of a mesh takes the whole mesh's path."""
+    by block equals the whole-grid one bit for bit. The compiled kernel or BLAS is chosen by the
+    whole grid's size, so every block of a mesh takes the whole mesh's path; on BLAS (small grids)
+    the block is cut from the whole grid's values (:func:`small_grid_network`)."""
     dim = len(coords)
     block = tuple(block) if block is not None else (slice(None),) * dim
     sub_coords = [c[b] for c, b in zip(coords, block)]
     shape = tuple(len(c) for c in sub_coords)
     compiled = compiled_for(model, int(np.prod([len(c) for c in coords])))  # by the whole grid: one path per mesh
-    X = evaluate_network(model, sub_coords, workers=workers, device=device, compiled=compiled).reshape(*shape, dim)
+    if compiled or inference_device(device) == "cuda":
+        X = evaluate_network(model, sub_coords, workers=workers, device=device, compiled=compiled).reshape(*shape, dim)
+    else:  # a small grid on BLAS: its nodes' bits depend on the partition, so always the whole grid's
+        X = small_grid_network(model, coords, workers)[block].copy()
     scale = float(model["scale"])
     if not model["exact_boundary"]:
         X *= scale
