@@ -24,7 +24,7 @@ import numpy as np
 
 from meshgen.quality.structured import use_compiled
 
-__all__ = ["DEFINITIONS", "cell_centres", "face_centres_and_areas", "non_orthogonality"]
+__all__ = ["DEFINITIONS", "cell_centres", "face_centres_and_areas", "non_orthogonality", "quad_centres_and_areas"]
 
 DEFINITIONS = {
     "non_orthogonality_internal": (
@@ -56,9 +56,14 @@ def _face_corners(X: np.ndarray, axis: int) -> list[np.ndarray]:
 def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     """OpenFOAM's face centres and area vectors (module docstring) of the faces normal to ``axis``
     of the 3D node array ``X``: two arrays shaped like the face grid (node layers along ``axis``,
-    cells along the others) + (3,); area vectors along +``axis`` for a right-handed map.
-    Computed component by component (plain arrays, no (.., 3) temporaries)."""
-    corners = [[np.ascontiguousarray(corner[..., c]) for c in range(3)] for corner in _face_corners(X, axis)]
+    cells along the others) + (3,); area vectors along +``axis`` for a right-handed map."""
+    return quad_centres_and_areas([[np.ascontiguousarray(corner[..., c]) for c in range(3)] for corner in _face_corners(X, axis)])
+
+
+def quad_centres_and_areas(corners) -> tuple[np.ndarray, np.ndarray]:
+    """OpenFOAM's centres and area vectors of quadrilateral faces given as their four corners in
+    cyclic order, each corner three component arrays of one shape: (shape + (3,)) twice. Computed
+    component by component (plain arrays, no (.., 3) temporaries)."""
     estimate = [0.25 * (corners[0][c] + corners[1][c] + corners[2][c] + corners[3][c]) for c in range(3)]
     shape = estimate[0].shape
     sum_n = [np.zeros(shape) for _ in range(3)]

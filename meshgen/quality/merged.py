@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.quality.faces import match_faces
-from meshgen.quality.faces_openfoam import ROOT_VSMALL
+from meshgen.quality.faces_openfoam import ROOT_VSMALL, quad_centres_and_areas
 from meshgen.quality.kernels import HEX_CORNER, HEX_FACES, QUAD_CORNER, QUAD_FACES
 from meshgen.quality.report import assess, build_report
 
@@ -91,33 +91,13 @@ def _cell_sizes(points, cells, dim) -> np.ndarray:
 
 def _face_geometry(points3, cells, cyclic) -> tuple[np.ndarray, np.ndarray]:
     """OpenFOAM's centres and area vectors (F, M, 3) of every face of every cell (corners in
-    ``cyclic`` order: area vectors along +axis on a right-handed cell), component by component as
-    ``meshgen.quality.faces_openfoam.face_centres_and_areas`` computes them."""
+    ``cyclic`` order: area vectors along +axis on a right-handed cell), by ``meshgen.quality.faces_openfoam.quad_centres_and_areas``."""
     xyz = [np.ascontiguousarray(points3[:, c]) for c in range(3)]
     columns = np.ascontiguousarray(cells.T)
     centres = np.empty((len(cyclic), len(cells), 3))
     areas = np.empty_like(centres)
     for f, corners in enumerate(cyclic):
-        P = [[x[columns[k]] for x in xyz] for k in corners]
-        estimate = [0.25 * (P[0][c] + P[1][c] + P[2][c] + P[3][c]) for c in range(3)]
-        sum_n = [np.zeros(len(cells)) for _ in range(3)]
-        sum_a = np.zeros(len(cells))
-        sum_ac = [np.zeros(len(cells)) for _ in range(3)]
-        for m in range(4):
-            point, following = P[m], P[(m + 1) % 4]
-            e = [following[c] - point[c] for c in range(3)]
-            g = [estimate[c] - point[c] for c in range(3)]
-            n = (e[1] * g[2] - e[2] * g[1], e[2] * g[0] - e[0] * g[2], e[0] * g[1] - e[1] * g[0])
-            a = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-            sum_a += a
-            for c in range(3):
-                sum_n[c] += n[c]
-                sum_ac[c] += a * (point[c] + following[c] + estimate[c])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(sum_a > 0, 1.0 / (3.0 * sum_a), 0.0)
-        for c in range(3):
-            centres[f, :, c] = np.where(sum_a > 0, sum_ac[c] * scale, estimate[c])
-            areas[f, :, c] = 0.5 * sum_n[c]
+        centres[f], areas[f] = quad_centres_and_areas([[x[columns[k]] for x in xyz] for k in corners])
     return centres, areas
 
 
