@@ -17,15 +17,8 @@ from meshgen.errors import MeshgenError
 from meshgen.formats import metadata_of, read_mesh
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.clustering import node_coordinates
-from meshgen.methods.elliptic import (
-    ConvergenceWarning,
-    along_axes,
-    build_elliptic,
-    elliptic,
-    hierarchy,
-    interpolation_matrix,
-    solve_lines,
-)
+from meshgen.methods.elliptic import ConvergenceWarning, build_elliptic, elliptic
+from meshgen.methods.multigrid import along_axes, hierarchy, interpolation_matrix, solve_lines
 from meshgen.methods.tfi import parametric_grid, tfi
 from meshgen.methods.winslow import winslow_residual
 

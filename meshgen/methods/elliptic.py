@@ -20,57 +20,20 @@ import numpy as np
 from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.geometry.blocks import global_numbering, tfi_blocks
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
-from meshgen.methods.multigrid import (
-    COARSEST_CELLS,
-    COARSEST_SWEEPS,
-    COMPILED_NODES,
-    DAMPING,
-    DEFAULT_MAX_ITER,
-    DEFAULT_TOL,
-    SEMI_COARSENING,
-    Level,
-    along_axes,
-    banded,
-    coarser_coordinates,
-    hierarchy,
-    interpolation_matrix,
-    smooth,
-    solve_lines,
-    solve_winslow,
-    stencil_weights,
-    uses_kernels,
-    v_cycle,
-)
+from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
 from meshgen.methods.multigrid_set import solve_set
 from meshgen.methods.orthogonal import inner_block, parse_walls, straighten_first_layer
 from meshgen.methods.sliding import planar_sliding
 from meshgen.methods.tfi import check_axes, parametric_grid, tfi
 
 __all__ = [
-    "COARSEST_CELLS",
-    "COARSEST_SWEEPS",
-    "COMPILED_NODES",
-    "DAMPING",
     "DEFAULT_MAX_ITER",
     "DEFAULT_TOL",
     "MAX_CYCLES",
-    "SEMI_COARSENING",
     "ConvergenceWarning",
-    "Level",
-    "along_axes",
-    "banded",
     "build_elliptic",
-    "coarser_coordinates",
     "elliptic",
     "elliptic_blocks",
-    "hierarchy",
-    "interpolation_matrix",
-    "smooth",
-    "solve_lines",
-    "solve_winslow",
-    "stencil_weights",
-    "uses_kernels",
-    "v_cycle",
 ]
 
 

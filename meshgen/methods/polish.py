@@ -30,7 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.geometry.layout import relax_faces
-from meshgen.methods.elliptic import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
+from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
 
 __all__ = ["NOT_POLISHED_REASON", "polish", "polishes_by_default"]
 
