@@ -167,6 +167,18 @@ def test_a_nodes_value_is_fixed_order_float32_arithmetic_whatever_the_grid():
     np.testing.assert_array_equal(forward_on_grid(model, part, chunk=3, workers=1, compiled=compiled), expected)
 
 
+def dense_numpy(h: np.ndarray, weight: np.ndarray, bias: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
+    """``meshgen.neural.mlp_numpy.dense_kernel``'s layer in NumPy (this test's whole-array oracle), the same float32 operations in the same order (so the
+    same bits): ``out`` = 0, then ``out`` + W_k h_k for k = 0, 1, .., then + b, each product and sum
+    a separate float32 ufunc (rounded one by one). A Python loop over the inputs k, vectorised over
+    outputs and nodes. ``h`` (fan_in, nodes), ``out`` and ``scratch`` (fan_out, nodes) float32."""
+    out[...] = 0.0
+    for k in range(h.shape[0]):
+        np.multiply(weight[:, k : k + 1], h[k], out=scratch)
+        np.add(out, scratch, out=out)
+    np.add(out, bias[:, None], out=out)
+
+
 @pytest.mark.parametrize("fan_in", [1, 2, 3, 5, 8, 48])
 @pytest.mark.parametrize("fan_out", [1, 3, 7, 8, 13, 48])
 def test_the_compiled_layer_and_the_numpy_layer_are_the_same_bits_as_a_scalar_oracle(fan_in, fan_out):
@@ -174,7 +186,7 @@ def test_the_compiled_layer_and_the_numpy_layer_are_the_same_bits_as_a_scalar_or
     remainder, nodes in runs of ``KERNEL_NODES`` and a partial run) and ``dense_numpy`` against
     float32 scalars summed k = 0, 1, .. one node at a time: every shape's remainders, bit for bit.
     Values spread over decades, so that a reordered sum or a fused multiply-add would differ."""
-    from meshgen.neural.mlp_numpy import KERNEL_NODES, dense_kernel, dense_numpy
+    from meshgen.neural.mlp_numpy import KERNEL_NODES, dense_kernel
 
     rng = np.random.default_rng(fan_in * 100 + fan_out)
     nodes = 2 * KERNEL_NODES + 37

@@ -5,8 +5,7 @@ bits in any grid, block, batch or thread count, on any CPU, so a chunked mesh eq
 one bit for bit. Below it (a fresh process then never imports numba, about a second) each layer
 is a BLAS product, whose rounding of a node depends on its column in the product (OpenBLAS's AVX2
 kernel: the column index modulo 6), so such a grid is always evaluated whole, in the one fixed
-partition below (``meshgen.neural.network_map.small_grid_network``). ``dense_numpy`` is the
-kernel's arithmetic in NumPy, its reference in the tests. The path is chosen by size alone
+partition below (``meshgen.neural.network_map.small_grid_network``). The path is chosen by size alone
 (``compiled_for``).
 
 ``forward_on_grid(model, coords)`` is ``meshgen.neural.gpu_forward.evaluate_on_grid`` without torch:
@@ -46,7 +45,6 @@ __all__ = [
     "TILE_ROWS",
     "compiled_for",
     "dense_kernel",
-    "dense_numpy",
     "finite_output",
     "forward_on_grid",
     "forward_tile",
@@ -73,7 +71,7 @@ def dense_kernel():
     fused multiply-add, no reordering: ``fastmath`` off), vectorised across the nodes. So a node's
     value is the same bits in any grid, block, batch or thread, on any CPU: IEEE float32 arithmetic
     in a fixed order, where a BLAS product's rounding depends on the node's row in it (OpenBLAS's
-    AVX2 kernel treats rows by their index modulo 6). :func:`dense_numpy` is the same arithmetic.
+    AVX2 kernel treats rows by their index modulo 6).
 
     For speed (not for the result): nodes in runs of ``KERNEL_NODES`` (the run's inputs stay in L1
     across the outputs), eight outputs at once over two inputs k per pass (their sums in a small
@@ -165,18 +163,6 @@ def dense_kernel():
     return dense
 
 
-def dense_numpy(h: np.ndarray, weight: np.ndarray, bias: np.ndarray, out: np.ndarray, scratch: np.ndarray) -> None:
-    """:func:`dense_kernel`'s layer in NumPy, the same float32 operations in the same order (so the
-    same bits): ``out`` = 0, then ``out`` + W_k h_k for k = 0, 1, .., then + b, each product and sum
-    a separate float32 ufunc (rounded one by one). A Python loop over the inputs k, vectorised over
-    outputs and nodes. ``h`` (fan_in, nodes), ``out`` and ``scratch`` (fan_out, nodes) float32."""
-    out[...] = 0.0
-    for k in range(h.shape[0]):
-        np.multiply(weight[:, k : k + 1], h[k], out=scratch)
-        np.add(out, scratch, out=out)
-    np.add(out, bias[:, None], out=out)
-
-
 def multiply_adds(model: dict) -> int:
     """Multiply-adds per node of the network of ``model`` (a ``checkpoint["model"]`` description)."""
     sizes = [int(model["dim"]), *(int(w) for w in model["widths"]), int(model["dim"])]
@@ -186,7 +172,7 @@ def multiply_adds(model: dict) -> int:
 def compiled_for(model: dict, nodes: int) -> bool:
     """Whether a forward pass of ``model`` over ``nodes`` nodes takes the compiled fixed-order kernel
     (from ``NUMPY_WORK`` multiply-adds up) rather than BLAS products (no numba import, about a
-    second in a fresh process, and ten times faster than :func:`dense_numpy` on small grids). By
+    second in a fresh process, and ten times faster than the kernel's order in NumPy on small grids). By
     size alone, so a request always takes the same path (a chunked mesh: give the whole grid's
     nodes). BLAS rounds a node by its position in the product, so a grid below the threshold is
     evaluated whole, in one fixed partition (``meshgen.neural.network_map.map_on_block``)."""
@@ -195,13 +181,10 @@ def compiled_for(model: dict, nodes: int) -> bool:
 
 def _tile_buffers(layers, dim: int) -> list[np.ndarray]:
     """A tile's float32 buffers: its inputs (dim, ``TILE_ROWS``), then one (width, ``TILE_ROWS``)
-    per layer, then a scratch buffer (widest layer, ``TILE_ROWS``) for :func:`dense_numpy`."""
-    widths = [b.shape[0] for _, b in layers]
-    return (
-        [np.zeros((dim, TILE_ROWS), dtype=np.float32)]
-        + [np.empty((width, TILE_ROWS), dtype=np.float32) for width in widths]
-        + [np.empty((max(widths), TILE_ROWS), dtype=np.float32)]
-    )
+    per layer."""
+    return [np.zeros((dim, TILE_ROWS), dtype=np.float32)] + [
+        np.empty((b.shape[0], TILE_ROWS), dtype=np.float32) for _, b in layers
+    ]
 
 
 def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray], compiled: bool = True) -> np.ndarray:
@@ -214,7 +197,7 @@ def forward_tile(layers, inputs: np.ndarray, buffers: list[np.ndarray], compiled
     hidden = buffers[0]
     hidden[:, : len(inputs)] = inputs.T
     hidden[:, len(inputs) :] = 0.0
-    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:-1])):
+    for index, ((weight, bias), result) in enumerate(zip(layers, buffers[1:])):
         if compiled:
             dense(hidden, weight, bias, result)
         else:  # BLAS: fast, but its rounding of a node depends on the node's column in the product
