@@ -1,7 +1,7 @@
 """Multi-block meshes (meshgen.geometry.blocks): the pipe O-grid's quality against resolution, and the DFG
 2D-1 benchmark on the dfg-cylinder block set with OpenFOAM's simpleFoam.
 
-    python benchmarks/bench_blocks.py [--quick] [--json FILE] [--only pipe|dfg]
+    python benchmarks/bench_blocks.py [--quick] [--json FILE] [--only pipe|dfg|speed]
 
 ``pipe``: elliptic (and TFI) meshes at N = 8, 16, 32, 50 (--quick: 8, 16) cells around a quarter of
 the circumference (50: 200 around), M = N / 2 across the wall layer, 4 along the axis, and the
@@ -19,6 +19,12 @@ errors against the reference, the observed order of convergence, and the targets
 larger rows (at most 10k cells: 0.1%, 3%, 0.5%; at most 40k: 0.05%, 1%, 0.2%); each row also says
 whether simpleFoam met its residual controls and how much drag and lift moved over the last 50
 iterations. Needs OpenFOAM; skipped without it.
+``speed``: the elliptic solver on block sets against one block, in one warm process, medians of 3
+(--quick: 1): ``meshgen mesh -g dfg-cylinder --dims 34 20 --method elliptic``'s solve (target at
+most 1 s); the pipe at 50 50 80 (1.0e6 hexahedra, solved as its section and extruded, the
+default) over the semicylinder at 100^3 (1.0e6 hexahedra; target at most 1.5x); and, not judged,
+the same pipe solved by the 3D multigrid (``as_extrusion=False``, a set that is not an extrusion
+pays this; full run only).
 The machine's load average is recorded: other work on a shared machine slows the wall times.
 """
 
@@ -143,6 +149,46 @@ def dfg_rows(all_dims) -> list[dict]:
     return rows
 
 
+def speed_rows(quick: bool) -> dict:
+    """Seconds of the block-set elliptic solves against the one-block semicylinder (module docstring)."""
+    from meshgen.geometry import load_geometry
+    from meshgen.methods.elliptic import elliptic, elliptic_blocks
+
+    repeat = 1 if quick else 3
+    elliptic_blocks(load_block_set("pipe", None, (4, 4, 4)))  # compiled kernels loaded before any timing
+    elliptic(load_geometry("semicylinder"), dims=(8, 8, 8))
+
+    def timed(function):
+        runs, info = [], None
+        for _ in range(repeat):
+            start = time.perf_counter()
+            info = function()
+            runs.append(time.perf_counter() - start)
+        return {"seconds": float(np.median(runs)), "runs_seconds": runs, "cycles": info.get("sweeps", info.get("iterations"))}
+
+    dfg = load_block_set("dfg-cylinder", None, (34, 20))
+    pipe = load_block_set("pipe", None, (50, 50, 80))
+    result = {
+        "dfg_34x20": timed(lambda: elliptic_blocks(dfg)[1]),
+        "semicylinder_100": timed(lambda: elliptic(load_geometry("semicylinder"), dims=(100, 100, 100))[1]),
+        "pipe_50_50_80": timed(lambda: elliptic_blocks(load_block_set("pipe", None, (50, 50, 80)))[1]),
+    }
+    result["pipe_cells"] = int(sum(np.prod([len(t) - 1 for t in c]) for c in pipe.coords))
+    result["pipe_over_semicylinder"] = result["pipe_50_50_80"]["seconds"] / result["semicylinder_100"]["seconds"]
+    if not quick:
+        once = {"repeat": 1}
+        start = time.perf_counter()
+        info = elliptic_blocks(pipe, as_extrusion=False)[1]
+        once.update(seconds=time.perf_counter() - start, cycles=info["sweeps"])
+        result["pipe_50_50_80_3d"] = once
+        result["pipe_3d_over_semicylinder"] = once["seconds"] / result["semicylinder_100"]["seconds"]
+    for key in ("dfg_34x20", "semicylinder_100", "pipe_50_50_80", "pipe_50_50_80_3d"):
+        if key in result:
+            print(f"speed {key:18s} {result[key]['seconds']:7.2f} s  {result[key]['cycles']} cycles", flush=True)
+    print(f"speed pipe / semicylinder {result['pipe_over_semicylinder']:.3f}x", flush=True)
+    return result
+
+
 def run(quick: bool, only: str | None = None) -> dict:
     """The pipe and DFG rows (``--quick``: the pipe at N = 8, 16 only: the DFG and the 40 x 80
     pipe take minutes)."""
@@ -152,6 +198,8 @@ def run(quick: bool, only: str | None = None) -> dict:
         result["pipe"] = pipe_rows(sizes + ([] if quick else [(10, 5, 80)]), potential_dims=() if quick else [(10, 5, 80)])
     if only in (None, "dfg") and not quick:
         result["dfg"] = dfg_rows(DFG_DIMS)
+    if only in (None, "speed"):
+        result["speed"] = speed_rows(quick)
     return result
 
 
@@ -159,7 +207,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--json", type=Path, default=None)
-    parser.add_argument("--only", choices=["pipe", "dfg"], default=None)
+    parser.add_argument("--only", choices=["pipe", "dfg", "speed"], default=None)
     args = parser.parse_args()
     result = run(args.quick, args.only)
     if args.json is not None:

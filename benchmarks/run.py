@@ -208,6 +208,13 @@ TARGETS = {
     "blocks_pipe_min_angle": (">=", 40.0, "deg", "pipe O-grid, elliptic: worst min angle at every resolution"),
     "blocks_pipe_max_angle": ("<=", 140.0, "deg", "pipe O-grid, elliptic: worst max angle at every resolution"),
     "blocks_pipe_potential": ("<=", 1e-6, "", "pipe 40 around x 80 along, elliptic, default tol: potentialFoam max |U - U_in|"),
+    "blocks_dfg_34x20_elliptic_seconds": ("<=", 1.0, "s", "dfg-cylinder --dims 34 20 elliptic solve, warm process"),
+    "blocks_pipe_1e6_ratio": (
+        "<=",
+        1.5,
+        "x",
+        "elliptic pipe 50 50 80 (1.0e6 hexahedra) / semicylinder 100^3 (1.0e6), seconds, one run",
+    ),
     "dfg_10k_drag": ("abs<=", 0.1, "%", "DFG 2D-1 at most 10k cells: drag error against 5.5795"),
     "dfg_10k_lift": ("abs<=", 3.0, "%", "DFG 2D-1 at most 10k cells: lift error against 0.0106"),
     "dfg_10k_dp": ("abs<=", 0.5, "%", "DFG 2D-1 at most 10k cells: front-back pressure difference error against 0.1175"),
@@ -1101,6 +1108,15 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             if row.get("potential_error") is not None:
                 add(f"pipe {' '.join(map(str, row['dims']))} elliptic: potentialFoam max |U - U_in|", row["potential_error"], "",
                     key="blocks_pipe_potential", note=f"{row['sweeps']} sweeps, default tol")  # fmt: skip
+        speed = data.get("speed")
+        if speed:
+            add("dfg-cylinder 34 20 elliptic solve", speed["dfg_34x20"]["seconds"], "s", key="blocks_dfg_34x20_elliptic_seconds",
+                note=f"{speed['dfg_34x20']['cycles']} V-cycles")  # fmt: skip
+            add("elliptic pipe 50 50 80 / semicylinder 100^3", speed["pipe_over_semicylinder"], "x", key="blocks_pipe_1e6_ratio",
+                note=f"{speed['pipe_50_50_80']['seconds']:.2f} s (section, extruded) / {speed['semicylinder_100']['seconds']:.2f} s")  # fmt: skip
+            if "pipe_50_50_80_3d" in speed:
+                add("elliptic pipe 50 50 80 by the 3D multigrid / semicylinder 100^3", speed["pipe_3d_over_semicylinder"], "x",
+                    note=f"{speed['pipe_50_50_80_3d']['seconds']:.1f} s, {speed['pipe_50_50_80_3d']['cycles']} V-cycles; not an extrusion's path")  # fmt: skip
         for row in data.get("dfg", []):
             budget = {0.001: "10k", 0.0005: "40k"}.get((row.get("targets") or {}).get("drag"))
             for name in ("drag", "lift", "dp"):

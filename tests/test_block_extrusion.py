@@ -105,16 +105,21 @@ def test_the_extruded_section_tfi_is_the_3d_tfi():
 
 @pytest.mark.parametrize("name, dims", [("pipe", (8, 4, 3)), ("dfg-cylinder-3d", (4, 2, 3))])
 def test_the_3d_elliptic_mesh_is_the_extrusion_of_its_section_mesh(name, dims):
-    """The design notes' reason to train the section: the 3D multi-block solver, which knows
-    nothing of extrusions, finds the extrusion of the 2D solver's section mesh. The channel's
+    """The design notes' reason to train the section and to solve an extruded set's elliptic mesh
+    as its section's: the 3D multi-block solver, which knows nothing of extrusions, finds the
+    extrusion of the 2D solver's section mesh. The channel's
     inlet and outlet edges with its front and back slide along their lines, as the section's
     inlet and outlet nodes slide along theirs."""
     block_set = load_block_set(name, None, dims)
     extrusion = extrusion_of(block_set)
-    solid, info3 = elliptic_blocks(block_set, tol=1e-9)
+    solid, info3 = elliptic_blocks(block_set, tol=1e-9, as_extrusion=False)
     plane, info2 = elliptic_blocks(section_of(block_set, extrusion), tol=1e-9)
     assert info3["converged"] and info2["converged"]
     for made, expected in zip(extrude(extrusion, plane, block_set.coords[0][2]), solid):
+        np.testing.assert_allclose(made, expected, atol=1e-7 * block_set.length)
+    shortcut, info = elliptic_blocks(block_set, tol=1e-9)  # the default: solved as the section, extruded
+    assert info["extruded"] and info["converged"]
+    for made, expected in zip(shortcut, solid):
         np.testing.assert_allclose(made, expected, atol=1e-7 * block_set.length)
 
 

@@ -16,6 +16,7 @@ from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.tfi import tfi
+from meshgen.quality.deviation import ON_BOUNDARY
 from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.merged import merged_solver_figures
 from meshgen.quality.smoothness import expansion_ratio, grid_smoothness
@@ -145,5 +146,7 @@ def test_in_memory_block_set_report_has_deviation_even_where_nodes_slid():
     points, _, _ = merged_mesh(made.geometry, made.blocks)
     boundary = np.unique(np.concatenate([faces.reshape(-1) for _, _, faces in patch_faces(made.geometry)]))
     assert deviation["nodes"] == len(boundary)
-    assert deviation["max"] < 1e-12 * deviation["characteristic_length"]
+    # The measure stops searching within ON_BOUNDARY of a node's own face (its resolution); the
+    # closed-form distance to the pipe is the exact check.
+    assert deviation["max"] < ON_BOUNDARY * deviation["characteristic_length"]
     assert _pipe_distance(points[boundary]).max() < 1e-12

@@ -19,6 +19,7 @@ import numpy as np
 
 from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.geometry.blocks import global_numbering, tfi_blocks
+from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
 from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
 from meshgen.methods.multigrid_set import solve_set
@@ -153,6 +154,7 @@ def elliptic_blocks(
     progress=None,
     slide: bool = True,
     initial=None,
+    as_extrusion: bool = True,
 ):
     """Winslow mesh of the block set ``block_set`` (``meshgen.geometry.blocks.BlockSet``): (list of
     node arrays, one per block, interface nodes identical in every block; info dict as
@@ -169,10 +171,20 @@ def elliptic_blocks(
     corrected mesh; copied), else the TFI.
 
     A set of one block with no interface and nothing to slide is the one-block solve
-    (``solve_winslow``, its stopping rule relative to the block set's length): the same mesh."""
+    (``solve_winslow``, its stopping rule relative to the block set's length): the same mesh.
+    ``as_extrusion`` (default on): an extruded set (``meshgen.geometry.extrusion``) started from
+    its TFI with its flat caps sliding is solved as its 2D section and extruded, the fixed point
+    of its 3D equations (design notes §20); off, the 3D equations are solved."""
     tol = DEFAULT_TOL if tol is None else tol
     max_cycles = MAX_CYCLES if max_iter is None else max_iter
     start = time.perf_counter()
+    extrusion = extrusion_of(block_set) if as_extrusion and slide and initial is None and block_set.dim == 3 else None
+    if extrusion is not None:
+        planes, info = elliptic_blocks(section_of(block_set, extrusion), tol=tol, max_iter=max_iter, progress=progress)
+        Xs = extrude(extrusion, planes, block_set.coords[0][2])
+        solver = info.get("solver", "the one-block solve")
+        info = {**info, "solver": f"the 2D section's elliptic mesh, extruded ({solver})", "extruded": True}
+        return Xs, {**info, "seconds": time.perf_counter() - start}
     Xs = tfi_blocks(block_set) if initial is None else [np.array(X, dtype=float) for X in initial]
     if min(min(shape) for shape in block_set.node_shapes) < 3:
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}

@@ -43,7 +43,8 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
             continue
         inner_index = list(face.node_index)
         inner_index[face.axis] = -2 if face.side else 1
-        records.append((ids, numbering[block][tuple(inner_index)].reshape(-1), centre, vt[-1]))
+        normal = np.where(np.abs(vt[-1]) < 1e-12, 0.0, vt[-1])  # an axis-aligned plane: its coordinate kept exactly
+        records.append((ids, numbering[block][tuple(inner_index)].reshape(-1), centre, normal / np.linalg.norm(normal)))
     planes, normals = distinct_planes([(centre, normal) for _, _, centre, normal in records], block_set.length)
     on_plane = np.zeros((count, len(normals)), dtype=bool)
     for (ids, *_), plane in zip(records, planes):
