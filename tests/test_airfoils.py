@@ -170,6 +170,21 @@ def test_selig_and_lednicer_files_give_the_same_curve(tmp_path):
     np.testing.assert_array_equal(low, lower)
 
 
+def test_a_sharp_trailing_edge_file_closes_its_spline(tmp_path):
+    x = 0.5 * (1 - np.cos(np.linspace(0, np.pi, 61)))
+    upper = np.stack([x, tmr_formula(x)], axis=1)
+    lower = upper * [1, -1]
+    (tmp_path / "tmr.dat").write_text(selig_text("TMR 0012 points", upper, lower))
+    section = load_section(tmp_path / "tmr.dat")
+    te = trailing_edge(section)
+    assert te.sharp and te.gap < 1e-15 and not section.analytic
+    np.testing.assert_allclose(points_at(section, [0.0, section.length]), [[1, 0], [1, 0]], atol=1e-15)
+    assert section.length == pytest.approx(tmr0012_section().length, rel=1e-5)
+    s = chordwise_distribution(section, 100, 1e-3, 1e-3)
+    p = points_at(section, s)  # between data points the spline lies close to the formula
+    np.testing.assert_allclose(np.abs(p[:, 1]), tmr_formula(np.clip(p[:, 0], 0, 1)), atol=2e-5)
+
+
 def test_spline_passes_through_the_data_and_is_curvature_continuous():
     upper, lower = naca_points("4415", n=31)
     _, u, low = parse_section_text(selig_text("4415", upper, lower))

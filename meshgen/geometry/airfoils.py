@@ -268,7 +268,8 @@ def _check_surfaces(upper: np.ndarray, lower: np.ndarray, source: str) -> tuple[
     thick = np.interp(stations, upper[:, 0], upper[:, 1]) - np.interp(stations, lower[:, 0], lower[:, 1])
     if np.all(thick[:-1] < 0) and thick[-1] <= 0:
         upper, lower, thick = lower, upper, -thick
-    crossed = np.append(thick[:-1] <= 0, thick[-1] < 0)  # a sharp trailing edge closes: thickness 0
+    # a sharp trailing edge closes: thickness 0, to rounding (1e-9 of chord)
+    crossed = np.append(thick[:-1] <= 0, thick[-1] < -1e-9 * chord)
     if np.any(crossed):
         where = stations[np.argmax(crossed)]
         raise GeometryError(f"{source}: self-crossing contour: the upper and lower surfaces cross near x = {where:.6g}")
