@@ -88,6 +88,8 @@ LAYERS = [
         "meshgen.methods.multigrid",
         "meshgen.methods.sliding",
         "meshgen.methods.interfaces",
+        "meshgen.geometry.airfoil_curve",
+        "meshgen.geometry.airfoils",
     ],
     [
         "meshgen.geometry.layout",
@@ -97,6 +99,7 @@ LAYERS = [
         "meshgen.methods.multigrid_set",
         "meshgen.geometry.extrusion",
         "meshgen.geometry.grading",
+        "meshgen.geometry.wall_spacing",
         "meshgen.quality.deviation",
     ],
     [

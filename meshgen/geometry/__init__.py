@@ -8,7 +8,9 @@
 - ``patches``: named boundary patches; ``surface``: closed boundary surfaces (trimesh);
 - ``layout``, ``layout_family``, ``layout_start``: the smoothed boundary layout;
 - ``shapes``: CAD solids and triangulated surfaces turned into boundary maps;
-- ``plugin_calls``: the one place that runs plugin code.
+- ``plugin_calls``: the one place that runs plugin code;
+- ``airfoils``, ``airfoil_curve``: airfoil sections (NACA, TMR, coordinate files) as curves, and
+  their chordwise node distribution; ``wall_spacing``: first-cell height from y+, wall-normal spacing.
 
 ``from meshgen.geometry import load_geometry`` (and the other names of ``plugins``) keeps working
 as in 0.2: they are imported lazily, so importing a submodule costs nothing more.

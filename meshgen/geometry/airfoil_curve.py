@@ -1,0 +1,255 @@
+"""An airfoil section as a curve: points, arc length, tangents and normals, the trailing edge, and
+the chordwise distribution of mesh nodes along it.
+
+A ``Section`` is a parametric curve p(t), t in [0, 1], running from the lower trailing-edge point
+(t = 0) round the leading edge (t = ``le_parameter``) to the upper trailing-edge point (t = 1):
+clockwise for a section with the upper surface above, so the outward normal is the tangent turned
+by +90 degrees. Every public function takes arc length s in [0, ``length``] (units of the section's
+coordinates, chord 1 for the built-in sections) measured from the lower trailing-edge point.
+
+- Coordinate data (``spline_section``): p is a C2 cubic spline (scipy ``CubicSpline``, not-a-knot
+  ends) through the points over their cumulative chord length, so the nodes at data parameters
+  are the data points.
+- Analytic sections (``analytic_section``): p is the exact formula, so every node s maps to a
+  parameter t and the node is the formula evaluated at t (on the curve to rounding); only the
+  arc-length map s(t) is numerical.
+
+Arc length is 8-point Gauss-Legendre quadrature of |p'(t)| on each parameter interval (between
+data points, or 512 equal steps of t for an analytic section); s -> t is inverted by Newton's
+method on the same quadrature, to about 1e-13 of the length.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from meshgen.errors import GeometryError, ParameterError
+
+__all__ = [
+    "Section",
+    "TrailingEdge",
+    "analytic_section",
+    "chord_length",
+    "chordwise_distribution",
+    "leading_edge_arc",
+    "normals_at",
+    "parameters_at",
+    "points_at",
+    "spline_section",
+    "tangents_at",
+    "trailing_edge",
+    "vinokur",
+]
+
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(8)
+ANALYTIC_INTERVALS = 512  # parameter intervals of an analytic section's arc-length table
+
+
+@dataclass(frozen=True, eq=False)
+class Section:
+    """An airfoil section curve (see the module docstring). ``shape`` maps t (m,) to points (m, 2);
+    ``derivative`` to dp/dt (m, 2); ``knots`` (k+1,) are the parameter breakpoints of the
+    arc-length table ``knot_arcs`` (k+1,); ``points`` (n, 2) are the defining data points (or a
+    sample of an analytic section), lower trailing edge -> leading edge -> upper trailing edge."""
+
+    name: str
+    shape: Callable[[np.ndarray], np.ndarray]
+    derivative: Callable[[np.ndarray], np.ndarray]
+    knots: np.ndarray
+    knot_arcs: np.ndarray
+    le_parameter: float
+    points: np.ndarray
+    analytic: bool
+
+    @property
+    def length(self) -> float:
+        """The arc length from the lower to the upper trailing-edge point."""
+        return float(self.knot_arcs[-1])
+
+
+def _arc_table(derivative, knots: np.ndarray) -> np.ndarray:
+    """Cumulative arc length at ``knots``: Gauss-Legendre quadrature of |p'| per interval."""
+    a, b = knots[:-1], knots[1:]
+    t = 0.5 * (a + b)[:, None] + 0.5 * (b - a)[:, None] * _GAUSS_X[None, :]
+    speed = np.linalg.norm(derivative(t.ravel()), axis=1).reshape(t.shape)
+    pieces = 0.5 * (b - a) * (speed @ _GAUSS_W)
+    return np.concatenate([[0.0], np.cumsum(pieces)])
+
+
+def _partial_arcs(section: Section, interval: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Arc length from t = 0 to each t in its knot interval ``interval``."""
+    a = section.knots[interval]
+    nodes = 0.5 * (a + t)[:, None] + 0.5 * (t - a)[:, None] * _GAUSS_X[None, :]
+    speed = np.linalg.norm(section.derivative(nodes.ravel()), axis=1).reshape(nodes.shape)
+    return section.knot_arcs[interval] + 0.5 * (t - a) * (speed @ _GAUSS_W)
+
+
+def analytic_section(name: str, shape, le_parameter: float, *, derivative=None, samples: int = 201) -> Section:
+    """A section from an exact formula ``shape`` (t (m,) -> (m, 2), t in [0, 1], lower trailing
+    edge to upper); ``derivative`` dp/dt, or the complex-step derivative Im p(t + ih) / h of
+    ``shape`` (exact to rounding; ``shape`` must then accept complex t)."""
+    if derivative is None:
+
+        def derivative(t, step=1e-30):
+            return np.imag(shape(np.asarray(t, dtype=float) + 1j * step)) / step
+
+    knots = np.linspace(0.0, 1.0, ANALYTIC_INTERVALS + 1)
+    points = shape(np.linspace(0.0, 1.0, samples))
+    return Section(name, shape, derivative, knots, _arc_table(derivative, knots), float(le_parameter), points, True)
+
+
+def spline_section(name: str, points, le_index: int) -> Section:
+    """A section through data ``points`` (n, 2), ordered lower trailing edge -> leading edge
+    (``points[le_index]``) -> upper trailing edge: a C2 cubic spline over cumulative chord length
+    (normalised to [0, 1]); the data are taken as checked (``meshgen.geometry.airfoils``)."""
+    from scipy.interpolate import CubicSpline
+
+    points = np.asarray(points, dtype=float)
+    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    if len(points) < 4 or not np.all(steps > 0):
+        raise GeometryError(f"section '{name}': a spline needs at least 4 distinct consecutive points")
+    knots = np.concatenate([[0.0], np.cumsum(steps)])
+    knots /= knots[-1]
+    knots[-1] = 1.0
+    spline = CubicSpline(knots, points, axis=0)
+    slope = spline.derivative()
+    return Section(name, spline, slope, knots, _arc_table(slope, knots), float(knots[le_index]), points, False)
+
+
+def parameters_at(section: Section, s) -> np.ndarray:
+    """The curve parameters t (m,) of arc lengths ``s`` (m,) in [0, length] (Newton's method)."""
+    s = np.asarray(s, dtype=float).ravel()
+    length = section.length
+    if np.any(~np.isfinite(s)) or np.any(s < -1e-12 * length) or np.any(s > length * (1 + 1e-12)):
+        raise ParameterError("s", f"{{name}}: arc lengths must lie in [0, {length:.6g}]")
+    s = np.clip(s, 0.0, length)
+    interval = np.clip(np.searchsorted(section.knot_arcs, s, side="right") - 1, 0, len(section.knots) - 2)
+    a, b = section.knots[interval], section.knots[interval + 1]
+    sa, sb = section.knot_arcs[interval], section.knot_arcs[interval + 1]
+    t = a + (b - a) * (s - sa) / np.where(sb > sa, sb - sa, 1.0)
+    for _ in range(30):
+        error = _partial_arcs(section, interval, t) - s
+        speed = np.linalg.norm(section.derivative(t), axis=1)
+        step = error / np.maximum(speed, 1e-300)
+        t = np.clip(t - step, a, b)
+        if np.all(np.abs(error) <= 1e-14 * max(length, 1.0)):
+            break
+    return t
+
+
+def points_at(section: Section, s) -> np.ndarray:
+    """The points (m, 2) at arc lengths ``s`` (m,): on the exact formula for an analytic section."""
+    return section.shape(parameters_at(section, s))
+
+
+def tangents_at(section: Section, s) -> np.ndarray:
+    """Unit tangents (m, 2) at arc lengths ``s``, pointing towards increasing s."""
+    d = section.derivative(parameters_at(section, s))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def normals_at(section: Section, s) -> np.ndarray:
+    """Unit outward normals (m, 2) at arc lengths ``s``: the tangent turned by +90 degrees (the
+    section runs clockwise)."""
+    tangent = tangents_at(section, s)
+    return np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+
+
+def leading_edge_arc(section: Section) -> float:
+    """The arc length from the lower trailing-edge point to the leading edge."""
+    interval = min(int(np.searchsorted(section.knots, section.le_parameter, side="right")) - 1, len(section.knots) - 2)
+    return float(_partial_arcs(section, np.array([interval]), np.array([section.le_parameter]))[0])
+
+
+def chord_length(section: Section) -> float:
+    """The chord: the distance from the leading edge to the midpoint of the trailing-edge points."""
+    le, lower, upper = section.shape(np.array([section.le_parameter, 0.0, 1.0]))
+    return float(np.linalg.norm(0.5 * (lower + upper) - le))
+
+
+class TrailingEdge(NamedTuple):
+    sharp: bool  # the gap is below the tolerance
+    gap: float  # the distance between the two trailing-edge points, as a fraction of chord
+    lower: np.ndarray  # (2,) the lower trailing-edge point (s = 0)
+    upper: np.ndarray  # (2,) the upper trailing-edge point (s = length)
+
+
+def trailing_edge(section: Section, tol: float = 1e-5) -> TrailingEdge:
+    """Whether the trailing edge is sharp (gap below ``tol`` of chord) or blunt; for a blunt one,
+    the base is the straight segment from ``lower`` to ``upper``."""
+    lower, upper = section.shape(np.array([0.0, 1.0]))
+    gap = float(np.linalg.norm(upper - lower)) / chord_length(section)
+    return TrailingEdge(gap < tol, gap, lower, upper)
+
+
+def _stretch(n: int, first: float, last: float) -> np.ndarray:
+    """Vinokur's two-sided stretching (J. Comput. Phys. 50, 1983): n+1 values on [0, 1] with
+    derivative-matched end spacings ``first`` and ``last`` (fractions of the length)."""
+    from scipy.optimize import brentq
+
+    xi = np.arange(n + 1) / n
+    a = np.sqrt(last / first)
+    b = 1.0 / (n * np.sqrt(first * last))
+    if b > 1.001:
+        d = brentq(lambda x: np.log(np.sinh(x) / x) - np.log(b), 1e-6, 700.0, xtol=1e-15)
+        u = 0.5 * (1.0 + np.tanh(d * (xi - 0.5)) / np.tanh(0.5 * d))
+    elif b < 0.999:
+        d = brentq(lambda x: np.sin(x) / x - b, 1e-9, np.pi - 1e-12, xtol=1e-15)
+        u = 0.5 * (1.0 + np.tan(d * (xi - 0.5)) / np.tan(0.5 * d))
+    else:
+        u = xi * (1.0 + 2.0 * (b - 1.0) * (xi - 0.5) * (1.0 - xi))
+    s = u / (a + (1.0 - a) * u)
+    s[0], s[-1] = 0.0, 1.0
+    return s
+
+
+def vinokur(n: int, first: float, last: float) -> np.ndarray:
+    """(n+1,) increasing values from 0 to 1 whose first and last steps are ``first`` and ``last``
+    (fractions of the length, met to 1e-10): Vinokur's two-sided stretching, its end spacings
+    corrected by fixed-point iteration (the formula matches derivatives, not cells).
+    ParameterError when n < 2 or the two spacings do not fit in n cells."""
+    n = int(n)
+    if n < 2:
+        raise ParameterError("cells", f"{{name}} {n}: two-sided clustering needs at least 2 cells")
+    if not (0 < first and 0 < last and first + last < 1):
+        raise ParameterError("spacing", f"{{name}}: end spacings {first:.3g} and {last:.3g} of the length do not fit in it")
+    wanted_first, wanted_last = first, last
+    for _ in range(100):
+        s = _stretch(n, first, last)
+        got_first, got_last = s[1], 1.0 - s[-2]
+        if abs(got_first / wanted_first - 1) < 1e-11 and abs(got_last / wanted_last - 1) < 1e-11:
+            return s
+        first *= wanted_first / got_first
+        last *= wanted_last / got_last
+    raise ParameterError(
+        "spacing",
+        f"{{name}}: end spacings {wanted_first:.3g} and {wanted_last:.3g} of the length cannot both be met with {n} cells",
+    )
+
+
+def chordwise_distribution(section: Section, cells: int, le_spacing: float, te_spacing: float) -> np.ndarray:
+    """Arc lengths (cells+1,) of the nodes round the section, lower trailing edge -> leading edge
+    -> upper trailing edge, with the leading edge a node: ``cells`` split between the surfaces in
+    proportion to their arc lengths, each surface clustered by ``vinokur`` so that its cells at the
+    leading and trailing edges are ``le_spacing`` and ``te_spacing`` of chord long (arc length).
+    A blunt trailing edge's base is not included."""
+    cells = int(cells)
+    if cells < 4:
+        raise ParameterError("cells", f"{{name}} {cells}: a section needs at least 4 cells round it")
+    for name, value in (("le_spacing", le_spacing), ("te_spacing", te_spacing)):
+        if not (np.isfinite(value) and 0 < value < 0.5):
+            raise ParameterError(name, f"{{name}} {value:g}: the spacing must be a fraction of chord in (0, 0.5)")
+    chord, length, s_le = chord_length(section), section.length, leading_edge_arc(section)
+    lower_cells = min(max(int(round(cells * s_le / length)), 2), cells - 2)
+    lower = s_le * vinokur(lower_cells, te_spacing * chord / s_le, le_spacing * chord / s_le)
+    upper_length = length - s_le
+    upper = s_le + upper_length * vinokur(
+        cells - lower_cells, le_spacing * chord / upper_length, te_spacing * chord / upper_length
+    )
+    nodes = np.concatenate([lower, upper[1:]])
+    nodes[-1] = length
+    return nodes
