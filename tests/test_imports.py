@@ -77,6 +77,7 @@ LAYERS = [
         "meshgen.methods.anderson",
         "meshgen.geometry.layout_start",
         "meshgen.methods.orthogonal",
+        "meshgen.methods.hyperbolic",
         "meshgen.geometry.patches",
         "meshgen.geometry.surface",
         "meshgen.geometry.domain",
