@@ -21,11 +21,12 @@ from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.geometry.blocks import global_numbering, tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
-from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, solve_winslow
+from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, Level, jacobi_residual, solve_winslow, uses_kernels
 from meshgen.methods.multigrid_set import solve_set
 from meshgen.methods.orthogonal import inner_block, parse_walls, straighten_first_layer
 from meshgen.methods.sliding import planar_sliding
 from meshgen.methods.tfi import check_axes, parametric_grid, tfi
+from meshgen.methods.winslow import component_array
 
 __all__ = [
     "DEFAULT_MAX_ITER",
@@ -36,6 +37,51 @@ __all__ = [
     "elliptic",
     "elliptic_blocks",
 ]
+
+
+EXTRUSION_TOL = 1e-9  # relative to the characteristic length: a start mesh this close to an extrusion is one
+
+
+def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: float, progress=None):
+    """The Winslow mesh of a one-block start ``X0`` (n1+1, n2+1, n3+1, 3) whose boundary is an
+    extrusion along zeta and whose caps are flat, each cap's interior the section's 2D Winslow
+    grid (the smoothed boundary layout's): the extrusion of the section's 2D solve; None when the
+    start is not such an extrusion.
+
+    An extrusion (to ``EXTRUSION_TOL`` times ``length``): the zeta = 1 cap is the zeta = 0 cap
+    moved by one sweep v square to it, and the four side faces are their zeta = 0 edge plus zeta v
+    at the parametric zeta nodes (their Winslow grid: a ruled face is developable). Winslow's
+    equations keep such a mesh an extrusion (z linear in zeta, every layer the section's 2D
+    solution: the 3D operator is |v|^2 times the 2D one, design notes §20), so the mesh is the 2D
+    solve of the zeta = 0 cap with its edges fixed, extruded, caps included (they are flat: their
+    nodes stay on them). Returns ``(X, info)`` as ``solve_winslow``'s, with ``extruded`` True."""
+    if X0.ndim != 4 or X0.shape[-1] != 3 or min(X0.shape[:3]) < 3:
+        return None
+    bound = EXTRUSION_TOL * length
+    sweep = X0[0, 0, -1] - X0[0, 0, 0]
+    height = float(np.linalg.norm(sweep))
+    if not height > bound or np.abs(X0[:, :, -1] - X0[:, :, 0] - sweep).max() > bound:
+        return None
+    unit = sweep / height
+    cap = X0[:, :, 0]
+    if np.abs((cap - cap[0, 0]) @ unit).max() > bound:  # the cap flat and square to the sweep
+        return None
+    zeta = np.asarray(coords[2], dtype=float)
+    zeta = (zeta - zeta[0]) / (zeta[-1] - zeta[0])
+    straight = X0[:, :, :1] + zeta[None, None, :, None] * sweep
+    for side in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):
+        if np.abs(X0[side] - straight[side]).max() > bound:
+            return None
+    frame = np.linalg.svd(np.eye(3) - np.outer(unit, unit))[0][:, :2].T  # (2, 3) orthonormal, square to the sweep
+    section = (cap - cap[0, 0]) @ frame.T
+    solved, info = solve_winslow(section, coords[:2], tol=tol, max_iter=max_iter, length=length, progress=progress)
+    plane = cap[0, 0] + solved @ frame
+    X = plane[:, :, None, :] + zeta[None, None, :, None] * sweep
+    for side in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):  # the side faces as the start holds them
+        X[side] = X0[side]
+    residual = jacobi_residual(Level(coords, compiled=uses_kernels(coords)), component_array(X), length)  # of the 3D equations
+    solver = f"the section's 2D solve, extruded ({info['solver']})"
+    return X, {**info, "final_residual": residual, "extruded": True, "solver": solver}
 
 
 class ConvergenceWarning(MeshgenWarning):
@@ -78,7 +124,10 @@ def build_elliptic(
     boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
     geometry = with_layout(geometry, boundary_layout)
     X0 = tfi(geometry, None, coords)
-    if boundary_layout == "smoothed":
+    solved = None
+    if boundary_layout == "smoothed":  # an extrusion: its section's 2D solve (extruded_solve)
+        solved = extruded_solve(X0, coords, tol, max_iter, geometry.characteristic_length, progress)
+    if solved is None and boundary_layout == "smoothed":
         relax_faces(geometry, coords, X0)  # the faces' own discrete Winslow grids (see there)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
         return X0, {
@@ -91,7 +140,9 @@ def build_elliptic(
             "boundary_layout": boundary_layout,
             "note": "no interior nodes: the TFI mesh is the mesh",
         }
-    X, info = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
+    if solved is None:
+        solved = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
+    X, info = solved
     info["boundary_layout"] = boundary_layout
     if walls:
         block = inner_block(walls, geometry.dim)
@@ -106,13 +157,17 @@ def build_elliptic(
         for key in ("final_update", "final_residual", "converged"):
             info[key] = second[key]
         info["seconds"] += second["seconds"]
+    return X, _warned(info, tol)
+
+
+def _warned(info: dict, tol: float) -> dict:
     if not info["converged"]:
         info["warnings"] = [
             f"elliptic solver did not converge: after {info['iterations']} cycle(s) the largest node update is "
             f"{info['final_update']:.3g} of the characteristic length (tolerance {tol:g}), residual "
             f"{info['final_residual']:.3g}; raise the iteration limit or the tolerance"
         ]
-    return X, info
+    return info
 
 
 def elliptic(

@@ -59,6 +59,7 @@ __all__ = [
     "banded",
     "coarser_coordinates",
     "hierarchy",
+    "jacobi_residual",
     "interpolation_matrix",
     "largest_node_norm",
     "smooth",
@@ -316,6 +317,13 @@ def v_cycle(levels: list[Level], index: int, R: np.ndarray, f) -> float:
     return smooth(R, f, level, POST_SMOOTHING)
 
 
+def jacobi_residual(level: Level, R: np.ndarray, length: float) -> float:
+    """The largest Jacobi step of the Winslow equations on ``level`` at the component-first node
+    array ``R`` (dim, ...), relative to ``length``: ``solve_winslow``'s ``final_residual``."""
+    step, axial = level.operator(R)
+    return largest_node_norm(step / centre_coefficient(list(axial), level.grid)) / length
+
+
 def solve_winslow(
     X0: np.ndarray, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, length: float = 1.0, progress=None
 ):
@@ -369,8 +377,7 @@ def solve_winslow(
             acceleration.restart()
         R = acceleration.next_iterate(before, R)
 
-    step, axial = levels[0].operator(R)
-    residual = largest_node_norm(step / centre_coefficient(list(axial), levels[0].grid)) / length
+    residual = jacobi_residual(levels[0], R, length)
     info = {
         "solver": "nonlinear multigrid (FAS V(1,1) cycles, line-ADI relaxation, full-multigrid start, Anderson mixing)",
         "iterations": iterations,
