@@ -2,7 +2,8 @@
 edge is sharp, an O-grid when it is blunt (meshgen.geometry.blocks, three blocks either way).
 
 Section (``meshgen.geometry.airfoils``): NACA 4- or 5-digit ``naca`` (a number: 12 is NACA 0012,
-2412, 23012), chord 1, turned by ``alpha`` degrees (nose up) about the quarter chord; ``sharp=1``
+2412, 23012), chord 1, turned by ``alpha`` degrees (nose up) about the quarter chord with its whole
+grid (the wake cut leaves along the chord line, the outflow square to it); ``sharp=1``
 closes its trailing edge (NACA 0012: the NASA TMR formula, whose wall nodes lie on it to
 rounding; others: a4 = -0.1036).
 
@@ -131,8 +132,8 @@ class _Setup:
     sharp: bool
     turn: np.ndarray  # (2, 2) rotation by -alpha
     pivot: np.ndarray  # (2,) the quarter chord
-    te: np.ndarray  # (2,) the trailing edge (turned; the base's middle when blunt)
-    centre: np.ndarray  # (2,) the mid-chord point the directions turn about (turned)
+    te: np.ndarray  # (2,) the trailing edge (the base's middle when blunt), before the turn by alpha
+    centre: np.ndarray  # (2,) the mid-chord point the directions turn about
     distance: float  # D: the far field's distance from the wall
     wake: float  # the cut's length behind the trailing edge
     le_arc: float
@@ -164,7 +165,7 @@ def _setup(key: tuple) -> _Setup:
     gap = 0.0 if edge.sharp else float(np.linalg.norm(edge.upper - edge.lower))
     splits = (0.5 * gap + 0.5 * le_arc, 0.5 * gap + 0.5 * (le_arc + length))
     setup = _Setup(
-        section, bool(edge.sharp), turn, pivot, (te - pivot) @ turn.T + pivot, (middle - pivot) @ turn.T + pivot,
+        section, bool(edge.sharp), turn, pivot, te, middle,
         float(v["farfield"]), float(v["wake"] or v["farfield"]), le_arc, gap, edge.lower, edge.upper, splits,
     )  # fmt: skip
     _check_star(setup)
@@ -188,7 +189,7 @@ def _ring_points(setup: _Setup, r: np.ndarray) -> np.ndarray:
     out[low] = mid + (setup.base_lower - mid) * (r[low] / half)[:, None]
     high = r > half + length
     out[high] = setup.base_upper + (mid - setup.base_upper) * ((r[high] - half - length) / half)[:, None]
-    return _turned(setup, out)
+    return out
 
 
 def _ring_length(setup: _Setup) -> float:
@@ -205,8 +206,16 @@ def _polar(setup: _Setup, points: np.ndarray, lower: np.ndarray) -> np.ndarray:
     return np.where(~lower & (rel < 0.5 * np.pi), rel + 2 * np.pi, rel)
 
 
-def _wall(setup: _Setup, block: str, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 2) of block ``block``'s wall (or cut) at xi and the unit directions (N, 2) of its straight lines."""
+def _wall(setup: _Setup, block: str, xi: np.ndarray, turned: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 2) of block ``block``'s wall (or cut) at xi and the unit directions (N, 2) of its
+    straight lines, turned by alpha (``turned``) or not."""
+    points, direction = _wall_unturned(setup, block, xi)
+    if not turned:
+        return points, direction
+    return _turned(setup, points), direction @ setup.turn.T
+
+
+def _wall_unturned(setup: _Setup, block: str, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     from meshgen.geometry.airfoil_curve import points_at
 
     xi = np.clip(np.asarray(xi, dtype=float), 0.0, 1.0)
@@ -217,7 +226,7 @@ def _wall(setup: _Setup, block: str, xi: np.ndarray) -> tuple[np.ndarray, np.nda
             direction = np.tile([0.0, -1.0 if block == "lower" else 1.0], (len(xi), 1))
             return points, direction
         s = xi * setup.section.length
-        points = _turned(setup, points_at(setup.section, s))
+        points = points_at(setup.section, s)
         points[xi == 0.0] = points[xi == 1.0] = setup.te
         phi = -0.5 * np.pi - 0.5 * _polar(setup, points, s <= setup.le_arc)
         phi = np.where(xi == 0.0, -0.5 * np.pi, np.where(xi == 1.0, 0.5 * np.pi, phi))
@@ -234,7 +243,7 @@ def _check_star(setup: _Setup) -> None:
     """The straight lines must not cross: the polar angle about the mid-chord increases along the wall."""
     if setup.sharp:
         s = np.linspace(0.0, setup.section.length, 4001)
-        points, lower = _wall(setup, "section", s / setup.section.length)[0], s <= setup.le_arc
+        points, lower = _wall(setup, "section", s / setup.section.length, turned=False)[0], s <= setup.le_arc
     else:
         r = np.linspace(0.0, _ring_length(setup), 4001)
         points, lower = _ring_points(setup, r), r <= 0.5 * setup.gap + setup.le_arc
@@ -259,7 +268,10 @@ def first_height(values) -> tuple[float, str]:
 
     if values["first_height"] > 0:
         return float(values["first_height"]), "as given"
-    cell = first_cell_height(values["yplus"], values["reynolds"])
+    try:
+        cell = first_cell_height(values["yplus"], values["reynolds"])
+    except ParameterError as exc:
+        raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
     return cell.height, (
         f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
     )
@@ -356,6 +368,28 @@ def notes(block_set):
 # the elliptic mesh: near-wall layers marched, the rest solved
 
 
+def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
+    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
+    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
+    ratio stays the designed one where the blend bends or stretches the lines."""
+    n, nodes = X.shape[0], X.shape[1]
+    arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
+    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
+    target[:, -1] = arc[:, -1]
+    lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
+    wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
+    segment = np.clip(np.searchsorted(lifted.ravel(), wanted.ravel(), side="right") - 1, 0, n * nodes - 2)
+    segment = np.minimum(segment, (np.arange(n)[:, None] * nodes + nodes - 2).repeat(nodes, axis=1).ravel())
+    flat, lifted = X.reshape(-1, 2), lifted.ravel()
+    step = lifted[segment + 1] - lifted[segment]
+    fraction = np.where(step > 0, (wanted.ravel() - lifted[segment]) / np.where(step > 0, step, 1.0), 0.0)
+    out = flat[segment] + fraction[:, None] * (flat[segment + 1] - flat[segment])
+    out = out.reshape(X.shape)
+    out[:, 0], out[:, -1] = X[:, 0], X[:, -1]
+    return out
+
+
 def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
     wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
@@ -368,18 +402,26 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     start = time.perf_counter()
     setup = _setup(_key(block_set.values))
     d = np.asarray(block_set.coords[0][1]) * setup.distance
-    walls = [_wall(setup, b, np.asarray(c[0]))[0] for b, c in zip(blocks, block_set.coords)]
+    walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
     sizes = [len(w) for w in walls]
     curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
-    if setup.sharp:
-        marched = march(curve, d, ends=("constant_x", "constant_x"))
-    else:
-        marched = march(curve[:-1], d, closed=True, area_smoothing=0.25)
+    try:
+        if setup.sharp:
+            marched = march(curve, d, ends=("constant_x", "constant_x"))
+        else:
+            marched = march(curve[:-1], d, closed=True, area_smoothing=0.25)
+    except GeometryError as exc:
+        n = sum(len(c[0]) - 1 for c in block_set.coords)
+        raise GeometryError(
+            f"geometry 'airfoil': --dims N = {n} is too coarse along the wall to march to the far field ({exc})"
+        ) from None
         marched = np.concatenate([marched, marched[:1]])
+    marched = _turned(setup, marched)  # marched square to the cut, turned with the section
     t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
     weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
     Xs = [(1.0 - weight) * marched[o : o + size] + weight * X for o, size, X in zip(offsets, sizes, tfi_blocks(block_set))]
+    Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
     if inverted:
@@ -390,6 +432,9 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
         "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into the TFI mesh beyond {BLEND_START:g} chord",
         "sweeps": 0,
         "iterations": 0,
+        "final_update": 0.0,
+        "final_residual": 0.0,
+        "tol": 0.0 if tol is None else float(tol),
         "converged": True,
         "seconds": time.perf_counter() - start,
     }
