@@ -415,6 +415,7 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
         raise GeometryError(
             f"geometry 'airfoil': --dims N = {n} is too coarse along the wall to march to the far field ({exc})"
         ) from None
+    if not setup.sharp:
         marched = np.concatenate([marched, marched[:1]])
     marched = _turned(setup, marched)  # marched square to the cut, turned with the section
     t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
