@@ -18,9 +18,25 @@ from meshgen.errors import GeometryError
 from meshgen.geometry.plugins import ENTRY_POINT_GROUP, _builtin_files, available_names, load_geometry
 from meshgen.methods.tfi import parametric_grid, tfi
 
-BLOCK_SETS = ["dfg-cylinder", "dfg-cylinder-3d", "pipe"]  # multi-block plugins: tests/test_blocks.py
+BLOCK_SETS = [
+    "airfoil",
+    "dfg-cylinder",
+    "dfg-cylinder-3d",
+    "pipe",
+]  # multi-block plugins: tests/test_blocks.py, tests/test_airfoil_grid.py
 NAMES = [name for name in available_names() if name not in BLOCK_SETS]
-BUILTINS = ["bump", "canal", "dfg-cylinder", "dfg-cylinder-3d", "flower", "pipe", "semicylinder", "semidisk", "topcurve"]
+BUILTINS = [
+    "airfoil",
+    "bump",
+    "canal",
+    "dfg-cylinder",
+    "dfg-cylinder-3d",
+    "flower",
+    "pipe",
+    "semicylinder",
+    "semidisk",
+    "topcurve",
+]
 
 
 def size_of(X):

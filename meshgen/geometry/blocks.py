@@ -12,6 +12,8 @@ A multi-block plugin is a geometry plugin (``meshgen.geometry.plugins``) that al
     interfaces = [("core", "xi1", "east", "xi0"), ...]   # faces that meet (orientation derived)
     block_patches = {"east": {"xi1": ("wall", "wall")}, ...}   # every other face: a patch
 
+``interfaces`` and ``block_patches`` may be functions of the parameters (a topology that depends on them).
+
 Each block is a ``Geometry`` (``<name>.<block>``) as meshgen's single-block methods know it. An
 interface's orientation is a CGNS Transform (``transform``): ``Index_b = T (Index_a - Begin_a) +
 Begin_b``, entry ``i`` of T being ``+-(axis of b + 1)`` for axis ``i`` of a; it is found by
@@ -151,6 +153,7 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
         if not hasattr(module, attribute):
             raise GeometryError(f"multi-block geometry plugin {source} does not define '{attribute}'")
     names = tuple(module.blocks)
+    declared_patches, declared_interfaces = _declared(module, "block_patches", base), _declared(module, "interfaces", base)
     dim = base.dim
     if dims is None or len(dims) != dim:
         got = "none" if dims is None else len(dims)
@@ -158,7 +161,6 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     coords = _block_coords(module, base, source, dims)
     geometries = []
     for block in names:
-        patches = dict(module.block_patches.get(block, {}))
         geometries.append(
             bind(
                 Geometry(
@@ -186,7 +188,7 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     check_block_set_memory([tuple(len(t) - 1 for t in axes) for axes in block_coords], base.name)
     length = float(base.length_map(**base.values)) if base.length_map is not None else 1.0
     patches = {}
-    for block, faces in module.block_patches.items():
+    for block, faces in declared_patches.items():
         if block not in names:
             raise GeometryError(f"geometry '{base.name}': block_patches names an unknown block '{block}'")
         for face_name, (patch, kind) in faces.items():
@@ -196,7 +198,7 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
                 raise GeometryError(f"geometry '{base.name}': patch '{patch}' has unknown type '{kind}'")
             patches[names.index(block), face_name] = (patch, kind)
     declared = []
-    for entry in module.interfaces:
+    for entry in declared_interfaces:
         block_a, face_a, block_b, face_b = entry[:4]
         for block in (block_a, block_b):
             if block not in names:
@@ -213,6 +215,12 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     block_set = BlockSet(**{**block_set.__dict__, "interfaces": interfaces})
     check_interfaces(block_set)
     return block_set
+
+
+def _declared(module, attribute: str, geometry: Geometry):
+    """The plugin's ``interfaces`` or ``block_patches``: as declared, or its function's value at the parameters."""
+    value = getattr(module, attribute)
+    return value(**geometry.values) if callable(value) else value
 
 
 def _with_params(base) -> str:
@@ -522,7 +530,7 @@ def describe(spec: str) -> dict | None:
         return None
     geometry = load_geometry(spec, check=False)
     faces_of, type_of = {}, {}
-    for block, faces in module.block_patches.items():
+    for block, faces in _declared(module, "block_patches", geometry).items():
         for face, (name, kind) in faces.items():
             faces_of.setdefault(name, []).append(f"{block}.{face}")
             type_of[name] = kind

@@ -11,6 +11,11 @@ trained model, ``meshgen.neural.inference``; ``auto`` is ``neural`` when a model
 set is found, else ``elliptic``, one note line saying so), and the write through
 ``meshgen.formats.multiblock`` with the merged mesh's quality sidecar (``meshgen.quality.merged``:
 interfaces as interior faces, the block set's boundary deviation).
+
+Two optional plugin hooks: ``mesh_elliptic(block_set, tol, max_iter, progress) -> (Xs, info)``
+makes the plugin's ``elliptic`` mesh in place of ``elliptic_blocks`` (the airfoil's: near-wall
+layers marched, the rest solved), and ``notes(block_set) -> [lines]`` adds lines said before the
+work (the airfoil's wall spacing).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from meshgen.formats.multiblock import check_block_output, write_blocks
 from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged_mesh, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
-from meshgen.geometry.plugins import Geometry, load_geometry
+from meshgen.geometry.plugins import Geometry, load_geometry, plugin_module
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.device import inference_device
 from meshgen.neural.inference import is_block_model, neural_blocks
@@ -223,7 +228,8 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
             elif method == "neural":
                 Xs, info = _neural(request, block_set, model, callback)
             else:
-                Xs, info = elliptic_blocks(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
+                elliptic = getattr(plugin_module(spec)[0], "mesh_elliptic", None) or elliptic_blocks
+                Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
             timings.append(time.perf_counter() - start)
     if request.first_cell:
         asked = parse_first_cell(request.first_cell, block_set)
@@ -315,6 +321,7 @@ def _check(request, spec: str, say):
         heights = parse_first_cell(request.first_cell, block_set)
         block_set = graded_block_set(block_set, heights, parse_wall_clusters(request.clusters, block_set))
     output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
+    notes.extend(getattr(plugin_module(spec)[0], "notes", lambda _: [])(block_set))
     for line in notes:
         say(line)
     return method, block_set, output, notes, model

@@ -1,0 +1,442 @@
+"""An airfoil section in a 2D far field, meshed to the wall (y+ about 1): a C-grid when the trailing
+edge is sharp, an O-grid when it is blunt (meshgen.geometry.blocks, three blocks either way).
+
+Section (``meshgen.geometry.airfoils``): NACA 4- or 5-digit ``naca`` (a number: 12 is NACA 0012,
+2412, 23012), chord 1, turned by ``alpha`` degrees (nose up) about the quarter chord with its whole
+grid (the wake cut leaves along the chord line, the outflow square to it); ``sharp=1``
+closes its trailing edge (NACA 0012: the NASA TMR formula, whose wall nodes lie on it to
+rounding; others: a4 = -0.1036).
+
+Blocks ``lower``, ``section``, ``upper`` in a row along the wall (xi along it, eta from the wall
+outwards; (xi, eta) right-handed). C-grid: ``lower`` lies under the wake cut (xi from the outflow
+to the trailing edge), ``section`` round the section (lower trailing edge, leading edge, upper
+trailing edge), ``upper`` above the cut; the cut is the interface lower.eta0 = upper.eta0, the
+outflow the patch ``outlet``. O-grid: the closed wall from the middle of the blunt base, split at
+the middle of the lower and of the upper surface. Patches ``wall`` (eta0 on the section) and
+``farfield`` (every eta1).
+
+The boundary map of each block is x(xi, eta) = w(xi) + eta D e(xi): w the wall (or the cut) at
+arc fraction xi, D = ``farfield`` chords, e a unit direction (the cut's: straight down or up;
+the section's, C-grid: turning from down at the lower trailing edge through upstream at the
+leading edge to up, at half the rate of the polar angle about the mid-chord; O-grid: radial from
+it). TFI reproduces it, so the TFI mesh's straight grid lines have their first cells exactly of
+the asked height; the parametric eta nodes are the wall-normal distances over D
+(``meshgen.geometry.wall_spacing``). ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
+marches the near-wall layers (``meshgen.methods.hyperbolic``) and solves the rest (Winslow,
+``elliptic_blocks``) with the last marched layer as its fixed inner boundary.
+"""
+
+import dataclasses
+import functools
+import math
+import time
+
+import numpy as np
+
+from meshgen.errors import GeometryError, ParameterError
+
+name = "airfoil"
+dim = 2
+description = "NACA airfoil section in a far field, to the wall (y+ 1): C-grid (sharp trailing edge) or O-grid (blunt)"
+params = {
+    "naca": 12.0,
+    "sharp": 0.0,
+    "farfield": 100.0,
+    "wake": 0.0,
+    "alpha": 0.0,
+    "yplus": 1.0,
+    "reynolds": 6e6,
+    "first_height": 0.0,
+    "growth": 1.15,
+    "layers": 2.0,
+    "le_spacing": 0.002,
+    "te_spacing": 0.001,
+}
+dims_meaning = (
+    "N M: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
+    "of them on each side of the cut at least; O-grid: round the section and across its blunt base), "
+    "cells from the wall to the far field"
+)
+blocks = ("lower", "section", "upper")
+WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
+MIN_SECTION_CELLS = 16
+MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
+RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
+# solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
+BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into the TFI mesh
+
+
+def _sharp_te(values) -> bool:
+    return _setup(_key(values)).sharp
+
+
+def interfaces(**values):
+    """The cut (C-grid) or the base's middle (O-grid) closes the row of blocks."""
+    ring = [("lower", "xi1", "section", "xi0"), ("section", "xi1", "upper", "xi0")]
+    return ring + ([("lower", "eta0", "upper", "eta0")] if _sharp_te(values) else [("upper", "xi1", "lower", "xi0")])
+
+
+def block_patches(**values):
+    far = {"eta1": ("farfield", "patch")}
+    if _sharp_te(values):
+        outlet = ("outlet", "patch")
+        return {"lower": {**far, "xi0": outlet}, "section": {**far, "eta0": ("wall", "wall")}, "upper": {**far, "xi1": outlet}}
+    return {block: {**far, "eta0": ("wall", "wall")} for block in blocks}
+
+
+def characteristic_length(**values):
+    return 2.0 * float(values["farfield"]) + 1.0
+
+
+# ---------------------------------------------------------------------------------------------
+# the section, the cut and their directions
+
+
+def _key(values) -> tuple:
+    return tuple(float(values.get(k, v)) for k, v in params.items())
+
+
+def _check(v: dict) -> None:
+    if not (2.0 <= v["farfield"] <= 1e4):
+        raise ParameterError("farfield", f"{{name}} {v['farfield']:g}: the far field must lie 2 to 10000 chords from the wall")
+    if not (v["wake"] == 0 or 1.0 <= v["wake"] <= 1e4):
+        raise ParameterError("wake", f"{{name}} {v['wake']:g}: the wake cut must be 1 to 10000 chords long (0: the far field's)")
+    if not (1.0 < v["growth"] <= 2.0):
+        raise ParameterError("growth", f"{{name}} {v['growth']:g}: the growth-ratio cap must be above 1 (and at most 2)")
+    if v["layers"] != int(v["layers"]) or not 1 <= v["layers"] <= 50:
+        raise ParameterError("layers", f"{{name}} {v['layers']:g}: the constant wall layers must be a whole number 1 to 50")
+    if not abs(v["alpha"]) <= 30:
+        raise ParameterError("alpha", f"{{name}} {v['alpha']:g}: the incidence must lie within +-30 degrees")
+    if v["sharp"] not in (0.0, 1.0):
+        raise ParameterError("sharp", f"{{name}} {v['sharp']:g}: 0 (the section's own trailing edge) or 1 (closed)")
+    for key in ("le_spacing", "te_spacing"):
+        if not (0 < v[key] <= 0.05):
+            raise ParameterError(key, f"{{name}} {v[key]:g}: the spacing must be a fraction of chord in (0, 0.05]")
+    if v["first_height"] != 0 and not (0 < v["first_height"] <= 0.01):
+        raise ParameterError(
+            "first_height", f"{{name}} {v['first_height']:g}: the first cell must be 0 (from yplus and Re) or in (0, 0.01] chord"
+        )
+
+
+def _designation(v: dict) -> str:
+    naca = v["naca"]
+    if naca != int(naca) or not 1 <= naca <= 99999:
+        raise GeometryError(f"geometry 'airfoil': naca={naca:g} is not a NACA 4- or 5-digit designation (e.g. 12, 2412, 23012)")
+    digits = f"{int(naca):04d}"
+    return "tmr0012" if v["sharp"] and digits == "0012" else digits
+
+
+@dataclasses.dataclass(frozen=True)
+class _Setup:
+    section: object  # meshgen.geometry.airfoil_curve.Section (unturned)
+    sharp: bool
+    turn: np.ndarray  # (2, 2) rotation by -alpha
+    pivot: np.ndarray  # (2,) the quarter chord
+    te: np.ndarray  # (2,) the trailing edge (the base's middle when blunt), before the turn by alpha
+    centre: np.ndarray  # (2,) the mid-chord point the directions turn about
+    distance: float  # D: the far field's distance from the wall
+    wake: float  # the cut's length behind the trailing edge
+    le_arc: float
+    gap: float  # the base's width (0 when sharp)
+    base_lower: np.ndarray
+    base_upper: np.ndarray
+    splits: tuple  # O-grid: the ring arcs where blocks meet (lower|section, section|upper)
+
+
+@functools.lru_cache(maxsize=16)
+def _setup(key: tuple) -> _Setup:
+    from meshgen.geometry.airfoil_curve import leading_edge_arc, points_at, trailing_edge
+    from meshgen.geometry.airfoils import load_section
+
+    v = dict(zip(params, key))
+    _check(v)
+    designation = _designation(v)
+    try:
+        section = load_section(designation, closed_te=bool(v["sharp"]) and designation != "tmr0012")
+    except (GeometryError, ParameterError) as exc:
+        raise GeometryError(f"geometry 'airfoil': naca={v['naca']:g}: {exc}") from None
+    edge = trailing_edge(section)
+    alpha = math.radians(v["alpha"])
+    turn = np.array([[math.cos(alpha), math.sin(alpha)], [-math.sin(alpha), math.cos(alpha)]])
+    pivot = np.array([0.25, 0.0])
+    le_arc, length = leading_edge_arc(section), section.length
+    middle = 0.5 * (points_at(section, [0.5 * le_arc])[0] + points_at(section, [0.5 * (le_arc + length)])[0])
+    te = 0.5 * (edge.lower + edge.upper)
+    gap = 0.0 if edge.sharp else float(np.linalg.norm(edge.upper - edge.lower))
+    splits = (0.5 * gap + 0.5 * le_arc, 0.5 * gap + 0.5 * (le_arc + length))
+    setup = _Setup(
+        section, bool(edge.sharp), turn, pivot, te, middle,
+        float(v["farfield"]), float(v["wake"] or v["farfield"]), le_arc, gap, edge.lower, edge.upper, splits,
+    )  # fmt: skip
+    _check_star(setup)
+    return setup
+
+
+def _turned(setup: _Setup, points: np.ndarray) -> np.ndarray:
+    return (points - setup.pivot) @ setup.turn.T + setup.pivot
+
+
+def _ring_points(setup: _Setup, r: np.ndarray) -> np.ndarray:
+    """O-grid: the wall at ring arcs ``r`` (from the base's middle, clockwise), turned."""
+    from meshgen.geometry.airfoil_curve import points_at
+
+    half, length = 0.5 * setup.gap, setup.section.length
+    out = np.empty((len(r), 2))
+    on = (r >= half) & (r <= half + length)
+    out[on] = points_at(setup.section, np.clip(r[on] - half, 0.0, length))
+    mid = 0.5 * (setup.base_lower + setup.base_upper)
+    low = r < half
+    out[low] = mid + (setup.base_lower - mid) * (r[low] / half)[:, None]
+    high = r > half + length
+    out[high] = setup.base_upper + (mid - setup.base_upper) * ((r[high] - half - length) / half)[:, None]
+    return out
+
+
+def _ring_length(setup: _Setup) -> float:
+    return setup.section.length + setup.gap
+
+
+def _polar(setup: _Setup, points: np.ndarray, lower: np.ndarray) -> np.ndarray:
+    """The polar angle about the mid-chord, clockwise from the trailing edge: 0 there, about pi at
+    the leading edge, 2 pi back at the trailing edge (``lower``: points before the leading edge)."""
+    theta_te = math.atan2(*(setup.te - setup.centre)[::-1])
+    d = points - setup.centre
+    rel = np.mod(theta_te - np.arctan2(d[:, 1], d[:, 0]), 2 * np.pi)
+    rel = np.where(lower & (rel > 1.5 * np.pi), rel - 2 * np.pi, rel)
+    return np.where(~lower & (rel < 0.5 * np.pi), rel + 2 * np.pi, rel)
+
+
+def _wall(setup: _Setup, block: str, xi: np.ndarray, turned: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 2) of block ``block``'s wall (or cut) at xi and the unit directions (N, 2) of its
+    straight lines, turned by alpha (``turned``) or not."""
+    points, direction = _wall_unturned(setup, block, xi)
+    if not turned:
+        return points, direction
+    return _turned(setup, points), direction @ setup.turn.T
+
+
+def _wall_unturned(setup: _Setup, block: str, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    from meshgen.geometry.airfoil_curve import points_at
+
+    xi = np.clip(np.asarray(xi, dtype=float), 0.0, 1.0)
+    if setup.sharp:
+        if block in ("lower", "upper"):
+            run = setup.wake * (1.0 - xi if block == "lower" else xi)
+            points = setup.te + np.stack([run, np.zeros_like(run)], axis=1)
+            direction = np.tile([0.0, -1.0 if block == "lower" else 1.0], (len(xi), 1))
+            return points, direction
+        s = xi * setup.section.length
+        points = points_at(setup.section, s)
+        points[xi == 0.0] = points[xi == 1.0] = setup.te
+        phi = -0.5 * np.pi - 0.5 * _polar(setup, points, s <= setup.le_arc)
+        phi = np.where(xi == 0.0, -0.5 * np.pi, np.where(xi == 1.0, 0.5 * np.pi, phi))
+        return points, np.stack([np.cos(phi), np.sin(phi)], axis=1)
+    a, b = setup.splits
+    start, end = {"lower": (0.0, a), "section": (a, b), "upper": (b, _ring_length(setup))}[block]
+    r = start + xi * (end - start)
+    points = _ring_points(setup, r)
+    direction = points - setup.centre
+    return points, direction / np.linalg.norm(direction, axis=1, keepdims=True)
+
+
+def _check_star(setup: _Setup) -> None:
+    """The straight lines must not cross: the polar angle about the mid-chord increases along the wall."""
+    if setup.sharp:
+        s = np.linspace(0.0, setup.section.length, 4001)
+        points, lower = _wall(setup, "section", s / setup.section.length, turned=False)[0], s <= setup.le_arc
+    else:
+        r = np.linspace(0.0, _ring_length(setup), 4001)
+        points, lower = _ring_points(setup, r), r <= 0.5 * setup.gap + setup.le_arc
+    if not np.all(np.diff(_polar(setup, points, lower)[1:-1]) > 0):
+        raise GeometryError("geometry 'airfoil': the section is not star-shaped about its mid-chord point (too cambered)")
+
+
+def boundary(block, points, **values):
+    """(N, 2) points on the unit square's boundary -> (N, 2) points of block ``block``: w(xi) + eta D e(xi)."""
+    setup = _setup(_key(values))
+    wall, direction = _wall(setup, block, points[:, 0])
+    return wall + (points[:, 1] * setup.distance)[:, None] * direction
+
+
+# ---------------------------------------------------------------------------------------------
+# node distributions
+
+
+def first_height(values) -> tuple[float, str]:
+    """The first-cell height (chords) and how it was found (one phrase)."""
+    from meshgen.geometry.wall_spacing import first_cell_height
+
+    if values["first_height"] > 0:
+        return float(values["first_height"]), "as given"
+    try:
+        cell = first_cell_height(values["yplus"], values["reynolds"])
+    except ParameterError as exc:
+        raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
+    return cell.height, (
+        f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
+    )
+
+
+def _design_ratio(cap: float) -> float:
+    return 1.0 + RATIO_MARGIN * (cap - 1.0)
+
+
+def normal_distances(values, cells: int) -> tuple[np.ndarray, float]:
+    """The wall-normal node distances (cells+1,) from 0 to D and the growth ratio they take."""
+    from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
+
+    h, _ = first_height(values)
+    cap, layers, distance = _design_ratio(values["growth"]), int(values["layers"]), float(values["farfield"])
+    smallest = minimal_cell_count(h, distance, cap, layers)
+    if cells < smallest:
+        raise ParameterError(
+            "dims",
+            f"{{name}}: M = {cells} cells cannot reach the far field ({distance:g} chords) from a first cell of {h:.3g} "
+            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}",
+        )
+    return wall_normal_distances(h, distance, cap, layers, cells=cells)
+
+
+def _split_at(r: np.ndarray, arc: float, first: int, last: int) -> int:
+    """Move node nearest ``arc`` among r[first..last] onto it, stretching its neighbours linearly."""
+    j = first + 1 + int(np.argmin(np.abs(r[first + 1 : last] - arc)))
+    lo, hi = r[first], r[last]
+    r[first : j + 1] = lo + (r[first : j + 1] - lo) * (arc - lo) / (r[j] - lo)
+    r[j : last + 1] = arc + (r[j : last + 1] - r[j]) * (hi - arc) / (hi - r[j])
+    return j
+
+
+def block_coords(dims, **values):
+    from meshgen.geometry.airfoil_curve import chordwise_distribution
+    from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
+
+    setup = _setup(_key(values))
+    n, m = (int(k) for k in dims)
+    eta = normal_distances(values, m)[0] / setup.distance
+    te_h, le_h = values["te_spacing"], values["le_spacing"]
+    if setup.sharp:
+        cap = _design_ratio(values["growth"])
+        least = minimal_cell_count(te_h, setup.wake, cap, 1)
+        wake_cells = max(least, round(WAKE_SHARE * n))
+        if n - 2 * wake_cells < MIN_SECTION_CELLS:
+            smallest = max(2 * least + MIN_SECTION_CELLS, math.ceil((MIN_SECTION_CELLS + 1) / (1 - 2 * WAKE_SHARE)))
+            raise ParameterError(
+                "dims", f"{{name}}: N = {n} is too few for the section and its wake: the smallest N that works is {smallest}"
+            )
+        wake = wall_normal_distances(te_h, setup.wake, cap, 1, cells=wake_cells)[0] / setup.wake
+        around = chordwise_distribution(setup.section, n - 2 * wake_cells, le_h, te_h) / setup.section.length
+        return {"lower": [1.0 - wake[::-1], eta], "section": [around, eta], "upper": [wake, eta]}
+    base = max(MIN_BASE_CELLS, 2 * math.ceil(setup.gap / (2 * te_h)))
+    if n - base < MIN_SECTION_CELLS:
+        raise ParameterError(
+            "dims", f"{{name}}: N = {n} is too few round the section: the smallest N that works is {base + MIN_SECTION_CELLS}"
+        )
+    half = 0.5 * setup.gap
+    s = chordwise_distribution(setup.section, n - base, le_h, te_h)
+    r = np.concatenate(
+        [
+            np.linspace(0.0, half, base // 2 + 1)[:-1],
+            half + s,
+            half + setup.section.length + np.linspace(0.0, half, base // 2 + 1)[1:],
+        ]
+    )
+    le = base // 2 + int(np.argmin(np.abs(s - setup.le_arc)))
+    a, b = setup.splits
+    ja = _split_at(r, a, base // 2, le)
+    jb = _split_at(r, b, le, base // 2 + len(s) - 1)
+    total = _ring_length(setup)
+    return {
+        "lower": [r[: ja + 1] / a, eta],
+        "section": [(r[ja : jb + 1] - a) / (b - a), eta],
+        "upper": [(r[jb:] - b) / (total - b), eta],
+    }
+
+
+def notes(block_set):
+    """One line: the first-cell height (formula, Cf) and the growth ratio that --dims forces."""
+    values = block_set.values
+    h, how = first_height(values)
+    d = np.asarray(block_set.coords[0][1]) * _setup(_key(values)).distance
+    ratio = (d[int(values["layers"]) + 1] - d[int(values["layers"])]) / (d[1] - d[0])
+    kind = "C-grid" if _setup(_key(values)).sharp else "O-grid"
+    return [
+        f"airfoil {kind}: first cell {h:.3g} chord ({how}); {len(d) - 1} cells to {d[-1]:g} chords, growth ratio {ratio:.4f} (cap {values['growth']:g})"
+    ]
+
+
+# ---------------------------------------------------------------------------------------------
+# the elliptic mesh: near-wall layers marched, the rest solved
+
+
+def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
+    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
+    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
+    ratio stays the designed one where the blend bends or stretches the lines."""
+    n, nodes = X.shape[0], X.shape[1]
+    arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
+    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
+    target[:, -1] = arc[:, -1]
+    lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
+    wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
+    segment = np.clip(np.searchsorted(lifted.ravel(), wanted.ravel(), side="right") - 1, 0, n * nodes - 2)
+    segment = np.minimum(segment, (np.arange(n)[:, None] * nodes + nodes - 2).repeat(nodes, axis=1).ravel())
+    flat, lifted = X.reshape(-1, 2), lifted.ravel()
+    step = lifted[segment + 1] - lifted[segment]
+    fraction = np.where(step > 0, (wanted.ravel() - lifted[segment]) / np.where(step > 0, step, 1.0), 0.0)
+    out = flat[segment] + fraction[:, None] * (flat[segment + 1] - flat[segment])
+    out = out.reshape(X.shape)
+    out[:, 0], out[:, -1] = X[:, 0], X[:, -1]
+    return out
+
+
+def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
+    """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
+    wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
+    to the wall), then the layers beyond ``BLEND_START`` chords blended into the TFI mesh, whose
+    outer layer is the far field: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)).
+    ``tol``, ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
+    from meshgen.geometry.blocks import tfi_blocks, unify_interfaces
+    from meshgen.methods.hyperbolic import cell_areas, march
+
+    start = time.perf_counter()
+    setup = _setup(_key(block_set.values))
+    d = np.asarray(block_set.coords[0][1]) * setup.distance
+    walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
+    sizes = [len(w) for w in walls]
+    curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
+    try:
+        if setup.sharp:
+            marched = march(curve, d, ends=("constant_x", "constant_x"))
+        else:
+            marched = march(curve[:-1], d, closed=True, area_smoothing=0.25)
+    except GeometryError as exc:
+        n = sum(len(c[0]) - 1 for c in block_set.coords)
+        raise GeometryError(
+            f"geometry 'airfoil': --dims N = {n} is too coarse along the wall to march to the far field ({exc})"
+        ) from None
+    if not setup.sharp:
+        marched = np.concatenate([marched, marched[:1]])
+    marched = _turned(setup, marched)  # marched square to the cut, turned with the section
+    t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
+    weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
+    offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
+    Xs = [(1.0 - weight) * marched[o : o + size] + weight * X for o, size, X in zip(offsets, sizes, tfi_blocks(block_set))]
+    Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
+    unify_interfaces(block_set, Xs)
+    inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
+    if inverted:
+        raise GeometryError(
+            f"geometry 'airfoil': {inverted} cells of the marched mesh are inverted (try more cells or a smaller growth)"
+        )
+    info = {
+        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into the TFI mesh beyond {BLEND_START:g} chord",
+        "sweeps": 0,
+        "iterations": 0,
+        "final_update": 0.0,
+        "final_residual": 0.0,
+        "tol": 0.0 if tol is None else float(tol),
+        "converged": True,
+        "seconds": time.perf_counter() - start,
+    }
+    return Xs, info

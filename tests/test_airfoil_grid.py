@@ -1,0 +1,199 @@
+"""The airfoil block set (geometries/airfoil.py): C-grid (sharp trailing edge) and O-grid (blunt)
+to y+ 1, checked at every wall node against independent figures: Schlichting's first-cell height
+written out here, wall normals from the section formulas' own derivatives, the TMR NACA 0012
+formula; the wake cut read back from the .cgns, OpenFOAM's checkMesh on the written case."""
+
+import math
+
+import numpy as np
+import pytest
+
+import meshgen
+from meshgen.formats._cgns import read_zones
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
+from tests.openfoam_helpers import check_mesh, needs_openfoam
+
+RE = 6e6
+TMR = (0.594689181, (0.298222773, -0.127125232, -0.357907906, 0.291984971, -0.105174606))
+NACA = (0.6, (0.2969, -0.1260, -0.3516, 0.2843, -0.1015))  # 5 t a_i with t = 0.12
+
+
+def _height(y_plus=1.0, reynolds=RE):
+    cf = (2.0 * math.log10(reynolds) - 0.65) ** -2.3
+    return y_plus / (reynolds * math.sqrt(cf / 2.0))
+
+
+def _thickness(x, coefficients):
+    scale, a = coefficients
+    y = scale * (a[0] * np.sqrt(x) + a[1] * x + a[2] * x**2 + a[3] * x**3 + a[4] * x**4)
+    slope = scale * (0.5 * a[0] / np.sqrt(np.maximum(x, 1e-300)) + a[1] + 2 * a[2] * x + 3 * a[3] * x**2 + 4 * a[4] * x**3)
+    return y, slope
+
+
+def _areas(X):
+    """Signed quad areas (n-1, m-1) from the two diagonals."""
+    d1, d2 = X[1:, 1:] - X[:-1, :-1], X[:-1, 1:] - X[1:, :-1]
+    return 0.5 * (d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0])
+
+
+def _ratios(X):
+    """Wall-normal expansion ratios (n, m-1): each edge along eta over the one before it."""
+    edges = np.linalg.norm(np.diff(X, axis=1), axis=-1)
+    return edges[:, 1:] / edges[:, :-1]
+
+
+@pytest.fixture(scope="module")
+def c_grid():
+    return meshgen.mesh("airfoil", dims=(448, 128), method="elliptic", params={"sharp": 1})
+
+
+@pytest.fixture(scope="module")
+def o_grid():
+    return meshgen.mesh("airfoil", dims=(448, 128), method="elliptic", params={})
+
+
+def _wall_angles(wall, inward, coefficients):
+    """Degrees between the first grid lines (wall -> first node) and the formula's outward normal
+    (-y_t', 1) on the upper surface, (-y_t', -1) on the lower, (-1, 0) at the leading edge."""
+    x = wall[:, 0]
+    _, slope = _thickness(x, coefficients)
+    normal = np.stack([-slope, np.sign(wall[:, 1])], axis=1)
+    normal[x == 0.0] = (-1.0, 0.0)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    line = inward - wall
+    line /= np.linalg.norm(line, axis=1, keepdims=True)
+    return np.degrees(np.arccos(np.clip((line * normal).sum(1), -1.0, 1.0)))
+
+
+def test_c_grid_at_every_wall_node(c_grid):
+    block_set, Xs = c_grid.geometry, c_grid.blocks
+    assert block_set.cells == 448 * 128 and [X.shape[0] - 1 for X in Xs][0] == [X.shape[0] - 1 for X in Xs][2]
+    section = Xs[1]
+    wall, first = section[:, 0], section[:, 1]
+    h = _height()
+    assert np.abs(np.linalg.norm(first - wall, axis=1) / h - 1).max() < 0.02
+    # The TMR formula: every wall node on y = +-y_t(x) to 1e-12 (the trailing edge at (1, 0)).
+    y_t, _ = _thickness(wall[:, 0], TMR)
+    assert np.abs(np.abs(wall[:, 1]) - y_t).max() < 1e-12
+    # The trailing-edge node (the first and the last) is where the cut meets the wall: no normal there.
+    angles = _wall_angles(wall[1:-1], first[1:-1], TMR)
+    assert angles.max() < 2.0
+    for X in Xs:
+        assert (_areas(X) > 0).all()
+        assert _ratios(X).max() <= 1.15
+    # Aspect ratios past 1e5 (the wake's first cells: along the cut over wall-normal).
+    lower = Xs[0]
+    aspect = np.linalg.norm(np.diff(lower[:, 0], axis=0), axis=1) / np.linalg.norm(lower[:-1, 1] - lower[:-1, 0], axis=1)
+    assert aspect.max() > 1e5
+    assert "first cell 4.46e-06" in c_grid.notes[-1]
+
+
+def test_o_grid_at_every_wall_node(o_grid):
+    Xs = o_grid.blocks
+    wall = np.concatenate([Xs[0][:-1, 0], Xs[1][:-1, 0], Xs[2][:-1, 0]])
+    first = np.concatenate([Xs[0][:-1, 1], Xs[1][:-1, 1], Xs[2][:-1, 1]])
+    assert np.abs(np.linalg.norm(first - wall, axis=1) / _height() - 1).max() < 0.02
+    base = np.isclose(wall[:, 0], 1.0, atol=1e-12)
+    corners = base & np.isclose(np.abs(wall[:, 1]), 0.5 * 0.00252, atol=2e-5)
+    assert base.sum() == 5 and corners.sum() == 2  # 4 cells across the base (gap 0.00252 over te_spacing 0.001)
+    surface = ~base
+    y_t, _ = _thickness(wall[surface, 0], NACA)
+    assert np.abs(np.abs(wall[surface, 1]) - y_t).max() < 1e-12
+    assert _wall_angles(wall[surface], first[surface], NACA).max() < 2.0
+    # The base's inner nodes (the two corners excepted): lines along +x, its outward normal.
+    inner = base & ~corners
+    line = first[inner] - wall[inner]
+    assert np.degrees(np.arctan2(np.abs(line[:, 1]), line[:, 0])).max() < 2.0
+    for X in Xs:
+        assert (_areas(X) > 0).all()
+        assert _ratios(X).max() <= 1.15
+
+
+@pytest.mark.parametrize("params", [{"sharp": 1}, {}])
+def test_tfi_first_cells_are_the_asked_height(params):
+    block_set = load_block_set("airfoil", {**params, "first_height": 1e-5, "farfield": 20}, (160, 100))
+    Xs = tfi_blocks(block_set)
+    for X in Xs:
+        assert (_areas(X) > 0).all()
+        assert np.allclose(np.linalg.norm(X[:, 1] - X[:, 0], axis=1), 1e-5, rtol=1e-6)
+        # The straight lines reach the far field 20 chords out.
+        assert np.allclose(np.linalg.norm(X[:, -1] - X[:, 0], axis=1), 20.0, rtol=1e-9)
+
+
+def test_alpha_turns_the_whole_grid_about_the_quarter_chord():
+    straight = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1})
+    turned = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1, "alpha": 10})
+    a = math.radians(10)
+    turn = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+    for X, Y in zip(straight.blocks, turned.blocks):
+        assert np.abs((X - [0.25, 0]) @ turn.T + [0.25, 0] - Y).max() < 1e-9
+    assert turned.blocks[1][0, 0, 1] == pytest.approx(-0.75 * math.sin(a), abs=1e-12)  # the trailing edge went down: nose up
+
+
+def test_cgns_wake_cut_is_one_to_one(tmp_path, c_grid):
+    path = tmp_path / "naca.cgns"
+    c_grid.write(path, quality=False)
+    zones = {zone["name"]: zone for zone in read_zones(path)}
+    n = zones["lower"]["X"].shape[0]
+    cut = [c for c in zones["lower"]["connections"] if c["donor"] == "upper"]
+    assert len(cut) == 1
+    begin, end = cut[0]["range"]
+    assert begin[1] == end[1] == 1 and sorted([begin[0], end[0]]) == [1, n]  # the whole eta0 face
+    # Every vertex of the range, mapped by the Transform, has the donor's coordinates.
+    T = np.zeros((2, 2), dtype=int)
+    for column, t in enumerate(cut[0]["transform"]):
+        T[abs(t) - 1, column] = np.sign(t)
+    begin_donor = cut[0]["donor_range"][0]
+    i = np.arange(1, n + 1)
+    index = np.stack([i, np.ones_like(i)], axis=1)
+    donor = (T @ (index - begin).T).T + begin_donor
+    here = zones["lower"]["X"][index[:, 0] - 1, index[:, 1] - 1]
+    there = zones["upper"]["X"][donor[:, 0] - 1, donor[:, 1] - 1]
+    assert np.array_equal(here, there)
+    assert np.abs(here[:, 1]).max() == 0.0 and np.ptp(here[:, 0]) == pytest.approx(100.0)
+
+
+@needs_openfoam
+def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
+    # A wall spacing whose cells stay under checkMesh's aspect threshold (1000): Mesh OK.
+    mesh = meshgen.mesh(
+        "airfoil", dims=(160, 48), method="elliptic", params={"sharp": 1, "farfield": 5, "wake": 5, "first_height": 0.005}
+    )
+    case = mesh.write(tmp_path / "case", "openfoam", quality=False) or tmp_path / "case"
+    report = check_mesh(case)
+    assert report["ok"], report["log"][-3000:]
+    assert report["cells"] == 160 * 48
+    assert report["patches"] == {
+        "farfield": 160,
+        "outlet": 2 * 48,
+        "wall": mesh.blocks[1].shape[0] - 1,
+        "frontAndBack": 2 * 160 * 48,
+    }
+    # y+ 1: every check passes but the aspect ratio, which is in the thousands by design; the cut has no boundary faces.
+    c_grid.write(tmp_path / "yplus", "openfoam", quality=False)
+    report = check_mesh(tmp_path / "yplus")
+    assert "Failed 1 mesh checks." in report["log"] and "***High aspect ratio cells found" in report["log"]
+    assert report["log"].count("***") == 1
+    assert sum(faces for name, faces in report["patches"].items() if name != "frontAndBack") == 448 + 2 * 128 + 268
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--param", "naca=60012"], "naca=60012"),
+        (["--param", "naca=12.5"], "naca=12.5 is not a NACA"),
+        (["--param", "yplus=-1"], "yplus -1 is outside"),
+        (["--param", "reynolds=1e20"], "reynolds 1e+20 is outside"),
+        (["--param", "farfield=1"], "farfield 1: the far field must lie 2"),
+        (["--param", "growth=1"], "growth 1: the growth-ratio cap must be above 1"),
+        (["--dims", "448", "40"], "the smallest M that works is 114"),
+        (["--param", "sharp=1", "--dims", "60", "128"], "the smallest N that works is"),
+    ],
+)
+def test_bad_input_is_one_line(run_cli, tmp_path, args, words):
+    dims = [] if "--dims" in args else ["--dims", "448", "128"]
+    result = run_cli("mesh", "-g", "airfoil", "--method", "elliptic", *dims, *args, "-o", "x.cgns")
+    assert result.returncode == 2, result.stderr
+    assert words in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert not list(tmp_path.glob("x.*"))
