@@ -3,8 +3,6 @@ near-wall requirements of airfoil O- and C-grids on the TMR NACA 0012 (sharp tra
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -177,15 +175,13 @@ def test_concave_corners_do_not_fold():
     assert (cell_areas(nodes, closed=True) > 0).all()
 
 
-def test_400_by_130_in_well_under_a_second():
+def test_a_400_by_130_o_grid_to_aspect_ratios_of_1e5_has_no_inverted_cell():
+    """The size of a y+ 1 airfoil grid (its time is a benchmark row, not a test)."""
     curve, _ = o_curve(200)
     distances = np.concatenate([[0.0], np.cumsum(1e-6 * 1.1385 ** np.arange(129))])
     assert len(curve) == 400 and len(distances) == 130
-    start = time.perf_counter()
     nodes = march(curve, distances, closed=True)
-    elapsed = time.perf_counter() - start
     assert (cell_areas(nodes, closed=True) > 0).all()
-    assert elapsed < 1.0, elapsed
 
 
 @pytest.mark.parametrize(
