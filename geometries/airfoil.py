@@ -22,8 +22,13 @@ leading edge to up, at half the rate of the polar angle about the mid-chord; O-g
 it). TFI reproduces it, so the TFI mesh's straight grid lines have their first cells exactly of
 the asked height; the parametric eta nodes are the wall-normal distances over D
 (``meshgen.geometry.wall_spacing``). ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
-marches the near-wall layers (``meshgen.methods.hyperbolic``) and solves the rest (Winslow,
-``elliptic_blocks``) with the last marched layer as its fixed inner boundary.
+marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the layers beyond one
+chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
+the designed, wall-normal spacing: see ``mesh_elliptic``).
+
+Grid families: ``level`` K scales the cells per direction by 1.5^K (DPW) and every designed length
+(first cell, leading- and trailing-edge spacing) by (2/3)^K, so the family's grids are similar
+(the y+ of the first cell falls with them).
 """
 
 import dataclasses
@@ -51,12 +56,14 @@ params = {
     "layers": 2.0,
     "le_spacing": 0.002,
     "te_spacing": 0.001,
+    "level": 0.0,
 }
 dims_meaning = (
     "N M: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
     "of them on each side of the cut at least; O-grid: round the section and across its blunt base), "
-    "cells from the wall to the far field"
+    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M)"
 )
+LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
 WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
 MIN_SECTION_CELLS = 16
@@ -112,6 +119,8 @@ def _check(v: dict) -> None:
     for key in ("le_spacing", "te_spacing"):
         if not (0 < v[key] <= 0.05):
             raise ParameterError(key, f"{{name}} {v[key]:g}: the spacing must be a fraction of chord in (0, 0.05]")
+    if v["level"] != int(v["level"]) or not -3 <= v["level"] <= 4:
+        raise ParameterError("level", f"{{name}} {v['level']:g}: the grid level must be a whole number -3 to 4")
     if v["first_height"] != 0 and not (0 < v["first_height"] <= 0.01):
         raise ParameterError(
             "first_height", f"{{name}} {v['first_height']:g}: the first cell must be 0 (from yplus and Re) or in (0, 0.01] chord"
@@ -262,18 +271,31 @@ def boundary(block, points, **values):
 # node distributions
 
 
+def level_scale(values) -> float:
+    """The factor (2/3)^K of every designed length at grid level K = ``level`` (DPW's family rule)."""
+    return LEVEL_RATIO ** -int(values.get("level", 0.0))
+
+
+def level_dims(values, dims) -> tuple[int, int]:
+    """The cell counts (N, M) at grid level K: round(1.5^K N), round(1.5^K M)."""
+    return tuple(round(LEVEL_RATIO ** int(values.get("level", 0.0)) * int(k)) for k in dims)
+
+
 def first_height(values) -> tuple[float, str]:
-    """The first-cell height (chords) and how it was found (one phrase)."""
+    """The first-cell height (chords) at the grid level and how it was found (one phrase)."""
     from meshgen.geometry.wall_spacing import first_cell_height
 
+    scale = level_scale(values)
+    at_level = "" if scale == 1 else f", times (2/3)^{int(values['level'])} at level {int(values['level'])}"
     if values["first_height"] > 0:
-        return float(values["first_height"]), "as given"
+        return float(values["first_height"]) * scale, "as given" + at_level
     try:
         cell = first_cell_height(values["yplus"], values["reynolds"])
     except ParameterError as exc:
         raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
-    return cell.height, (
+    return cell.height * scale, (
         f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
+        + at_level
     )
 
 
@@ -311,9 +333,9 @@ def block_coords(dims, **values):
     from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
 
     setup = _setup(_key(values))
-    n, m = (int(k) for k in dims)
+    n, m = level_dims(values, dims)
     eta = normal_distances(values, m)[0] / setup.distance
-    te_h, le_h = values["te_spacing"], values["le_spacing"]
+    te_h, le_h = values["te_spacing"] * level_scale(values), values["le_spacing"] * level_scale(values)
     if setup.sharp:
         cap = _design_ratio(values["growth"])
         least = minimal_cell_count(te_h, setup.wake, cap, 1)

@@ -186,6 +186,8 @@ def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
         (["--param", "reynolds=1e20"], "reynolds 1e+20 is outside"),
         (["--param", "farfield=1"], "farfield 1: the far field must lie 2"),
         (["--param", "growth=1"], "growth 1: the growth-ratio cap must be above 1"),
+        (["--param", "level=0.5"], "level 0.5: the grid level must be a whole number"),
+        (["--yplus", "1", "--param", "yplus=1"], "--yplus and --param yplus= both given"),
         (["--dims", "448", "40"], "the smallest M that works is 114"),
         (["--param", "sharp=1", "--dims", "60", "128"], "the smallest N that works is"),
     ],
@@ -197,3 +199,34 @@ def test_bad_input_is_one_line(run_cli, tmp_path, args, words):
     assert words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not list(tmp_path.glob("x.*"))
+
+
+def test_level_scales_the_cells_and_the_first_cell():
+    # DPW's family rule: 1.5x the cells per direction, 2/3 of every designed length (first cell included).
+    base = load_block_set("airfoil", {"sharp": 1, "farfield": 20}, (160, 110))
+    finer = load_block_set("airfoil", {"sharp": 1, "farfield": 20, "level": 1}, (160, 110))
+    assert base.cells == 160 * 110 and finer.cells == 240 * 165
+    for X in tfi_blocks(finer):
+        assert np.allclose(np.linalg.norm(X[:, 1] - X[:, 0], axis=1), _height() * 2 / 3, rtol=1e-6)
+    # The chordwise spacing at the trailing edge (te_spacing 0.001) scales too.
+    te = (
+        np.linalg.norm(finer.coords[1][0][1] - finer.coords[1][0][0])
+        * np.linalg.norm(np.diff(tfi_blocks(finer)[1][:, 0], axis=0), axis=1).sum()
+    )
+    assert te == pytest.approx(0.001 * 2 / 3, rel=0.05)
+    mesh = meshgen.mesh("airfoil", dims=(160, 110), method="elliptic", params={"sharp": 1, "farfield": 20, "level": 1})
+    section = mesh.blocks[1]
+    assert np.abs(np.linalg.norm(section[:, 1] - section[:, 0], axis=1) / (_height() * 2 / 3) - 1).max() < 0.02
+    assert sum(X.shape[0] - 1 for X in mesh.blocks) == 240 and mesh.blocks[0].shape[1] == 166
+
+
+def test_yplus_and_reynolds_options(run_cli, tmp_path):
+    result = run_cli(
+        "mesh", "-g", "airfoil", "--yplus", "0.5", "--reynolds", "1e6", "--param", "sharp=1",
+        "--dims", "160", "120", "-m", "tfi", "--no-quality", "-o", "x.cgns",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert f"first cell {_height(0.5, 1e6):.3g} chord (y+ 0.5 at Re 1e+06" in result.stdout
+    refused = run_cli("mesh", "-g", "pipe", "--yplus", "1", "--dims", "8", "8", "8", "-m", "tfi", "-o", "y.cgns")
+    assert refused.returncode == 2 and "geometry 'pipe' has no parameter 'yplus'" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and not list(tmp_path.glob("y.*"))
