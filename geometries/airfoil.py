@@ -70,13 +70,7 @@ MIN_SECTION_CELLS = 16
 MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
 RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
-MARCH_ASPECT = 1.0  # march while a layer's section cells are longer than high by more than this
-MIN_OUTER_CELLS = 8  # wall-normal cells left to the elliptic solve at least
-OUTER_COARSEST = 100  # the outer block's multigrid coarsens an axis only while it has more cells
-FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing (and the xi coordinate's scale) is smoothed
-FRONT_SCALE = 0.5  # C-grid: the xi coordinate per far-field arc length round the front, relative to the wake's
-PLATE = 0.5  # chords: the eta coordinate is PLATE asinh(d / PLATE), a flat plate's elliptic coordinate
-SEAM_PASSES = 3  # the O-grid ring's Schwarz passes
+BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into the TFI mesh
 
 
 def _sharp_te(values) -> bool:
@@ -393,146 +387,17 @@ def notes(block_set):
 
 
 # ---------------------------------------------------------------------------------------------
-# the elliptic mesh: near-wall layers marched, the outer region solved (Winslow)
+# the elliptic mesh: near-wall layers marched, the rest solved
 
 
-def marched_layers(d: np.ndarray, section_wall: np.ndarray, layers: int) -> int:
-    """The count of layers marched off the wall: up to the first whose step d[k+1] - d[k] reaches
-    the longest chordwise cell of the section's wall ``section_wall`` (n, 2), i.e. while every
-    section cell of the layer is thinner than long (aspect ratio above ``MARCH_ASPECT``); at
-    least ``layers`` + 1, and ``MIN_OUTER_CELLS`` left to the solve. ``d``: (M + 1,) distances."""
-    longest = float(np.linalg.norm(np.diff(section_wall, axis=0), axis=1).max())
-    square = np.nonzero(np.diff(d) * MARCH_ASPECT >= longest)[0]
-    k = int(square[0]) if len(square) else len(d) - 1
-    return max(layers + 1, min(k, len(d) - 1 - MIN_OUTER_CELLS))
-
-
-def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
-    """Spacings (n,) whose logarithm is that of ``ds`` (n,) diffused over about ``width`` cells
-    (one implicit step, zero-flux ends), scaled to the same sum."""
-    from scipy.linalg import solve_banded
-
-    lam = width**2
-    bands = np.zeros((3, len(ds)))
-    bands[0, 1:] = bands[2, :-1] = -lam
-    bands[1] = 1.0 + 2.0 * lam
-    bands[1, 0] = bands[1, -1] = 1.0 + lam
-    out = np.exp(solve_banded((1, 1), bands, np.log(ds)))
-    return out * ds.sum() / out.sum()
-
-
-def far_field(setup: _Setup, coords, fractions=None) -> np.ndarray:
-    """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
-    curve (w + D e), at the arc-length ``fractions`` (N + 1,) from 0 to 1 if given, else spaced as
-    the boundary map spaces them but with the logarithm of the spacing diffused over
-    ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
-    the wake blocks' where they meet)."""
-    designed, dense = [], []
-    for block, c in zip(blocks, coords):
-        for target, xi in ((designed, np.asarray(c[0])), (dense, np.linspace(0.0, 1.0, 4001))):
-            points, direction = _wall(setup, block, xi, turned=False)
-            target.append(points + setup.distance * direction)
-    designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
-    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
-    if fractions is None:
-        spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
-        s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
-    else:
-        s = np.asarray(fractions) * arc[-1]
-    out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
-    out[0], out[-1] = designed[0], designed[-1]
-    return out
-
-
-def _rolled(X: np.ndarray, t: np.ndarray, shift: int) -> tuple[np.ndarray, np.ndarray]:
-    """A closed ring X (N + 1, ..., 2), last node = first, and its xi coordinates t (N + 1,) started at node ``shift``."""
-    period = t[-1] - t[0]
-    ring = np.roll(X[:-1], -shift, axis=0)
-    t = np.concatenate([t[shift:-1], t[: shift + 1] + period]) - t[shift]
-    return np.concatenate([ring, ring[:1]]), t
-
-
-def periodic_padded(X: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A closed ring X (N + 1, m, 2) and its xi coordinates (N + 1,) with one node more at each end
-    (the ring's last but one before, its second after): every ring node is an interior node."""
-    period = t[-1] - t[0]
-    return np.concatenate([X[-2:-1], X, X[1:2]]), np.concatenate([[t[-2] - period], t, [t[1] + period]])
-
-
-def _solve(X0, coords, closed: bool, tol: float, max_iter: int, length: float):
-    """Winslow (``meshgen.methods.multigrid.solve_winslow``) on the outer block. A closed ring by
-    alternating Schwarz: solved with its seam (node 0 = N) fixed, then with the seam half way round
-    (the old one inside), ``SEAM_PASSES`` solves in all; info's ``seam_moved`` is the largest move of
-    the last pass relative to ``length`` (what is left of the seam's error)."""
-    from meshgen.methods.multigrid import solve_winslow
-
-    X, info = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=length, coarsest=OUTER_COARSEST)
-    if not closed:
-        return X, info
-    t, n, cycles, moved = np.asarray(coords[0]), len(X0) - 1, info["iterations"], np.inf
-    for passes in range(1, SEAM_PASSES):
-        seam = (passes % 2) * (n // 2)  # alternately half way round and back at node 0
-        shifted, ts = _rolled(X, t, seam)
-        solved, info = solve_winslow(shifted, [ts, coords[1]], tol=tol, max_iter=max_iter, length=length, coarsest=OUTER_COARSEST)
-        cycles += info["iterations"]
-        solved = _rolled(solved, ts, (n - seam) % n)[0]
-        moved, X = float(np.abs(solved - X).max()) / length, solved
-    return X, {**info, "iterations": cycles, "seam_passes": SEAM_PASSES, "seam_moved": moved}
-
-
-def outer_region(block_set, tol=None, max_iter=None):
-    """The near-wall layers marched and the outer region solved, before respacing: returns
-    (marched (N + 1, k + 1, 2), outer (N + 1, M - k + 1, 2), outer coords [xi, eta], info), unturned;
-    the outer block's first layer is the last marched one, its last the far field (``far_field``).
-    Coordinates (what Winslow keeps where the map is near affine): eta = PLATE asinh(d / PLATE), the
-    elliptic coordinate of a flat plate of chord 1 (linear in the wall distance d near the wall,
-    logarithmic far out: harmonic round a body, where d itself is not); xi, C-grid: the far field's
-    arc length, times ``FRONT_SCALE`` round the front (a polar angle there, harmonic too; the scale
-    splits the kink where the wake's straight lines meet the front's radial ones); O-grid: the arc
-    length along the last marched layer, the far-field nodes at the same arc fractions (radial
-    lines; the far field's own spacing folded cells at the blunt base)."""
-    from meshgen.methods.hyperbolic import march
-    from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL
-
-    setup = _setup(_key(block_set.values))
-    d = np.asarray(block_set.coords[0][1]) * setup.distance
-    walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
-    curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
-    k = marched_layers(d, walls[1], int(block_set.values["layers"]))
-    try:
-        if setup.sharp:
-            inner = march(curve, d[: k + 1], ends=("constant_x", "constant_x"))
-        else:
-            inner = march(curve[:-1], d[: k + 1], closed=True, area_smoothing=0.25)
-            inner = np.concatenate([inner, inner[:1]])
-    except GeometryError as exc:
-        n = sum(len(c[0]) - 1 for c in block_set.coords)
-        raise GeometryError(f"geometry 'airfoil': --dims N = {n} is too coarse along the wall to march off it ({exc})") from None
-    layer = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(inner[:, -1], axis=0), axis=1))])
-    far = far_field(setup, block_set.coords, None if setup.sharp else layer / layer[-1])
-    scale = np.ones(len(far) - 1)
-    if setup.sharp:
-        first = len(block_set.coords[0][0]) - 1
-        scale[first : first + len(block_set.coords[1][0]) - 1] = FRONT_SCALE
-        scale = _smoothed_spacing(scale, FARFIELD_SMOOTHING) * scale.sum() / scale.sum()
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(far, axis=0), axis=1) * scale)]) if setup.sharp else layer
-    coords = [arc, PLATE * np.arcsinh(d[k:] / PLATE)]
-    fraction = ((d[k:] - d[k]) / (d[-1] - d[k]))[None, :, None]
-    X0 = (1.0 - fraction) * inner[:, -1:] + fraction * far[:, None]  # straight lines
-    tol = DEFAULT_TOL if tol is None else float(tol)
-    X, info = _solve(X0, coords, not setup.sharp, tol, DEFAULT_MAX_ITER if max_iter is None else int(max_iter), block_set.length)
-    return inner, X, coords, {**info, "marched_layers": k}
-
-
-def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray, start: np.ndarray) -> np.ndarray:
+def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
-    lengths d (f (1 - w) + (L / d[-1]) w): ``d`` (m + 1,) the designed distances from its first
-    node, L the line's length, ``w`` (m + 1,) the weight from 0 to 1, ``f`` = ``start`` (n,) the
-    scale of the line's first cells (that of the cells before it, so the growth ratio goes on)."""
+    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
+    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
+    ratio stays the designed one where the blend bends or stretches the lines."""
     n, nodes = X.shape[0], X.shape[1]
     arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
-    target = d[None, :] * (start[:, None] * (1.0 - weight[None, :]) + (arc[:, -1:] / d[-1]) * weight[None, :])
+    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
     target[:, -1] = arc[:, -1]
     lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
     wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
@@ -548,45 +413,52 @@ def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray, start: np.ndarra
 
 
 def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
-    """The hook of ``meshgen.run.meshing`` for ``--method elliptic`` (``outer_region``): the
-    near-wall layers marched (``meshgen.methods.hyperbolic.march``: first cells of the asked
-    height, grid lines square to the wall), the outer region solved as one block (Winslow; the
-    three blocks in a row: a C, or a periodic ring), then its nodes slid along its eta lines to the
-    designed distances (``_respaced``, weight smoothstep(log(d / d_k) / log(D / d_k)): the cells
-    stretch to lines longer than D towards the far field). The Winslow solution keeps the lines;
-    its own spacing along them is harmonic (logarithmic round the front, linear in the wake: no one
-    eta coordinate gives the designed growth in both), so the spacing is the design's. Returns
-    (node arrays per block, info; ``outer_residual``: the solve's largest Jacobi step, relative)."""
-    from meshgen.geometry.blocks import unify_interfaces
-    from meshgen.methods.hyperbolic import cell_areas
+    """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
+    wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
+    to the wall), then the layers beyond ``BLEND_START`` chords blended into the TFI mesh, whose
+    outer layer is the far field: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)).
+    ``tol``, ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
+    from meshgen.geometry.blocks import tfi_blocks, unify_interfaces
+    from meshgen.methods.hyperbolic import cell_areas, march
 
     start = time.perf_counter()
     setup = _setup(_key(block_set.values))
-    inner, outer, coords, info = outer_region(block_set, tol, max_iter)
-    k = info["marched_layers"]
-    d = np.asarray(block_set.coords[0][1])[k:] * setup.distance
-    t = np.clip(np.log(d / d[0]) / math.log(d[-1] / d[0]), 0.0, 1.0)
-    last = np.linalg.norm(inner[:, -1] - inner[:, -2], axis=1) / (
-        d[0] - np.asarray(block_set.coords[0][1])[k - 1] * setup.distance
-    )
-    outer = _respaced(outer, d - d[0], t * t * (3.0 - 2.0 * t), last)
-    whole = _turned(setup, np.concatenate([inner[:, :-1], outer], axis=1))
-    sizes = [len(c[0]) for c in block_set.coords]
+    d = np.asarray(block_set.coords[0][1]) * setup.distance
+    walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
+    sizes = [len(w) for w in walls]
+    curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
+    try:
+        if setup.sharp:
+            marched = march(curve, d, ends=("constant_x", "constant_x"))
+        else:
+            marched = march(curve[:-1], d, closed=True, area_smoothing=0.25)
+    except GeometryError as exc:
+        n = sum(len(c[0]) - 1 for c in block_set.coords)
+        raise GeometryError(
+            f"geometry 'airfoil': --dims N = {n} is too coarse along the wall to march to the far field ({exc})"
+        ) from None
+    if not setup.sharp:
+        marched = np.concatenate([marched, marched[:1]])
+    marched = _turned(setup, marched)  # marched square to the cut, turned with the section
+    t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
+    weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
-    Xs = [np.ascontiguousarray(whole[o : o + size]) for o, size in zip(offsets, sizes)]
+    Xs = [(1.0 - weight) * marched[o : o + size] + weight * X for o, size, X in zip(offsets, sizes, tfi_blocks(block_set))]
+    Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
     if inverted:
         raise GeometryError(
-            f"geometry 'airfoil': {inverted} cells of the elliptic mesh are inverted (try more cells or a smaller growth)"
+            f"geometry 'airfoil': {inverted} cells of the marched mesh are inverted (try more cells or a smaller growth)"
         )
-    kind = "a C" if setup.sharp else "a periodic ring"
     info = {
-        **info,
-        "solver": f"hyperbolic march of {k} layers, Winslow on the outer {len(d) - 1} as {kind} ({info['solver']}), "
-        "respaced along its lines",
-        "outer_residual": info["final_residual"],
-        "sweeps": info["iterations"],
+        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into the TFI mesh beyond {BLEND_START:g} chord",
+        "sweeps": 0,
+        "iterations": 0,
+        "final_update": 0.0,
+        "final_residual": 0.0,
+        "tol": 0.0 if tol is None else float(tol),
+        "converged": True,
         "seconds": time.perf_counter() - start,
     }
     return Xs, info

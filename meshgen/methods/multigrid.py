@@ -203,10 +203,9 @@ def banded(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return columns, values
 
 
-def hierarchy(coords, axis_weights=None, compiled: bool | None = None, coarsest: int = COARSEST_CELLS) -> list[Level]:
+def hierarchy(coords, axis_weights=None, compiled: bool | None = None) -> list[Level]:
     """Levels from the given grid (first) to the coarsest (last); ``compiled``: whether they run
-    the compiled kernels (3D only; default: ``uses_kernels(coords)``); ``coarsest``: the cell
-    count below which an axis is not coarsened (default ``COARSEST_CELLS``).
+    the compiled kernels (3D only; default: ``uses_kernels(coords)``).
 
     ``axis_weights``: the typical size of A_aa (the weight of r_aa) per axis; the coupling
     strength of axis a on a grid is then A_aa / h_a^2. An axis is coarsened only while it has more
@@ -221,7 +220,7 @@ def hierarchy(coords, axis_weights=None, compiled: bool | None = None, coarsest:
     while True:
         cells = np.array([len(t) - 1 for t in chain[-1]])
         strength = weights * cells.astype(float) ** 2
-        coarsenable = cells > coarsest
+        coarsenable = cells > COARSEST_CELLS
         if not coarsenable.any():
             break
         strongest = strength[coarsenable].max()
@@ -326,13 +325,7 @@ def jacobi_residual(level: Level, R: np.ndarray, length: float) -> float:
 
 
 def solve_winslow(
-    X0: np.ndarray,
-    coords,
-    tol: float = DEFAULT_TOL,
-    max_iter: int = DEFAULT_MAX_ITER,
-    length: float = 1.0,
-    progress=None,
-    coarsest: int = COARSEST_CELLS,
+    X0: np.ndarray, coords, tol: float = DEFAULT_TOL, max_iter: int = DEFAULT_MAX_ITER, length: float = 1.0, progress=None
 ):
     """Solve the discrete Winslow equations for the interior nodes of ``X0``.
 
@@ -343,8 +336,6 @@ def solve_winslow(
     ``progress``: optional callable ``progress(done, **figures)`` after each cycle, ``done`` in
     [0, 1] the progress of log(update) from the first cycle's towards ``tol``, ``figures`` the
     cycle number, update and residual.
-    ``coarsest``: coarsen an axis only while it has more cells than this (``hierarchy``): a domain that
-    a few cells cannot represent (a C-grid's outer region folds back on itself) needs more.
     Returns ``(X, info)``: the node array and a dict with ``iterations`` (finest-grid cycles),
     ``final_update`` and ``final_residual`` (both relative to ``length``), ``converged``,
     ``seconds`` and ``levels`` (the grids' cell counts, finest first).
@@ -352,7 +343,7 @@ def solve_winslow(
     start = time.perf_counter()
     starts = [component_array(X0)]
     _, axial = Level(coords, compiled=uses_kernels(coords)).operator(starts[0])
-    levels = hierarchy(coords, [np.median(a) for a in axial], coarsest=coarsest)
+    levels = hierarchy(coords, [np.median(a) for a in axial])
     for level in levels[:-1]:
         starts.append(level.transfer("restrict_solution", starts[-1]))
 
