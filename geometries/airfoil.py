@@ -70,7 +70,8 @@ MIN_SECTION_CELLS = 16
 MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
 RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
-BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into the TFI mesh
+BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into straight lines
+FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing is smoothed
 
 
 def _sharp_te(values) -> bool:
@@ -390,6 +391,44 @@ def notes(block_set):
 # the elliptic mesh: near-wall layers marched, the rest solved
 
 
+def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
+    """Spacings (n,) whose logarithm is that of ``ds`` (n,) diffused over about ``width`` cells
+    (one implicit step, zero-flux ends), scaled to the same sum."""
+    from scipy.linalg import solve_banded
+
+    lam = width**2
+    bands = np.zeros((3, len(ds)))
+    bands[0, 1:] = bands[2, :-1] = -lam
+    bands[1] = 1.0 + 2.0 * lam
+    bands[1, 0] = bands[1, -1] = 1.0 + lam
+    out = np.exp(solve_banded((1, 1), bands, np.log(ds)))
+    return out * ds.sum() / out.sum()
+
+
+def far_field(setup: _Setup, coords, fractions=None) -> np.ndarray:
+    """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
+    curve (w + D e), at the arc-length ``fractions`` (N + 1,) from 0 to 1 if given, else spaced as
+    the boundary map spaces them but with the logarithm of the spacing diffused over
+    ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
+    the wake blocks' where they meet)."""
+    designed, dense = [], []
+    for block, c in zip(blocks, coords):
+        for target, xi in ((designed, np.asarray(c[0])), (dense, np.linspace(0.0, 1.0, 4001))):
+            points, direction = _wall(setup, block, xi, turned=False)
+            target.append(points + setup.distance * direction)
+    designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
+    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
+    if fractions is None:
+        spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
+        s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
+    else:
+        s = np.asarray(fractions) * arc[-1]
+    out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
+    out[0], out[-1] = designed[0], designed[-1]
+    return out
+
+
 def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
     lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
@@ -415,10 +454,13 @@ def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
 def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
     wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
-    to the wall), then the layers beyond ``BLEND_START`` chords blended into the TFI mesh, whose
-    outer layer is the far field: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)).
+    to the wall), then the layers beyond ``BLEND_START`` chords blended into straight lines from the
+    wall nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes at the designed
+    distances: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)). No Winslow equations
+    are solved: a Winslow outer region keeps harmonic, not designed, wall-normal spacing (logarithmic
+    round the front, linear in the wake) and leaves the marched layer at up to 80 degrees.
     ``tol``, ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
-    from meshgen.geometry.blocks import tfi_blocks, unify_interfaces
+    from meshgen.geometry.blocks import unify_interfaces
     from meshgen.methods.hyperbolic import cell_areas, march
 
     start = time.perf_counter()
@@ -443,7 +485,9 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
     weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
-    Xs = [(1.0 - weight) * marched[o : o + size] + weight * X for o, size, X in zip(offsets, sizes, tfi_blocks(block_set))]
+    lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far_field(setup, block_set.coords) - curve)[:, None]
+    lines = _turned(setup, lines)
+    Xs = [(1.0 - weight) * marched[o : o + size] + weight * lines[o : o + size] for o, size in zip(offsets, sizes)]
     Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
@@ -452,7 +496,7 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
             f"geometry 'airfoil': {inverted} cells of the marched mesh are inverted (try more cells or a smaller growth)"
         )
     info = {
-        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into the TFI mesh beyond {BLEND_START:g} chord",
+        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into straight lines to the far field beyond {BLEND_START:g} chord",
         "sweeps": 0,
         "iterations": 0,
         "final_update": 0.0,

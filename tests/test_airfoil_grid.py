@@ -109,6 +109,23 @@ def test_o_grid_at_every_wall_node(o_grid):
         assert _ratios(X).max() <= 1.15
 
 
+@pytest.mark.parametrize("grid", ["c_grid", "o_grid"])
+def test_far_field_spacing_has_no_jump(grid, request):
+    # The section block's far-field cells are about 15 times the wake blocks' where they meet (TFI);
+    # the elliptic mesh's far-field nodes grow smoothly along the whole far field.
+    Xs = request.getfixturevalue(grid).blocks
+    far = np.concatenate([Xs[0][:, -1], Xs[1][1:, -1], Xs[2][1:, -1]])
+    spacing = np.linalg.norm(np.diff(far, axis=0), axis=1)
+    ratio = spacing[1:] / spacing[:-1]
+    assert max(ratio.max(), 1 / ratio.min()) < 1.25
+    tfi = tfi_blocks(request.getfixturevalue(grid).geometry)
+    tfi_far = np.concatenate([tfi[0][:, -1], tfi[1][1:, -1], tfi[2][1:, -1]])
+    tfi_spacing = np.linalg.norm(np.diff(tfi_far, axis=0), axis=1)
+    assert (tfi_spacing[1:] / tfi_spacing[:-1]).max() > 5 or grid == "o_grid"  # the jump that was there
+    # On the far field's curve: as far from the wall's mid-chord as the TFI far field (D = 100 chords out).
+    assert np.allclose(np.linalg.norm(far - [0.5, 0], axis=1).max(), np.linalg.norm(tfi_far - [0.5, 0], axis=1).max(), rtol=1e-3)
+
+
 @pytest.mark.parametrize("params", [{"sharp": 1}, {}])
 def test_tfi_first_cells_are_the_asked_height(params):
     block_set = load_block_set("airfoil", {**params, "first_height": 1e-5, "farfield": 20}, (160, 100))
