@@ -315,7 +315,8 @@ def normal_distances(values, cells: int) -> tuple[np.ndarray, float]:
         raise ParameterError(
             "dims",
             f"{{name}}: M = {cells} cells cannot reach the far field ({distance:g} chords) from a first cell of {h:.3g} "
-            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}",
+            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}"
+            + (f" (at level {int(values['level'])}: M is round(1.5^K M) of --dims)" if values.get("level") else ""),
         )
     return wall_normal_distances(h, distance, cap, layers, cells=cells)
 

@@ -11,7 +11,7 @@ from meshgen.cli._progress import progress_display
 from meshgen.cli._text import echo
 from meshgen.errors import GeometryError, did_you_mean
 from meshgen.formats import format_for
-from meshgen.geometry.plugins import parse_params
+from meshgen.geometry.plugins import parse_params, plugin_module
 from meshgen.methods.registry import METHODS
 from meshgen.quality import summary_lines
 from meshgen.run.request import MeshRequest, carry_out
@@ -316,8 +316,6 @@ def _wall_options(values: dict, geometry: str, **given) -> dict:
     given = {key: value for key, value in given.items() if value is not None}
     if not given:
         return values
-    from meshgen.geometry.plugins import plugin_module
-
     names = getattr(plugin_module(geometry)[0], "params", {})
     for key in given:
         if key not in names:
