@@ -4,6 +4,7 @@ written out here, wall normals from the section formulas' own derivatives, the T
 formula; the wake cut read back from the .cgns, OpenFOAM's checkMesh on the written case."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -191,6 +192,8 @@ def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
     report = check_mesh(tmp_path / "yplus")
     assert "Failed 1 mesh checks." in report["log"] and "***High aspect ratio cells found" in report["log"]
     assert report["log"].count("***") == 1
+    # No severely non-orthogonal faces (the far field's 15-fold spacing jump made 86 degrees there).
+    assert float(re.search(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)", report["log"]).group(1)) < 60
     assert sum(faces for name, faces in report["patches"].items() if name != "frontAndBack") == 448 + 2 * 128 + 268
 
 
