@@ -406,11 +406,10 @@ def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
     return out * ds.sum() / out.sum()
 
 
-def far_field(setup: _Setup, coords, fractions=None) -> np.ndarray:
+def far_field(setup: _Setup, coords) -> np.ndarray:
     """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
-    curve (w + D e), at the arc-length ``fractions`` (N + 1,) from 0 to 1 if given, else spaced as
-    the boundary map spaces them but with the logarithm of the spacing diffused over
-    ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
+    curve (w + D e), spaced as the boundary map spaces them but with the logarithm of the spacing
+    diffused over ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
     the wake blocks' where they meet)."""
     designed, dense = [], []
     for block, c in zip(blocks, coords):
@@ -420,11 +419,8 @@ def far_field(setup: _Setup, coords, fractions=None) -> np.ndarray:
     designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
     dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
-    if fractions is None:
-        spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
-        s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
-    else:
-        s = np.asarray(fractions) * arc[-1]
+    spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
+    s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
     out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
     out[0], out[-1] = designed[0], designed[-1]
     return out
