@@ -22,8 +22,13 @@ leading edge to up, at half the rate of the polar angle about the mid-chord; O-g
 it). TFI reproduces it, so the TFI mesh's straight grid lines have their first cells exactly of
 the asked height; the parametric eta nodes are the wall-normal distances over D
 (``meshgen.geometry.wall_spacing``). ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
-marches the near-wall layers (``meshgen.methods.hyperbolic``) and solves the rest (Winslow,
-``elliptic_blocks``) with the last marched layer as its fixed inner boundary.
+marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the layers beyond one
+chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
+the designed, wall-normal spacing: see ``mesh_elliptic``).
+
+Grid families: ``level`` K scales the cells per direction by 1.5^K (DPW) and every designed length
+(first cell, leading- and trailing-edge spacing) by (2/3)^K, so the family's grids are similar
+(the y+ of the first cell falls with them).
 """
 
 import dataclasses
@@ -51,19 +56,22 @@ params = {
     "layers": 2.0,
     "le_spacing": 0.002,
     "te_spacing": 0.001,
+    "level": 0.0,
 }
 dims_meaning = (
     "N M: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
     "of them on each side of the cut at least; O-grid: round the section and across its blunt base), "
-    "cells from the wall to the far field"
+    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M)"
 )
+LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
 WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
 MIN_SECTION_CELLS = 16
 MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
 RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
-BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into the TFI mesh
+BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into straight lines
+FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing is smoothed
 
 
 def _sharp_te(values) -> bool:
@@ -112,6 +120,8 @@ def _check(v: dict) -> None:
     for key in ("le_spacing", "te_spacing"):
         if not (0 < v[key] <= 0.05):
             raise ParameterError(key, f"{{name}} {v[key]:g}: the spacing must be a fraction of chord in (0, 0.05]")
+    if v["level"] != int(v["level"]) or not -3 <= v["level"] <= 4:
+        raise ParameterError("level", f"{{name}} {v['level']:g}: the grid level must be a whole number -3 to 4")
     if v["first_height"] != 0 and not (0 < v["first_height"] <= 0.01):
         raise ParameterError(
             "first_height", f"{{name}} {v['first_height']:g}: the first cell must be 0 (from yplus and Re) or in (0, 0.01] chord"
@@ -262,18 +272,31 @@ def boundary(block, points, **values):
 # node distributions
 
 
+def level_scale(values) -> float:
+    """The factor (2/3)^K of every designed length at grid level K = ``level`` (DPW's family rule)."""
+    return LEVEL_RATIO ** -int(values.get("level", 0.0))
+
+
+def level_dims(values, dims) -> tuple[int, int]:
+    """The cell counts (N, M) at grid level K: round(1.5^K N), round(1.5^K M)."""
+    return tuple(round(LEVEL_RATIO ** int(values.get("level", 0.0)) * int(k)) for k in dims)
+
+
 def first_height(values) -> tuple[float, str]:
-    """The first-cell height (chords) and how it was found (one phrase)."""
+    """The first-cell height (chords) at the grid level and how it was found (one phrase)."""
     from meshgen.geometry.wall_spacing import first_cell_height
 
+    scale = level_scale(values)
+    at_level = "" if scale == 1 else f", times (2/3)^{int(values['level'])} at level {int(values['level'])}"
     if values["first_height"] > 0:
-        return float(values["first_height"]), "as given"
+        return float(values["first_height"]) * scale, "as given" + at_level
     try:
         cell = first_cell_height(values["yplus"], values["reynolds"])
     except ParameterError as exc:
         raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
-    return cell.height, (
+    return cell.height * scale, (
         f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
+        + at_level
     )
 
 
@@ -292,7 +315,8 @@ def normal_distances(values, cells: int) -> tuple[np.ndarray, float]:
         raise ParameterError(
             "dims",
             f"{{name}}: M = {cells} cells cannot reach the far field ({distance:g} chords) from a first cell of {h:.3g} "
-            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}",
+            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}"
+            + (f" (at level {int(values['level'])}: M is round(1.5^K M) of --dims)" if values.get("level") else ""),
         )
     return wall_normal_distances(h, distance, cap, layers, cells=cells)
 
@@ -311,9 +335,9 @@ def block_coords(dims, **values):
     from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
 
     setup = _setup(_key(values))
-    n, m = (int(k) for k in dims)
+    n, m = level_dims(values, dims)
     eta = normal_distances(values, m)[0] / setup.distance
-    te_h, le_h = values["te_spacing"], values["le_spacing"]
+    te_h, le_h = values["te_spacing"] * level_scale(values), values["le_spacing"] * level_scale(values)
     if setup.sharp:
         cap = _design_ratio(values["growth"])
         least = minimal_cell_count(te_h, setup.wake, cap, 1)
@@ -368,6 +392,40 @@ def notes(block_set):
 # the elliptic mesh: near-wall layers marched, the rest solved
 
 
+def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
+    """Spacings (n,) whose logarithm is that of ``ds`` (n,) diffused over about ``width`` cells
+    (one implicit step, zero-flux ends), scaled to the same sum."""
+    from scipy.linalg import solve_banded
+
+    lam = width**2
+    bands = np.zeros((3, len(ds)))
+    bands[0, 1:] = bands[2, :-1] = -lam
+    bands[1] = 1.0 + 2.0 * lam
+    bands[1, 0] = bands[1, -1] = 1.0 + lam
+    out = np.exp(solve_banded((1, 1), bands, np.log(ds)))
+    return out * ds.sum() / out.sum()
+
+
+def far_field(setup: _Setup, coords) -> np.ndarray:
+    """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
+    curve (w + D e), spaced as the boundary map spaces them but with the logarithm of the spacing
+    diffused over ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
+    the wake blocks' where they meet)."""
+    designed, dense = [], []
+    for block, c in zip(blocks, coords):
+        for target, xi in ((designed, np.asarray(c[0])), (dense, np.linspace(0.0, 1.0, 4001))):
+            points, direction = _wall(setup, block, xi, turned=False)
+            target.append(points + setup.distance * direction)
+    designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
+    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
+    spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
+    s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
+    out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
+    out[0], out[-1] = designed[0], designed[-1]
+    return out
+
+
 def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
     lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
@@ -393,10 +451,13 @@ def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
 def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
     wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
-    to the wall), then the layers beyond ``BLEND_START`` chords blended into the TFI mesh, whose
-    outer layer is the far field: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)).
+    to the wall), then the layers beyond ``BLEND_START`` chords blended into straight lines from the
+    wall nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes at the designed
+    distances: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)). No Winslow equations
+    are solved: a Winslow outer region keeps harmonic, not designed, wall-normal spacing (logarithmic
+    round the front, linear in the wake) and leaves the marched layer at up to 80 degrees.
     ``tol``, ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
-    from meshgen.geometry.blocks import tfi_blocks, unify_interfaces
+    from meshgen.geometry.blocks import unify_interfaces
     from meshgen.methods.hyperbolic import cell_areas, march
 
     start = time.perf_counter()
@@ -421,7 +482,9 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
     t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
     weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
-    Xs = [(1.0 - weight) * marched[o : o + size] + weight * X for o, size, X in zip(offsets, sizes, tfi_blocks(block_set))]
+    lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far_field(setup, block_set.coords) - curve)[:, None]
+    lines = _turned(setup, lines)
+    Xs = [(1.0 - weight) * marched[o : o + size] + weight * lines[o : o + size] for o, size in zip(offsets, sizes)]
     Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
@@ -430,7 +493,7 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
             f"geometry 'airfoil': {inverted} cells of the marched mesh are inverted (try more cells or a smaller growth)"
         )
     info = {
-        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into the TFI mesh beyond {BLEND_START:g} chord",
+        "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into straight lines to the far field beyond {BLEND_START:g} chord",
         "sweeps": 0,
         "iterations": 0,
         "final_update": 0.0,

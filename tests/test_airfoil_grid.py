@@ -4,6 +4,7 @@ written out here, wall normals from the section formulas' own derivatives, the T
 formula; the wake cut read back from the .cgns, OpenFOAM's checkMesh on the written case."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -109,6 +110,23 @@ def test_o_grid_at_every_wall_node(o_grid):
         assert _ratios(X).max() <= 1.15
 
 
+@pytest.mark.parametrize("grid", ["c_grid", "o_grid"])
+def test_far_field_spacing_has_no_jump(grid, request):
+    # The section block's far-field cells are about 15 times the wake blocks' where they meet (TFI);
+    # the elliptic mesh's far-field nodes grow smoothly along the whole far field.
+    Xs = request.getfixturevalue(grid).blocks
+    far = np.concatenate([Xs[0][:, -1], Xs[1][1:, -1], Xs[2][1:, -1]])
+    spacing = np.linalg.norm(np.diff(far, axis=0), axis=1)
+    ratio = spacing[1:] / spacing[:-1]
+    assert max(ratio.max(), 1 / ratio.min()) < 1.25
+    tfi = tfi_blocks(request.getfixturevalue(grid).geometry)
+    tfi_far = np.concatenate([tfi[0][:, -1], tfi[1][1:, -1], tfi[2][1:, -1]])
+    tfi_spacing = np.linalg.norm(np.diff(tfi_far, axis=0), axis=1)
+    assert (tfi_spacing[1:] / tfi_spacing[:-1]).max() > 5 or grid == "o_grid"  # the jump that was there
+    # On the far field's curve: as far from the wall's mid-chord as the TFI far field (D = 100 chords out).
+    assert np.allclose(np.linalg.norm(far - [0.5, 0], axis=1).max(), np.linalg.norm(tfi_far - [0.5, 0], axis=1).max(), rtol=1e-3)
+
+
 @pytest.mark.parametrize("params", [{"sharp": 1}, {}])
 def test_tfi_first_cells_are_the_asked_height(params):
     block_set = load_block_set("airfoil", {**params, "first_height": 1e-5, "farfield": 20}, (160, 100))
@@ -174,6 +192,8 @@ def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
     report = check_mesh(tmp_path / "yplus")
     assert "Failed 1 mesh checks." in report["log"] and "***High aspect ratio cells found" in report["log"]
     assert report["log"].count("***") == 1
+    # No severely non-orthogonal faces (the far field's 15-fold spacing jump made 86 degrees there).
+    assert float(re.search(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)", report["log"]).group(1)) < 60
     assert sum(faces for name, faces in report["patches"].items() if name != "frontAndBack") == 448 + 2 * 128 + 268
 
 
@@ -186,6 +206,8 @@ def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
         (["--param", "reynolds=1e20"], "reynolds 1e+20 is outside"),
         (["--param", "farfield=1"], "farfield 1: the far field must lie 2"),
         (["--param", "growth=1"], "growth 1: the growth-ratio cap must be above 1"),
+        (["--param", "level=0.5"], "level 0.5: the grid level must be a whole number"),
+        (["--yplus", "1", "--param", "yplus=1"], "--yplus and --param yplus= both given"),
         (["--dims", "448", "40"], "the smallest M that works is 114"),
         (["--param", "sharp=1", "--dims", "60", "128"], "the smallest N that works is"),
     ],
@@ -197,3 +219,34 @@ def test_bad_input_is_one_line(run_cli, tmp_path, args, words):
     assert words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not list(tmp_path.glob("x.*"))
+
+
+def test_level_scales_the_cells_and_the_first_cell():
+    # DPW's family rule: 1.5x the cells per direction, 2/3 of every designed length (first cell included).
+    base = load_block_set("airfoil", {"sharp": 1, "farfield": 20}, (160, 110))
+    finer = load_block_set("airfoil", {"sharp": 1, "farfield": 20, "level": 1}, (160, 110))
+    assert base.cells == 160 * 110 and finer.cells == 240 * 165
+    for X in tfi_blocks(finer):
+        assert np.allclose(np.linalg.norm(X[:, 1] - X[:, 0], axis=1), _height() * 2 / 3, rtol=1e-6)
+    # The chordwise spacing at the trailing edge (te_spacing 0.001) scales too.
+    te = (
+        np.linalg.norm(finer.coords[1][0][1] - finer.coords[1][0][0])
+        * np.linalg.norm(np.diff(tfi_blocks(finer)[1][:, 0], axis=0), axis=1).sum()
+    )
+    assert te == pytest.approx(0.001 * 2 / 3, rel=0.05)
+    mesh = meshgen.mesh("airfoil", dims=(160, 110), method="elliptic", params={"sharp": 1, "farfield": 20, "level": 1})
+    section = mesh.blocks[1]
+    assert np.abs(np.linalg.norm(section[:, 1] - section[:, 0], axis=1) / (_height() * 2 / 3) - 1).max() < 0.02
+    assert sum(X.shape[0] - 1 for X in mesh.blocks) == 240 and mesh.blocks[0].shape[1] == 166
+
+
+def test_yplus_and_reynolds_options(run_cli, tmp_path):
+    result = run_cli(
+        "mesh", "-g", "airfoil", "--yplus", "0.5", "--reynolds", "1e6", "--param", "sharp=1",
+        "--dims", "160", "120", "-m", "tfi", "--no-quality", "-o", "x.cgns",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert f"first cell {_height(0.5, 1e6):.3g} chord (y+ 0.5 at Re 1e+06" in result.stdout
+    refused = run_cli("mesh", "-g", "pipe", "--yplus", "1", "--dims", "8", "8", "8", "-m", "tfi", "-o", "y.cgns")
+    assert refused.returncode == 2 and "geometry 'pipe' has no parameter 'yplus'" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and not list(tmp_path.glob("y.*"))

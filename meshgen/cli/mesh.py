@@ -9,9 +9,9 @@ import click
 from meshgen.cli._options import DimsCommand, block_nodes_option, dims_option, geometry_options
 from meshgen.cli._progress import progress_display
 from meshgen.cli._text import echo
-from meshgen.errors import did_you_mean
+from meshgen.errors import GeometryError, did_you_mean
 from meshgen.formats import format_for
-from meshgen.geometry.plugins import parse_params
+from meshgen.geometry.plugins import parse_params, plugin_module
 from meshgen.methods.registry import METHODS
 from meshgen.quality import summary_lines
 from meshgen.run.request import MeshRequest, carry_out
@@ -147,6 +147,19 @@ METHOD_HELP = (
     help="Measure the mesh: per-cell quality arrays in the file (in-memory path) and <output>.quality.json. "
     "--no-quality writes the mesh alone (meshgen evaluate can measure it later).",
 )
+@click.option(
+    "--yplus",
+    type=float,
+    default=None,
+    help="Geometries meshed to the wall (airfoil): the first cell's y+ (its parameter yplus) [default: the geometry's].",
+)
+@click.option(
+    "--reynolds",
+    type=float,
+    default=None,
+    help="Geometries meshed to the wall (airfoil): the Reynolds number per chord (its parameter reynolds) "
+    "[default: the geometry's].",
+)
 @click.option("--quiet", "-q", is_flag=True, help="Print only errors and warnings.")
 def mesh(
     method,
@@ -171,6 +184,8 @@ def mesh(
     scheduler,
     block_nodes,
     quality,
+    yplus,
+    reynolds,
     quiet,
 ):
     """Make a structured mesh of a geometry and write it.
@@ -194,7 +209,7 @@ def mesh(
     request = MeshRequest(
         dims,
         geometry if geometry_given or checkpoint is None else None,
-        parse_params(params),
+        _wall_options(parse_params(params), geometry, yplus=yplus, reynolds=reynolds),
         method,
         checkpoint=checkpoint,
         tol=tol,
@@ -293,6 +308,23 @@ def _print_result(made, output_format, quiet):
         echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in made.patches))
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
         echo(line)
+
+
+def _wall_options(values: dict, geometry: str, **given) -> dict:
+    """``values`` (the --param values) with --yplus / --reynolds added as the parameters of the same
+    names; a geometry without such a parameter, or the same one given as --param too, is refused."""
+    given = {key: value for key, value in given.items() if value is not None}
+    if not given:
+        return values
+    names = getattr(plugin_module(geometry)[0], "params", {})
+    for key in given:
+        if key not in names:
+            raise GeometryError(
+                f"--{key} is for geometries meshed to the wall (airfoil); geometry '{geometry}' has no parameter '{key}'"
+            )
+        if key in values:
+            raise GeometryError(f"--{key} and --param {key}= both given: give one")
+    return {**values, **given}
 
 
 def _check_method(name):
