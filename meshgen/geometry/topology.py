@@ -17,12 +17,13 @@ shows or measures a block set takes a topology file as it takes ``geometries/pip
 from __future__ import annotations
 
 import types
+from pathlib import Path
 
 import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
-from meshgen.geometry.topology_file import Topology, read_topology
+from meshgen.geometry.topology_file import Topology, is_topology_file, read_topology
 from meshgen.methods.clustering import Cluster, clustered_coordinates
 
 __all__ = [
@@ -452,16 +453,12 @@ def _boundary_map(topology: Topology, curves: dict, block: int):
 def topology_dims(spec) -> tuple[int, ...] | None:
     """The placeholder ``--dims`` of a topology file (ones, one per axis; its ``cells`` give the
     counts), or None when ``spec`` is not one."""
-    from meshgen.geometry.topology_file import is_topology_file
-
     return (1,) * topology_module(spec).dim if isinstance(spec, str) and is_topology_file(spec) else None
 
 
 def topology_module(path) -> types.ModuleType:
     """The block-set plugin module of the topology file ``path`` (module docstring), checked;
     kept per (path, size, modification time)."""
-    from pathlib import Path
-
     path = Path(path)
     status = path.stat()
     key = (str(path.resolve()), status.st_size, status.st_mtime_ns)
