@@ -218,3 +218,49 @@ def test_cylinder_example_is_valid_and_passes_checkmesh(run_cli, tmp_path):
         pytest.skip(missing_reason())
     report = check_mesh(tmp_path / "case")
     assert report["ok"], report["log"][-2000:]
+
+
+BLOCKMESH_DICT = """FoamFile { version 2.0; format ascii; class dictionary; object blockMeshDict; }
+vertices ((1 0 0) (2 0 0) (0 2 0) (0 1 0) (1 0 1) (2 0 1) (0 2 1) (0 1 1) (3 0 0) (3 2 0) (3 0 1) (3 2 1));
+blocks (hex (0 1 2 3 4 5 6 7) (3 8 2) simpleGrading (4 1 1) hex (1 8 9 2 5 10 11 6) (5 8 2) simpleGrading (1 1 1));
+edges (arc 1 2 (1.41421356237 1.41421356237 0) arc 5 6 (1.41421356237 1.41421356237 1)
+       arc 0 3 (0.707106781187 0.707106781187 0) arc 4 7 (0.707106781187 0.707106781187 1));
+boundary ();
+"""
+SAME_TOPOLOGY = """vertices: [[1, 0, 0], [2, 0, 0], [0, 2, 0], [0, 1, 0], [1, 0, 1], [2, 0, 1], [0, 2, 1], [0, 1, 1],
+  [3, 0, 0], [3, 2, 0], [3, 0, 1], [3, 2, 1]]
+blocks: [[0, 1, 2, 3, 4, 5, 6, 7], [1, 8, 9, 2, 5, 10, 11, 6]]
+edges: [{arc: [1, 2], center: [0, 0, 0]}, {arc: [5, 6], center: [0, 0, 1]}, {arc: [0, 3], center: [0, 0, 0]},
+  {arc: [4, 7], center: [0, 0, 1]}]
+cells: {counts: [[0, 1, 3], [0, 3, 8], [0, 4, 2], [1, 8, 5]]}
+grading: {ratios: [[0, 1, 4]]}
+"""
+
+
+@pytest.mark.slow
+def test_tfi_of_a_topology_is_blockmeshs_mesh_of_the_same_blocks(tmp_path):
+    """blockMesh (an independent implementation: arcs, expansion ratios, its own interpolation)
+    meshes the same two blocks to the same points."""
+    import re
+
+    from openfoam_helpers import missing_reason, run_tool
+
+    if missing_reason() is not None:
+        pytest.skip(missing_reason())
+    case = tmp_path / "case"
+    (case / "system").mkdir(parents=True)
+    (case / "system" / "blockMeshDict").write_text(BLOCKMESH_DICT)
+    (case / "system" / "controlDict").write_text(
+        "FoamFile { version 2.0; format ascii; class dictionary; object controlDict; }\n"
+        "application blockMesh; startFrom startTime; startTime 0; stopAt endTime; endTime 1; deltaT 1;\n"
+        "writeControl timeStep; writeInterval 1; writeFormat ascii; writePrecision 15;\n"
+    )
+    assert run_tool("blockMesh", case).returncode == 0
+    text = (case / "constant" / "polyMesh" / "points").read_text()
+    theirs = np.array(re.findall(r"^\(([-\d.e+]+) ([-\d.e+]+) ([-\d.e+]+)\)$", text, re.MULTILINE), dtype=float)
+    blocks = load(write(tmp_path, SAME_TOPOLOGY), 3)
+    points, _, _ = merged_mesh(blocks, tfi_blocks(blocks))
+    assert len(points) == len(theirs) == 4 * 9 * 3 + 5 * 9 * 3
+    ours = points[np.lexsort(np.round(points, 9).T)]
+    theirs = theirs[np.lexsort(np.round(theirs, 9).T)]
+    np.testing.assert_allclose(ours, theirs, atol=1e-9)
