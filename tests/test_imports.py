@@ -83,6 +83,8 @@ LAYERS = [
         "meshgen.geometry.domain",
         "meshgen.geometry.blocks",
         "meshgen.geometry.shapes",
+        "meshgen.geometry.topology_file",
+        "meshgen.geometry.topology",
         "meshgen.run.trust",
         "meshgen.geometry.plugin_calls",
         "meshgen.geometry.plugins",

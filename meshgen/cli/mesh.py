@@ -12,6 +12,7 @@ from meshgen.cli._text import echo
 from meshgen.errors import GeometryError, did_you_mean
 from meshgen.formats import format_for
 from meshgen.geometry.plugins import parse_params, plugin_module
+from meshgen.geometry.topology import TOPOLOGY_DIMS_MEANING, topology_dims
 from meshgen.methods.registry import METHODS
 from meshgen.quality import summary_lines
 from meshgen.run.request import MeshRequest, carry_out
@@ -28,7 +29,11 @@ METHOD_HELP = (
 @click.command("mesh", cls=DimsCommand)
 @click.option("--method", "-m", default="auto", show_default=True, help=METHOD_HELP)
 @geometry_options()
-@dims_option()
+@dims_option(
+    required=False,
+    help_text="Cells per axis: two numbers (2D) or three (3D), e.g. --dims 30 30 30. Required, except for a topology file "
+    "(its 'cells' give the counts; --param refine=R scales them).",
+)
 @click.option(
     "-o",
     "--output",
@@ -206,6 +211,10 @@ def mesh(
     _check_method(method)  # an unknown name fails before anything is loaded
     context = click.get_current_context()
     geometry_given = context.get_parameter_source("geometry") != click.core.ParameterSource.DEFAULT
+    if dims is None:
+        dims = topology_dims(geometry) if geometry_given else None
+        if dims is None:
+            raise click.MissingParameter(ctx=context, param=next(p for p in context.command.params if p.name == "dims"))
     request = MeshRequest(
         dims,
         geometry if geometry_given or checkpoint is None else None,
@@ -253,7 +262,12 @@ def _print_block_result(made, quiet):
     block_set = made.geometry
     echo(
         f"{made.method} mesh of {block_set.name}: {len(block_set.names)} blocks, {block_set.cells} cells "
-        f"(--dims {' '.join(map(str, made.dims))}: {block_set.dims_meaning}) in {made.seconds:.2f} s"
+        + (
+            "(counts from the topology file)"
+            if block_set.dims_meaning == TOPOLOGY_DIMS_MEANING
+            else f"(--dims {' '.join(map(str, made.dims))}: {block_set.dims_meaning})"
+        )
+        + f" in {made.seconds:.2f} s"
     )
     for name, height in info.get("first_cell", {}).items():
         echo(

@@ -121,8 +121,8 @@ def block_spec(geometry) -> str | None:
             return None
     else:
         spec = str(geometry)
-    if Path(spec).suffix.lower() not in ("", ".py"):
-        return None  # a shape file is one block
+    if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml"):
+        return None  # a shape file is one block (a topology file, .yaml too, is a block set)
     return spec if is_multiblock(spec) else None
 
 

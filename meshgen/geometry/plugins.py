@@ -41,6 +41,8 @@ from meshgen.geometry.domain import Geometry, bind
 from meshgen.geometry.patches import face_assignment, patches_from_assignment
 from meshgen.geometry.plugin_calls import call_plugin
 from meshgen.geometry.shapes.loader import is_shape_file, load_shape
+from meshgen.geometry.topology import topology_module
+from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.trust import check_plugin_name, note_given_plugin, recorded_spec
 
 __all__ = [
@@ -187,7 +189,7 @@ def _declared_patches(declared, dim: int, source: str) -> dict:
 def looks_like_path(spec: str) -> bool:
     """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, or anything with a folder
     separator) rather than a built-in or installed geometry."""
-    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec)
+    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec) or is_topology_file(spec)
 
 
 def plugin_module(spec: str) -> tuple[ModuleType, str]:
@@ -197,7 +199,7 @@ def plugin_module(spec: str) -> tuple[ModuleType, str]:
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
-        module = _import_file(path)
+        module = topology_module(path) if is_topology_file(path) else _import_file(path)
         note_given_plugin(path)  # named by the user: a file recording this path may load it too
         return module, str(path)
     builtins = _builtin_files()

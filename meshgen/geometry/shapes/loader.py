@@ -27,6 +27,7 @@ from meshgen.geometry.shapes.assemble import (
 from meshgen.geometry.shapes.cad_process import cad_block
 from meshgen.geometry.shapes.geometry_file import load_geometry_file
 from meshgen.geometry.shapes.triangulated import surface_block
+from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.inputs import InputError, check_input_file
 
 __all__ = ["FORMAT_HELP", "is_shape_file", "load_shape"]
@@ -41,7 +42,8 @@ _LOADED: dict = {}
 
 
 def is_shape_file(spec) -> bool:
-    return Path(str(spec)).suffix.lower() in SHAPE_FORMATS
+    """Whether ``spec`` names a shape file by its extension (a topology file, YAML too, is not one)."""
+    return Path(str(spec)).suffix.lower() in SHAPE_FORMATS and not is_topology_file(spec)
 
 
 def load_shape(spec) -> Geometry:

@@ -1,0 +1,312 @@
+"""The topology file: a block set written as data (YAML), in the spirit of OpenFOAM's blockMeshDict::
+
+    name: channel                        # optional: the geometry's name (default: the file's stem)
+    vertices:                            # a list (named 0, 1, ...) or a mapping name -> point
+      a: [0, 0]
+      b: [1, 0]
+      ...
+    blocks:                              # 3D: 8 vertices in blockMesh order; 2D: 4, counterclockwise
+      - [a, b, c, d]
+      - {name: right, vertices: [b, e, f, c]}
+    edges:                               # optional; straight lines otherwise
+      - {arc: [b, c], through: [1.2, 0.5]}        # or center: [x, y(, z)] (a circle about it)
+      - {polyline: [a, b], points: [[0.5, -0.1]]}   # or spline: [a, b] (points between a and b)
+    cells:
+      size: 0.05                         # every chain of parallel edges: longest edge / size cells
+      counts: [[a, b, 20]]               # or per edge: the chain through a-b gets 20 cells
+    grading:
+      ratios: [[a, d, 4]]                # last cell / first cell along a -> d, on its chain
+      first_cell: {wall: 0.001}          # first-cell height on these patches' faces
+      growth: 1.2                        # the largest cell-to-cell growth first_cell may make
+    patches:                             # faces by their vertices (3D: 4, 2D: 2)
+      inlet: {type: patch, faces: [[a, d]]}
+    default_patch: {name: walls, type: wall}     # every face not listed (default: defaultFaces, wall)
+
+``read_topology`` parses and checks it (one-line GeometryError per problem); ``is_topology_file``
+tells a topology file from the YAML geometry file of ``meshgen.geometry.shapes``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import GeometryError, did_you_mean
+from meshgen.run.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
+
+__all__ = ["EDGE_KINDS", "TOPOLOGY_KEYS", "Topology", "is_topology_file", "read_topology"]
+
+TOPOLOGY_KEYS = ("name", "description", "vertices", "blocks", "edges", "cells", "grading", "patches", "default_patch")
+EDGE_KINDS = ("arc", "polyline", "spline")
+_EDGE_KEYS = EDGE_KINDS + ("through", "center", "points")
+_CELL_KEYS = ("size", "counts")
+_GRADING_KEYS = ("ratios", "first_cell", "growth")
+_PATCH_KEYS = ("type", "faces")
+_PATCH_TYPES = ("wall", "patch", "symmetry")
+_MARK = re.compile(r"^(vertices|blocks)\s*:", re.MULTILINE)
+_SEEN: dict = {}
+
+
+@dataclass
+class Topology:
+    """A topology file checked: vertex names and points (V, dim), blocks as vertex indices (8 or
+    4 each), curved edges {(i, j): (kind, points (K, dim))}, counts [(i, j, n)], ratios [(i, j,
+    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}."""
+
+    path: Path
+    name: str
+    description: str
+    dim: int
+    vertex_names: list
+    points: np.ndarray
+    block_names: list
+    blocks: np.ndarray
+    edges: dict = field(default_factory=dict)
+    size: float | None = None
+    counts: list = field(default_factory=list)
+    ratios: list = field(default_factory=list)
+    first_cell: dict = field(default_factory=dict)
+    growth: float | None = None
+    patches: dict = field(default_factory=dict)
+    default_patch: tuple = ("defaultFaces", "wall")
+
+
+def is_topology_file(spec) -> bool:
+    """Whether ``spec`` names a regular ``.yaml``/``.yml`` file with a top-level ``vertices`` or
+    ``blocks`` key (a topology file, not a shape geometry file). Never raises."""
+    path = Path(str(spec))
+    if path.suffix.lower() not in (".yaml", ".yml"):
+        return False
+    try:
+        status = os.stat(path)
+    except OSError:
+        return False
+    if not stat.S_ISREG(status.st_mode):
+        return False
+    key = (str(path.resolve()), status.st_size, status.st_mtime_ns)
+    if key not in _SEEN:
+        try:
+            _SEEN[key] = bool(_MARK.search(read_input_text(path, "topology file", MAX_YAML_BYTES)))
+        except InputError:
+            _SEEN[key] = False
+    return _SEEN[key]
+
+
+def _fail(path, text: str):
+    raise GeometryError(f"topology file {path}: {text}")
+
+
+def _keys(path, where: str, value, allowed) -> dict:
+    """``value`` as a mapping whose keys are all in ``allowed`` (the nearest one named otherwise)."""
+    if not isinstance(value, dict):
+        _fail(path, f"{where} must be a mapping (keys: {', '.join(allowed)})")
+    for key in value:
+        if str(key) not in allowed:
+            _fail(path, f"unknown key '{key}' in {where} (keys: {', '.join(allowed)}){did_you_mean(str(key), allowed)}")
+    return value
+
+
+def _number(path, where: str, value, positive=True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or (positive and value <= 0):
+        _fail(path, f"{where} must be a {'positive ' if positive else ''}number, got {value!r}"[:200])
+    return float(value)
+
+
+def _points(path, where: str, value, dim: int) -> np.ndarray:
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        array = np.zeros(0)
+    if array.ndim == 1 and array.size == dim:
+        array = array[None]
+    if array.ndim != 2 or array.shape[1] != dim or not np.all(np.isfinite(array)) or len(array) == 0:
+        _fail(path, f"{where} must be points of {dim} numbers each")
+    return array
+
+
+def read_topology(path) -> Topology:
+    """The topology file ``path`` parsed (YAML safe loader with meshgen's limits) and checked for
+    its structure: keys, vertex references, numbers. Geometric checks are ``meshgen.geometry.topology``'s."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = load_yaml(read_input_text(path, "topology file", MAX_YAML_BYTES), f"topology file {path}")
+    except InputError as exc:
+        raise GeometryError(str(exc)) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" (line {mark.line + 1})" if mark is not None else ""
+        raise GeometryError(
+            f"topology file {path} is not plain YAML data{line}: {str(getattr(exc, 'problem', ''))[:80]}"
+        ) from None
+    data = _keys(path, "the file", data, TOPOLOGY_KEYS)
+    for key in ("vertices", "blocks"):
+        if key not in data:
+            _fail(path, f"needs '{key}'")
+    names, raw = _vertices(path, data["vertices"])
+    if len(set(names)) != len(names):
+        _fail(path, "two vertices have one name")
+    index = {name: i for i, name in enumerate(names)}
+    block_names, blocks, dim = _blocks(path, data["blocks"], index)
+    points = _points(path, "vertices", raw, dim) if len(raw) else None
+    if points is None or len(points) != len(names):
+        _fail(path, f"vertices must be points of {dim} numbers each")
+    stem = re.sub(r"[^A-Za-z0-9_-]", "-", path.stem).lstrip("-_")[:64] or "topology"
+    topology = Topology(
+        path, str(data.get("name", stem)), str(data.get("description", f"block set of the topology file {path.name}")),
+        dim, names, points, block_names, blocks,
+    )  # fmt: skip
+
+    _edges(topology, data.get("edges") or [])
+    _cells(topology, _keys(path, "cells", data.get("cells") or {}, _CELL_KEYS))
+    _grading(topology, _keys(path, "grading", data.get("grading") or {}, _GRADING_KEYS))
+    _patches(topology, data.get("patches") or {})
+    if "default_patch" in data:
+        default = _keys(path, "default_patch", data["default_patch"], ("name", "type"))
+        kind = str(default.get("type", "wall"))
+        if kind not in _PATCH_TYPES:
+            _fail(path, f"default_patch has unknown type '{kind}' (types: {', '.join(_PATCH_TYPES)})")
+        topology.default_patch = (str(default.get("name", "defaultFaces")), kind)
+    return topology
+
+
+def _vertex(topology: Topology, where: str, value) -> int:
+    """The index of the vertex named ``value`` (GeometryError naming the nearest name otherwise)."""
+    key, names = str(value), topology.vertex_names
+    if key not in names:
+        _fail(topology.path, f"{where} names a missing vertex '{key}'{did_you_mean(key, names)}")
+    return names.index(key)
+
+
+def _pair(topology: Topology, where: str, value) -> tuple[int, int]:
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        _fail(topology.path, f"{where} must name two vertices [a, b]")
+    i, j = _vertex(topology, where, value[0]), _vertex(topology, where, value[1])
+    if i == j:
+        _fail(topology.path, f"{where} names vertex '{topology.vertex_names[i]}' twice")
+    return i, j
+
+
+def _edges(topology: Topology, entries) -> None:
+    path, names, dim = topology.path, topology.vertex_names, topology.dim
+    if not isinstance(entries, list):
+        _fail(path, "edges must be a list of curved edges")
+    for number, entry in enumerate(entries):
+        entry = _keys(path, f"edges[{number}]", entry, _EDGE_KEYS)
+        kinds = [k for k in EDGE_KINDS if k in entry]
+        if len(kinds) != 1:
+            _fail(path, f"edges[{number}] needs one of {', '.join(EDGE_KINDS)} naming its two vertices")
+        kind = kinds[0]
+        i, j = _pair(topology, f"edges[{number}] ({kind})", entry[kind])
+        where = f"edge {kind} {names[i]}-{names[j]}"
+        if kind == "arc":
+            if ("through" in entry) == ("center" in entry):
+                _fail(path, f"{where} needs one of 'through' (a point on the arc) and 'center'")
+            how = "through" if "through" in entry else "center"
+            extra = (how, _points(path, f"{where}: {how}", entry[how], dim)[0])
+        else:
+            if "points" not in entry:
+                _fail(path, f"{where} needs 'points' (the points between its vertices)")
+            extra = ("points", _points(path, f"{where}: points", entry["points"], dim))
+        if (i, j) in topology.edges or (j, i) in topology.edges:
+            _fail(path, f"{where} is given twice")
+        topology.edges[i, j] = (kind, *extra)
+
+
+def _cells(topology: Topology, cells: dict) -> None:
+    path = topology.path
+    if "size" in cells:
+        topology.size = _number(path, "cells: size", cells["size"])
+    for number, entry in enumerate(cells.get("counts") or []):
+        if not isinstance(entry, (list, tuple)) or len(entry) != 3:
+            _fail(path, f"cells: counts[{number}] must be [a, b, cells]")
+        i, j = _pair(topology, f"cells: counts[{number}]", entry[:2])
+        n = entry[2]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            _fail(path, f"cells: counts[{number}] must give a positive whole number of cells, got {n!r}"[:200])
+        topology.counts.append((i, j, n))
+
+
+def _grading(topology: Topology, grading: dict) -> None:
+    path = topology.path
+    for number, entry in enumerate(grading.get("ratios") or []):
+        if not isinstance(entry, (list, tuple)) or len(entry) != 3:
+            _fail(path, f"grading: ratios[{number}] must be [a, b, last cell / first cell]")
+        i, j = _pair(topology, f"grading: ratios[{number}]", entry[:2])
+        topology.ratios.append((i, j, _number(path, f"grading: ratios[{number}]", entry[2])))
+    first = grading.get("first_cell") or {}
+    if not isinstance(first, dict):
+        _fail(path, "grading: first_cell must map patch names to first-cell heights")
+    topology.first_cell = {str(k): _number(path, f"grading: first_cell of '{k}'", v) for k, v in first.items()}
+    if "growth" in grading:
+        topology.growth = _number(path, "grading: growth", grading["growth"])
+        if topology.growth <= 1.0:
+            _fail(path, f"grading: growth must be above 1, got {topology.growth:g}")
+
+
+def _patches(topology: Topology, patches) -> None:
+    path, dim = topology.path, topology.dim
+    corners = 4 if dim == 3 else 2
+    if not isinstance(patches, dict):
+        _fail(path, "patches must map patch names to {type: ..., faces: [...]}")
+    for name, entry in patches.items():
+        entry = _keys(path, f"patch '{name}'", entry, _PATCH_KEYS)
+        kind = str(entry.get("type", "wall"))
+        if kind not in _PATCH_TYPES:
+            _fail(
+                path,
+                f"patch '{name}' has unknown type '{kind}' (types: {', '.join(_PATCH_TYPES)}){did_you_mean(kind, _PATCH_TYPES)}",
+            )
+        faces = entry.get("faces")
+        if not isinstance(faces, list) or not faces:
+            _fail(path, f"patch '{name}' needs 'faces': a list of faces, each {corners} vertices")
+        listed = []
+        for face in faces:
+            if not isinstance(face, (list, tuple)) or len(face) != corners:
+                _fail(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
+            listed.append(tuple(_vertex(topology, f"patch '{name}'", v) for v in face))
+        topology.patches[str(name)] = (kind, listed)
+
+
+def _vertices(path, value) -> tuple[list, list]:
+    """(names, raw points) of ``vertices``: a list (names '0', '1', ...) or a mapping."""
+    if isinstance(value, list):
+        return [str(i) for i in range(len(value))], value
+    if isinstance(value, dict):
+        return [str(k) for k in value], list(value.values())
+    _fail(path, "vertices must be a list of points or a mapping name -> point")
+
+
+def _blocks(path, value, index) -> tuple[list, np.ndarray, int]:
+    """(block names, vertex indices (B, 4 or 8), dim) of ``blocks``."""
+    if not isinstance(value, list) or not value:
+        _fail(path, "blocks must be a list of blocks (3D: 8 vertices each, 2D: 4)")
+    names, rows = [], []
+    for number, entry in enumerate(value):
+        if isinstance(entry, dict):
+            entry = _keys(path, f"blocks[{number}]", entry, ("name", "vertices"))
+            name, vertices = str(entry.get("name", f"b{number}")), entry.get("vertices")
+        else:
+            name, vertices = f"b{number}", entry
+        if not isinstance(vertices, list) or len(vertices) not in (4, 8):
+            _fail(path, f"block '{name}' needs 8 vertices (3D, blockMesh order) or 4 (2D), got {vertices!r}"[:200])
+        row = []
+        for v in vertices:
+            if str(v) not in index:
+                _fail(path, f"block '{name}' names a missing vertex '{v}'{did_you_mean(str(v), list(index))}")
+            row.append(index[str(v)])
+        if len(set(row)) != len(row):
+            _fail(path, f"block '{name}' names a vertex twice")
+        if name in names:
+            _fail(path, f"two blocks are named '{name}'")
+        names.append(name)
+        rows.append(row)
+    if len({len(r) for r in rows}) != 1:
+        _fail(path, "blocks mix 8 vertices (3D) and 4 (2D)")
+    return names, np.array(rows, dtype=int), 3 if len(rows[0]) == 8 else 2
