@@ -12,7 +12,8 @@ both given (CPU: user + system seconds of all the process's threads, from ``getr
 shared machine the CPU time is the steadier figure, and CPU seconds / 2 what 2 quiet cores take
 when the work divides evenly between them. The machine's load average is recorded with each run.
 
-``first_call``: the first ``cell_metrics`` in a fresh process, with numba's cache empty (the
+``cli``: ``meshgen evaluate`` of the mesh as a .vts, end to end (a subprocess, start to exit;
+target at most 0.8 s on 2 cores). ``first_call``: the first ``cell_metrics`` in a fresh process, with numba's cache empty (the
 compile a new installation pays once) and with it filled (what every later process pays).
 """
 
@@ -148,6 +149,40 @@ def first_call() -> dict:
     return figures
 
 
+CLI_TARGET_SECONDS = 0.8
+
+
+def evaluate_cli(dims=(100, 100, 100), repeat: int = 5) -> dict:
+    """``meshgen evaluate`` of the TFI semicylinder's .vts (``meshgen mesh --method tfi``), end to
+    end: a subprocess from its start to its exit, as a user runs it; one warm-up run (numba's cache
+    and the page cache warm), then the median of ``repeat``, wall and CPU (user + system of the
+    process, all its threads) seconds."""
+    root = str(Path(__file__).resolve().parents[1])
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    with tempfile.TemporaryDirectory() as folder:
+        mesh = str(Path(folder) / "semi.vts")
+        command = [sys.executable, "-m", "meshgen"]
+        made = [*command, "mesh", "--method", "tfi", "--dims", *map(str, dims), "-o", mesh, "-q"]
+        subprocess.run(made, env=environment, check=True, capture_output=True)
+        walls, cpus = [], []
+        for run in range(repeat + 1):
+            before, start = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+            subprocess.run([*command, "evaluate", mesh], env=environment, check=True, stdout=subprocess.DEVNULL)
+            wall, after = time.perf_counter() - start, resource.getrusage(resource.RUSAGE_CHILDREN)
+            if run:  # the first run warms up
+                walls.append(wall)
+                cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    return {
+        "cells": int(np.prod(dims)),
+        "seconds": statistics.median(walls),
+        "min_seconds": min(walls),
+        "max_seconds": max(walls),
+        "cpu_seconds": statistics.median(cpus),
+        "runs_seconds": walls,
+        "target_seconds": CLI_TARGET_SECONDS,
+    }
+
+
 def print_table(data: dict) -> None:
     n_cells = data["cells"]
     print(
@@ -162,6 +197,13 @@ def print_table(data: dict) -> None:
             f"{r['path']:<13} {r['what']:<38} {r['median_s']:9.3f} {r['min_s']:7.3f} {r['max_s']:7.3f} "
             f"{r['median_cpu_s']:7.3f} {n_cells / r['median_s'] / 1e6:9.2f}  {'met' if r['target_met'] else 'NOT met'}"
             f" (<= {r['target_s']:g} s)"
+        )
+    if "cli" in data:
+        cli = data["cli"]
+        print(
+            f"meshgen evaluate of the .vts, end to end: median {cli['seconds']:.3f} s (min {cli['min_seconds']:.3f}, "
+            f"max {cli['max_seconds']:.3f}, cpu {cli['cpu_seconds']:.3f}) of {len(cli['runs_seconds'])} runs, "
+            f"target <= {cli['target_seconds']:g} s"
         )
     if "first_call" in data:
         first = data["first_call"]
@@ -180,6 +222,7 @@ def main(argv=None):
 
     data = measure(args.dims, args.repeat)
     data["first_call"] = first_call()
+    data["cli"] = evaluate_cli(args.dims, args.repeat)
     print_table(data)
     if args.json_path:
         data = {

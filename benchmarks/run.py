@@ -40,6 +40,7 @@ Sections, in order (all on the semicylinder, the reference shape):
   random members against its elliptic mesh;
 - ``evaluate``: ``meshgen.quality.quality_report`` with boundary deviation on 1e6 hexahedra
   (``bench_quality.py``); the headline is the unstructured path ``meshgen evaluate`` takes for files;
+  and ``meshgen evaluate`` of the 100^3 .vts end to end, a subprocess, median of 5 after a warm-up;
 - ``formats``: write and read time and file size per output format at 100^3 (``formats.py``);
 - ``solver_formats``: the 100^3 neural mesh with its quality arrays and patches written as .vtu,
   .vts, .cgns, OpenFOAM (binary, ASCII), .su2 and .msh: seconds and MB, and the .vts against the
@@ -147,6 +148,7 @@ TARGETS = {
         "elliptic semicylinder 100^3 / gmsh's smoothed transfinite semicylinder 100^3 (its meshing walls), same run",
     ),
     "evaluate_1e6_seconds": ("<=", 3.0, "s", "quality report of 1e6 hexahedra, with boundary deviation"),
+    "evaluate_cli_100_seconds": ("<=", 0.8, "s", "meshgen evaluate of a 100^3 .vts, end to end, 2 cores"),
     "quality_kernels_1e6_seconds": ("<=", 0.1, "s", "the seven per-cell metrics of 1e6 hexahedra in memory"),
     "quality_chunked_1e6_seconds": ("<=", 0.1, "s", "quality of 1e6 hexahedra block by block from a .cgns file"),
     "fd_ad_step_ratio": (">=", 10.0, "x", "autograd step / finite-difference step, same points"),
@@ -631,6 +633,7 @@ def evaluate(quick: bool) -> dict:
     cases = quick_cases if quick else bench_quality.CASES
     data = bench_quality.measure((100, 100, 100), 2 if quick else 5, cases)
     data["first_call"] = bench_quality.first_call()
+    data["cli"] = bench_quality.evaluate_cli((100, 100, 100), 5)
     bench_quality.print_table(data)
     rows = [
         {
@@ -654,6 +657,7 @@ def evaluate(quick: bool) -> dict:
         "repeat": data["repeat"],
         "results": rows,
         "first_call": data["first_call"],
+        "cli": data["cli"],
     }
 
 
@@ -922,6 +926,15 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 headlines.get((row["path"], row["what"])),
                 judged=row["cells"] >= 1e6,
                 cpu=row["cpu_seconds"],
+            )
+        if "cli" in data:
+            cli = data["cli"]
+            add(
+                f"`meshgen evaluate` of the 100^3 .vts, end to end (median of {len(cli['runs_seconds'])}, after a warm-up)",
+                cli["seconds"],
+                "s",
+                "evaluate_cli_100_seconds",
+                cpu=cli["cpu_seconds"],
             )
         if "first_call" in data:
             first = data["first_call"]

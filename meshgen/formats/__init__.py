@@ -53,6 +53,7 @@ __all__ = [
     "format_names",
     "metadata_json",
     "metadata_of",
+    "read_grid",
     "read_header",
     "read_mesh",
     "read_node_block",
@@ -366,6 +367,27 @@ def metadata_of(source) -> dict:
 def read_mesh(path):
     """Read a mesh file (or an OpenFOAM case folder, or its ``.foam`` file) as a ``meshio.Mesh``
     (our own readers where we have one, meshio for the rest)."""
+    path = _checked_input(path)
+    fmt = _reading_format(path)
+    reader = importlib.import_module(fmt.module if fmt is not None else "meshgen.formats._meshio")
+    return _reading(path, reader.read)
+
+
+def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None):
+    """A VTK structured grid file (.vts) read without connectivity, as ``meshgen.formats._vts.Grid``
+    (node shape, points in C order, meshgen's field data), with only the cell and point arrays
+    named in ``cell_arrays`` and ``point_arrays`` (None: all); None for a file of another format
+    (``read_mesh`` reads those). ``on_shape(node_shape)`` is called before any array is inflated.
+    Errors as ``read_mesh``'s."""
+    path = _checked_input(path)
+    fmt = _reading_format(path)
+    if fmt is None or fmt.module != "meshgen.formats._vts":
+        return None
+    reader = importlib.import_module(fmt.module)
+    return _reading(path, lambda where: reader.read_grid(where, cell_arrays, point_arrays, on_shape))
+
+
+def _checked_input(path) -> Path:
     path = Path(path)
     if not path.exists():
         raise FormatError(f"mesh file {path} does not exist")
@@ -373,13 +395,16 @@ def read_mesh(path):
         check_input_file(path, "mesh file", folder=True)  # a FIFO or a device is never handed to a reader
     except InputError as exc:
         raise FormatError(str(exc)) from None
-    fmt = _reading_format(path)
-    reader = importlib.import_module(fmt.module if fmt is not None else "meshgen.formats._meshio")
+    return path
+
+
+def _reading(path: Path, read):
+    """``read(path)``, its errors as FormatError naming the file, its printed output kept off stdout."""
     captured = io.StringIO()
     try:
         # meshio prints its own "Error:" line and calls sys.exit() on a file it cannot parse.
         with contextlib.redirect_stderr(captured), contextlib.redirect_stdout(captured):
-            mesh = reader.read(path)
+            mesh = read(path)
     except SystemExit:
         said = " ".join(captured.getvalue().replace("Error:", "").split())
         raise FormatError(f"could not read {path}: {said or 'not a mesh file meshio can read'}") from None

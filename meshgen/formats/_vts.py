@@ -35,6 +35,7 @@ import base64
 import json
 import xml.etree.ElementTree as ET
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -57,6 +58,7 @@ from meshgen.run.limits import READ_BYTES_PER_NODE, check_memory, node_count
 
 __all__ = [
     "FILE_TAIL",
+    "Grid",
     "NUMPY_TYPES",
     "PATCHES_KEY",
     "PATCH_ARRAY",
@@ -67,6 +69,7 @@ __all__ = [
     "file_head",
     "patch_ids",
     "read",
+    "read_grid",
     "read_patches",
     "whole_extent",
     "write",
@@ -216,12 +219,13 @@ def _parse(path):
     return root, appended
 
 
-def _decode(element, root, appended=None, count: int | None = None, what: str = "a DataArray") -> np.ndarray:
+def _decode(element, root, appended=None, count: int | None = None, what: str = "a DataArray", pool=None) -> np.ndarray:
     """The values of a DataArray: ascii, inline binary, or raw appended, with or without zlib
     compression. ``count``: the number of values the file's extent implies; the sizes the array
     declares are compared with it before anything is inflated, and each zlib stream is inflated
     to at most its declared size (``inputs.inflate``): a stream of a few MB that would inflate to
-    gigabytes is refused, not inflated. FormatError for an array that does not hold its values."""
+    gigabytes is refused, not inflated. ``pool``: an executor that inflates the blocks on its
+    threads (zlib releases the GIL). FormatError for an array that does not hold its values."""
     dtype = np.dtype(NUMPY_TYPES[element.get("type")])
     header_type = np.dtype(NUMPY_TYPES[root.get("header_type", "UInt32")])
     compressed = root.get("compressor") == "vtkZLibDataCompressor"
@@ -269,10 +273,12 @@ def _decode(element, root, appended=None, count: int | None = None, what: str = 
     offsets = np.concatenate([[0], np.cumsum(sizes)])
     if blocks and offsets[-1] > len(stream):
         raise FormatError(f"{what} declares {int(offsets[-1])} compressed bytes but the file holds {len(stream)}: truncated")
+
+    def block(n):
+        return inflate(stream[offsets[n] : offsets[n + 1]], inflated[n], f"{what}, block {n + 1}")
+
     try:
-        values = b"".join(
-            inflate(stream[offsets[n] : offsets[n + 1]], inflated[n], f"{what}, block {n + 1}") for n in range(blocks)
-        )
+        values = b"".join(pool.map(block, range(blocks)) if pool is not None and blocks > 1 else map(block, range(blocks)))
     except InputError as exc:
         raise FormatError(str(exc)) from None
     return _counted(np.frombuffer(values, dtype=dtype), count, what)
@@ -289,11 +295,24 @@ def _counted(values: np.ndarray, count: int | None, what: str) -> np.ndarray:
     return values
 
 
-def read(path):
-    """Read a .vts (one piece, inline arrays) as a ``meshio.Mesh``: points and hexahedron (quad)
-    cells in meshgen's C order, cell data, point data, meshgen's metadata in field data."""
-    import meshio
+class Grid(NamedTuple):
+    """A .vts file as ``read_grid`` reads it: ``node_shape`` (n1+1, n2+1[, n3+1]); ``points``
+    (N, 3) float64 in meshgen's C order of the nodes; ``cell_data`` {name: [(cells,) float64]} and
+    ``point_data`` {name: (N,)} in C order (meshio's layout); ``field_data`` {name: uint8 codes}
+    (meshgen's metadata and patches). No connectivity: ``cell_connectivity(node_shape)`` is it."""
 
+    node_shape: tuple
+    points: np.ndarray
+    cell_data: dict
+    point_data: dict
+    field_data: dict
+
+
+def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
+    """Read a .vts (one piece) as a ``Grid``: the points, the cell and point arrays named in
+    ``cell_arrays`` and ``point_arrays`` (None: all; the others are not inflated) and meshgen's
+    field data. The compressed blocks of each array are inflated on all cores.
+    ``on_shape(node_shape)``: called once the extent is known, before anything is inflated."""
     root, appended = _parse(path)
     grid = root.find("StructuredGrid")
     pieces = grid.findall("Piece")
@@ -317,35 +336,58 @@ def read(path):
     except MeshgenError as exc:
         raise FormatError(str(exc)) from None
     cells = int(np.prod([n - 1 for n in node_shape]))
+    if on_shape is not None:
+        on_shape(node_shape)
 
-    def decode(element, count, name):
-        if element is None:
-            raise FormatError(f"{path}: no {name} array")
-        return _decode(element, root, appended, count, f"{path}: the {name} array")
+    def wanted(elements, names):
+        return [a for a in elements if names is None or a.get("Name") in names]
 
-    points = c_order(decode(pieces[0].find("Points/DataArray"), 3 * nodes, "points").astype(float), node_shape, 3)
-    cell_shape = tuple(n - 1 for n in node_shape)
-    cell_data = {
-        a.get("Name"): [c_order(decode(a, cells, f"cell data {a.get('Name')!r}").astype(float), cell_shape)]
-        for a in pieces[0].findall("CellData/DataArray")
-    }
-    point_data = {
-        a.get("Name"): c_order(decode(a, nodes, f"point data {a.get('Name')!r}"), node_shape)
-        for a in pieces[0].findall("PointData/DataArray")
-    }
+    with ThreadPoolExecutor(max_workers=cpu_count(), thread_name_prefix="meshgen-vts") as pool:
+
+        def decode(element, count, name):
+            if element is None:
+                raise FormatError(f"{path}: no {name} array")
+            return _decode(element, root, appended, count, f"{path}: the {name} array", pool)
+
+        points = _writable(
+            c_order(decode(pieces[0].find("Points/DataArray"), 3 * nodes, "points").astype(float, copy=False), node_shape, 3)
+        )
+        cell_shape = tuple(n - 1 for n in node_shape)
+        cell_data = {
+            a.get("Name"): [c_order(decode(a, cells, f"cell data {a.get('Name')!r}").astype(float), cell_shape)]
+            for a in wanted(pieces[0].findall("CellData/DataArray"), cell_arrays)
+        }
+        point_data = {
+            a.get("Name"): c_order(decode(a, nodes, f"point data {a.get('Name')!r}"), node_shape)
+            for a in wanted(pieces[0].findall("PointData/DataArray"), point_arrays)
+        }
     field_data = {a.get("Name"): _decode(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
     field_data = {k: v for k, v in field_data.items() if k in (METADATA_KEY, PATCHES_KEY)}
+    return Grid(node_shape, points, cell_data, point_data, field_data)
+
+
+def _writable(values: np.ndarray) -> np.ndarray:
+    """``values``, copied where they are a view of the file's (read-only) bytes."""
+    return values if values.flags.writeable else values.copy()
+
+
+def read(path):
+    """Read a .vts (one piece, inline arrays) as a ``meshio.Mesh``: points and hexahedron (quad)
+    cells in meshgen's C order, cell data, point data, meshgen's metadata in field data."""
+    import meshio
+
+    grid = read_grid(path)
     return meshio.Mesh(
-        points,
-        [("hexahedron" if dim == 3 else "quad", cell_connectivity(node_shape))],
-        point_data=point_data,
-        cell_data=cell_data,
-        field_data=field_data,
+        grid.points,
+        [("hexahedron" if len(grid.node_shape) == 3 else "quad", cell_connectivity(grid.node_shape))],
+        point_data=grid.point_data,
+        cell_data=grid.cell_data,
+        field_data=grid.field_data,
     )
 
 
 def read_patches(path) -> list:
-    codes = read(path).field_data.get(PATCHES_KEY)
+    codes = read_grid(path, cell_arrays=(), point_arrays=()).field_data.get(PATCHES_KEY)
     if codes is None:
         raise FormatError(f"{path}: no {PATCHES_KEY} field data (not written by meshgen)")
     return from_records(json.loads(np.asarray(codes, dtype=np.uint8).tobytes()))

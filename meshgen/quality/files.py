@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
-from meshgen.formats import metadata_of, read_header, read_mesh, write_mesh
+from meshgen.formats import metadata_of, read_grid, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
 from meshgen.formats.multiblock import MultiZoneError, read_zones, zone_count
 from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
@@ -23,8 +24,8 @@ from meshgen.quality.chunked import chunked_report
 from meshgen.quality.deviation import block_set_deviation
 from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.merged import merged_reports
-from meshgen.quality.report import assess, build_report, quality_report, report_in_parallel
-from meshgen.quality.structured import check_node_array
+from meshgen.quality.report import assess, assess_in_parallel, build_report, quality_report, report_in_parallel
+from meshgen.quality.structured import check_node_array, load_compiled_kernels, use_compiled
 from meshgen.run.atomic import atomic_path
 from meshgen.run.inputs import read_input_text
 from meshgen.run.publish import publishing
@@ -33,6 +34,7 @@ from meshgen.run.trust import UntrustedGeometry, recorded_spec
 
 __all__ = [
     "zone_reports",
+    "BLOCK_DATA",
     "EVALUATE_BYTES_PER_NODE",
     "as_node_array",
     "evaluate_file",
@@ -45,15 +47,20 @@ __all__ = [
 ]
 
 
-def as_node_array(points, cells, dims) -> np.ndarray | None:
+def as_node_array(points, cells, dims, grid_shape=None) -> np.ndarray | None:
     """The node array of an unstructured mesh that is exactly meshgen's structured grid of ``dims``
-    cells (same node order and connectivity), else None: such files take the fast path."""
+    cells (same node order and connectivity), else None: such files take the fast path.
+    ``cells`` None: the points are the structured grid of ``grid_shape`` nodes (a .vts read as
+    its grid), whose connectivity is meshgen's."""
     dims = tuple(int(n) for n in dims)
     node_shape = tuple(n + 1 for n in dims)
     dim = len(dims)
-    if len(points) != int(np.prod(node_shape)) or cells.shape != (int(np.prod(dims)), 2**dim):
+    if cells is None:
+        if tuple(grid_shape) != node_shape:
+            return None
+    elif len(points) != int(np.prod(node_shape)) or cells.shape != (int(np.prod(dims)), 2**dim):
         return None
-    if not np.array_equal(cells, cell_connectivity(node_shape)):
+    elif not np.array_equal(cells, cell_connectivity(node_shape)):
         return None
     if dim == 2 and points.shape[1] == 3:
         if np.any(points[:, 2] != points[0, 2]):
@@ -168,6 +175,7 @@ def recorded_metadata(path, mesh) -> dict:
 
 
 MAX_SIDECAR_BYTES = 16 * 2**20  # a sidecar is a report of a few kB: a larger file is not one
+BLOCK_DATA = "block"  # the cell data of a merged block-set file: the block of each cell
 EVALUATE_BYTES_PER_NODE = 600  # measured order of the in-memory evaluate of a file (mesh, cells, metrics)
 
 
@@ -214,18 +222,59 @@ def evaluate_file(
         chunked = _chunked_by_default(path, client)
     if chunked:
         return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
-    if mesh is None:
-        progress(0.0, phase="reading")
-        mesh = read_mesh(path)
+    preloading = []
     try:
-        points, cells, skipped = cells_for_quality(mesh)
-    except MeshgenError as exc:
-        raise MeshgenError(f"{path}: {exc}") from None
+        if mesh is None:
+            progress(0.0, phase="reading")
+            mesh = _read_for_evaluation(path, preloading)
+        return _evaluate_mesh(path, mesh, geometry, params, progress, per_block)
+    finally:
+        for thread in preloading:
+            thread.join()
+
+
+def _read_for_evaluation(path: Path, preloading: list):
+    """The mesh file ``path`` as ``read_mesh`` reads it; a .vts as its grid (``read_grid``: no
+    connectivity, only the cell data ``block`` of its cell arrays), with numba's kernels loaded on
+    a thread (appended to ``preloading``) while its arrays inflate when the compiled kernels will
+    measure it."""
+
+    def load():
+        try:
+            load_compiled_kernels()
+        except Exception:  # noqa: BLE001 - the metrics meet the same error where it is reported
+            pass
+
+    def preload(node_shape):
+        if use_compiled(int(np.prod([n - 1 for n in node_shape]))):
+            thread = threading.Thread(target=load, name="meshgen-numba")
+            thread.start()
+            preloading.append(thread)
+
+    grid = read_grid(path, cell_arrays=(BLOCK_DATA,), point_arrays=(), on_shape=preload)
+    return grid if grid is not None else read_mesh(path)
+
+
+def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool) -> dict:
+    """``evaluate_file`` of the file ``path`` read as ``mesh`` (a ``meshio.Mesh`` or a .vts grid)."""
+    grid_shape = getattr(mesh, "node_shape", None)  # a .vts grid: the cells are the grid's
+    if grid_shape is not None:
+        points, cells, skipped = mesh.points, None, {}
+        n_cells = int(np.prod([n - 1 for n in grid_shape]))
+        if n_cells == 0:
+            raise MeshgenError(f"{path}: the mesh has no cells")
+    else:
+        try:
+            points, cells, skipped = cells_for_quality(mesh)
+        except MeshgenError as exc:
+            raise MeshgenError(f"{path}: {exc}") from None
+        n_cells = len(cells)
     metadata = recorded_metadata(path, mesh)
-    geometry, source, notes = _geometry_for(path, geometry, params, metadata, len(cells))
-    blocks = _cell_blocks(mesh, len(cells))
+    geometry, source, notes = _geometry_for(path, geometry, params, metadata, n_cells)
+    blocks = _cell_blocks(mesh, n_cells)
     if isinstance(geometry, BlockSet) or blocks is not None:
         progress(0.3, phase="metrics")
+        cells = cells if cells is not None else cell_connectivity(grid_shape)
         reports = _block_set_reports(path, points, cells, blocks, geometry, metadata)
         progress(1.0, phase="done")
         report = _finish_file_report(path, reports[0], source, notes, metadata, False)
@@ -235,27 +284,57 @@ def evaluate_file(
     dims = metadata.get("dims")
     X = None
     if isinstance(dims, list) and len(dims) in (2, 3) and all(isinstance(n, int) and n > 0 for n in dims):
-        X = as_node_array(points, cells, dims)
+        X = as_node_array(points, cells, dims, grid_shape)
     progress(0.3, phase="metrics")
+    if X is not None:
+        report = _node_array_report(path, X, geometry, source, notes, skipped, progress)
+        progress(1.0, phase="done")
+        return _finish_file_report(path, report, source, notes, metadata, True)
+    cells = cells if cells is not None else cell_connectivity(grid_shape)
     try:
-        metrics, degenerate, info = assess(X if X is not None else (points, cells))
+        metrics, degenerate, info = assess((points, cells))
     except MeshgenError as exc:
         raise MeshgenError(f"{path}: {exc}") from None
+    _check_not_all_degenerate(path, degenerate)
+    info["skipped"] = skipped
+    progress(0.8, phase="report")
+    geometry = _geometry_of_dim(geometry, info["dim"], source, notes)
+    report = build_report(metrics, degenerate, info, geometry)
+    progress(1.0, phase="done")
+    return _finish_file_report(path, report, source, notes, metadata, False)
+
+
+def _node_array_report(path, X, geometry, source, notes, skipped, progress) -> dict:
+    """The report of a file that is meshgen's structured grid, node array ``X``: the per-cell
+    metrics here, the solver figures and the boundary deviation on threads meanwhile."""
+    geometry = _geometry_of_dim(geometry, X.shape[-1], source, notes)
+    with ThreadPoolExecutor(max_workers=3, thread_name_prefix="meshgen-quality") as pool:
+        try:
+            measured = geometry if geometry is not None and geometry.dim == X.shape[-1] else None
+            metrics, degenerate, info = assess_in_parallel(X, measured, pool)
+        except MeshgenError as exc:
+            raise MeshgenError(f"{path}: {exc}") from None
+        _check_not_all_degenerate(path, degenerate)
+        info["skipped"] = skipped
+        progress(0.8, phase="report")
+        return build_report(metrics, degenerate, info, geometry)
+
+
+def _geometry_of_dim(geometry, dim: int, source: str, notes: list):
+    """``geometry``, or None (with a note) when it was recorded, not given, and is not of the
+    mesh's dimension ``dim`` (a --geometry of another dimension is ``build_report``'s error)."""
+    if geometry is not None and geometry.dim != dim and source != "--geometry":
+        notes.append(f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {dim}D; no boundary deviation")
+        return None
+    return geometry
+
+
+def _check_not_all_degenerate(path, degenerate) -> None:
     if degenerate.all():
         raise MeshgenError(
             f"{path}: nothing to evaluate: all {len(degenerate)} cells are degenerate "
             "(zero-length edges or non-finite coordinates)"
         )
-    info["skipped"] = skipped
-    progress(0.8, phase="report")
-    if geometry is not None and geometry.dim != info["dim"] and source != "--geometry":
-        notes.append(
-            f"recorded geometry '{geometry.name}' is {geometry.dim}D but the mesh is {info['dim']}D; no boundary deviation"
-        )
-        geometry = None
-    report = build_report(metrics, degenerate, info, geometry)
-    progress(1.0, phase="done")
-    return _finish_file_report(path, report, source, notes, metadata, X is not None)
 
 
 def _chunked_by_default(path, client) -> bool:
@@ -385,7 +464,7 @@ def _recorded_block_dims(metadata) -> tuple | None:
 def _cell_blocks(mesh, n_cells: int) -> np.ndarray | None:
     """The block of each cell of a merged block-set file (its cell data ``block``: a multi-zone
     .cgns read merged, a .vtu meshgen wrote), or None (one block, or no such data)."""
-    data = getattr(mesh, "cell_data", {}).get("block")
+    data = getattr(mesh, "cell_data", {}).get(BLOCK_DATA)
     if not data or len(data) != 1 or len(data[0]) != n_cells:
         return None
     blocks = np.asarray(data[0])

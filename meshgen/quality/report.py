@@ -11,6 +11,7 @@ from meshgen.quality.faces import cells_for_quality, unstructured_metrics
 from meshgen.quality.faces_openfoam import DEFINITIONS as FACE_DEFINITIONS
 from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import DEFINITIONS, METRICS, STATS, VALID_FRACTION, VALID_RULE
+from meshgen.quality.pool import map_in_threads
 from meshgen.quality.smoothness import DEFINITIONS as SMOOTHNESS_DEFINITIONS
 from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import check_node_array, structured_metrics
@@ -18,6 +19,7 @@ from meshgen.quality.structured import check_node_array, structured_metrics
 __all__ = [
     "assemble_report",
     "assess",
+    "assess_in_parallel",
     "build_report",
     "node_array_deviation",
     "quality_report",
@@ -88,13 +90,14 @@ def _quietly(function, *arguments):
         return function(*arguments)
 
 
-def report_in_parallel(X: np.ndarray, geometry, pool):
-    """The quality report of node array ``X`` (as :func:`quality_report` gives it) in parts on the
-    threads of ``pool`` (a ``concurrent.futures`` executor with at least four workers): the
-    smoothness figures, the face non-orthogonality and the boundary deviation start at once; the
+def assess_in_parallel(X: np.ndarray, geometry, pool):
+    """``assess`` of node array ``X`` with its other parts started first on the threads of ``pool``
+    (a ``concurrent.futures`` executor with at least three workers): the smoothness figures, the
+    face non-orthogonality and the boundary deviation from ``geometry`` (if not None); the
     per-cell metrics are computed on the calling thread (their first call in a process imports
     numba and loads the compiled kernels, which the face kernels wait for). Returns (metrics,
-    report): the seven per-cell arrays, for a writer to start on, and a future of the report."""
+    degenerate, info) for ``build_report``, whose ``solver_figures`` and ``boundary_deviation``
+    wait for the threads."""
     X = check_node_array(X)
     smoothness = pool.submit(_quietly, smoothness_figures, X)
     faces = pool.submit(_quietly, non_orthogonality, X)
@@ -103,6 +106,15 @@ def report_in_parallel(X: np.ndarray, geometry, pool):
     info["solver_figures"] = lambda: {**smoothness.result(), **faces.result()}
     if deviation is not None:
         info["boundary_deviation"] = deviation.result
+    return metrics, degenerate, info
+
+
+def report_in_parallel(X: np.ndarray, geometry, pool):
+    """The quality report of node array ``X`` (as :func:`quality_report` gives it) in parts on the
+    threads of ``pool`` (a ``concurrent.futures`` executor with at least four workers), as
+    ``assess_in_parallel`` computes them. Returns (metrics, report): the seven per-cell arrays,
+    for a writer to start on, and a future of the report."""
+    metrics, degenerate, info = assess_in_parallel(X, geometry, pool)
     return metrics, pool.submit(build_report, metrics, degenerate, info, geometry)
 
 
@@ -126,7 +138,10 @@ def build_report(metrics, degenerate, info, geometry) -> dict:
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
     every = bool(shaped.all())  # then the arrays themselves, not copies of them
-    summaries = {name: summarize(metrics[name] if every else metrics[name][shaped]) for name in METRICS}
+    # One metric per thread: np.percentile's partition, the most of the report's own time, releases the GIL.
+    summaries = dict(
+        zip(METRICS, map_in_threads(lambda name: summarize(metrics[name] if every else metrics[name][shaped]), METRICS))
+    )
     counts = {
         "cells": int(len(degenerate)),
         "inverted": int(np.count_nonzero(inverted)),

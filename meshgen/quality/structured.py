@@ -22,6 +22,7 @@ __all__ = [
     "cell_metrics",
     "check_node_array",
     "degenerate_tolerance",
+    "load_compiled_kernels",
     "orientation_2d",
     "structured_metrics",
     "use_compiled",
@@ -38,6 +39,14 @@ def use_compiled(cells: int, kernels: str = "auto") -> bool:
     if kernels == "auto":
         return cells >= NUMPY_CELLS
     return kernels == "compiled"
+
+
+def load_compiled_kernels() -> None:
+    """Import numba and load the first compiled kernel from its cache (numba's one-off set-up, most
+    of a second), e.g. on a thread while a large mesh is read."""
+    from meshgen.quality.compiled import finite_extent
+
+    finite_extent(np.zeros((1, 3)))
 
 
 def check_node_array(X) -> np.ndarray:
