@@ -1,7 +1,7 @@
 """``meshgen evaluate`` of a .vts reads it as its grid (``meshgen.formats.read_grid``: no
 connectivity, no stored quality arrays) and measures the node array on threads: the reports must
 be those of the file read whole as a ``meshio.Mesh`` and of the serial ``quality_report``, to the
-last bit; and the command's quick exit keeps its output and exit status."""
+last bit; and the command's output and exit status in a process are the in-process ones."""
 
 import json
 
@@ -75,7 +75,7 @@ def test_a_vts_of_blocks_is_measured_block_by_block_as_before(tmp_path):
     assert report == evaluate_file(path, mesh=read_mesh(path), per_block=True)
 
 
-def test_the_quick_exit_keeps_the_output_and_the_exit_status(semicylinder_vts, run_cli, run_cli_process):
+def test_the_command_keeps_the_output_and_the_exit_status(semicylinder_vts, run_cli, run_cli_process):
     in_process = run_cli("evaluate", semicylinder_vts, "--json", "-")
     process = run_cli_process("evaluate", semicylinder_vts, "--json", "-")
     assert process.returncode == 0, process.stderr

@@ -9,11 +9,9 @@ signal's number. Set MESHGEN_DEBUG=1 to see tracebacks.
 
 from __future__ import annotations
 
-import atexit
 import importlib
 import os
 import sys
-import threading
 
 import click
 
@@ -26,13 +24,11 @@ __all__ = [
     "FLAGS",
     "MAX_ERROR_CHARS",
     "MeshgenGroup",
-    "QUICK_EXIT",
     "cli",
     "flag_of",
     "main",
     "message_for_command_line",
     "one_line",
-    "quick_exit",
 ]
 
 # name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
@@ -157,42 +153,9 @@ def cli():
     """
 
 
-# Commands whose process ends once its output is flushed and its exit handlers ran, without the
-# interpreter's teardown (after numba's kernels: a third of a second of a 1e6-cell evaluate).
-QUICK_EXIT = ("evaluate",)
-
-
 def main():
     # Before torch starts its OpenMP threads (train, compare's neural rows, neural meshes): spinning
     # threads make a CPU that other processes share tens of times slower; the user's setting wins.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     install_termination_handlers()
-    try:
-        cli.main()
-    except SystemExit as exc:
-        if sys.argv[1:2] and sys.argv[1] in QUICK_EXIT:
-            quick_exit(exc.code)
-        raise
-
-
-def quick_exit(code) -> None:
-    """End the process now with status ``code`` (an int or None) as the interpreter's exit would,
-    less its teardown (freeing every module's objects, which the OS does at once): wait for the
-    threads (``threading``'s shutdown, which also ends idle executor workers), run the exit
-    handlers (``atexit``), flush stdout and stderr. Returns, for the normal exit, when ``code`` is
-    not a status, this is not the main thread, or a stream cannot be flushed."""
-    shutdown = getattr(threading, "_shutdown", None)  # what the interpreter calls first at exit
-    if (
-        not (code is None or isinstance(code, int))
-        or shutdown is None
-        or threading.current_thread() is not threading.main_thread()
-    ):
-        return
-    shutdown()
-    atexit._run_exitfuncs()
-    try:
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except (OSError, ValueError):  # a closed pipe: the normal exit reports it
-        return
-    os._exit(code or 0)
+    cli.main()
