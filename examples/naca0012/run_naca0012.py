@@ -16,7 +16,8 @@ over the last ``WINDOW`` iterations (or ``--max-iterations``). At M = 0.15 compr
 the lift by about 1 % (Prandtl-Glauert, 1 / sqrt(1 - M^2) = 1.0114): the table prints both.
 
 Mesh: ``meshgen mesh -g airfoil`` (C-grid, elliptic: hyperbolic wall layer, elliptic outside),
-the wall at y+ = 1 for Re 6e6 (``--yplus``), ``--level K`` scaling the cells per direction by 1.5^K (level 0: 448 x 128).
+the wall at y+ = 1 for Re 6e6 (``--yplus``) on level 0 (448 x 128 cells), ``--level K`` scaling the cells
+per direction by 1.5^K and the first cell by (2/3)^K (DPW).
 Needs OpenFOAM (v1912 or later, the ESI syntax) on PATH or in /usr/share/openfoam.
 """
 
@@ -142,15 +143,12 @@ def wall_yplus(case: Path) -> dict:
 DIMS = (448, 128)  # level 0: 57,344 cells (TMR's 449 x 129 grid has 57,344)
 
 
-def level_dims(level: int, dims=DIMS) -> tuple[int, int]:
-    """Cells per direction at grid level ``level``: x 1.5 per level (DPW), the wall at y+ 1 on each."""
-    return tuple(int(round(n * 1.5**level)) for n in dims)
-
-
-def mesh_command(dims, case: Path, extra=()) -> list[str]:
-    return [sys.executable, "-m", "meshgen", "mesh", "-g", "airfoil", "--param", "sharp=1", "--param", "yplus=1",
-            "--param", f"reynolds={REYNOLDS:g}", "--dims", *map(str, dims), "--method", "elliptic", "--format", "openfoam",
-            "-o", str(case), "--no-quality", "-q", *extra]  # fmt: skip
+def mesh_command(dims, level: int, case: Path, extra=()) -> list[str]:
+    """``meshgen mesh`` of the TMR section at y+ 1 (level 0; the airfoil's ``level`` scales the
+    cells by 1.5 and every designed length by 2/3 per level, DPW's rule)."""
+    return [sys.executable, "-m", "meshgen", "mesh", "-g", "airfoil", "--param", "sharp=1", "--yplus", "1",
+            "--reynolds", f"{REYNOLDS:g}", "--param", f"level={level}", "--dims", *map(str, dims), "--method", "elliptic",
+            "--format", "openfoam", "-o", str(case), "--no-quality", "-q", *extra]  # fmt: skip
 
 
 def run(
@@ -169,7 +167,7 @@ def run(
         raise SystemExit("simpleFoam not found: install OpenFOAM (Debian: apt install openfoam)")
     shutil.rmtree(case, ignore_errors=True)
     start = time.perf_counter()
-    meshed = subprocess.run(mesh_command(level_dims(level, dims), case, extra), capture_output=True, text=True)
+    meshed = subprocess.run(mesh_command(dims, level, case, extra), capture_output=True, text=True)
     if meshed.returncode != 0:
         raise SystemExit(meshed.stderr)
     mesh_seconds = time.perf_counter() - start
