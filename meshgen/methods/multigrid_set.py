@@ -54,7 +54,10 @@ COARSEST_SET_SWEEPS = (
     10  # relaxation sweeps on the coarsest level (40 for one grid: 10 gave the same cycles in 3D, 4 more in 2D, in less time)
 )
 
-DIRECT_NODES = 1500  # the hierarchy stops at the first level with at most this many nodes, solved by Newton's method
+# A 2D hierarchy stops at the first level with at most DIRECT_NODES nodes, solved by Newton's method
+# (dfg-cylinder 34 x 20: 0.58 -> 0.19 per V-cycle). Not in 3D: the pipe's slow modes are on its
+# finest level (0.47 per cycle either way) and a 27-point Jacobian costs ~150 residuals (2x the time).
+DIRECT_NODES = 1500
 DIRECT_TOL = 1e-12  # its Newton steps stop below this times the characteristic length (or after DIRECT_STEPS)
 DIRECT_REDUCTION = 1e-2  # or below this times its first step: the coarse-grid correction to 1 %
 DIRECT_STEPS = 20
@@ -228,7 +231,8 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     finest = weights * (np.array([[len(t) - 1 for t in c] for c in block_set.coords]) / spans) ** 2
     strong = finest >= SEMI_COARSENING * finest.max(axis=1, keepdims=True)  # per block axis, for wall_rows
     levels, sets, starts = [], [block_set], [list(Xs)]
-    while global_numbering(sets[-1])[1] > DIRECT_NODES:
+    direct = DIRECT_NODES if block_set.dim == 2 else 0  # 3D: see DIRECT_NODES
+    while global_numbering(sets[-1])[1] > direct:
         current = sets[-1]
         cells = np.array([[len(t) - 1 for t in c] for c in current.coords])
         strength = weights * (cells / spans) ** 2
@@ -256,7 +260,7 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
                 for t, X in zip(level.transfers, starts[index])
             ]
             starts.append(restricted)
-    if levels[-1].halo.count <= DIRECT_NODES:
+    if levels[-1].halo.count <= direct:
         levels[-1].equations = coarsest_equations(levels[-1])
         halo = levels[-1].halo
         colours = np.zeros(halo.count, dtype=np.int64)  # the owner's index modulo 3 per axis
