@@ -80,6 +80,8 @@ def test_newton_finds_the_root_and_its_jacobian_is_the_analytic_one():
     np.testing.assert_allclose(solver.factor.solve(v), spla.spsolve(J, v), rtol=1e-5, atol=1e-5)
     got = solver.solve(lambda y: operator(y) - rhs, x, tol=1e-14, reduction=0.0, iterations=30)
     assert np.abs(got - root).max() < 1e-12
+    # a residual that is not finite (a folded cell): None, for the caller to relax instead
+    assert solver.solve(lambda y: np.full_like(y, np.nan), x, tol=1e-14, reduction=0.0, iterations=30) is None
 
 
 @pytest.mark.parametrize("slide", [True, False])

@@ -8,6 +8,11 @@ while it has more than ``COARSEST_CELLS`` cells and one of its axes is coupled a
 hierarchy's semi-coarsening: a pipe's cells, long along the pipe, couple ~100 times more weakly
 along it), so the blocks' coarse grids share their interface nodes (``coarser_coordinates`` picks
 nodes by index, the same on both sides). A block whose axes are all coarse stays as it is.
+In 2D the hierarchy stops at the first level with at most ``DIRECT_NODES`` nodes, which Newton's
+method solves (``coarsest_equations``, ``meshgen.methods.sparse_newton``): on the coarse levels a
+block's line solve ends at its halo, so where a strong direction crosses several blocks of a few
+cells each (the DFG channel's stacked blocks, their long axis ~25 times weaker) the sweeps leave
+the modes rough along the weak axis, and further coarsening of that axis does not reach them.
 
 On each level (``SetLevel``) each block is padded with a halo layer on its interface faces
 (``meshgen.methods.interfaces.Halo``), all of them slices of one flat buffer
@@ -436,12 +441,20 @@ def v_cycle_set(levels: list[SetLevel], index: int, values: np.ndarray, f) -> np
     ``values``; returns the new unique nodes."""
     level = levels[index]
     if index == len(levels) - 1:
-        if level.newton is None:
-            return relax_set(level, values, f, COARSEST_SET_SWEEPS)
         start = values.copy()
-        solved = level.newton.solve(
-            lambda x: _coarsest_residual(level, level.equations, x, f, start), values, DIRECT_TOL, DIRECT_REDUCTION, DIRECT_STEPS
+        solved = (
+            None
+            if level.newton is None
+            else level.newton.solve(
+                lambda x: _coarsest_residual(level, level.equations, x, f, start),
+                values,
+                DIRECT_TOL,
+                DIRECT_REDUCTION,
+                DIRECT_STEPS,
+            )
         )
+        if solved is None:
+            return relax_set(level, values, f, COARSEST_SET_SWEEPS)
         kept = level.equations[3]
         solved[kept] = start[kept]  # exactly, as the relaxation keeps them (not to round-off)
         return solved

@@ -90,10 +90,11 @@ class LaggedNewton:
         self.factor = spla.splu(jacobian)
         self.factorisations += 1
 
-    def solve(self, residual, values: np.ndarray, tol: float, reduction: float, iterations: int) -> np.ndarray:
+    def solve(self, residual, values: np.ndarray, tol: float, reduction: float, iterations: int) -> np.ndarray | None:
         """x from ``values`` (count, dim) until a step moves no coordinate by more than ``tol``
         times the length or ``reduction`` times the first step, or ``iterations`` steps;
-        ``residual``: x (count, dim) -> F(x) (count, dim)."""
+        ``residual``: x (count, dim) -> F(x) (count, dim). None where a step is not finite (a
+        folded start: the caller relaxes instead)."""
         values = values.copy()
         previous, first = np.inf, None
         for _ in range(iterations):
@@ -103,8 +104,11 @@ class LaggedNewton:
             step = self.factor.solve(base.reshape(-1)).reshape(values.shape)
             values -= step
             size = float(np.abs(step).max())
+            if not np.isfinite(size):
+                self.factor = None
+                return None
             first = size if first is None else first
-            if not np.isfinite(size) or size < max(tol * self.length, reduction * first):
+            if size < max(tol * self.length, reduction * first):
                 break
             if size > REFRESH_RATIO * previous:
                 self.factor = None
