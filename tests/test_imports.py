@@ -75,6 +75,7 @@ LAYERS = [
         "meshgen.methods.winslow_compiled",
         "meshgen.methods.winslow_compiled_2d",
         "meshgen.methods.anderson",
+        "meshgen.methods.sparse_newton",
         "meshgen.geometry.layout_start",
         "meshgen.methods.orthogonal",
         "meshgen.methods.hyperbolic",

@@ -8,6 +8,11 @@ while it has more than ``COARSEST_CELLS`` cells and one of its axes is coupled a
 hierarchy's semi-coarsening: a pipe's cells, long along the pipe, couple ~100 times more weakly
 along it), so the blocks' coarse grids share their interface nodes (``coarser_coordinates`` picks
 nodes by index, the same on both sides). A block whose axes are all coarse stays as it is.
+In 2D the hierarchy stops at the first level with at most ``DIRECT_NODES`` nodes, which Newton's
+method solves (``coarsest_equations``, ``meshgen.methods.sparse_newton``): on the coarse levels a
+block's line solve ends at its halo, so where a strong direction crosses several blocks of a few
+cells each (the DFG channel's stacked blocks, their long axis ~25 times weaker) the sweeps leave
+the modes rough along the weak axis, and further coarsening of that axis does not reach them.
 
 On each level (``SetLevel``) each block is padded with a halo layer on its interface faces
 (``meshgen.methods.interfaces.Halo``), all of them slices of one flat buffer
@@ -27,8 +32,10 @@ The fixed point is the finest level's equations at every node: block interiors, 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
+import scipy.sparse as sp
 
 from meshgen.geometry.blocks import global_numbering
 from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
@@ -44,6 +51,7 @@ from meshgen.methods.interfaces import (
 )
 from meshgen.methods.multigrid import COARSEST_CELLS, DAMPING, SEMI_COARSENING, Level, coarser_coordinates, stencil_weights
 from meshgen.methods.sliding import SlideRule, local_cell_sizes, planar_sliding
+from meshgen.methods.sparse_newton import LaggedNewton
 from meshgen.methods.winslow import component_array
 
 SMOOTHING = 2  # relaxation sweeps before and after the coarse-grid correction (1: half as many cycles more)
@@ -51,12 +59,25 @@ COARSEST_SET_SWEEPS = (
     10  # relaxation sweeps on the coarsest level (40 for one grid: 10 gave the same cycles in 3D, 4 more in 2D, in less time)
 )
 
+# A 2D hierarchy stops at the first level with at most DIRECT_NODES nodes, solved by Newton's method
+# (dfg-cylinder 34 x 20: 0.58 -> 0.19 per V-cycle). Not in 3D: the pipe's slow modes are on its
+# finest level (0.47 per cycle either way) and a 27-point Jacobian costs ~150 residuals (2x the time).
+DIRECT_NODES = 1500
+DIRECT_TOL = 1e-12  # its Newton steps stop below this times the characteristic length (or after DIRECT_STEPS)
+DIRECT_REDUCTION = 1e-2  # or below this times its first step: the coarse-grid correction to 1 %
+DIRECT_STEPS = 20
+
 __all__ = [
     "COARSEST_SET_SWEEPS",
+    "DIRECT_NODES",
+    "DIRECT_REDUCTION",
+    "DIRECT_STEPS",
+    "DIRECT_TOL",
     "SMOOTHING",
     "SetLevel",
     "axis_families",
     "axis_weights",
+    "coarsest_equations",
     "relax_set",
     "set_levels",
     "solve_set",
@@ -112,6 +133,7 @@ class SetLevel:
                 frozen[face.node_index] = True
             self.frozen.append(np.nonzero(frozen))  # as indices: the block's faces, a small part of it
         self.slide_rule = self.rules[0] if sliding is not None else None
+        self.newton = self.equations = None  # the coarsest level's Newton solver and ``coarsest_equations``
         terms = [t for rule in self.rules for t in rule.terms if t.dtype.kind in "iu"]
         self.moved = np.unique(np.concatenate([rule.nodes for rule in self.rules])) if self.rules else np.zeros(0, int)
         self.touched = np.unique(np.concatenate([self.moved] + [t.reshape(-1) for t in terms]))  # what the rules read
@@ -214,7 +236,8 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     finest = weights * (np.array([[len(t) - 1 for t in c] for c in block_set.coords]) / spans) ** 2
     strong = finest >= SEMI_COARSENING * finest.max(axis=1, keepdims=True)  # per block axis, for wall_rows
     levels, sets, starts = [], [block_set], [list(Xs)]
-    while True:
+    direct = DIRECT_NODES if block_set.dim == 2 else 0  # 3D: see DIRECT_NODES
+    while global_numbering(sets[-1])[1] > direct:
         current = sets[-1]
         cells = np.array([[len(t) - 1 for t in c] for c in current.coords])
         strength = weights * (cells / spans) ** 2
@@ -242,7 +265,78 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
                 for t, X in zip(level.transfers, starts[index])
             ]
             starts.append(restricted)
+    if levels[-1].halo.count <= direct:
+        levels[-1].equations = coarsest_equations(levels[-1])
+        halo = levels[-1].halo
+        colours = np.zeros(halo.count, dtype=np.int64)  # the owner's index modulo 3 per axis
+        for ids, (flat, nodes) in zip(halo.numbering, halo.writes):
+            colours[nodes] = np.ravel_multi_index(tuple(i % 3 for i in np.unravel_index(flat, ids.shape)), (3,) * ids.ndim)
+        levels[-1].newton = LaggedNewton(levels[-1].equations[0], block_set.length, colours)
     return levels
+
+
+def coarsest_equations(level: SetLevel) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray]:
+    """The equations of ``level`` as one system over its unique nodes (count, dim), for Newton's
+    method: at a node a rule holds, the rule (a sliding node also keeps its offset normal to its
+    plane or line); at a node its owner's line relaxation keeps (a block edge on a patch), that
+    it stays; elsewhere the owner's Winslow equations (an interface node's: the blocks glued).
+    Returns the sparsity (count, count) (equation i reads node j), the fixed nodes, per node
+    the projector (count, dim, dim) onto what its rule leaves fixed (zero where nothing is) and
+    (count, dim) the coordinates kept exactly (fixed nodes, sliding nodes' coordinate normal to
+    an axis-aligned plane)."""
+    halo, dim, count = level.halo, level.block_set.dim, level.halo.count
+    owner = np.empty(count, dtype=np.int64)
+    frozen = np.zeros(count, dtype=bool)
+    for block, (flat, ids) in enumerate(halo.writes):  # as Halo.unique: later blocks override
+        owner[ids] = block
+        mask = np.zeros(halo.numbering[block].shape, dtype=bool)
+        mask[level.frozen[block]] = True
+        frozen[ids] = mask.reshape(-1)[flat]
+    fixed = np.ones(count, dtype=bool)
+    fixed[level.moved] = False
+    fixed &= frozen
+    rows, cols = [np.arange(count)], [np.arange(count)]
+    for block, padded in enumerate(halo.padded_ids):  # halos and ghosts: every pad is one layer
+        centre = padded[(slice(1, -1),) * dim]
+        solved = (owner[centre] == block) & ~frozen[centre]
+        for offset in itertools.product((-1, 0, 1), repeat=dim):
+            shifted = padded[tuple(slice(1 + o, n - 1 + o) for o, n in zip(offset, padded.shape))]
+            rows.append(centre[solved])
+            cols.append(shifted[solved])
+    normal = np.zeros((count, dim, dim))
+    for rule in level.rules:
+        for term in (t for t in rule.terms if t.dtype.kind in "iu"):
+            rows.extend([rule.rows] * term.shape[1])
+            cols.extend(term.T)
+        if rule is level.slide_rule:
+            projector = rule.terms[1]
+            normal[rule.rows] = np.eye(dim)
+            np.add.at(normal, rule.rows, -projector / rule.count[rule.slot, None, None])
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    pattern = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
+    pattern.data[:] = 1.0
+    kept = np.all((normal == np.eye(dim)) | (normal == 0.0), axis=2) & (np.einsum("nii->ni", normal) == 1.0)
+    kept[fixed] = True
+    return pattern, np.flatnonzero(fixed), normal, kept
+
+
+def _coarsest_residual(level: SetLevel, equations, values: np.ndarray, f, start: np.ndarray) -> np.ndarray:
+    """F (count, dim) of ``coarsest_equations`` at ``values``: N - f at the Winslow nodes, the
+    rules' residual - f less the normal offset from ``start`` at theirs, the offset from
+    ``start`` at the fixed nodes."""
+    _, fixed, normal, _ = equations
+    winslow = []
+    for block, R in enumerate(level.layout.views(level.layout.load(values))):
+        with np.errstate(all="ignore"):
+            full = _defect_block(R, None if f is None else f[0][block], level.smoothers[block], level.weights[block])
+        winslow.append(full[level.halo.inside(block)])
+    residual = -level.halo.unique(winslow)
+    for number, rule in enumerate(level.rules):
+        residual[rule.nodes] = rule.residual(values) - (0.0 if f is None else f[1][number])
+    moved = level.moved
+    residual[moved] -= np.einsum("nij,nj->ni", normal[moved], values[moved] - start[moved])
+    residual[fixed] = values[fixed] - start[fixed]
+    return residual
 
 
 def _relax_block(R: np.ndarray, f, level: Level, weights, frozen, walls=None, wall_step=None) -> None:
@@ -347,7 +441,23 @@ def v_cycle_set(levels: list[SetLevel], index: int, values: np.ndarray, f) -> np
     ``values``; returns the new unique nodes."""
     level = levels[index]
     if index == len(levels) - 1:
-        return relax_set(level, values, f, COARSEST_SET_SWEEPS)
+        start = values.copy()
+        solved = (
+            None
+            if level.newton is None
+            else level.newton.solve(
+                lambda x: _coarsest_residual(level, level.equations, x, f, start),
+                values,
+                DIRECT_TOL,
+                DIRECT_REDUCTION,
+                DIRECT_STEPS,
+            )
+        )
+        if solved is None:
+            return relax_set(level, values, f, COARSEST_SET_SWEEPS)
+        kept = level.equations[3]
+        solved[kept] = start[kept]  # exactly, as the relaxation keeps them (not to round-off)
+        return solved
     values = relax_set(level, values, f, SMOOTHING)
     coarse = levels[index + 1]
     transfers = level.transfers
