@@ -40,6 +40,7 @@ import base64
 import functools
 import itertools
 import os
+import zlib
 from concurrent.futures import ThreadPoolExecutor
 from xml.sax.saxutils import quoteattr
 
@@ -54,6 +55,7 @@ __all__ = [
     "FILE_HEAD",
     "HEADER_TYPE",
     "LEVEL",
+    "SMALL_BLOCK",
     "VTK_TYPES",
     "compress_block",
     "compress_blocks",
@@ -69,6 +71,8 @@ __all__ = [
 # 2 the same size at a quarter more CPU (benchmarks/formats.py, design notes §21).
 LEVEL = 1
 BLOCK_BYTES = 1 << 20  # uncompressed bytes per block: enough blocks to share out, few Python calls
+SMALL_BLOCK = 1 << 16  # below: zlib, whose output is a function of its input (``compress_block``)
+ZLIB_LEVEL = 1
 HEADER_TYPE = np.dtype("<u8")
 VTK_TYPES = {np.dtype("<f8"): "Float64", np.dtype("<i8"): "Int64", np.dtype("u1"): "UInt8"}
 VTK_HEXAHEDRON, VTK_QUAD = 12, 9
@@ -142,8 +146,16 @@ def write_cells(path, points, cells, dim: int, cell_data, metadata, level=LEVEL,
 
 
 def compress_block(block, level: int = LEVEL) -> bytes:
-    """One zlib stream of ``block`` (bytes-like), deflated by ISA-L at ``level`` (0-3); any zlib
-    reader inflates it."""
+    """One zlib stream of ``block`` (bytes-like), deflated by ISA-L at ``level`` (0-3), or by zlib
+    below ``SMALL_BLOCK`` bytes; any zlib reader inflates it.
+
+    Small blocks (metadata, patch lists, the arrays of small meshes) go to zlib: ISA-L encodes
+    the same small input differently from one process state to another (measured: a 241-byte
+    patch list deflated to 112 or 114 bytes, both valid, after other work in the process), and a
+    mesh must be written to the same bytes every time; zlib's output depends on its input alone.
+    Where the time is, in blocks of ``BLOCK_BYTES``, ISA-L keeps its speed."""
+    if memoryview(block).nbytes < SMALL_BLOCK:
+        return zlib.compress(block, ZLIB_LEVEL)
     return isal_zlib.compress(block, level)
 
 

@@ -2,7 +2,8 @@
 numba kernels: ``_quad_cell`` holds the arithmetic, ``structured_quad`` (2D node arrays; face
 neighbours are the cells at index +-1) and ``unstructured_quad`` (points + connectivity; neighbours
 from face matching) feed it, in parallel over cells. The arithmetic follows the NumPy definition
-operation by operation in IEEE double precision (``fastmath=False``); tested to 1e-12.
+operation by operation in IEEE double precision (``fastmath=False``) and the angles come from the
+cosines through NumPy's own ``arccos`` (``finish_hex_angles``), as the hexahedra's do.
 
 The small helpers shared with the hexahedra (``meshgen.quality.compiled``) are repeated here
 rather than imported: numba's on-disk cache of a function is invalidated by changes to its own
@@ -17,19 +18,14 @@ import numpy as np
 from numba import njit, prange
 
 from meshgen.quality import compiled  # noqa: F401  (sets numba's threading layer first)
+from meshgen.quality.angles import finish_hex_angles
 
 __all__ = ["structured_quad", "unstructured_quad"]
 
-_DEGREES = 180.0 / math.pi
 # VTK corner order of a quad, as corner q (centroids are summed in this order).
 QUAD_Q_OF_VTK = np.array([0, 1, 3, 2])
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
-
-
-@njit(inline="always", **_JIT)
-def _degrees_of_cosine(cosine):
-    return math.acos(min(max(cosine, -1.0), 1.0)) * _DEGREES
 
 
 @njit(inline="always", **_JIT)
@@ -54,14 +50,15 @@ def _unit2(x, y):
 @njit(inline="always", **_JIT)
 def _finish(largest_cosine, smallest_cosine, reflex_cosine, any_reflex, aspect_ratio, centroid_alignment, face_alignment,
             scaled_jacobian, out, c):  # fmt: skip
-    min_angle = _degrees_of_cosine(largest_cosine)
-    max_angle = 360.0 - _degrees_of_cosine(reflex_cosine) if any_reflex else _degrees_of_cosine(smallest_cosine)
-    out[0, c] = min_angle
-    out[1, c] = max_angle
-    out[2, c] = max((max_angle - 90.0) / 90.0, (90.0 - min_angle) / 90.0)
+    """The hexahedra's layout (``meshgen.quality.angles.finish_hex_angles`` makes the angles):
+    row 0 the largest corner cosine, row 1 the max-angle cosine (the reflex corner's where there
+    is one), row 2 the reflex flag, row 5 the face-alignment cosine."""
+    out[0, c] = largest_cosine
+    out[1, c] = reflex_cosine if any_reflex else smallest_cosine
+    out[2, c] = 1.0 if any_reflex else 0.0
     out[3, c] = aspect_ratio
     out[4, c] = 1.0 - centroid_alignment
-    out[5, c] = _degrees_of_cosine(face_alignment)
+    out[5, c] = face_alignment
     out[6, c] = scaled_jacobian
 
 
@@ -134,8 +131,8 @@ def _quad_cell(P, G, N, S, tolerance, orientation, out, degenerate, c):
 
 
 @njit(parallel=True, **_JIT)
-def structured_quad(X, first, last, tolerance, orientation, out, degenerate):
-    """``structured_hex`` for a 2D node array (n1+1, n2+1, 2)."""
+def _structured_quad(X, first, last, tolerance, orientation, out, degenerate):
+    """``structured_quad`` without the angles (cosines left in ``out``)."""
     n1, n2 = X.shape[0] - 1, X.shape[1] - 1
     centroid = np.empty((n1, n2, 2))
     for i in prange(n1):
@@ -181,8 +178,8 @@ def _centroids(points, cells):
 
 
 @njit(parallel=True, **_JIT)
-def unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate):
-    """``unstructured_hex`` for quads ``cells`` (M, 4) on ``points`` (N, 2); ``neighbour`` (4, M)."""
+def _unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate):
+    """``unstructured_quad`` without the angles (cosines left in ``out``)."""
     centroid = _centroids(points, cells)
     n = cells.shape[0]
     chunk = 1024
@@ -199,3 +196,19 @@ def unstructured_quad(points, cells, neighbour, tolerance, orientation, out, deg
                 for d in range(2):
                     N[face, d] = centroid[other, d] if other >= 0 else np.nan
             _quad_cell(P, centroid[c], N, S, tolerance, orientation, out, degenerate, c)
+
+
+def structured_quad(X, first, last, tolerance, orientation, out, degenerate):
+    """``structured_hex`` for a 2D node array (n1+1, n2+1, 2): the cells' metrics into ``out``
+    (7, m), the angles from the kernel's cosines by NumPy's ``arccos`` (``finish_hex_angles``), so
+    they are the NumPy definition's to the bit on every CPU (a libm ``acos`` in the kernel differs
+    from NumPy's vectorised one in the last bit where NumPy dispatches AVX-512)."""
+    _structured_quad(X, first, last, tolerance, orientation, out, degenerate)
+    finish_hex_angles(out)
+
+
+def unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate):
+    """``unstructured_hex`` for quads ``cells`` (M, 4) on ``points`` (N, 2); ``neighbour`` (4, M);
+    the angles as ``structured_quad``'s."""
+    _unstructured_quad(points, cells, neighbour, tolerance, orientation, out, degenerate)
+    finish_hex_angles(out)
