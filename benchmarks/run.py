@@ -121,6 +121,7 @@ SECTIONS = [
     "fidelity",
     "blocks_neural",
     "blocks",
+    "airfoil",
 ]
 
 # figure key -> (comparison, target, unit, what the figure measures)
@@ -222,6 +223,22 @@ TARGETS = {
         1.5,
         "x",
         "elliptic pipe 50 50 80 (1.0e6 hexahedra) / semicylinder 100^3 (1.0e6), seconds, one run",
+    ),
+    "airfoil_mesh_seconds": ("<=", 5.0, "s", "airfoil C-grid 448 x 128 (57,344 cells, y+ 1 at Re 6e6), elliptic, 2 cores"),
+    "airfoil_first_cell_error": ("<=", 0.02, "", "airfoil: largest |first-cell height / asked - 1| over the wall nodes"),
+    "airfoil_wall_angle_degrees": ("<=", 2.0, "deg", "airfoil: largest angle of a first grid line off the wall normal"),
+    "airfoil_expansion_ratio": ("<=", 1.15, "x", "airfoil: largest wall-normal expansion ratio (the cap)"),
+    "airfoil_cl_alpha_10": (
+        "abs<=",
+        0.0125,
+        "",
+        "NACA 0012 alpha 10, simpleFoam SA, <= 60k cells: CL - 1.0875 (band 1.075-1.100)",
+    ),
+    "airfoil_cd_alpha_10": (
+        "abs<=",
+        0.0005,
+        "",
+        "NACA 0012 alpha 10, simpleFoam SA, <= 60k cells: CD - 0.0125 (band 0.0120-0.0130)",
     ),
     "dfg_10k_drag": ("abs<=", 0.1, "%", "DFG 2D-1 at most 10k cells: drag error against 5.5795"),
     "dfg_10k_lift": ("abs<=", 3.0, "%", "DFG 2D-1 at most 10k cells: lift error against 0.0106"),
@@ -610,6 +627,12 @@ def blocks(quick: bool) -> dict:
     import bench_blocks
 
     return bench_blocks.run(quick)
+
+
+def airfoil(quick: bool) -> dict:
+    import bench_airfoil
+
+    return bench_airfoil.run(quick)
 
 
 def family(quick: bool) -> dict:
@@ -1156,6 +1179,26 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 add(f"DFG 2D-1 --dims {' '.join(map(str, row['dims']))} ({row['cells']} cells): {name} error",
                     100 * row[f"{name}_error"], "%", key=f"dfg_{budget}_{name}" if budget else None,
                     note="" if row["converged"] else "simpleFoam did not converge")  # fmt: skip
+    if "airfoil" in sections:
+        mesh = sections["airfoil"]["mesh"]
+        add(f"airfoil C-grid {mesh['cells']} cells, elliptic", mesh["seconds"], "s", key="airfoil_mesh_seconds")
+        add("airfoil: first-cell height error, every wall node", mesh["first_cell_error"], "", key="airfoil_first_cell_error",
+            note=f"h = {mesh['first_cell_height']:.3e} chord")  # fmt: skip
+        add("airfoil: first grid line off the wall normal", mesh["worst_wall_angle_degrees"], "deg", key="airfoil_wall_angle_degrees",
+            note="trailing edge excepted")  # fmt: skip
+        add("airfoil: wall-normal expansion ratio", mesh["largest_expansion_ratio"], "x", key="airfoil_expansion_ratio",
+            note=f"{mesh['inverted']} inverted")  # fmt: skip
+        if mesh.get("check_mesh"):
+            cm = mesh["check_mesh"]
+            add("airfoil: checkMesh max non-orthogonality", cm["max_non_orthogonality"], "deg",
+                note=f"max skewness {cm['max_skewness']}; {'Mesh OK' if cm['mesh_ok'] else str(cm['failed_checks']) + ' failed (aspect ratio)'}")  # fmt: skip
+        solved = sections["airfoil"].get("simplefoam_alpha_10")
+        if solved:
+            note = f"{solved['cells']} cells, y+ mean {solved['yplus']['average']:.2f} max {solved['yplus']['max']:.2f}"
+            add("NACA 0012 alpha 10: CL - 1.0875", solved["CL"] - 1.0875, "", key="airfoil_cl_alpha_10",
+                note=f"CL {solved['CL']:.4f} (x Prandtl-Glauert {solved['CL_prandtl_glauert']:.4f}); {note}")  # fmt: skip
+            add("NACA 0012 alpha 10: CD - 0.0125", solved["CD"] - 0.0125, "", key="airfoil_cd_alpha_10",
+                note=f"CD {solved['CD']:.5f}; {'converged' if solved['converged'] else 'NOT converged'}")  # fmt: skip
     return rows
 
 
@@ -1307,6 +1350,7 @@ def main(argv=None) -> int:
         "fidelity": lambda: fidelity(args.quick),
         "blocks_neural": lambda: blocks_neural(args.quick),
         "blocks": lambda: blocks(args.quick),
+        "airfoil": lambda: airfoil(args.quick),
     }
     for name in chosen:
         section_header(name)

@@ -35,7 +35,6 @@ import dataclasses
 import itertools
 
 import numpy as np
-import scipy.sparse as sp
 
 from meshgen.geometry.blocks import global_numbering
 from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
@@ -275,7 +274,7 @@ def set_levels(block_set, Xs, lengths, slide: bool = True) -> list[SetLevel]:
     return levels
 
 
-def coarsest_equations(level: SetLevel) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray]:
+def coarsest_equations(level: SetLevel) -> tuple:
     """The equations of ``level`` as one system over its unique nodes (count, dim), for Newton's
     method: at a node a rule holds, the rule (a sliding node also keeps its offset normal to its
     plane or line); at a node its owner's line relaxation keeps (a block edge on a patch), that
@@ -313,6 +312,8 @@ def coarsest_equations(level: SetLevel) -> tuple[sp.csr_matrix, np.ndarray, np.n
             normal[rule.rows] = np.eye(dim)
             np.add.at(normal, rule.rows, -projector / rule.count[rule.slot, None, None])
     rows, cols = np.concatenate(rows), np.concatenate(cols)
+    import scipy.sparse as sp  # on first use: `meshgen mesh --help` imports this module
+
     pattern = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
     pattern.data[:] = 1.0
     kept = np.all((normal == np.eye(dim)) | (normal == 0.0), axis=2) & (np.einsum("nii->ni", normal) == 1.0)

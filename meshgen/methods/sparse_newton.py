@@ -13,8 +13,6 @@ back-substitution per step elsewhere.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 __all__ = ["REFRESH_RATIO", "LaggedNewton", "colour_nodes"]
 
@@ -22,13 +20,15 @@ REFRESH_RATIO = 0.5  # a step longer than this times the previous one refactors 
 FD_STEP = 1e-7  # finite-difference step, relative to the characteristic length
 
 
-def colour_nodes(pattern: sp.spmatrix, start: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+def colour_nodes(pattern, start: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
     """(count,) a colour per node such that no equation (row of the boolean ``pattern``
     (count, count): equation i reads node j) reads two nodes of one colour. ``start``: colours to
     keep where they are already valid (a structured grid's index modulo 3 per axis). The nodes in
     conflict are recoloured by Jones-Plassmann: in each round those heavier (random weights)
     than all their uncoloured conflicting nodes take the smallest colour none of their coloured
     conflicts has."""
+    import scipy.sparse as sp  # scipy on first use: `meshgen mesh --help` imports this module
+
     pattern = sp.csr_matrix(pattern, dtype=float)
     conflict = (pattern.T @ pattern).tocsr()
     conflict.setdiag(0.0)
@@ -62,7 +62,9 @@ class LaggedNewton:
     ``length``: the characteristic length, the unit of the steps and of ``solve``'s ``tol``;
     ``colours``: a first guess at ``colour_nodes``'."""
 
-    def __init__(self, pattern: sp.spmatrix, length: float, colours: np.ndarray | None = None):
+    def __init__(self, pattern, length: float, colours: np.ndarray | None = None):
+        import scipy.sparse as sp
+
         self.pattern = sp.coo_matrix(pattern)
         self.colours = colour_nodes(pattern, colours)
         self.length = length
@@ -86,6 +88,9 @@ class LaggedNewton:
         data = np.concatenate([columns[self.colours[col], b, row, a] for a, b in pairs])
         rows = np.concatenate([row * dim + a for a, _ in pairs])
         cols = np.concatenate([col * dim + b for _, b in pairs])
+        import scipy.sparse as sp
+        import scipy.sparse.linalg as spla
+
         jacobian = sp.csc_matrix((data, (rows, cols)), shape=(count * dim, count * dim))
         self.factor = spla.splu(jacobian)
         self.factorisations += 1

@@ -1,0 +1,154 @@
+"""Airfoils to the wall (geometries/airfoil.py): NASA TMR's NACA 0012 as a C-grid at y+ 1.
+
+    python benchmarks/bench_airfoil.py [--quick] [--json FILE]
+
+``mesh``: ``meshgen.mesh("airfoil", dims=(448, 128), method="elliptic", sharp=1)`` (TMR's
+449 x 129 points: 57,344 cells, y+ 1 at Re 6e6), seconds (median of 3 in a warm process, after a
+first call), and at every wall node the first-cell height against the asked one, the angle of the
+first grid line with the wall normal (trailing edge excepted), the largest wall-normal expansion
+ratio against the cap 1.15, inverted cells; then OpenFOAM's checkMesh on the written case (max
+non-orthogonality, max skewness, max aspect ratio, the failed checks: a y+ 1 grid fails the aspect
+ratio check by construction, its threshold being 1000).
+``simpleFoam`` (full run only, about an hour on 2 cores): ``examples/naca0012/run_naca0012.py``
+at alpha 10 on that mesh: CL, CD, the wall's y+, against TMR's (CFL3D: CL 1.0909, CD 0.01231 at
+M 0.15; simpleFoam is incompressible: CL x 1.0114 by Prandtl-Glauert is printed beside it).
+Targets: CL within [1.075, 1.100], CD within [0.0120, 0.0130], y+ at most 1.5 on average and 5
+at most, the mesh in at most 5 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+DIMS = (448, 128)
+PARAMS = {"sharp": 1}
+CAP = 1.15
+
+
+def wall_figures(made) -> dict:
+    """Worst first-cell error, wall angle and expansion ratio over the blocks' wall nodes."""
+    from meshgen.geometry import cube
+
+    heights, angles, ratios, inverted = [], [], [], 0
+    for (block, face_name), (patch, _) in made.geometry.patches.items():
+        X = made.blocks[block]
+        d1, d2 = X[1:, 1:] - X[:-1, :-1], X[:-1, 1:] - X[1:, :-1]
+        inverted = max(inverted, int(np.count_nonzero(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] <= 0)))
+        if patch != "wall":
+            continue
+        face = cube.face_named(face_name, 2)
+        assert face.axis == 1 and face.side == 0  # the wall is eta0
+        wall, first = X[:, 0], X[:, 1]
+        step = first - wall
+        heights.append(np.linalg.norm(step, axis=-1))
+        tangent = np.gradient(wall, axis=0)
+        cosine = np.abs((step * tangent).sum(-1)) / (np.linalg.norm(step, axis=-1) * np.linalg.norm(tangent, axis=-1))
+        angles.append(90.0 - np.degrees(np.arccos(np.clip(cosine, 0.0, 1.0)))[1:-1])  # its ends: the trailing edge
+        edges = np.linalg.norm(np.diff(X, axis=1), axis=-1)
+        ratios.append((edges[:, 1:] / edges[:, :-1]).max())
+    from meshgen.geometry.wall_spacing import first_cell_height
+
+    asked = first_cell_height(1.0, 6e6).height  # the airfoil's defaults: y+ 1 at Re 6e6
+    height = np.concatenate(heights)
+    return {
+        "first_cell_height": float(np.median(height)),
+        "first_cell_spread": float((height.max() - height.min()) / np.median(height)),
+        "asked_height": asked,
+        "first_cell_error": float(np.abs(height / asked - 1.0).max()),
+        "worst_wall_angle_degrees": float(np.concatenate(angles).max()),
+        "largest_expansion_ratio": float(max(ratios)),
+        "inverted": inverted,
+    }
+
+
+def check_mesh(made) -> dict | None:
+    """checkMesh's figures of the mesh written as an OpenFOAM case; None without OpenFOAM."""
+    sys.path.insert(0, str(REPO / "examples"))
+    from foam_case import foam_environment
+
+    env = foam_environment()
+    with tempfile.TemporaryDirectory() as folder:
+        case = Path(folder) / "naca"
+        made.write(case, "openfoam", quality=False)
+        try:
+            run = subprocess.run(["checkMesh", "-case", str(case)], env=env, capture_output=True, text=True, timeout=600)
+        except FileNotFoundError:
+            return None
+    text = run.stdout
+
+    def number(pattern):
+        found = re.search(pattern, text)
+        return float(found[1]) if found else None
+
+    failed = re.search(r"Failed (\d+) mesh checks", text)
+    return {
+        "mesh_ok": "Mesh OK" in text,
+        "failed_checks": int(failed[1]) if failed else 0,
+        "max_non_orthogonality": number(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)"),
+        "max_skewness": number(r"Max skewness = ([0-9.eE+-]+)"),
+        "max_aspect_ratio": number(r"Max aspect ratio: ([0-9.eE+-]+)|Max aspect ratio = ([0-9.eE+-]+)"),
+    }
+
+
+def mesh_rows(repeat: int) -> dict:
+    import meshgen
+
+    meshgen.mesh("airfoil", dims=DIMS, method="elliptic", params=PARAMS)  # first call: imports, caches
+    runs, made = [], None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        made = meshgen.mesh("airfoil", dims=DIMS, method="elliptic", params=PARAMS)
+        runs.append(time.perf_counter() - start)
+    cells = sum(int(np.prod([n - 1 for n in X.shape[:-1]])) for X in made.blocks)
+    row = {"dims": list(DIMS), "cells": cells, "seconds": statistics.median(runs), "runs_seconds": runs, **wall_figures(made)}
+    row["check_mesh"] = check_mesh(made)
+    print(f"airfoil C-grid {DIMS[0]} x {DIMS[1]} ({cells} cells): {row['seconds']:.2f} s; first cell {row['first_cell_height']:.3e} "
+          f"(spread {row['first_cell_spread']:.1e}), worst wall angle {row['worst_wall_angle_degrees']:.2f} deg, largest "
+          f"expansion ratio {row['largest_expansion_ratio']:.4f}, {row['inverted']} inverted", flush=True)  # fmt: skip
+    if row["check_mesh"]:
+        cm = row["check_mesh"]
+        print(f"  checkMesh: max non-orthogonality {cm['max_non_orthogonality']}, max skewness {cm['max_skewness']}, "
+              f"{'Mesh OK' if cm['mesh_ok'] else str(cm['failed_checks']) + ' failed check(s)'}", flush=True)  # fmt: skip
+    return row
+
+
+def solver_row() -> dict:
+    sys.path.insert(0, str(REPO / "examples" / "naca0012"))
+    from run_naca0012 import run
+
+    with tempfile.TemporaryDirectory() as folder:
+        return run(10.0, 0, Path(folder) / "case")
+
+
+def run(quick: bool) -> dict:
+    result = {"load_average": list(os.getloadavg()), "mesh": mesh_rows(1 if quick else 3)}
+    if not quick:
+        result["simplefoam_alpha_10"] = solver_row()
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="the mesh rows only (the solver runs for about an hour)")
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+    result = run(args.quick)
+    if args.json is not None:
+        args.json.write_text(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
