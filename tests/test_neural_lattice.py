@@ -27,8 +27,10 @@ from meshgen.neural.problem import (
     lattice_blocks,
     lattice_tfi_derivatives,
     lbfgs_points,
+    make_test_set,
     sample_pde_points,
     sample_step,
+    test_loss,
 )
 from meshgen.neural.train import train
 from meshgen.neural.winslow import winslow_residual
@@ -95,6 +97,20 @@ def test_adam_step_inputs_on_the_lattice_carry_the_grids_tfi_differences(problem
     X = transfinite(problem.boundary, list(nodes.reshape(-1, 3).T)).reshape(18, 18, 18, 3)
     x_k = (X[1:-1, 1:-1, 2:] - X[1:-1, 1:-1, :-2]) * (RESOLUTION / 2)  # d r / d xi_3
     np.testing.assert_allclose(inputs["tfi_first"][..., 2, :].numpy(), x_k, rtol=1e-6, atol=1e-6 * np.abs(x_k).max())
+
+
+def test_held_out_loss_keeps_tfi_not_the_network_between_checkpoints(problem):
+    """test_loss keeps TFI at its held-out points from its first call: a second network's loss on
+    the same test set equals its loss on a fresh one, and differs from the first network's."""
+    config = from_dict({"test": {"interior": 50, "boundary": 40}})
+    first, second = zero_network(), MLP(3, [8, 8])
+    torch.nn.init.normal_(second.layers[-1].weight, std=0.05)
+    shared = make_test_set(problem, config)
+    before = test_loss(first, problem, shared)
+    assert set(shared["tfi"]) == {"stencils", "boundary"}
+    after = test_loss(second, problem, shared)
+    assert after == test_loss(second, problem, make_test_set(problem, config))
+    assert after["pde"] != before["pde"] and after["boundary"] < 1e-28  # the bubble keeps the boundary either way
 
 
 def test_tfi_of_an_extruded_shape_solves_the_lattice_equations_and_not_others(problem):
