@@ -30,7 +30,9 @@ from meshgen.neural.problem import (
     make_test_set,
     sample_pde_points,
     sample_step,
-    test_loss,
+)
+from meshgen.neural.problem import (
+    test_loss as held_out_loss,
 )
 from meshgen.neural.train import train
 from meshgen.neural.winslow import winslow_residual
@@ -106,10 +108,10 @@ def test_held_out_loss_keeps_tfi_not_the_network_between_checkpoints(problem):
     first, second = zero_network(), MLP(3, [8, 8])
     torch.nn.init.normal_(second.layers[-1].weight, std=0.05)
     shared = make_test_set(problem, config)
-    before = test_loss(first, problem, shared)
+    before = held_out_loss(first, problem, shared)
     assert set(shared["tfi"]) == {"stencils", "boundary"}
-    after = test_loss(second, problem, shared)
-    assert after == test_loss(second, problem, make_test_set(problem, config))
+    after = held_out_loss(second, problem, shared)
+    assert after == held_out_loss(second, problem, make_test_set(problem, config))
     assert after["pde"] != before["pde"] and after["boundary"] < 1e-28  # the bubble keeps the boundary either way
 
 
