@@ -158,8 +158,7 @@ def train(
     name or plugin path; default its name). ``summary``: mesh the geometry at the end and write the
     quality summary. ``init`` ({"path", "checkpoint"}, ``meshgen train --init``): a block set's new
     run starting from a checkpoint's weights. On a CPU with two or more torch threads, the two
-    terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile;
-    the exact-boundary form, one term alone, gives torch all the threads instead.
+    terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
     """
     run_dir = Path(run_dir)
     if isinstance(subject, BlockSet):
@@ -228,8 +227,7 @@ def start_training(config: TrainConfig, geometry, device: torch.device, resume: 
         weights.load_state_dict(resume["reweighting"])
         generator.set_state(resume["rng"]["sampler"])
         state = state_from_checkpoint(resume)
-    # the exact-boundary form has one term (no boundary loss): torch's own threads share its passes
-    parallel = device.type == "cpu" and torch.get_num_threads() >= 2 and not problem.exact
+    parallel = device.type == "cpu" and torch.get_num_threads() >= 2
     return Training(network, weights, problem, config, generator, TermRunner(parallel)), state
 
 
