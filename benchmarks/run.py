@@ -249,6 +249,12 @@ TARGETS = {
     "family_worst_degrees": ("<=", 0.5, "deg", "family: every member within 0.5 deg of its elliptic mesh, 0 inverted"),
     "exact_converged_seconds": ("<=", 15.0, "s", "training time of exact to converged quality on 2 cores"),
     "default_converged_seconds": ("<=", 90.0, "s", "training time of default to converged quality on 2 cores"),
+    "train_exact_seconds": (
+        "<=",
+        30.0,
+        "s",
+        "meshgen train -g semicylinder --preset exact end to end (a subprocess: imports, layout, stages, checkpoints, summary), median of 3",
+    ),
     "gpu_inference_501_seconds": ("<=", 1.0, "s", "forward pass of a [85]*4 network on 501^3 nodes on a GPU"),
     "paper_cuda_adam_seconds": ("<=", 60.0, "s", "paper's 12000 Adam steps, [85]*4, on a GPU"),
     "correction_angle_degrees": (
@@ -584,7 +590,32 @@ def time_to_quality(quick: bool) -> dict:
 
     from meshgen.geometry.plugins import load_geometry
 
-    return bench_train.speed_table(load_geometry(GEOMETRY), quick=quick)
+    table = bench_train.speed_table(load_geometry(GEOMETRY), quick=quick)
+    table["train_exact"] = train_exact_command(quick)
+    return table
+
+
+def train_exact_command(quick: bool) -> dict:
+    """``meshgen train -g semicylinder --preset exact`` as a user runs it, in a subprocess (imports,
+    the layout, every stage, the checkpoints and the summary): wall and CPU seconds (the child's
+    user + system), median of 3; --quick: once, with 50 Adam and 5 L-BFGS steps (not judged)."""
+    capped = ["--set", "adam.steps=50", "--set", "lbfgs.steps=5"] if quick else []
+    walls, cpus = [], []
+    for _ in range(1 if quick else 3):
+        with tempfile.TemporaryDirectory() as folder:
+            command = [sys.executable, "-m", "meshgen", "train", "-g", GEOMETRY, "--preset", "exact", "--seed", "0"]
+            command += ["--out", str(Path(folder) / "run"), "-q", *capped]
+            before = os.times()
+            start = time.perf_counter()
+            subprocess.run(command, check=True, env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.DEVNULL)
+            walls.append(time.perf_counter() - start)
+            after = os.times()
+            cpus.append(after.children_user - before.children_user + after.children_system - before.children_system)
+    result = {"seconds": statistics.median(walls), "cpu_seconds": statistics.median(cpus), "runs_seconds": walls, "capped": quick}
+    print(
+        f"meshgen train --preset exact: {result['seconds']:.1f} s (CPU {result['cpu_seconds']:.1f} s){', capped' if quick else ''}"
+    )
+    return result
 
 
 def correction(quick: bool) -> dict:
@@ -891,6 +922,17 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 )
         if data["cuda_skipped"]:
             add("CUDA rows", None, "s", note=f"skipped: {data['cuda_skipped']}")
+        if "train_exact" in data:
+            run = data["train_exact"]
+            add(
+                "meshgen train --preset exact, end to end, cpu x2",
+                run["seconds"],
+                "s",
+                "train_exact_seconds",
+                judged=not run["capped"],
+                cpu=run["cpu_seconds"],
+                note="50 Adam + 5 L-BFGS steps (--quick)" if run["capped"] else f"median of {len(run['runs_seconds'])}",
+            )
     if "correction" in sections:
         data = sections["correction"]
         for row in data["rows"]:

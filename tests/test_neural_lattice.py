@@ -21,7 +21,19 @@ from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import ConfigError, from_dict, resolve_config
 from meshgen.neural.derivatives import grid_derivatives, grid_points, lattice_grid_from_draws, training_grid
 from meshgen.neural.model import MLP, bubble, mesh_from_checkpoint, normalisation, normalised_boundary
-from meshgen.neural.problem import Problem, grid_residual, lattice_blocks, lbfgs_points, sample_pde_points
+from meshgen.neural.problem import (
+    Problem,
+    grid_residual,
+    lattice_blocks,
+    lattice_tfi_derivatives,
+    lbfgs_points,
+    make_test_set,
+    sample_pde_points,
+    sample_step,
+)
+from meshgen.neural.problem import (
+    test_loss as held_out_loss,
+)
 from meshgen.neural.train import train
 from meshgen.neural.winslow import winslow_residual
 
@@ -53,6 +65,54 @@ def test_lattice_grids_lie_on_the_lattice_inside_the_cube():
     # a batch of grids: each the tensor grid of its own axes
     nodes = grid_points(axes)
     assert torch.equal(nodes[7], grid_points([a[7] for a in axes]))
+
+
+def test_lattice_tfi_differences_are_those_of_tfi_at_the_grid_nodes(problem):
+    """The Adam step's TFI differences sliced from the whole lattice's (computed once) are the
+    central differences of TFI evaluated point by point at the grid's nodes, in NumPy float64:
+    at random lattice grids and at the cube's two far corners."""
+    draws = torch.rand((4, 6), generator=torch.Generator().manual_seed(5), dtype=torch.float64)
+    draws = torch.cat([draws, torch.zeros((1, 6), dtype=torch.float64), torch.full((1, 6), 0.999999, dtype=torch.float64)])
+    h = 1.0 / RESOLUTION
+    for batch in draws:
+        axes, spacing = lattice_grid_from_draws(batch, 6, RESOLUTION)
+        first, second = lattice_tfi_derivatives(problem, axes, spacing)
+        nodes = np.stack(np.meshgrid(*[a.numpy() for a in axes], indexing="ij"), axis=-1)  # (8, 8, 8, 3)
+        X = transfinite(problem.boundary, list(nodes.reshape(-1, 3).T)).reshape(8, 8, 8, 3)
+        inner = slice(1, -1)
+        x_i = (X[2:, inner, inner] - X[:-2, inner, inner]) / (2 * h)  # d r / d xi_1
+        x_ii = (X[2:, inner, inner] - 2 * X[inner, inner, inner] + X[:-2, inner, inner]) / h**2
+        x_23 = (X[inner, 2:, 2:] - X[inner, 2:, :-2] - X[inner, :-2, 2:] + X[inner, :-2, :-2]) / (4 * h * h)
+        assert (
+            first.dtype == torch.float32 and tuple(first.shape) == (6, 6, 6, 3, 3) and tuple(second.shape) == (6, 6, 6, 3, 3, 3)
+        )
+        np.testing.assert_allclose(first[..., 0, :].numpy(), x_i, rtol=1e-6, atol=1e-6 * np.abs(x_i).max())
+        np.testing.assert_allclose(second[..., 0, 0, :].numpy(), x_ii, rtol=1e-5, atol=1e-5 * np.abs(x_ii).max())
+        np.testing.assert_allclose(second[..., 1, 2, :].numpy(), x_23, rtol=1e-5, atol=1e-5 * np.abs(x_23).max() + 1e-6)
+
+
+def test_adam_step_inputs_on_the_lattice_carry_the_grids_tfi_differences(problem):
+    config = resolve_config("exact", None, [], None, 0)
+    inputs = sample_step(config, problem, torch.Generator().manual_seed(2))
+    axes, _ = lattice_grid_from_draws(inputs["grid"], 16, RESOLUTION)
+    nodes = np.stack(np.meshgrid(*[a.numpy() for a in axes], indexing="ij"), axis=-1)
+    X = transfinite(problem.boundary, list(nodes.reshape(-1, 3).T)).reshape(18, 18, 18, 3)
+    x_k = (X[1:-1, 1:-1, 2:] - X[1:-1, 1:-1, :-2]) * (RESOLUTION / 2)  # d r / d xi_3
+    np.testing.assert_allclose(inputs["tfi_first"][..., 2, :].numpy(), x_k, rtol=1e-6, atol=1e-6 * np.abs(x_k).max())
+
+
+def test_held_out_loss_keeps_tfi_not_the_network_between_checkpoints(problem):
+    """test_loss keeps TFI at its held-out points from its first call: a second network's loss on
+    the same test set equals its loss on a fresh one, and differs from the first network's."""
+    config = from_dict({"test": {"interior": 50, "boundary": 40}})
+    first, second = zero_network(), MLP(3, [8, 8])
+    torch.nn.init.normal_(second.layers[-1].weight, std=0.05)
+    shared = make_test_set(problem, config)
+    before = held_out_loss(first, problem, shared)
+    assert set(shared["tfi"]) == {"stencils", "boundary"}
+    after = held_out_loss(second, problem, shared)
+    assert after == held_out_loss(second, problem, make_test_set(problem, config))
+    assert after["pde"] != before["pde"] and after["boundary"] < 1e-28  # the bubble keeps the boundary either way
 
 
 def test_tfi_of_an_extruded_shape_solves_the_lattice_equations_and_not_others(problem):
