@@ -28,7 +28,7 @@ from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet, Interface
 from meshgen.geometry.domain import Geometry
 
-__all__ = ["TOLERANCE", "Extrusion", "extrude", "extrusion_of", "section_of"]
+__all__ = ["TOLERANCE", "Extrusion", "extrude", "extrusion_of", "section_of", "sweep_frame"]
 
 TOLERANCE = 1e-9  # relative to the block set's characteristic length
 _SAMPLES = 9  # sample points per face axis of the test
@@ -55,7 +55,7 @@ class Extrusion:
         return mine.shape == theirs.shape and bool(np.max(np.abs(mine - theirs)) <= TOLERANCE * max(length, 1.0))
 
 
-def _frame(direction: np.ndarray) -> np.ndarray:
+def sweep_frame(direction: np.ndarray) -> np.ndarray:
     """Orthonormal (e1, e2) square to ``direction`` with (e1, e2, direction) right-handed: the two
     coordinate axes after the direction's, cyclically, when it lies along one (z: e1 = x, e2 = y)."""
     unit = direction / np.linalg.norm(direction)
@@ -105,7 +105,7 @@ def extrusion_of(block_set: BlockSet) -> Extrusion | None:
     heights = start @ unit
     if np.ptp(heights) > tolerance:
         return None
-    return Extrusion(float(heights.mean()) * unit, _frame(direction), direction)
+    return Extrusion(float(heights.mean()) * unit, sweep_frame(direction), direction)
 
 
 def _section_map(geometry: Geometry, extrusion: Extrusion):

@@ -19,7 +19,7 @@ import numpy as np
 
 from meshgen.errors import MeshgenWarning, ParameterError
 from meshgen.geometry.blocks import global_numbering, tfi_blocks
-from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
+from meshgen.geometry.extrusion import extrude, extrusion_of, section_of, sweep_frame
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
 from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, Level, jacobi_residual, solve_winslow, uses_kernels
 from meshgen.methods.multigrid_set import solve_set
@@ -72,7 +72,7 @@ def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: fl
     for side in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):
         if np.abs(X0[side] - straight[side]).max() > bound:
             return None
-    frame = np.linalg.svd(np.eye(3) - np.outer(unit, unit))[0][:, :2].T  # (2, 3) orthonormal, square to the sweep
+    frame = sweep_frame(sweep)  # (2, 3): the coordinate axes themselves for a sweep along one
     section = (cap - cap[0, 0]) @ frame.T
     solved, info = solve_winslow(section, coords[:2], tol=tol, max_iter=max_iter, length=length, progress=progress)
     plane = cap[0, 0] + solved @ frame
