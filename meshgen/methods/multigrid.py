@@ -60,6 +60,7 @@ __all__ = [
     "coarser_coordinates",
     "hierarchy",
     "jacobi_residual",
+    "progress_fraction",
     "interpolation_matrix",
     "largest_node_norm",
     "smooth",
@@ -317,6 +318,12 @@ def v_cycle(levels: list[Level], index: int, R: np.ndarray, f) -> float:
     return smooth(R, f, level, POST_SMOOTHING)
 
 
+def progress_fraction(first: float, update: float, tol: float) -> float:
+    """How far a solve is, in [0, 1]: the progress of log(update) from the first cycle's towards ``tol``."""
+    done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
+    return float(np.clip(done, 0.0, 1.0))
+
+
 def jacobi_residual(level: Level, R: np.ndarray, length: float) -> float:
     """The largest Jacobi step of the Winslow equations on ``level`` at the component-first node
     array ``R`` (dim, ...), relative to ``length``: ``solve_winslow``'s ``final_residual``."""
@@ -369,8 +376,7 @@ def solve_winslow(
             break
         first_update = first_update or update
         if progress is not None:
-            done = 1.0 if update < tol else np.log(first_update / update) / np.log(first_update / tol)
-            progress(float(np.clip(done, 0.0, 1.0)), cycle=iterations, update=update, residual=residual)
+            progress(progress_fraction(first_update, update, tol), cycle=iterations, update=update, residual=residual)
         if update < tol or iterations >= max_iter:
             break
         if update > previous_update:  # the mixing made things worse: start it afresh

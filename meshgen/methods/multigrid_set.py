@@ -48,7 +48,15 @@ from meshgen.methods.interfaces import (
     junction_stencil,
     mean_length,
 )
-from meshgen.methods.multigrid import COARSEST_CELLS, DAMPING, SEMI_COARSENING, Level, coarser_coordinates, stencil_weights
+from meshgen.methods.multigrid import (
+    COARSEST_CELLS,
+    DAMPING,
+    SEMI_COARSENING,
+    Level,
+    coarser_coordinates,
+    progress_fraction,
+    stencil_weights,
+)
 from meshgen.methods.sliding import SlideRule, local_cell_sizes, planar_sliding
 from meshgen.methods.sparse_newton import LaggedNewton
 from meshgen.methods.winslow import component_array
@@ -503,8 +511,7 @@ def solve_set(block_set, Xs, tol: float, max_cycles: int, slide: bool = True, pr
             break
         first = first or update
         if progress is not None:
-            done = 1.0 if update < tol else np.log(first / update) / np.log(first / tol)
-            progress(float(np.clip(done, 0.0, 1.0)), cycle=cycles, update=update)
+            progress(progress_fraction(first, update, tol), cycle=cycles, update=update)
         if update < tol:
             values = output
             break
