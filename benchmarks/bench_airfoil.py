@@ -99,7 +99,7 @@ def check_mesh(made) -> dict | None:
         "failed_checks": int(failed[1]) if failed else 0,
         "max_non_orthogonality": number(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)"),
         "max_skewness": number(r"Max skewness = ([0-9.eE+-]+)"),
-        "max_aspect_ratio": number(r"Max aspect ratio: ([0-9.eE+-]+)|Max aspect ratio = ([0-9.eE+-]+)"),
+        "max_aspect_ratio": number(r"Max aspect ratio(?::| =) ([0-9.eE+-]+)"),  # ": " where the check fails
     }
 
 

@@ -173,9 +173,11 @@ def run(
     mesh_seconds = time.perf_counter() - start
     checked = subprocess.run(["checkMesh", "-case", str(case)], env=env, capture_output=True, text=True)
     set_up(case, alpha, ROUND)
+    control = case / "system" / "controlDict"
     start, iterations, changes = time.perf_counter(), 0, {"CL": math.inf, "CD": math.inf}
     while iterations < max_iterations:
-        set_up(case, alpha, iterations + ROUND)
+        # the next round: only endTime changes (the case restarts from its latest time)
+        control.write_text(re.sub(r"endTime \d+;", f"endTime {iterations + ROUND};", control.read_text()))
         solved = subprocess.run(["simpleFoam", "-case", str(case)], env=env, capture_output=True, text=True)
         if solved.returncode != 0:
             raise SystemExit(solved.stdout[-3000:] + solved.stderr[-3000:])
