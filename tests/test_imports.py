@@ -125,6 +125,7 @@ LAYERS = [
         "meshgen.quality.text",
         "meshgen.quality.sketch",
         "meshgen.quality.summary",
+        "meshgen.quality.torch_kernels",
     ],
     ["meshgen.formats"],
     ["meshgen.quality", "meshgen.methods.correction"],
