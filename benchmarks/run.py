@@ -122,6 +122,7 @@ SECTIONS = [
     "blocks_neural",
     "blocks",
     "airfoil",
+    "gpu",
 ]
 
 # figure key -> (comparison, target, unit, what the figure measures)
@@ -223,6 +224,14 @@ TARGETS = {
         1.5,
         "x",
         "elliptic pipe 50 50 80 (1.0e6 hexahedra) / semicylinder 100^3 (1.0e6), seconds, one run",
+    ),
+    "gpu_elliptic_100_seconds": ("<=", 1.0, "s", "elliptic semicylinder 100^3 by the torch multigrid on the GPU"),
+    "gpu_quality_1e9_seconds": ("<=", 60.0, "s", "the seven metrics and their summary of 1e9 hexahedra on one GPU"),
+    "gpu_neural_1e9_seconds": (
+        "<=",
+        60.0,
+        "s",
+        "1e9 hexahedra of the bundled network made, corrected and quality-checked on one GPU, writing excluded",
     ),
     "airfoil_mesh_seconds": ("<=", 5.0, "s", "airfoil C-grid 448 x 128 (57,344 cells, y+ 1 at Re 6e6), elliptic, 2 cores"),
     "airfoil_first_cell_error": ("<=", 0.02, "", "airfoil: largest |first-cell height / asked - 1| over the wall nodes"),
@@ -664,6 +673,12 @@ def airfoil(quick: bool) -> dict:
     import bench_airfoil
 
     return bench_airfoil.run(quick)
+
+
+def gpu(quick: bool) -> dict:
+    import bench_gpu
+
+    return bench_gpu.measure(("elliptic", "quality", "neural") if quick else bench_gpu.ROWS)
 
 
 def family(quick: bool) -> dict:
@@ -1241,7 +1256,32 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 note=f"CL {solved['CL']:.4f} (x Prandtl-Glauert {solved['CL_prandtl_glauert']:.4f}); {note}")  # fmt: skip
             add("NACA 0012 alpha 10: CD - 0.0125", solved["CD"] - 0.0125, "", key="airfoil_cd_alpha_10",
                 note=f"CD {solved['CD']:.5f}; {'converged' if solved['converged'] else 'NOT converged'}")  # fmt: skip
+    if "gpu" in sections and "skipped" not in sections["gpu"]:
+        gpu_rows(sections["gpu"], add)
     return rows
+
+
+def gpu_rows(data: dict, add) -> None:
+    """The rows of the ``gpu`` section (``bench_gpu.measure``), each with its CPU figure of the same
+    run in the note."""
+    device = data["device"]
+    row = data.get("elliptic", {})
+    if "seconds" in row:
+        add(f"elliptic 100^3 on {device}", row["seconds"], "s", key="gpu_elliptic_100_seconds",
+            note=f"CPU solver {row['cpu_seconds']:.2f} s; meshes differ by {row['max_difference_over_length']:.1e} L")  # fmt: skip
+    row = data.get("quality", {})
+    if "seconds" in row:
+        add(f"quality of {row['cells']:.1e} hexahedra on {device}", row["seconds"], "s", key="gpu_quality_1e9_seconds",
+            note=f"CPU kernels {row['cpu_cells_per_second']:.2e} cells/s; sub-block agrees to {row['max_difference']:.1e}")  # fmt: skip
+    row = data.get("neural", {})
+    if "seconds" in row:
+        add(f"neural {row['cells']:.1e} hexahedra made, corrected, checked on {device}", row["seconds"], "s",
+            key="gpu_neural_1e9_seconds",
+            note=f"copy to host {row['copy_to_host_seconds'] or 0:.1f} s apart; CPU path {row['cpu']['cells_per_second']:.2e} cells/s")  # fmt: skip
+    for name, row in data.get("training", {}).items():
+        if "training_seconds" in row:
+            add(f"train {name.replace('_', ' ')}", row["training_seconds"], "s",
+                note=f"test loss {row['test_loss']['total']:.4g}, mean min angle {row['min_angle_mean']:.2f}")  # fmt: skip
 
 
 def bench_variants():
@@ -1393,6 +1433,7 @@ def main(argv=None) -> int:
         "blocks_neural": lambda: blocks_neural(args.quick),
         "blocks": lambda: blocks(args.quick),
         "airfoil": lambda: airfoil(args.quick),
+        "gpu": lambda: gpu(args.quick),
     }
     for name in chosen:
         section_header(name)

@@ -37,6 +37,7 @@ __all__ = [
     "GPU_CHUNK_NODES",
     "evaluate_on_grid",
     "network_layers",
+    "network_on_planes",
 ]
 
 CHUNK_NODES = 8192
@@ -118,6 +119,26 @@ def evaluate_on_grid(
     finally:
         torch.set_num_threads(threads)
     return finite_output(out)
+
+
+def network_on_planes(layers, axes, i0: int, i1: int, chunk: int = GPU_CHUNK_NODES):
+    """The network of ``layers`` (:func:`network_layers`, on the device) at the node planes
+    i0 <= i < i1 of the tensor grid of ``axes`` (1D float32 tensors of u = 2 xi - 1 per axis, on the
+    device): (planes x the other axes' nodes, d) float32 on the device, C order, in chunks of
+    ``chunk`` nodes."""
+    per_plane = int(np.prod([len(axis) for axis in axes[1:]]))
+    start, stop = i0 * per_plane, i1 * per_plane
+    result = torch.empty((stop - start, layers[-1][1].shape[0]), device=axes[0].device)
+    with torch.inference_mode():
+        for first in range(start, stop, chunk):
+            last = min(stop, first + chunk)
+            hidden = _grid_inputs(axes, first, last)
+            for index, (weight, bias) in enumerate(layers):
+                hidden = torch.addmm(bias, hidden, weight)
+                if index < len(layers) - 1:
+                    hidden = torch.tanh(hidden)
+            result[first - start : last - start] = hidden
+    return result
 
 
 def _evaluate_on_gpu(layers, axes, count: int, out: np.ndarray) -> np.ndarray:
