@@ -81,6 +81,7 @@ class TorchLevel:
         self.first = [weights(w, a, True) for a, w in enumerate(grid.first)]
         self.second = [weights(w, a, False) for a, w in enumerate(grid.second)]
         self.transfers = {}
+        self.solver = None  # the coarsest grid's solve as a replayed CUDA graph (``_graphed_coarsest``)
         if hasattr(level, "prolong"):
             for name in ("prolong", "restrict_solution", "restrict_residual"):
                 self.transfers[name] = [torch.as_tensor(m, dtype=torch.float64, device=device) for m in getattr(level, name)]
@@ -208,6 +209,8 @@ def torch_v_cycle(levels: list[TorchLevel], index: int, R: torch.Tensor, f) -> t
     """One FAS V-cycle for N(R) = f on ``levels[index]`` (``meshgen.methods.multigrid.v_cycle``; R in place)."""
     level = levels[index]
     if index == len(levels) - 1:
+        if level.solver is not None:
+            return level.solver(R, f)
         return torch_smooth(R, f, level, COARSEST_SWEEPS)
     torch_smooth(R, f, level, PRE_SMOOTHING)
     coarse = levels[index + 1]
@@ -253,6 +256,37 @@ class _Anderson:
         return mixed
 
 
+def _capture(function, *static):
+    """A CUDA graph of ``function(*static)`` (after one warm-up call on a side stream, on copies, as
+    capture requires) and the output tensor of the captured call."""
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        function(*(t.clone() for t in static))
+    torch.cuda.current_stream().wait_stream(side)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        output = function(*static)
+    return graph, output
+
+
+def _graphed_coarsest(level: TorchLevel, R: torch.Tensor) -> None:
+    """Give the coarsest ``level`` a ``solver(R, f)``: its ``COARSEST_SWEEPS`` relaxation sweeps as one
+    replayed CUDA graph (thousands of tiny kernels; f None is f = 0, the same arithmetic)."""
+    static_R = R.clone()
+    static_f = torch.zeros_like(R[level.interior])
+    graph, static_step = _capture(lambda r, f: torch_smooth(r, f, level, COARSEST_SWEEPS), static_R, static_f)
+
+    def solver(R, f):
+        static_R.copy_(R)
+        static_f.copy_(f) if f is not None else static_f.zero_()
+        graph.replay()
+        R.copy_(static_R)
+        return static_step.clone()
+
+    level.solver = solver
+
+
 def _cycle(levels: list[TorchLevel], R: torch.Tensor, graph: bool):
     """The finest-grid V-cycle as a function ``cycle(R) -> (new R, Jacobi step)``: with ``graph`` (CUDA)
     a CUDA graph captured once (after the one warm-up cycle capture requires) and replayed on a static
@@ -265,14 +299,9 @@ def _cycle(levels: list[TorchLevel], R: torch.Tensor, graph: bool):
 
         return eager
     static = R.clone()
-    side = torch.cuda.Stream()
-    side.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(side):
-        torch_v_cycle(levels, 0, static.clone(), None)  # warm-up: the allocator's pools, the kernels' setup
-    torch.cuda.current_stream().wait_stream(side)
-    captured = torch.cuda.CUDAGraph()
-    with torch.cuda.graph(captured):
-        static_step = torch_v_cycle(levels, 0, static, None)
+    coarsest, levels[-1].solver = levels[-1].solver, None  # the finest cycle's graph holds the coarsest sweeps
+    captured, static_step = _capture(lambda r: torch_v_cycle(levels, 0, r, None), static)
+    levels[-1].solver = coarsest
 
     def replay(state):
         static.copy_(state)
@@ -311,15 +340,18 @@ def solve_winslow_torch(
     for level in levels[:-1]:
         starts.append(level.transfer("restrict_solution", starts[-1]))
 
+    graph = graph and device.type == "cuda"
     R = starts[-1].clone()
-    torch_smooth(R, None, levels[-1], COARSEST_SWEEPS)
+    if graph:
+        _graphed_coarsest(levels[-1], R)
+    torch_v_cycle(levels, len(levels) - 1, R, None)
     for index in range(len(levels) - 2, -1, -1):
         R = starts[index] + levels[index].transfer("prolong", R - starts[index + 1])
         if index > 0:
             torch_v_cycle(levels, index, R, None)
     del starts
 
-    cycle = _cycle(levels, R, graph and device.type == "cuda")
+    cycle = _cycle(levels, R, graph)
 
     acceleration = _Anderson(ANDERSON_DEPTH)
     update, first_update, iterations = np.inf, None, 0
