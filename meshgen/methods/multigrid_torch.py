@@ -257,13 +257,9 @@ class _Anderson:
 
 
 def _capture(function, *static):
-    """A CUDA graph of ``function(*static)`` (after one warm-up call on a side stream, on copies, as
-    capture requires) and the output tensor of the captured call."""
-    side = torch.cuda.Stream()
-    side.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(side):
-        function(*(t.clone() for t in static))
-    torch.cuda.current_stream().wait_stream(side)
+    """A CUDA graph of ``function(*static)`` and the output tensor of the captured call (capture runs
+    nothing). No warm-up call: the solver captures a function only after running its kernels eagerly
+    (the coarsest sweeps, the cycles of the full-multigrid start), which is the warm-up capture needs."""
     graph = torch.cuda.CUDAGraph()
     with torch.cuda.graph(graph):
         output = function(*static)
@@ -289,8 +285,7 @@ def _graphed_coarsest(level: TorchLevel, R: torch.Tensor) -> None:
 
 def _cycle(levels: list[TorchLevel], R: torch.Tensor, graph: bool):
     """The finest-grid V-cycle as a function ``cycle(R) -> (new R, Jacobi step)``: with ``graph`` (CUDA)
-    a CUDA graph captured once (after the one warm-up cycle capture requires) and replayed on a static
-    input, else eager."""
+    a CUDA graph captured once and replayed on a static input, else eager."""
     if not graph:
 
         def eager(state):
@@ -311,6 +306,13 @@ def _cycle(levels: list[TorchLevel], R: torch.Tensor, graph: bool):
     return replay
 
 
+def _clock(device, start: float) -> float:
+    """Seconds since ``start``, the device's queued work finished first (CUDA)."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter() - start
+
+
 def solve_winslow_torch(
     X0: np.ndarray,
     coords,
@@ -327,31 +329,38 @@ def solve_winslow_torch(
     ``coords``: parametric node coordinates per axis; ``tol``, ``max_iter``, ``length``,
     ``progress``: as ``solve_winslow``'s; ``graph``: on CUDA, replay the finest cycle as a CUDA graph.
     Returns ``(X, info)``: the node array (NumPy float64, same shape as X0) and an info dict with
-    ``solve_winslow``'s keys plus ``device``.
+    ``solve_winslow``'s keys plus ``device`` and ``phase_seconds`` (setup: copy to the device, hierarchy;
+    start: full-multigrid start; capture: CUDA graphs; cycles: the finest-grid cycles).
     """
     start = time.perf_counter()
     device = torch.device(device)
     R0 = torch.as_tensor(component_array(X0), dtype=torch.float64, device=device)
     finest = TorchLevel(Level(coords), device)
     _, axial = torch_operator(R0, finest)
-    weights = [float(np.median(a.cpu().numpy())) for a in axial]
+    axial = torch.stack([a.reshape(-1) for a in axial])
+    if axial.numel() <= 2**24:  # torch.quantile's limit; linear interpolation: NumPy's median
+        weights = torch.quantile(axial, 0.5, dim=1).tolist()
+    else:
+        weights = np.median(axial.cpu().numpy(), axis=1).tolist()
     levels = torch_hierarchy(coords, weights, device)
+    phases = {"setup": _clock(device, start)}
     starts = [R0]
     for level in levels[:-1]:
         starts.append(level.transfer("restrict_solution", starts[-1]))
 
     graph = graph and device.type == "cuda"
     R = starts[-1].clone()
-    if graph:
-        _graphed_coarsest(levels[-1], R)
     torch_v_cycle(levels, len(levels) - 1, R, None)
+    if graph:  # after the eager solve above, which loads every kernel it uses
+        _graphed_coarsest(levels[-1], R)
     for index in range(len(levels) - 2, -1, -1):
         R = starts[index] + levels[index].transfer("prolong", R - starts[index + 1])
         if index > 0:
             torch_v_cycle(levels, index, R, None)
     del starts
-
+    phases["start"] = _clock(device, start) - sum(phases.values())
     cycle = _cycle(levels, R, graph)
+    phases["capture"] = _clock(device, start) - sum(phases.values())
 
     acceleration = _Anderson(ANDERSON_DEPTH)
     update, first_update, iterations = np.inf, None, 0
@@ -374,6 +383,7 @@ def solve_winslow_torch(
             acceleration.restart()
         R = acceleration.next_iterate(before, R)
 
+    phases["cycles"] = _clock(device, start) - sum(phases.values())
     step, axial = torch_operator(R, levels[0])
     centre = -sum(c * w[1] for c, w in zip(axial, levels[0].second))
     final_residual = float(_largest_node_norm(step / centre)) / length
@@ -389,6 +399,7 @@ def solve_winslow_torch(
         "seconds": time.perf_counter() - start,
         "levels": [list(np.array(level.shape) - 1) for level in levels],
         "device": str(device),
+        "phase_seconds": phases,
     }
     info["levels"] = [[int(n) for n in shape] for shape in info["levels"]]
     return X, info
