@@ -81,7 +81,7 @@ class TorchLevel:
         self.first = [weights(w, a, True) for a, w in enumerate(grid.first)]
         self.second = [weights(w, a, False) for a, w in enumerate(grid.second)]
         self.transfers = {}
-        self.solver = None  # the coarsest grid's solve as a replayed CUDA graph (``_graphed_coarsest``)
+        self.solver = None  # the coarsest grid's solve as a replayed CUDA graph (``_coarsest_solve``)
         if hasattr(level, "prolong"):
             for name in ("prolong", "restrict_solution", "restrict_residual"):
                 self.transfers[name] = [torch.as_tensor(m, dtype=torch.float64, device=device) for m in getattr(level, name)]
@@ -256,54 +256,83 @@ class _Anderson:
         return mixed
 
 
+def _on_side_stream(function, *args):
+    """``function(*args)`` run eagerly on a side CUDA stream, as the warm-up before a graph capture
+    should be (torch.cuda.graphs); the caller's stream waits for it. The solver's warm-ups are work
+    it needs anyway (the first coarsest solve, the first finest cycle), so they cost nothing extra."""
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        output = function(*args)
+    torch.cuda.current_stream().wait_stream(side)
+    return output
+
+
 def _capture(function, *static):
     """A CUDA graph of ``function(*static)`` and the output tensor of the captured call (capture runs
-    nothing). No warm-up call: the solver captures a function only after running its kernels eagerly
-    (the coarsest sweeps, the cycles of the full-multigrid start), which is the warm-up capture needs."""
+    nothing: ``static`` keeps its values)."""
     graph = torch.cuda.CUDAGraph()
     with torch.cuda.graph(graph):
         output = function(*static)
     return graph, output
 
 
-def _graphed_coarsest(level: TorchLevel, R: torch.Tensor) -> None:
-    """Give the coarsest ``level`` a ``solver(R, f)``: its ``COARSEST_SWEEPS`` relaxation sweeps as one
-    replayed CUDA graph (thousands of tiny kernels; f None is f = 0, the same arithmetic)."""
+def _coarsest_solve(levels: list[TorchLevel], R: torch.Tensor, graph: bool) -> None:
+    """The full-multigrid start's solve of the coarsest grid (R in place); with ``graph`` (CUDA) run as
+    the warm-up on a side stream, after which the coarsest level gets a ``solver(R, f)``: its
+    ``COARSEST_SWEEPS`` relaxation sweeps (thousands of tiny kernels) as one replayed CUDA graph
+    (f None is f = 0: the same arithmetic)."""
+    level = levels[-1]
+    if not graph:
+        torch_v_cycle(levels, len(levels) - 1, R, None)
+        return
+    _on_side_stream(torch_v_cycle, levels, len(levels) - 1, R, None)
     static_R = R.clone()
     static_f = torch.zeros_like(R[level.interior])
-    graph, static_step = _capture(lambda r, f: torch_smooth(r, f, level, COARSEST_SWEEPS), static_R, static_f)
+    captured, static_step = _capture(lambda r, f: torch_smooth(r, f, level, COARSEST_SWEEPS), static_R, static_f)
 
     def solver(R, f):
         static_R.copy_(R)
         static_f.copy_(f) if f is not None else static_f.zero_()
-        graph.replay()
+        captured.replay()
         R.copy_(static_R)
         return static_step.clone()
 
     level.solver = solver
 
 
-def _cycle(levels: list[TorchLevel], R: torch.Tensor, graph: bool):
+def _cycle(levels: list[TorchLevel], graph: bool):
     """The finest-grid V-cycle as a function ``cycle(R) -> (new R, Jacobi step)``: with ``graph`` (CUDA)
-    a CUDA graph captured once and replayed on a static input, else eager."""
+    the first call runs eagerly (the warm-up, on a side stream) and captures the cycle as a CUDA graph,
+    which the later calls replay on a static input; else eager."""
+
+    def eager(state):
+        out = state.clone()
+        return out, torch_v_cycle(levels, 0, out, None)
+
     if not graph:
-
-        def eager(state):
-            out = state.clone()
-            return out, torch_v_cycle(levels, 0, out, None)
-
         return eager
-    static = R.clone()
-    coarsest, levels[-1].solver = levels[-1].solver, None  # the finest cycle's graph holds the coarsest sweeps
-    captured, static_step = _capture(lambda r: torch_v_cycle(levels, 0, r, None), static)
-    levels[-1].solver = coarsest
+    captured = []
 
     def replay(state):
+        if not captured:
+            out, step = _on_side_stream(eager, state)
+            static = state.clone()
+            coarsest, levels[-1].solver = levels[-1].solver, None  # the graph holds the coarsest sweeps themselves
+            captured.extend((static, *_capture(lambda r: torch_v_cycle(levels, 0, r, None), static)))
+            levels[-1].solver = coarsest
+            return out, step
+        static, graph_, static_step = captured
         static.copy_(state)
-        captured.replay()
+        graph_.replay()
         return static.clone(), static_step.clone()
 
     return replay
+
+
+def _graphs_possible(device) -> bool:
+    """Whether the solver can capture CUDA graphs on ``device`` (a CUDA device)."""
+    return device.type == "cuda"
 
 
 def _clock(device, start: float) -> float:
@@ -330,7 +359,7 @@ def solve_winslow_torch(
     ``progress``: as ``solve_winslow``'s; ``graph``: on CUDA, replay the finest cycle as a CUDA graph.
     Returns ``(X, info)``: the node array (NumPy float64, same shape as X0) and an info dict with
     ``solve_winslow``'s keys plus ``device`` and ``phase_seconds`` (setup: copy to the device, hierarchy;
-    start: full-multigrid start; capture: CUDA graphs; cycles: the finest-grid cycles).
+    start: full-multigrid start; cycles: the finest-grid cycles, the capture of their CUDA graph included).
     """
     start = time.perf_counter()
     device = torch.device(device)
@@ -348,19 +377,16 @@ def solve_winslow_torch(
     for level in levels[:-1]:
         starts.append(level.transfer("restrict_solution", starts[-1]))
 
-    graph = graph and device.type == "cuda"
+    graph = graph and _graphs_possible(device)
     R = starts[-1].clone()
-    torch_v_cycle(levels, len(levels) - 1, R, None)
-    if graph:  # after the eager solve above, which loads every kernel it uses
-        _graphed_coarsest(levels[-1], R)
+    _coarsest_solve(levels, R, graph)
     for index in range(len(levels) - 2, -1, -1):
         R = starts[index] + levels[index].transfer("prolong", R - starts[index + 1])
         if index > 0:
             torch_v_cycle(levels, index, R, None)
     del starts
     phases["start"] = _clock(device, start) - sum(phases.values())
-    cycle = _cycle(levels, R, graph)
-    phases["capture"] = _clock(device, start) - sum(phases.values())
+    cycle = _cycle(levels, graph)
 
     acceleration = _Anderson(ANDERSON_DEPTH)
     update, first_update, iterations = np.inf, None, 0
@@ -383,7 +409,7 @@ def solve_winslow_torch(
             acceleration.restart()
         R = acceleration.next_iterate(before, R)
 
-    phases["cycles"] = _clock(device, start) - sum(phases.values())
+    phases["cycles"] = _clock(device, start) - sum(phases.values())  # the first one's graph capture included
     step, axial = torch_operator(R, levels[0])
     centre = -sum(c * w[1] for c, w in zip(axial, levels[0].second))
     final_residual = float(_largest_node_norm(step / centre)) / length
