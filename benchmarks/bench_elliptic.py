@@ -1,6 +1,7 @@
 """Elliptic (Winslow) solver on the semicylinder: multigrid cycles, time and result per grid size.
 
     python benchmarks/bench_elliptic.py [--quick] [--json FILE] [--jacobi]
+    python benchmarks/bench_elliptic.py --gpu N [--device cuda]   # gpu_elliptic_row(N, device)
 
 Sizes 16^3, 30^3, 50^3, 64^3, 100^3 cells (--quick: up to 50^3), default tolerance (largest node
 update per cycle 1e-6 of the characteristic length). Per size: finest-grid cycles, wall and CPU
@@ -30,13 +31,15 @@ from meshgen.geometry.plugins import load_geometry  # noqa: E402
 from meshgen.methods.elliptic import elliptic  # noqa: E402
 from meshgen.methods.tfi import parametric_grid, tfi  # noqa: E402
 from meshgen.methods.winslow import centre_coefficient, component_array, stencils, winslow_operator  # noqa: E402
-from meshgen.quality import quality_report  # noqa: E402
 
 TARGETS = {30: 3.0, 100: 5.0}  # cells per axis -> seconds, the targets for a 2-core CPU
 
 
 def inverted_cells(X: np.ndarray) -> int:
     """Inverted cells as ``meshgen evaluate`` counts them."""
+    # not at the top: gpu_elliptic_row runs on machines that may lack the file writers' libraries (isal)
+    from meshgen.quality import quality_report
+
     return quality_report(X)["inverted"]["count"]
 
 
@@ -95,6 +98,93 @@ def measure_size(geometry, n: int, jacobi: bool = False) -> dict:
     return row
 
 
+def _timed_solve(device: str, solve):
+    """``(result, seconds)`` of ``solve()``, the device synchronised before and after."""
+    import torch
+
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+    start = time.perf_counter()
+    result = solve()
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+    return result, time.perf_counter() - start
+
+
+def gpu_elliptic_row(
+    n: int = 100, device: str = "cuda", tol: float = 1e-12, repeats: int = 3, warmup: int = 12, cpu_3d: bool = False
+) -> dict:
+    """The torch multigrid (``meshgen.methods.multigrid_torch``) on the semicylinder with n^3 cells on
+    ``device``, beside the NumPy/numba solver's mesh of the same run (``build_elliptic``: the section's
+    2D solve, extruded), both to ``tol`` (largest node update per cycle / characteristic length).
+
+    Device solves (median seconds of ``repeats`` after one warm-up at ``warmup``^3 that takes CUDA's
+    initialisation out; host-to-device copy of the start and the copy back included):
+    ``seconds_3d``, the full 3D grid from the TFI interior with the CPU mesh's boundary (its caps
+    are the section's solution: the 3D problem's boundary data); ``seconds_extruded``, the
+    method's own path (``extruded_solve`` with the 2D solve on the device; ``seconds_extruded_2d``
+    is the 2D solve alone). ``diff_*``: max |X - X_cpu| / length. ``cpu_3d``: also the NumPy/numba
+    3D solve of the same 3D start (``cpu_3d_seconds``), the like-for-like CPU figure.
+    """
+    import functools
+
+    import torch
+
+    from meshgen.geometry.layout import with_layout
+    from meshgen.methods.elliptic import build_elliptic, extruded_solve
+    from meshgen.methods.multigrid import solve_winslow
+    from meshgen.methods.multigrid_torch import solve_winslow_torch
+
+    plain = load_geometry("semicylinder")
+    geometry = with_layout(plain, "smoothed")
+    length = geometry.characteristic_length
+    solve = functools.partial(solve_winslow_torch, device=device)
+
+    def starts(cells):
+        coords = parametric_grid((cells, cells, cells))
+        X0 = tfi(geometry, None, coords)
+        reference, seconds = _timed_solve("cpu", lambda: build_elliptic(plain, coords, tol=tol, max_iter=200))
+        start = X0.copy()
+        start[:, :, [0, -1]] = reference[0][:, :, [0, -1]]
+        return coords, X0, start, reference, seconds
+
+    coords, X0, start, _, _ = starts(warmup)
+    solve(start, coords, tol=tol, max_iter=200, length=length)
+    extruded_solve(X0, coords, tol, 200, length, solve=solve)
+
+    coords, X0, start, (X_cpu, info_cpu), cpu_seconds = starts(n)
+    solid, extruded = [], []
+    for _ in range(repeats):
+        solid.append(_timed_solve(device, lambda: solve(start, coords, tol=tol, max_iter=200, length=length)))
+        extruded.append(_timed_solve(device, lambda: extruded_solve(X0, coords, tol, 200, length, solve=solve)))
+    (X3, info3), _ = solid[-1]
+    (Xe, infoe), _ = extruded[-1]
+    row = {
+        "cells": n,
+        "device": device,
+        "device_name": torch.cuda.get_device_name() if device.startswith("cuda") else "torch cpu",
+        "tol": tol,
+        "seconds_3d": float(np.median([s for _, s in solid])),
+        "seconds_3d_all": [s for _, s in solid],
+        "iterations_3d": info3["iterations"],
+        "phase_seconds_3d": info3["phase_seconds"],
+        "levels_3d": info3["levels"],
+        "final_residual_3d": info3["final_residual"],
+        "diff_3d": float(np.abs(X3 - X_cpu).max() / length),
+        "seconds_extruded": float(np.median([s for _, s in extruded])),
+        "seconds_extruded_2d": float(np.median([r[1]["seconds"] for r, _ in extruded])),
+        "iterations_extruded": infoe["iterations"],
+        "diff_extruded": float(np.abs(Xe - X_cpu).max() / length),
+        "cpu_seconds": cpu_seconds,
+        "cpu_iterations": info_cpu["iterations"],
+        "converged": bool(info3["converged"] and infoe["converged"] and info_cpu["converged"]),
+    }
+    if cpu_3d:
+        (_, info), seconds = _timed_solve("cpu", lambda: solve_winslow(start, coords, tol=tol, max_iter=200, length=length))
+        row.update(cpu_3d_seconds=seconds, cpu_3d_iterations=info["iterations"])
+    return row
+
+
 def format_row(row: dict) -> str:
     n = row["cells"]
     target = f"<= {TARGETS[n]:.0f} s {'met' if row['target_met'] else 'NOT met'}" if n in TARGETS else ""
@@ -110,7 +200,12 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="sizes up to 50^3 only")
     parser.add_argument("--jacobi", action="store_true", help="also count point-Jacobi sweeps at 16^3 and 30^3")
     parser.add_argument("--json", type=Path, default=Path(__file__).with_name("bench_elliptic.json"))
+    parser.add_argument("--gpu", type=int, default=None, metavar="N", help="only gpu_elliptic_row(N) (torch multigrid)")
+    parser.add_argument("--device", default="cuda", help="torch device of --gpu [default: cuda]")
     args = parser.parse_args()
+    if args.gpu is not None:
+        print(json.dumps(gpu_elliptic_row(args.gpu, args.device, cpu_3d=True), indent=2))
+        return
 
     geometry = load_geometry("semicylinder")
     sizes = [16, 30, 50] if args.quick else [16, 30, 50, 64, 100]

@@ -90,6 +90,7 @@ LAYERS = [
         "meshgen.geometry.plugin_calls",
         "meshgen.geometry.plugins",
         "meshgen.methods.multigrid",
+        "meshgen.methods.multigrid_torch",
         "meshgen.methods.sliding",
         "meshgen.methods.interfaces",
         "meshgen.geometry.airfoil_curve",

@@ -86,7 +86,8 @@ METHOD_HELP = (
     "--device",
     type=click.Choice(["auto", "cpu", "cuda"]),
     default=None,
-    help="neural: where the network is evaluated; auto picks cuda when available [default: auto].",
+    help="neural: where the network is evaluated; auto picks cuda when available [default: auto]. elliptic (one "
+    "block): cuda solves on the GPU (torch), auto there when one is available [default: cpu].",
 )
 @click.option(
     "--tol",

@@ -12,6 +12,7 @@ block: ``build_elliptic``, ``elliptic``) and for a block set (``elliptic_blocks`
 
 from __future__ import annotations
 
+import functools
 import time
 import warnings
 
@@ -42,7 +43,7 @@ __all__ = [
 EXTRUSION_TOL = 1e-9  # relative to the characteristic length: a start mesh this close to an extrusion is one
 
 
-def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: float, progress=None):
+def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: float, progress=None, solve=solve_winslow):
     """The Winslow mesh of a one-block start ``X0`` (n1+1, n2+1, n3+1, 3) whose boundary is an
     extrusion along zeta and whose caps are flat, each cap's interior the section's 2D Winslow
     grid (the smoothed boundary layout's): the extrusion of the section's 2D solve; None when the
@@ -54,7 +55,8 @@ def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: fl
     equations keep such a mesh an extrusion (z linear in zeta, every layer the section's 2D
     solution: the 3D operator is |v|^2 times the 2D one, design notes §20), so the mesh is the 2D
     solve of the zeta = 0 cap with its edges fixed, extruded, caps included (they are flat: their
-    nodes stay on them). Returns ``(X, info)`` as ``solve_winslow``'s, with ``extruded`` True."""
+    nodes stay on them). ``solve``: the 2D solver (``solve_winslow``'s arguments). Returns ``(X, info)``
+    as ``solve_winslow``'s, with ``extruded`` True."""
     if X0.ndim != 4 or X0.shape[-1] != 3 or min(X0.shape[:3]) < 3:
         return None
     bound = EXTRUSION_TOL * length
@@ -74,7 +76,7 @@ def extruded_solve(X0: np.ndarray, coords, tol: float, max_iter: int, length: fl
             return None
     frame = sweep_frame(sweep)  # (2, 3): the coordinate axes themselves for a sweep along one
     section = (cap - cap[0, 0]) @ frame.T
-    solved, info = solve_winslow(section, coords[:2], tol=tol, max_iter=max_iter, length=length, progress=progress)
+    solved, info = solve(section, coords[:2], tol=tol, max_iter=max_iter, length=length, progress=progress)
     plane = cap[0, 0] + solved @ frame
     X = plane[:, :, None, :] + zeta[None, None, :, None] * sweep
     for side in (np.s_[0], np.s_[-1], np.s_[:, 0], np.s_[:, -1]):  # the side faces as the start holds them
@@ -103,6 +105,7 @@ def build_elliptic(
     progress=None,
     boundary_layout: str | None = None,
     orthogonal=(),
+    device: str | None = None,
 ):
     """Method ``elliptic`` (meshgen.methods.registry): Winslow mesh of ``geometry`` at parametric node
     coordinates ``coords`` (1D arrays per axis), starting from TFI, whose boundary nodes are the
@@ -114,6 +117,8 @@ def build_elliptic(
     "fixed" keeps the geometry's own boundary map (the faces' Coons layout).
     ``orthogonal``: names of walls (``eta0`` ...) that the first cell layer meets at right angles
     (``meshgen.methods.orthogonal``).
+    ``device``: "cpu" or None (NumPy/numba, the default), "cuda" (the same multigrid as torch tensor
+    operations on the GPU, ``meshgen.methods.multigrid_torch``) or "auto" (cuda when torch sees one).
     Returns ``(X, info)``, X of shape (n1+1, n2+1[, n3+1], dim); ``info`` as ``solve_winslow``'s,
     plus ``boundary_layout`` and ``warnings`` (a list of lines) when the solver did not converge.
     """
@@ -123,10 +128,11 @@ def build_elliptic(
     walls = parse_walls(orthogonal or (), geometry.dim)
     boundary_layout = DEFAULT_LAYOUT if boundary_layout is None else boundary_layout
     geometry = with_layout(geometry, boundary_layout)
+    solve = _solver(device)
     X0 = tfi(geometry, None, coords)
     solved = None
     if boundary_layout == "smoothed":  # an extrusion: its section's 2D solve (extruded_solve)
-        solved = extruded_solve(X0, coords, tol, max_iter, geometry.characteristic_length, progress)
+        solved = extruded_solve(X0, coords, tol, max_iter, geometry.characteristic_length, progress, solve)
     if solved is None and boundary_layout == "smoothed":
         relax_faces(geometry, coords, X0)  # the faces' own discrete Winslow grids (see there)
     if min(len(t) for t in coords) < 3:  # one cell across an axis: every node is a boundary node
@@ -141,7 +147,7 @@ def build_elliptic(
             "note": "no interior nodes: the TFI mesh is the mesh",
         }
     if solved is None:
-        solved = solve_winslow(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
+        solved = solve(X0, coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length, progress=progress)
     X, info = solved
     info["boundary_layout"] = boundary_layout
     if walls:
@@ -151,13 +157,26 @@ def build_elliptic(
             raise ParameterError("orthogonal", "{name} needs at least 3 cells across each orthogonal wall's axis")
         for face in walls:
             straighten_first_layer(X, face)
-        X[block], second = solve_winslow(X[block], sub_coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length)
+        X[block], second = solve(X[block], sub_coords, tol=tol, max_iter=max_iter, length=geometry.characteristic_length)
         info["orthogonal"] = [face.name for face in walls]
         info["iterations"] += second["iterations"]
         for key in ("final_update", "final_residual", "converged"):
             info[key] = second[key]
         info["seconds"] += second["seconds"]
     return X, _warned(info, tol)
+
+
+def _solver(device: str | None):
+    """The one-grid solver for ``device``: ``solve_winslow`` (NumPy/numba) for None and "cpu", else
+    ``solve_winslow_torch`` on that torch device ("cuda", "cuda:1"; imports torch). The caller
+    resolves "auto" (``meshgen.neural.device.inference_device``)."""
+    if device in (None, "cpu"):
+        return solve_winslow
+    if not (isinstance(device, str) and device.split(":")[0] == "cuda"):
+        raise ParameterError("device", f"{{name}} must be cpu or cuda for the elliptic method, got {device!r}")
+    from meshgen.methods.multigrid_torch import solve_winslow_torch
+
+    return functools.partial(solve_winslow_torch, device=device)
 
 
 def _warned(info: dict, tol: float) -> dict:
@@ -180,19 +199,27 @@ def elliptic(
     progress=None,
     boundary_layout: str | None = None,
     orthogonal=(),
+    device: str | None = None,
 ):
     """Elliptic (Winslow) mesh of ``geometry``: the Python entry point.
 
     ``dims``: cells per axis (n1, n2[, n3]); ``coords``: optional 1D parametric node positions per
     axis instead (e.g. clustered towards a wall). ``tol``, ``max_iter``, ``progress``: see
-    ``solve_winslow``; ``boundary_layout``, ``orthogonal``: see ``build_elliptic``.
+    ``solve_winslow``; ``boundary_layout``, ``orthogonal``, ``device``: see ``build_elliptic``.
     Returns ``(X, info)``; warns (ConvergenceWarning) when not converged.
     """
     if coords is None:
         coords = parametric_grid(dims)
     check_axes(geometry, coords)
     X, info = build_elliptic(
-        geometry, coords, tol=tol, max_iter=max_iter, progress=progress, boundary_layout=boundary_layout, orthogonal=orthogonal
+        geometry,
+        coords,
+        tol=tol,
+        max_iter=max_iter,
+        progress=progress,
+        boundary_layout=boundary_layout,
+        orthogonal=orthogonal,
+        device=device,
     )
     for line in info.get("warnings", []):
         warnings.warn(line, ConvergenceWarning, stacklevel=2)

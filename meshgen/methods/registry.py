@@ -62,7 +62,7 @@ register_method(
         "elliptic",
         "meshgen.methods.elliptic:build_elliptic",
         "Winslow elliptic equations, nonlinear multigrid",
-        options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal"),
+        options=("tol", "max_iter", "progress", "boundary_layout", "orthogonal", "device"),
     )
 )
 register_method(

@@ -27,6 +27,7 @@ from meshgen.geometry.plugins import Geometry, bind, check_boundary, load_geomet
 from meshgen.methods.clustering import node_coordinates
 from meshgen.methods.registry import get_method, make_mesh
 from meshgen.methods.tfi import check_axes
+from meshgen.neural.device import inference_device
 from meshgen.neural.models import TrainedModel, find_model
 from meshgen.quality import quality_report, write_mesh_alone, write_mesh_with_quality
 from meshgen.quality.worker import quality_worker
@@ -385,6 +386,8 @@ def _mesh_in_memory(request: MeshRequest, plan: _Plan, progress) -> Mesh:
         "orthogonal": tuple(request.orthogonal or ()) or None,
         "model": plan.model,
     }
+    if plan.method == "elliptic" and request.device not in (None, "cpu"):  # the GPU multigrid; auto: cuda if torch sees one
+        options["device"] = inference_device(request.device)
     iterative = "progress" in get_method(plan.method).options
     # with a quality report, numba loads in a forked worker while the mesh is made (design notes §21)
     wanted = plan.output is not None and request.quality
