@@ -108,7 +108,9 @@ def lattice_grid_from_draws(draws: torch.Tensor, nodes: int, cells: int):
     offsets = torch.floor(draws[..., 1::2] * (cells - nodes)).clamp(0, cells - nodes - 1)
     steps = torch.arange(nodes + 2, dtype=torch.float64, device=draws.device)
     axes = (offsets[..., None] + steps) / cells  # (..., dim, nodes + 2)
-    h = torch.tensor(1.0 / cells, dtype=torch.float64, device=draws.device)
+    # a fill, not torch.tensor: a tensor made from host data is a host-to-device copy, which a
+    # CUDA graph's capture refuses (torch 2.11: 'Cannot copy between CPU and CUDA tensors')
+    h = torch.full((), 1.0 / cells, dtype=torch.float64, device=draws.device)
     return list(axes.unbind(-2)), [h] * (draws.shape[-1] // 2)
 
 
@@ -130,7 +132,7 @@ def stencil_derivatives(function, points: torch.Tensor, h: float):
     with shapes (N, C), (N, d, C), (N, d, d, C).
     """
     n, dim = points.shape
-    offsets = h * grid_points([torch.tensor([-1.0, 0.0, 1.0], dtype=points.dtype, device=points.device)] * dim)
+    offsets = h * grid_points([torch.arange(-1, 2, dtype=points.dtype, device=points.device)] * dim)
     neighbourhood = points.reshape(n, *([1] * dim), dim) + offsets  # (N, 3, ..., 3, d)
     values = function(neighbourhood.reshape(-1, dim)).reshape(n, *([3] * dim), -1)
     centre, first, second = grid_derivatives(values, [h] * dim)
