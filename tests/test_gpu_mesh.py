@@ -56,3 +56,15 @@ def test_slab_summary_is_the_cpu_report(case):
     for name in ("min_angle", "scaled_jacobian", "non_orthogonality"):
         assert figures[name]["min"] == pytest.approx(report["metrics"][name]["min"], abs=1e-6)
         assert figures[name]["mean"] == pytest.approx(report["metrics"][name]["mean"], rel=1e-7)
+
+
+def test_the_chunked_path_takes_the_device_asked_for(tmp_path, run_cli):
+    """``--device cuda`` reaches the chunked path (its blocks' forward pass): without a GPU it is
+    the one-line refusal, nothing written, not a CPU mesh made in silence."""
+    if torch.cuda.is_available():
+        pytest.skip("a CUDA device is present: the refusal cannot be seen")
+    out = tmp_path / "mesh.cgns"
+    result = run_cli("mesh", "--dims", "6", "6", "6", "--chunked", "--device", "cuda", "-o", out)
+    assert result.returncode == 2
+    assert "no CUDA device" in result.stderr and "Traceback" not in result.stderr
+    assert not out.exists()

@@ -129,19 +129,24 @@ def tfi_array(geometry, coords, block_nodes: int | None = None):
 
 
 def _neural_block(shared, block):
-    model, coords, tfi_terms, error_terms, boundary_values = shared
-    X = map_on_block(model, coords, block, tfi_terms, workers=1)
+    model, coords, tfi_terms, error_terms, boundary_values, device = shared
+    X = map_on_block(model, coords, block, tfi_terms, workers=1, device=device)
     if error_terms:
         add_correction_terms(error_terms, coords, X, block)  # X + TFI[g - M] on the block
         snap_to_boundary(X, boundary_values, coords, block)  # the boundary nodes exactly g, as in memory
     return X
 
 
-def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int | None = None):
+def neural_array(
+    model: dict, geometry, coords, correct_boundary: bool = True, block_nodes: int | None = None, device: str = "cpu"
+):
     """The mesh of a trained network (``checkpoint["model"]``) on the tensor grid of ``coords`` as
-    a dask array, and what the boundary correction did (JSON-ready). Bit for bit the in-memory mesh
-    (``meshgen.neural.network_map.mesh_from_model``, then ``meshgen.methods.correction.correct_boundary``)
-    at any block size: every node sees the same arithmetic in any block (``map_on_block``).
+    a dask array, and what the boundary correction did (JSON-ready). On a CPU bit for bit the
+    in-memory mesh (``meshgen.neural.network_map.mesh_from_model``, then
+    ``meshgen.methods.correction.correct_boundary``) at any block size: every node sees the same
+    arithmetic in any block (``map_on_block``). ``device`` "cuda": the network's forward pass of
+    each block on the GPU (cuBLAS picks its kernels by the block's size, so the nodes equal the
+    in-memory GPU mesh's to float32 rounding, not bit for bit); the rest stays on the CPU.
 
     ``correct_boundary``: X = M + TFI[g - M] (``meshgen.methods.correction.add_boundary_correction``
     block by block, the face errors computed once on the faces alone); else the network's map M.
@@ -152,11 +157,11 @@ def neural_array(model: dict, geometry, coords, correct_boundary: bool = True, b
     info = {"corrected": False}
     error_terms = None
     if correct_boundary:
-        errors = model_boundary_errors(model, geometry, coords, values=boundary_values)
+        errors = model_boundary_errors(model, geometry, coords, device=device, values=boundary_values)
         info = {"corrected": True, "error_before": error_figures(errors, geometry)}
         error_terms = correction_terms(errors, coords)
     shape = tuple(len(c) for c in coords)
-    shared = (model, coords, tfi_terms, error_terms, boundary_values)
+    shared = (model, coords, tfi_terms, error_terms, boundary_values, device)
     return _node_array(_neural_block, shared, shape, len(coords), block_nodes), info
 
 

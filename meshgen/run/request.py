@@ -447,6 +447,8 @@ def _mesh_in_blocks(request: MeshRequest, plan: _Plan, progress) -> Mesh:
                 plan.coords,
                 correct_boundary=request.correct is not False,
                 block_nodes=request.block_nodes,
+                # local threads only: a cluster's workers choose nothing (cpu unless asked for cuda)
+                device=inference_device(request.device or ("auto" if client is None else "cpu")),
             )
             info = {"model": model.metadata(), "correction": correction, "polish": {"polished": False, "reason": "chunked"}}
         info["chunked"] = {
