@@ -1,0 +1,241 @@
+"""A CAD solid that is a straight sweep as a block set (``meshgen.geometry.blocks``): its cap is
+cut into quadrilateral blocks, each swept along the translation from the first cap to the second.
+
+``sweep_module(path)`` returns a block-set plugin module, as ``topology.topology_module`` does for
+a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pipe.py``:
+
+- the cap (read in the CAD process: ``sweep_read``) is one loop of CAD curves, each a cubic
+  spline through its points at arc-length fractions (1025 per curve: exact to about 1e-12 of the
+  part's size for an arc);
+- a loop of one smooth closed curve (or 2 or 4 curves joining smoothly): an O-grid like the pipe's
+  (a core whose sides bulge by ``BULGE``, corners at ``CORE`` of the way to four points a quarter
+  of the loop apart, and four ring blocks); a loop of n sharp corners: midpoint subdivision, n
+  quadrilaterals around the cap's centroid, each with one corner of the cap and two half sides;
+- each block's map is the Coons patch of its four sides in the cap's plane plus zeta times the
+  translation, so its outer faces are the linking faces' extrusions (exact for a straight sweep,
+  which ``sweep_read`` checks), and its ends lie on the caps;
+- patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
+
+Loops that mix sharp corners and smooth joints (a filleted edge), caps with holes and solids that
+are no sweep are one GeometryError naming what was found and pointing to topology files.
+"""
+
+from __future__ import annotations
+
+import re
+import types
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import GeometryError
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, content_hash, default_patch_type
+from meshgen.geometry.shapes.cad_process import cad_sweep
+
+__all__ = ["BULGE", "CORE", "is_sweep_file", "sweep_module"]
+
+CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
+BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
+_READ: dict = {}
+_MODULES: dict = {}
+TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
+
+
+def _key(path: Path) -> tuple:
+    status = path.stat()
+    return (str(path.resolve()), status.st_size, status.st_mtime_ns)
+
+
+def _read(path: Path) -> dict:
+    key = _key(path)
+    if key not in _READ:
+        _READ[key] = cad_sweep(path, content_hash([path], {}))
+    return _READ[key]
+
+
+def is_sweep_file(spec) -> bool:
+    """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
+    then meshed as a block set, or refused with a pointer to topology files)."""
+    if not isinstance(spec, (str, Path)) or Path(str(spec)).suffix.lower() not in CAD_FORMATS:
+        return False
+    path = Path(str(spec))
+    if not path.is_file():
+        return False
+    try:
+        return _read(path)["kind"] != "six"
+    except GeometryError:
+        return False  # the single-block reader reports what is wrong with the file
+
+
+def _spline(fractions: np.ndarray, points: np.ndarray):
+    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline), t in [0, 1]."""
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(fractions, points, axis=0)
+    return lambda t: spline(np.clip(np.asarray(t, dtype=float), 0.0, 1.0))
+
+
+def _line(a: np.ndarray, b: np.ndarray):
+    return lambda t: a + np.asarray(t, dtype=float)[:, None] * (b - a)
+
+
+def _piece(curve, start: float, stop: float):
+    return lambda t: curve(start + np.asarray(t, dtype=float) * (stop - start))
+
+
+def _coons(sides, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """(N, 2) the Coons patch of ``sides`` (left xi=0 and right xi=1 along eta, bottom eta=0 and
+    top eta=1 along xi; callables t (N,) -> (N, 2)) at (xi, eta)."""
+    left, right, bottom, top = sides
+    b0, b1, t0, t1 = bottom(np.zeros(1))[0], bottom(np.ones(1))[0], top(np.zeros(1))[0], top(np.ones(1))[0]
+    x, e = xi[:, None], eta[:, None]
+    return (
+        (1 - x) * left(eta) + x * right(eta) + (1 - e) * bottom(xi) + e * top(xi)
+        - ((1 - x) * (1 - e) * b0 + x * (1 - e) * b1 + (1 - x) * e * t0 + x * e * t1)
+    )  # fmt: skip
+
+
+def _midpoint_blocks(curves, faces):
+    """n quadrilaterals around the centroid (the frame's origin): block k has the corner at the
+    start of curve k, half of curve k - 1 (xi = 1) and half of curve k (eta = 1)."""
+    n, centre = len(curves), np.zeros(2)
+    middle = [curve(np.array([0.5]))[0] for curve in curves]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(n):
+        name = f"quad{k}"
+        blocks[name] = (
+            _line(centre, middle[k]),
+            _piece(curves[k - 1], 0.5, 1.0),
+            _line(centre, middle[k - 1]),
+            _piece(curves[k], 0.5, 0.0),
+        )
+        patches[name] = {"xi1": faces[k - 1], "eta1": faces[k]}
+        interfaces.append((name, "eta0", f"quad{(k - 1) % n}", "xi0"))
+    return blocks, patches, interfaces
+
+
+def _ogrid_blocks(curves, faces):
+    """A core and four ring blocks (``ring0`` .. ``ring3`` counterclockwise, xi from the core
+    outwards), the loop cut at four points a quarter of it apart (at the curves' ends)."""
+    per = 4 // len(curves)
+    pieces = [(k // per, (k % per) / per, (k % per + 1) / per) for k in range(4)]
+    outer = [_piece(curves[c], a, b) for c, a, b in pieces]
+    corners = [CORE * w(np.zeros(1))[0] for w in outer]
+    core_sides = []
+    for k in range(4):
+        a, b = corners[k], corners[(k + 1) % 4]
+        half = 0.5 * (b - a)
+        normal = np.array([half[1], -half[0]])  # outwards: the loop runs counterclockwise
+
+        def side(t, a=a, half=half, normal=normal):
+            s = 2.0 * np.asarray(t, dtype=float)[:, None] - 1.0
+            return a + half + s * half + 0.5 * np.tan(BULGE) * (1.0 - s**2) * normal
+
+        core_sides.append(side)
+    blocks = {
+        "core": (
+            _piece(core_sides[2], 1.0, 0.0),
+            core_sides[0],
+            core_sides[3],
+            _piece(core_sides[1], 1.0, 0.0),
+        )
+    }
+    patches, interfaces = {}, []
+    for k in range(4):
+        name = f"ring{k}"
+        start, stop = outer[k](np.zeros(1))[0], outer[k](np.ones(1))[0]
+        blocks[name] = (core_sides[k], outer[k], _line(corners[k], start), _line(corners[(k + 1) % 4], stop))
+        patches[name] = {"xi1": faces[pieces[k][0]]}
+        interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
+    interfaces += [("core", face, f"ring{k}", "xi0") for k, face in enumerate(("xi1", "eta1", "xi0", "eta0"))]
+    return blocks, patches, interfaces
+
+
+def sweep_module(path) -> types.ModuleType:
+    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
+    (path, size, modification time). GeometryError (one line) when the solid is no straight sweep
+    this meshes."""
+    path = Path(path)
+    key = _key(path)
+    if key in _MODULES:
+        return _MODULES[key]
+    found = _read(path)
+    summary = f"{path}: the solid has {found['summary']}"
+    if found["kind"] == "six":
+        raise GeometryError(f"{summary}: one block, not a sweep")
+    if found["kind"] != "sweep":
+        raise GeometryError(f"{summary}; it is no straight sweep ({found['reason']}): {TOPOLOGY_HINT}")
+    names = found["names"]
+    loop = found["curves"]
+    curves = [_spline(c["fractions"], c["points"]) for c in loop]
+    faces = [c["face"] for c in loop]
+    sharp = [not c["smooth"] for c in loop]
+    first, second = found["caps"]
+    if not any(sharp) and len(loop) in (1, 2, 4):
+        blocks, sides_of, interfaces = _ogrid_blocks(curves, faces)
+        how = f"a loop of {len(loop)} curve(s) joining smoothly: an O-grid of 5 blocks (core, ring0..ring3) like the pipe's"
+        meaning = "N M A: cells along a quarter of the cap's boundary (and across the core), across the ring, along the sweep"
+        counts = {"core": (0, 0, 2), **{f"ring{k}": (1, 0, 2) for k in range(4)}}
+    elif all(sharp):
+        blocks, sides_of, interfaces = _midpoint_blocks(curves, faces)
+        how = f"{len(loop)} sharp corners: midpoint subdivision into {len(loop)} blocks (quad0..) around its centroid"
+        meaning = "N M A: cells along half a side of the cap (and from its centroid to a side), not used, along the sweep"
+        counts = {name: (0, 0, 2) for name in blocks}
+    else:
+        turns = ", ".join("sharp" if s else "smooth" for s in sharp)
+        raise GeometryError(
+            f"{summary}; a straight sweep whose cap ({names[first]}) has {len(loop)} curves meeting at corners ({turns}): "
+            f"a cap that mixes sharp corners and smooth joints is not cut into blocks yet: {TOPOLOGY_HINT}"
+        )
+    origin, frame, translation = found["origin"], found["frame"], found["translation"]
+    kinds = {name: default_patch_type(name) for name in names}
+    block_patches = {}
+    for name in blocks:
+        block_patches[name] = {face: (names[index], kinds[names[index]]) for face, index in sides_of.get(name, {}).items()}
+        block_patches[name]["zeta0"] = (names[first], kinds[names[first]])
+        block_patches[name]["zeta1"] = (names[second], kinds[names[second]])
+    size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
+    stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
+    lines = (
+        f"{path.name}: {found['summary']}: a straight sweep along ({', '.join(f'{v:.6g}' for v in translation)}); "
+        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): planar, parallel, one shape, every other face touches both",
+        f"{path.name}: cap {names[first]}: {how}",
+        f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
+    )
+
+    module = types.ModuleType(f"meshgen_sweep_{stem}")
+    module.__file__ = str(path)
+    module.name, module.dim = stem, 3
+    module.description = f"CAD solid {path.name}: a straight sweep of its cap {names[first]} ({len(blocks)} blocks)"
+    module.params = {}
+    module.blocks = tuple(blocks)
+    module.dims_meaning = meaning
+    module.interfaces = interfaces
+    module.block_patches = block_patches
+    module.volume = found["volume"]
+    module.face_tags = found["face_tags"]
+    module.decisions = lines
+
+    def characteristic_length():
+        return size
+
+    def block_coords(dims):
+        """Per block, uniform node coordinates per axis: the --dims numbers its axes count."""
+        axes = [np.linspace(0.0, 1.0, int(n) + 1) for n in dims]
+        return {name: [axes[a] for a in counts[name]] for name in blocks}
+
+    def boundary(block, points):
+        """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
+        points = np.asarray(points, dtype=float)
+        xy = _coons(blocks[block], points[:, 0], points[:, 1])
+        return origin + xy @ frame + points[:, 2:3] * translation
+
+    def notes(block_set):
+        return list(lines)
+
+    module.characteristic_length = characteristic_length
+    module.block_coords = block_coords
+    module.boundary = boundary
+    module.notes = notes
+    _MODULES[key] = module
+    return module
