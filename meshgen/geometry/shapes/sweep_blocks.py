@@ -36,6 +36,7 @@ __all__ = ["BULGE", "CORE", "is_sweep_file", "sweep_module"]
 
 CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
 BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
+RING = 0.6  # a ring-and-core cap's core corners: this share of the way from the centroid to the loop's
 _READ: dict = {}
 _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
@@ -151,6 +152,50 @@ def _ogrid_blocks(curves, faces):
     return blocks, patches, interfaces
 
 
+def _ring_blocks(curves, faces):
+    """A ring of two blocks per curve (``a<k>``, ``b<k>``: its halves; xi from the core outwards)
+    around a core polygon, midpoint-subdivided into ``quad<k>``: the core's corners ``RING`` of the
+    way from the centroid to the curves' ends, joined to them by spokes, so every block corner on
+    the cap's boundary is a CAD vertex or a curve's midpoint and no block has a corner at a smooth
+    joint."""
+    n, centre = len(curves), np.zeros(2)
+    vertex = [curve(np.zeros(1))[0] for curve in curves]
+    middle = [curve(np.array([0.5]))[0] for curve in curves]
+    inner = [RING * v for v in vertex]
+    joint = [0.5 * (inner[k] + inner[(k + 1) % n]) for k in range(n)]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(n):
+        after = (k + 1) % n
+        blocks[f"a{k}"] = (
+            _line(inner[k], joint[k]),
+            _piece(curves[k], 0.0, 0.5),
+            _line(inner[k], vertex[k]),
+            _line(joint[k], middle[k]),
+        )
+        blocks[f"b{k}"] = (
+            _line(joint[k], inner[after]),
+            _piece(curves[k], 0.5, 1.0),
+            _line(joint[k], middle[k]),
+            _line(inner[after], vertex[after]),
+        )
+        blocks[f"quad{k}"] = (
+            _line(centre, joint[k]),
+            _line(joint[k - 1], inner[k]),
+            _line(centre, joint[k - 1]),
+            _line(joint[k], inner[k]),
+        )
+        patches[f"a{k}"] = {"xi1": faces[k]}
+        patches[f"b{k}"] = {"xi1": faces[k]}
+        interfaces += [
+            (f"a{k}", "eta1", f"b{k}", "eta0"),
+            (f"b{k}", "eta1", f"a{after}", "eta0"),
+            (f"quad{k}", "xi1", f"b{(k - 1) % n}", "xi0"),
+            (f"quad{k}", "eta1", f"a{k}", "xi0"),
+            (f"quad{k}", "eta0", f"quad{(k - 1) % n}", "xi0"),
+        ]
+    return blocks, patches, interfaces
+
+
 def sweep_module(path) -> types.ModuleType:
     """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
     (path, size, modification time). GeometryError (one line) when the solid is no straight sweep
@@ -182,11 +227,14 @@ def sweep_module(path) -> types.ModuleType:
         meaning = "N M A: cells along half a side of the cap (and from its centroid to a side), not used, along the sweep"
         counts = {name: (0, 0, 2) for name in blocks}
     else:
-        turns = ", ".join("sharp" if s else "smooth" for s in sharp)
-        raise GeometryError(
-            f"{summary}; a straight sweep whose cap ({names[first]}) has {len(loop)} curves meeting at corners ({turns}): "
-            f"a cap that mixes sharp corners and smooth joints is not cut into blocks yet: {TOPOLOGY_HINT}"
+        blocks, sides_of, interfaces = _ring_blocks(curves, faces)
+        turns = sum(not s for s in sharp)
+        how = (
+            f"{len(loop)} curves, {len(loop) - turns} sharp corners and {turns} smooth joint(s): a ring of "
+            f"{2 * len(loop)} blocks (a0, b0, ..: two per curve) around a core cut into {len(loop)} (quad0..)"
         )
+        meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
+        counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
     origin, frame, translation = found["origin"], found["frame"], found["translation"]
     kinds = {name: default_patch_type(name) for name in names}
     block_patches = {}
