@@ -16,8 +16,13 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   which ``sweep_read`` checks), and its ends lie on the caps;
 - patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
 
-Loops that mix sharp corners and smooth joints (a filleted edge), caps with holes and solids that
-are no sweep are one GeometryError naming what was found and pointing to topology files.
+- a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
+  curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
+  midpoint-subdivided, so no block has a corner at a smooth joint;
+- a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them.
+
+Other caps with holes and solids that are no straight sweep are one GeometryError naming what was
+found and pointing to topology files.
 """
 
 from __future__ import annotations
@@ -118,8 +123,7 @@ def _midpoint_blocks(curves, faces):
 def _ogrid_blocks(curves, faces):
     """A core and four ring blocks (``ring0`` .. ``ring3`` counterclockwise, xi from the core
     outwards), the loop cut at four points a quarter of it apart (at the curves' ends)."""
-    per = 4 // len(curves)
-    pieces = [(k // per, (k % per) / per, (k % per + 1) / per) for k in range(4)]
+    pieces = _quarters(curves)
     outer = [_piece(curves[c], a, b) for c, a, b in pieces]
     corners = [CORE * w(np.zeros(1))[0] for w in outer]
     core_sides = []
@@ -149,6 +153,41 @@ def _ogrid_blocks(curves, faces):
         patches[name] = {"xi1": faces[pieces[k][0]]}
         interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
     interfaces += [("core", face, f"ring{k}", "xi0") for k, face in enumerate(("xi1", "eta1", "xi0", "eta0"))]
+    return blocks, patches, interfaces
+
+
+def _quarters(curves):
+    """The loop of 1, 2 or 4 curves cut into four pieces: (curve index, start, stop) each."""
+    per = 4 // len(curves)
+    return [(k // per, (k % per) / per, (k % per + 1) / per) for k in range(4)]
+
+
+def _annulus_blocks(curves, faces, hole, hole_faces):
+    """Four blocks (``ring0`` .. ``ring3``, xi from the hole outwards, eta counterclockwise)
+    between the outer loop and the hole's, each cut into quarters; the hole's cuts turned to
+    face the outer ones (a single closed curve is cut anywhere, else at its curves' ends)."""
+    outer = [_piece(curves[c], a, b) for c, a, b in _quarters(curves)]
+    cuts = np.array([w(np.zeros(1))[0] for w in outer])
+    centre = np.mean(np.concatenate([h(np.linspace(0.0, 1.0, 65)[:-1]) for h in hole]), axis=0)
+    if len(hole) == 1:  # the hole's point in the direction of the first outer cut
+        s = np.linspace(0.0, 1.0, 4097)
+        along = hole[0](s) - centre
+        toward = (cuts[0] - centre) / np.linalg.norm(cuts[0] - centre)
+        start = float(s[int(np.argmax(along @ toward / np.linalg.norm(along, axis=1)))])
+        closed = hole[0]
+        inner = [(lambda t, a=start + k / 4: closed(np.mod(a + 0.25 * np.asarray(t, dtype=float), 1.0)), 0) for k in range(4)]
+    else:
+        pieces = _quarters(hole)
+        firsts = np.array([hole[c](np.array([a]))[0] for c, a, _ in pieces])
+        shift = int(np.argmin(np.linalg.norm(firsts - cuts[0], axis=1)))
+        inner = [(_piece(hole[c], a, b), c) for c, a, b in (pieces[(k + shift) % 4] for k in range(4))]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(4):
+        name, (side, curve) = f"ring{k}", inner[k]
+        a0, a1 = side(np.zeros(1))[0], side(np.ones(1))[0]
+        blocks[name] = (side, outer[k], _line(a0, cuts[k]), _line(a1, cuts[(k + 1) % 4]))
+        patches[name] = {"xi0": hole_faces[curve], "xi1": faces[_quarters(curves)[k][0]]}
+        interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
     return blocks, patches, interfaces
 
 
@@ -216,7 +255,20 @@ def sweep_module(path) -> types.ModuleType:
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
     first, second = found["caps"]
-    if not any(sharp) and len(loop) in (1, 2, 4):
+    holes = found.get("holes", [])
+    smooth_hole = bool(holes) and not any(not c["smooth"] for c in holes[0]) and len(holes[0]) in (1, 2, 4)
+    if holes and not (smooth_hole and not any(sharp) and len(loop) in (1, 2, 4)):
+        raise GeometryError(
+            f"{summary}; a straight sweep whose cap ({names[first]}) has a hole: only a smooth loop of 1, 2 or 4 curves "
+            f"around a smooth hole of 1, 2 or 4 curves is cut into blocks yet: {TOPOLOGY_HINT}"
+        )
+    if holes:
+        hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
+        blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]])
+        how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
+        meaning = "N M A: cells along a quarter of the cap's boundary, across the ring, along the sweep"
+        counts = {name: (1, 0, 2) for name in blocks}
+    elif not any(sharp) and len(loop) in (1, 2, 4):
         blocks, sides_of, interfaces = _ogrid_blocks(curves, faces)
         how = f"a loop of {len(loop)} curve(s) joining smoothly: an O-grid of 5 blocks (core, ring0..ring3) like the pipe's"
         meaning = "N M A: cells along a quarter of the cap's boundary (and across the core), across the ring, along the sweep"

@@ -15,6 +15,7 @@ joined by linking faces, the second cap the first moved by one vector.
     curves       the first cap's boundary loop, counterclockwise in the frame: per curve its points
                  (K, 2) in the frame at arc-length fractions ``fractions`` (K,), the index of the
                  linking face it bounds, and whether the loop turns smoothly at its start
+    holes        the loops of the first cap's holes (at most one), as ``curves``, counterclockwise too
 """
 
 from __future__ import annotations
@@ -42,9 +43,7 @@ def read_sweep(path, content_hash: str = "") -> dict:
     if len(volumes) != 1:
         raise GeometryError(f"{path} holds {len(volumes)} solids; a sweep is one solid")
     faces = [abs(tag) for dim, tag in gmsh.model.getBoundary(volumes, oriented=False) if dim == 2]
-    curves_of = [
-        {abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)} for face in faces
-    ]
+    curves_of = [{abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)} for face in faces]
     sides = [len(gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)) for face in faces]
     names = []
     for k, face in enumerate(faces):
@@ -66,7 +65,7 @@ def read_sweep(path, content_hash: str = "") -> dict:
         return {**found, "kind": "other", "reason": reason}
     first, second, translation = caps
     return {**found, "kind": "sweep", "caps": (first, second), "translation": translation,
-            **_cap_loop(gmsh, faces, curves_of, first, translation)}  # fmt: skip
+            **_cap_loop(gmsh, faces, first, translation)}  # fmt: skip
 
 
 def _find_caps(gmsh, faces, curves_of, size):
@@ -90,8 +89,8 @@ def _find_caps(gmsh, faces, curves_of, size):
         )
         if abs(float(translation @ n_i)) < 1e-6 * size:
             continue
-        if len(gmsh.model.occ.getCurveLoops(faces[i])[0]) != 1:
-            return None, f"faces {i + 1} and {j + 1} are caps with a hole (not meshed yet)"
+        if len(gmsh.model.occ.getCurveLoops(faces[i])[0]) > 2:
+            return None, f"faces {i + 1} and {j + 1} are caps with more than one hole (not meshed yet)"
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
         if _distance(gmsh, faces[j], samples + translation) > TOLERANCE * size:
             why = f"faces {i + 1} and {j + 1} are parallel but not one shape moved along a line"
@@ -132,8 +131,8 @@ def _curve_points(gmsh, curve: int, count: int):
     return np.interp(at, t, length) / length[-1], points
 
 
-def _cap_loop(gmsh, faces, curves_of, first: int, translation) -> dict:
-    """The first cap's frame, centroid and boundary loop (module docstring)."""
+def _cap_loop(gmsh, faces, first: int, translation) -> dict:
+    """The first cap's frame, centroid, boundary loop and holes' loops (module docstring)."""
     normal = _normal(gmsh, faces[first])
     normal = normal if normal @ translation > 0 else -normal
     helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
@@ -141,10 +140,24 @@ def _cap_loop(gmsh, faces, curves_of, first: int, translation) -> dict:
     e1 /= np.linalg.norm(e1)
     frame = np.stack([e1, np.cross(normal, e1)])
     origin = np.array(gmsh.model.occ.getCenterOfMass(2, faces[first]))
+    loops = []
+    for tags in gmsh.model.occ.getCurveLoops(faces[first])[1]:
+        loops.append(_loop(gmsh, faces, first, sorted({abs(int(t)) for t in tags}), origin, frame))
+    loops.sort(key=lambda loop: -_area(np.concatenate([c["points"] for c in loop])))
+    return {"origin": origin, "frame": frame, "centroid": np.zeros(2), "curves": loops[0], "holes": loops[1:]}
+
+
+def _area(xy: np.ndarray) -> float:
+    """The signed area (length^2) of the closed polygon ``xy`` (N, 2): positive counterclockwise."""
+    return 0.5 * float(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]))
+
+
+def _loop(gmsh, faces, first: int, tags, origin, frame) -> list:
+    """One boundary loop of the first cap, counterclockwise in the frame (module docstring)."""
     pieces = []
-    for curve in sorted(curves_of[first]):
+    for curve in tags:
         fractions, points = _curve_points(gmsh, curve, CURVE_SAMPLES)
-        link = next(k for k in range(len(faces)) if k != first and curve in curves_of[k])
+        link = next(k for k in range(len(faces)) if k != first and curve in _curves(gmsh, faces[k]))
         pieces.append([fractions, (points - origin) @ frame.T, link])
     loop = [pieces.pop(0)]
     while pieces:  # chain the curves end to start, turning those that run the other way
@@ -154,8 +167,7 @@ def _cap_loop(gmsh, faces, curves_of, first: int, translation) -> dict:
         if np.linalg.norm(piece[1][-1] - end) < np.linalg.norm(piece[1][0] - end):
             piece = [1.0 - piece[0][::-1], piece[1][::-1], piece[2]]
         loop.append(piece)
-    xy = np.concatenate([p[1] for p in loop])
-    if np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]) < 0:  # clockwise: turn it
+    if _area(np.concatenate([p[1] for p in loop])) < 0:  # clockwise: turn it
         loop = [[1.0 - p[0][::-1], p[1][::-1], p[2]] for p in loop[::-1]]
     curves = []
     for k, (fractions, points, link) in enumerate(loop):
@@ -164,4 +176,8 @@ def _cap_loop(gmsh, faces, curves_of, first: int, translation) -> dict:
         cosine = incoming @ outgoing / (np.linalg.norm(incoming) * np.linalg.norm(outgoing))
         smooth = bool(np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) < SHARP_DEGREES)
         curves.append({"fractions": fractions, "points": points, "face": int(link), "smooth": smooth})
-    return {"origin": origin, "frame": frame, "centroid": np.zeros(2), "curves": curves}
+    return curves
+
+
+def _curves(gmsh, face: int) -> set:
+    return {abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)}
