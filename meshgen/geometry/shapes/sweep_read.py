@@ -20,6 +20,7 @@ joined by linking faces, the second cap the first moved by one vector.
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -74,7 +75,7 @@ def _find_caps(gmsh, faces, curves_of, size):
     planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
     areas = [gmsh.model.occ.getMass(2, face) for face in faces]
     why = "no two planar faces that every other face touches"
-    for i, j in ((i, j) for i in range(len(faces)) for j in range(i + 1, len(faces))):
+    for i, j in itertools.combinations(range(len(faces)), 2):
         if not (planar[i] and planar[j]) or curves_of[i] & curves_of[j]:
             continue
         others = [k for k in range(len(faces)) if k not in (i, j)]
