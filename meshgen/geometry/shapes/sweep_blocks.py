@@ -191,16 +191,24 @@ def _annulus_blocks(curves, faces, hole, hole_faces):
     return blocks, patches, interfaces
 
 
-def _ring_blocks(curves, faces):
+def _ring_blocks(curves, faces, sharp):
     """A ring of two blocks per curve (``a<k>``, ``b<k>``: its halves; xi from the core outwards)
-    around a core polygon, midpoint-subdivided into ``quad<k>``: the core's corners ``RING`` of the
-    way from the centroid to the curves' ends, joined to them by spokes, so every block corner on
-    the cap's boundary is a CAD vertex or a curve's midpoint and no block has a corner at a smooth
-    joint."""
+    around a core polygon, midpoint-subdivided into ``quad<k>``; the core's corners joined to the
+    curves' ends by spokes (at a sharp corner towards the centroid, the core's corner ``RING`` of
+    the way; at a smooth joint along the inward normal, as deep), so every block corner on the
+    cap's boundary is a CAD vertex or a curve's midpoint, and a smooth joint is split at right
+    angles."""
     n, centre = len(curves), np.zeros(2)
     vertex = [curve(np.zeros(1))[0] for curve in curves]
     middle = [curve(np.array([0.5]))[0] for curve in curves]
-    inner = [RING * v for v in vertex]
+    inner = []
+    for k in range(n):  # a corner's spoke runs to the centroid; a smooth joint's along the inward normal
+        if sharp[k]:
+            inner.append(RING * vertex[k])
+        else:
+            tangent = curves[k](np.array([1e-3]))[0] - vertex[k]
+            normal = np.array([-tangent[1], tangent[0]]) / np.linalg.norm(tangent)
+            inner.append(vertex[k] + (1.0 - RING) * np.linalg.norm(vertex[k]) * normal)
     joint = [0.5 * (inner[k] + inner[(k + 1) % n]) for k in range(n)]
     blocks, patches, interfaces = {}, {}, []
     for k in range(n):
@@ -255,6 +263,7 @@ def sweep_module(path) -> types.ModuleType:
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
     first, second = found["caps"]
+    options, lines_extra = {}, ()
     holes = found.get("holes", [])
     smooth_hole = bool(holes) and not any(not c["smooth"] for c in holes[0]) and len(holes[0]) in (1, 2, 4)
     if holes and not (smooth_hole and not any(sharp) and len(loop) in (1, 2, 4)):
@@ -279,7 +288,7 @@ def sweep_module(path) -> types.ModuleType:
         meaning = "N M A: cells along half a side of the cap (and from its centroid to a side), not used, along the sweep"
         counts = {name: (0, 0, 2) for name in blocks}
     else:
-        blocks, sides_of, interfaces = _ring_blocks(curves, faces)
+        blocks, sides_of, interfaces = _ring_blocks(curves, faces, sharp)
         turns = sum(not s for s in sharp)
         how = (
             f"{len(loop)} curves, {len(loop) - turns} sharp corners and {turns} smooth joint(s): a ring of "
@@ -287,6 +296,11 @@ def sweep_module(path) -> types.ModuleType:
         )
         meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
         counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
+        options = {"slide_section": False}
+        lines_extra = (
+            f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (sliding along a flat side "
+            "would carry them past its smooth joint with an arc)",
+        )
     origin, frame, translation = found["origin"], found["frame"], found["translation"]
     kinds = {name: default_patch_type(name) for name in names}
     block_patches = {}
@@ -301,6 +315,7 @@ def sweep_module(path) -> types.ModuleType:
         f"caps {names[first]} (zeta0) and {names[second]} (zeta1): planar, parallel, one shape, every other face touches both",
         f"{path.name}: cap {names[first]}: {how}",
         f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
+        *lines_extra,
     )
 
     module = types.ModuleType(f"meshgen_sweep_{stem}")
@@ -315,6 +330,7 @@ def sweep_module(path) -> types.ModuleType:
     module.volume = found["volume"]
     module.face_tags = found["face_tags"]
     module.decisions = lines
+    module.elliptic_options = options
 
     def characteristic_length():
         return size
