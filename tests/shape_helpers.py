@@ -265,7 +265,7 @@ def voxel_surface(cells):
     return vertices, triangles, np.concatenate([normals, normals])
 
 
-SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge")
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon")
 
 
 def write_sweep_solid(kind: str, path) -> float:
@@ -273,7 +273,10 @@ def write_sweep_solid(kind: str, path) -> float:
     (radius 0.5, length 2 along z), ``hole`` (that cylinder with a coaxial hole of radius 0.2),
     ``fillet`` (a 1 x 1 x 2 box whose edge along z at x = y = 0 is filleted with radius 0.3: its
     faces z = 0 and z = 2 are the caps), ``pentagon`` (a regular pentagon of circumradius 1 moved
-    1.5 along z) or ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z). Returns OCC's volume."""
+    1.5 along z), ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z), ``bend`` (a disk of
+    radius 0.5 centred 2 from the z axis turned 90 degrees about it) or ``bent_pentagon`` (a regular
+    pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it). Returns
+    OCC's volume."""
     import gmsh
 
     started = not gmsh.isInitialized()
@@ -306,6 +309,15 @@ def write_sweep_solid(kind: str, path) -> float:
         solid = next(tag for dim, tag in extruded if dim == 3)
     elif kind == "wedge":
         solid = occ.addWedge(0, 0, 0, 1, 1, 2)
+    elif kind == "bend":
+        disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
+        solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)
+    elif kind == "bent_pentagon":
+        angles = np.pi / 2 + 2 * np.pi * np.arange(5) / 5
+        points = [occ.addPoint(2 + 0.5 * np.cos(a), 0, 0.5 * np.sin(a)) for a in angles]
+        loop = occ.addCurveLoop([occ.addLine(points[k], points[(k + 1) % 5]) for k in range(5)])
+        turned = occ.revolve([(2, occ.addPlaneSurface([loop]))], 0, 0, 0, 0, 0, 1, 2 * np.pi / 3)
+        solid = next(tag for dim, tag in turned if dim == 3)
     else:
         raise ValueError(kind)
     occ.synchronize()

@@ -1,6 +1,7 @@
-"""CAD solids that are straight sweeps, built by gmsh and exported to STEP (tests/shape_helpers
+"""CAD solids that are sweeps, built by gmsh and exported to STEP (tests/shape_helpers
 ``write_sweep_solid``: a cylinder, one with a coaxial hole, a box with one filleted edge, a
-pentagonal prism, a wedge), meshed as block sets: each patch's nodes on its own CAD face (gmsh's
+pentagonal prism, a wedge, and two bends: a disk and a pentagon turned about an axis), meshed as
+block sets: each patch's nodes on its own CAD face (gmsh's
 closest point), the volume against OCC's, checkMesh on the OpenFOAM case, and the cylinder
 against the built-in pipe at the same counts."""
 
@@ -19,8 +20,9 @@ gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python packag
 
 # about 20 cells across each cap (cylinder: N + 2M; hole: 2M + the hole; fillet: 2M + 2N; n-gons: 2N)
 DIMS = {"cylinder": (10, 5, 6), "hole": (10, 5, 6), "fillet": (7, 3, 6), "pentagon": (10, 1, 6), "wedge": (10, 1, 6)}
-FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5}  # the solids' CAD faces
-BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3}
+DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12)}
+FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7}  # CAD faces
+BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5}
 
 
 @pytest.fixture(scope="module")
@@ -129,6 +131,12 @@ def test_the_cli_says_each_decision(run_cli, tmp_path, solids):
     assert len(said) == 3
     assert "a straight sweep along (0, 0, 1.5)" in said[0] and "midpoint subdivision into 5 blocks" in said[1]
     assert (tmp_path / "p.vtu").exists() and block_spec(str(path)) == str(path)
+    path, _ = solids["bend"]
+    result = run_cli("mesh", "-g", path, "--method", "tfi", "--dims", "4", "2", "3", "-o", "b.vtu")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("bend.step:")]
+    assert "a sweep turning by " in said[0] and " 90 deg about the axis through (" in said[0].replace("-90", " 90")
+    assert "O-grid of 5 blocks" in said[1]
 
 
 def refused(run_cli, folder, geometry, *words):
@@ -158,9 +166,25 @@ def write_solid(path, make):
 
 def test_a_solid_that_is_no_sweep_points_to_topology_files(run_cli, tmp_path):
     write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
-    refused(run_cli, tmp_path, "cone.step", "3 faces with (", "no straight sweep", "docs/topologies.md")
+    refused(run_cli, tmp_path, "cone.step", "3 faces with (", "not of one area", "docs/topologies.md")
     write_solid(tmp_path / "ball.step", lambda occ: occ.addSphere(0, 0, 0, 1.0))
     refused(run_cli, tmp_path, "ball.step", "1 faces with (", "docs/topologies.md")
+
+
+def test_a_twisted_sweep_is_refused(run_cli, tmp_path):
+    """A loft between a pentagon and the same pentagon turned by 30 degrees: planar, parallel caps
+    of one area that every other face touches, but no rigid motion carries one onto the other."""
+
+    def make(occ):
+        wires = []
+        for z, turn in ((0.0, 0.0), (2.0, np.pi / 6)):
+            angles = turn + 2 * np.pi * np.arange(5) / 5
+            points = [occ.addPoint(np.cos(a), np.sin(a), z) for a in angles]
+            wires.append(occ.addWire([occ.addLine(points[k], points[(k + 1) % 5]) for k in range(5)]))
+        occ.addThruSections(wires, makeSolid=True, makeRuled=True)
+
+    write_solid(tmp_path / "twist.step", make)
+    refused(run_cli, tmp_path, "twist.step", "7 faces with (", "not one shape moved along a line", "docs/topologies.md")
 
 
 def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):

@@ -1,5 +1,6 @@
-"""A CAD solid that is a straight sweep as a block set (``meshgen.geometry.blocks``): its cap is
-cut into quadrilateral blocks, each swept along the translation from the first cap to the second.
+"""A CAD solid that is a sweep as a block set (``meshgen.geometry.blocks``): its cap is cut into
+quadrilateral blocks, each carried from the first cap to the second by the sweep's rigid motion
+(a translation, or a rotation about an axis: ``sweep_read.moved``).
 
 ``sweep_module(path)`` returns a block-set plugin module, as ``topology.topology_module`` does for
 a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pipe.py``:
@@ -11,9 +12,9 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   (a core whose sides bulge by ``BULGE``, corners at ``CORE`` of the way to four points a quarter
   of the loop apart, and four ring blocks); a loop of n sharp corners: midpoint subdivision, n
   quadrilaterals around the cap's centroid, each with one corner of the cap and two half sides;
-- each block's map is the Coons patch of its four sides in the cap's plane plus zeta times the
-  translation, so its outer faces are the linking faces' extrusions (exact for a straight sweep,
-  which ``sweep_read`` checks), and its ends lie on the caps;
+- each block's map is the Coons patch of its four sides in the cap's plane carried a share zeta
+  of the way along the motion, so its outer faces are the cap outline's sweep, which is the
+  linking faces (``sweep_read`` checks it), and its ends lie on the caps;
 - patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
 
 - a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
@@ -21,7 +22,7 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   midpoint-subdivided, so no block has a corner at a smooth joint;
 - a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them.
 
-Other caps with holes and solids that are no straight sweep are one GeometryError naming what was
+Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
 """
 
@@ -36,6 +37,7 @@ import numpy as np
 from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
+from meshgen.geometry.shapes.sweep_read import moved
 
 __all__ = ["BULGE", "CORE", "is_sweep_file", "sweep_module"]
 
@@ -245,7 +247,7 @@ def _ring_blocks(curves, faces, sharp):
 
 def sweep_module(path) -> types.ModuleType:
     """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
-    (path, size, modification time). GeometryError (one line) when the solid is no straight sweep
+    (path, size, modification time). GeometryError (one line) when the solid is no sweep
     this meshes."""
     path = Path(path)
     key = _key(path)
@@ -256,7 +258,7 @@ def sweep_module(path) -> types.ModuleType:
     if found["kind"] == "six":
         raise GeometryError(f"{summary}: one block, not a sweep")
     if found["kind"] != "sweep":
-        raise GeometryError(f"{summary}; it is no straight sweep ({found['reason']}): {TOPOLOGY_HINT}")
+        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
     names = found["names"]
     loop = found["curves"]
     curves = [_spline(c["fractions"], c["points"]) for c in loop]
@@ -268,7 +270,7 @@ def sweep_module(path) -> types.ModuleType:
     smooth_hole = bool(holes) and not any(not c["smooth"] for c in holes[0]) and len(holes[0]) in (1, 2, 4)
     if holes and not (smooth_hole and not any(sharp) and len(loop) in (1, 2, 4)):
         raise GeometryError(
-            f"{summary}; a straight sweep whose cap ({names[first]}) has a hole: only a smooth loop of 1, 2 or 4 curves "
+            f"{summary}; a sweep whose cap ({names[first]}) has a hole: only a smooth loop of 1, 2 or 4 curves "
             f"around a smooth hole of 1, 2 or 4 curves is cut into blocks yet: {TOPOLOGY_HINT}"
         )
     if holes:
@@ -301,7 +303,21 @@ def sweep_module(path) -> types.ModuleType:
             f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (sliding along a flat side "
             "would carry them past its smooth joint with an arc)",
         )
-    origin, frame, translation = found["origin"], found["frame"], found["translation"]
+    origin, frame, motion = found["origin"], found["frame"], found["motion"]
+    if motion["kind"] == "translation":
+        path_words = f"a straight sweep along ({', '.join(f'{v:.6g}' for v in motion['vector'])})"
+        cap_words = "planar, parallel, one shape"
+    else:
+        path_words = (
+            f"a sweep turning by {np.degrees(motion['angle']):.6g} deg about the axis through "
+            f"({', '.join(f'{v:.6g}' for v in motion['point'])}) along ({', '.join(f'{v:.6g}' for v in motion['axis'])})"
+        )
+        cap_words = "planar, one shape turned onto the other"
+        options = {"slide": False}
+        lines_extra = (
+            f"{path.name}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
+            "the line where two flat faces meet can pass a corner)",
+        )
     kinds = {name: default_patch_type(name) for name in names}
     block_patches = {}
     for name in blocks:
@@ -311,8 +327,8 @@ def sweep_module(path) -> types.ModuleType:
     size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
     lines = (
-        f"{path.name}: {found['summary']}: a straight sweep along ({', '.join(f'{v:.6g}' for v in translation)}); "
-        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): planar, parallel, one shape, every other face touches both",
+        f"{path.name}: {found['summary']}: {path_words}; "
+        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both",
         f"{path.name}: cap {names[first]}: {how}",
         f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
         *lines_extra,
@@ -321,7 +337,7 @@ def sweep_module(path) -> types.ModuleType:
     module = types.ModuleType(f"meshgen_sweep_{stem}")
     module.__file__ = str(path)
     module.name, module.dim = stem, 3
-    module.description = f"CAD solid {path.name}: a straight sweep of its cap {names[first]} ({len(blocks)} blocks)"
+    module.description = f"CAD solid {path.name}: a sweep of its cap {names[first]} ({len(blocks)} blocks)"
     module.params = {}
     module.blocks = tuple(blocks)
     module.dims_meaning = meaning
@@ -344,7 +360,7 @@ def sweep_module(path) -> types.ModuleType:
         """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
         points = np.asarray(points, dtype=float)
         xy = _coons(blocks[block], points[:, 0], points[:, 1])
-        return origin + xy @ frame + points[:, 2:3] * translation
+        return moved(motion, origin + xy @ frame, points[:, 2])
 
     def notes(block_set):
         return list(lines)

@@ -1,5 +1,7 @@
-"""A CAD solid read as a straight sweep (in the CAD process: gmsh, OpenCASCADE): two cap faces
-joined by linking faces, the second cap the first moved by one vector.
+"""A CAD solid read as a sweep (in the CAD process: gmsh, OpenCASCADE): two planar cap faces
+joined by linking faces, the second cap the first moved by a rigid motion, a translation (a
+straight sweep) or a rotation about an axis (a bend, a revolve), the linking faces the cap's
+outline carried along it (``moved``).
 
 ``read_sweep(path, content_hash)`` returns plain values only (they cross the CAD process's pipe):
 
@@ -8,9 +10,9 @@ joined by linking faces, the second cap the first moved by one vector.
     reason       why it is no sweep ("other" only)
     names        per CAD face, its patch name (the face's CAD name, else face1..faceN)
     volume, box  OCC's volume of the solid; its bounding box (2, 3)
-    caps         (first cap, second cap) face indices; the second is the first moved by ``translation`` (3,)
+    caps         (first cap, second cap) face indices; the second is the first carried by ``motion``
     origin, frame  the first cap's plane: a point (3,) and two orthonormal axes (2, 3), the frame's
-                 normal (frame[0] x frame[1]) along the translation
+                 normal (frame[0] x frame[1]) along the sweep
     centroid     the first cap's centre of area in the frame (2,)
     curves       the first cap's boundary loop, counterclockwise in the frame: per curve its points
                  (K, 2) in the frame at arc-length fractions ``fractions`` (K,), the index of the
@@ -28,7 +30,7 @@ import numpy as np
 from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.cad import gmsh_model
 
-__all__ = ["CURVE_SAMPLES", "SHARP_DEGREES", "read_sweep"]
+__all__ = ["CURVE_SAMPLES", "SHARP_DEGREES", "moved", "read_sweep"]
 
 CURVE_SAMPLES = 1025  # points per cap curve sent to meshgen (a cubic spline through them there)
 DENSE_SAMPLES = 8001  # parameter samples per curve for its arc length
@@ -64,14 +66,45 @@ def read_sweep(path, content_hash: str = "") -> dict:
     caps, reason = _find_caps(gmsh, faces, curves_of, size)
     if caps is None:
         return {**found, "kind": "other", "reason": reason}
-    first, second, translation = caps
-    return {**found, "kind": "sweep", "caps": (first, second), "translation": translation,
-            **_cap_loop(gmsh, faces, first, translation)}  # fmt: skip
+    first, second, motion = caps
+    return {**found, "kind": "sweep", "caps": (first, second), "motion": motion,
+            **_cap_loop(gmsh, faces, first, motion)}  # fmt: skip
+
+
+def moved(motion: dict, points: np.ndarray, t) -> np.ndarray:
+    """(N, 3) ``points`` (N, 3) carried a share ``t`` (scalar or (N,)) of the way along the sweep
+    ``motion``: {"kind": "translation", "vector" (3,)} or {"kind": "rotation", "point" (3,),
+    "axis" (3,) unit, "angle" radians} (Rodrigues' formula)."""
+    t = np.broadcast_to(np.asarray(t, dtype=float), points.shape[:1])[:, None]
+    if motion["kind"] == "translation":
+        return points + t * motion["vector"]
+    point, axis, angle = motion["point"], motion["axis"], t * motion["angle"]
+    v = points - point
+    return point + v * np.cos(angle) + np.cross(axis, v) * np.sin(angle) + (v @ axis)[:, None] * axis * (1 - np.cos(angle))
+
+
+def _motions(n_i, n_j, c_i, c_j, size):
+    """The rigid motions that could carry a cap (normal ``n_i``, centroid ``c_i``) onto the other:
+    the translation c_j - c_i when the normals are parallel, else rotations about the axis square
+    to both normals through the point that carries c_i to c_j, either way round."""
+    axis = np.cross(n_i, n_j)
+    if np.linalg.norm(axis) < 1e-6:
+        return [{"kind": "translation", "vector": c_j - c_i}]
+    axis /= np.linalg.norm(axis)
+    base = float(np.arctan2(np.cross(n_i, n_j) @ axis, n_i @ n_j))
+    found = []
+    for angle in (base, base - np.pi, base - 2 * np.pi, base + np.pi):
+        cos, sin = np.cos(angle), np.sin(angle)
+        rotation = cos * np.eye(3) + sin * np.cross(np.eye(3), axis) + (1 - cos) * np.outer(axis, axis)
+        point = np.linalg.lstsq(np.eye(3) - rotation, c_j - rotation @ c_i, rcond=None)[0]
+        if np.linalg.norm((np.eye(3) - rotation) @ point - (c_j - rotation @ c_i)) < 1e-9 * size:
+            found.append({"kind": "rotation", "point": point, "axis": axis, "angle": float(angle)})
+    return found
 
 
 def _find_caps(gmsh, faces, curves_of, size):
-    """((first, second, translation (3,)), "") for the first pair of faces that are caps of a
-    straight sweep, else (None, why no pair is)."""
+    """((first, second, motion), "") for the first pair of faces that are caps of a sweep by a
+    rigid motion (a translation or a rotation: ``moved``), else (None, why no pair is)."""
     planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
     areas = [gmsh.model.occ.getMass(2, face) for face in faces]
     why = "no two planar faces that every other face touches"
@@ -81,31 +114,26 @@ def _find_caps(gmsh, faces, curves_of, size):
         others = [k for k in range(len(faces)) if k not in (i, j)]
         if not all(curves_of[k] & curves_of[i] and curves_of[k] & curves_of[j] for k in others):
             continue
-        n_i, n_j = _normal(gmsh, faces[i]), _normal(gmsh, faces[j])
-        if np.linalg.norm(np.cross(n_i, n_j)) > 1e-6 or abs(areas[i] - areas[j]) > 1e-6 * max(areas[i], areas[j]):
-            why = f"faces {i + 1} and {j + 1} could be caps but are not parallel or not of one area"
-            continue
-        translation = np.array(gmsh.model.occ.getCenterOfMass(2, faces[j])) - np.array(
-            gmsh.model.occ.getCenterOfMass(2, faces[i])
-        )
-        if abs(float(translation @ n_i)) < 1e-6 * size:
+        if abs(areas[i] - areas[j]) > 1e-6 * max(areas[i], areas[j]):
+            why = f"faces {i + 1} and {j + 1} could be caps but are not of one area"
             continue
         if len(gmsh.model.occ.getCurveLoops(faces[i])[0]) > 2:
             return None, f"faces {i + 1} and {j + 1} are caps with more than one hole (not meshed yet)"
+        centres = [np.array(gmsh.model.occ.getCenterOfMass(2, faces[k])) for k in (i, j)]
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
-        if _distance(gmsh, faces[j], samples + translation) > TOLERANCE * size:
-            why = f"faces {i + 1} and {j + 1} are parallel but not one shape moved along a line"
-            continue
-        straight = True
-        for curve in curves_of[i]:
-            link = next(k for k in others if curve in curves_of[k])
-            points = _curve_points(gmsh, curve, 9)[1]
-            moved = np.concatenate([points + t * translation for t in (0.25, 0.5, 0.75)])
-            straight &= _distance(gmsh, faces[link], moved) <= TOLERANCE * size
-        if not straight:
-            why = f"faces {i + 1} and {j + 1} are caps of a curved or twisted sweep (only straight sweeps are meshed yet)"
-            continue
-        return (i, j, translation), ""
+        why = f"faces {i + 1} and {j + 1} are planar but not one shape moved along a line or turned about an axis"
+        for motion in _motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
+            if _outline_distance(gmsh, curves_of[j], moved(motion, samples, 1.0)) > TOLERANCE * size:
+                continue
+            swept = True
+            for curve in curves_of[i]:
+                link = next(k for k in others if curve in curves_of[k])
+                points = _curve_points(gmsh, curve, 9)[1]
+                between = np.concatenate([moved(motion, points, t) for t in (0.25, 0.5, 0.75)])
+                swept &= _distance(gmsh, faces[link], between) <= TOLERANCE * size
+            if swept:
+                return (i, j, motion), ""
+            why = f"faces {i + 1} and {j + 1} are caps of a sweep along another path (a twist, a helix, a spline)"
     return None, why
 
 
@@ -121,6 +149,16 @@ def _distance(gmsh, face: int, points: np.ndarray) -> float:
     return float(np.linalg.norm(closest - points, axis=1).max())
 
 
+def _outline_distance(gmsh, curves, points: np.ndarray) -> float:
+    """Largest distance (length) of ``points`` (N, 3) from the nearest of the CAD ``curves`` (a
+    face's outline: a planar face's own closest point is the untrimmed plane's)."""
+    nearest = np.full(len(points), np.inf)
+    for curve in curves:
+        closest = np.array(gmsh.model.getClosestPoint(1, curve, points.ravel().tolist())[0]).reshape(-1, 3)
+        nearest = np.minimum(nearest, np.linalg.norm(closest - points, axis=1))
+    return float(nearest.max())
+
+
 def _curve_points(gmsh, curve: int, count: int):
     """(arc-length fractions (count,), points (count, 3)) of a CAD curve from its start."""
     low, high = (float(b[0]) for b in gmsh.model.getParametrizationBounds(1, curve))
@@ -132,10 +170,12 @@ def _curve_points(gmsh, curve: int, count: int):
     return np.interp(at, t, length) / length[-1], points
 
 
-def _cap_loop(gmsh, faces, first: int, translation) -> dict:
+def _cap_loop(gmsh, faces, first: int, motion) -> dict:
     """The first cap's frame, centroid, boundary loop and holes' loops (module docstring)."""
     normal = _normal(gmsh, faces[first])
-    normal = normal if normal @ translation > 0 else -normal
+    centre = np.array(gmsh.model.occ.getCenterOfMass(2, faces[first]))
+    velocity = moved(motion, centre[None], 1e-3)[0] - centre  # the sweep's direction at the cap
+    normal = normal if normal @ velocity > 0 else -normal
     helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
     e1 = np.cross(helper, normal)
     e1 /= np.linalg.norm(e1)
