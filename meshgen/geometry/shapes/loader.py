@@ -1,7 +1,7 @@
 """``load_shape(path)``: a Geometry from a shape file, chosen by the file's extension.
 
     .step .stp .iges .igs .brep   a CAD solid bounded by six four-cornered faces (gmsh, OCC); a
-                                  straight sweep is a block set instead (``sweep_blocks``)
+                                  sweep is a block set instead (``sweep_blocks``)
     .stl .obj .ply                a closed triangulated surface (trimesh; ASCII STL solids)
     .yaml .yml                    a geometry file naming the surface file(s), faces and patches
 
@@ -37,7 +37,7 @@ FORMAT_HELP = (
     (
         "STEP, IGES, BREP",
         ".step .stp .iges .igs .brep",
-        "one solid bounded by six four-cornered faces, or a straight sweep (read by gmsh, OCC)",
+        "one solid bounded by six four-cornered faces, or a sweep (read by gmsh, OCC)",
     ),
     ("STL, OBJ, PLY", ".stl .obj .ply", "a closed manifold surface; patches from STL solids or sharp edges"),
     ("geometry file", ".yaml .yml", "a surface file or one file per patch, face assignment, patch names and types"),

@@ -16,6 +16,9 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   of the way along the motion, so its outer faces are the cap outline's sweep, which is the
   linking faces (``sweep_read`` checks it), and its ends lie on the caps;
 - patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
+- ``elliptic_options`` (passed on by ``meshgen.run.meshing``): a straight sweep is solved as its
+  cap's 2D mesh, extruded, whose sides slide unless a flat side joins an arc smoothly (sliding
+  would carry nodes past the joint: ``slide_section`` off); on a bend every boundary node stays.
 
 - a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
   curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
