@@ -265,7 +265,7 @@ def voxel_surface(cells):
     return vertices, triangles, np.concatenate([normals, normals])
 
 
-SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon")
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube")
 
 
 def write_sweep_solid(kind: str, path) -> float:
@@ -275,8 +275,9 @@ def write_sweep_solid(kind: str, path) -> float:
     faces z = 0 and z = 2 are the caps), ``pentagon`` (a regular pentagon of circumradius 1 moved
     1.5 along z), ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z), ``bend`` (a disk of
     radius 0.5 centred 2 from the z axis turned 90 degrees about it) or ``bent_pentagon`` (a regular
-    pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it). Returns
-    OCC's volume."""
+    pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it) or
+    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis). Returns OCC's
+    volume."""
     import gmsh
 
     started = not gmsh.isInitialized()
@@ -309,6 +310,8 @@ def write_sweep_solid(kind: str, path) -> float:
         solid = next(tag for dim, tag in extruded if dim == 3)
     elif kind == "wedge":
         solid = occ.addWedge(0, 0, 0, 1, 1, 2)
+    elif kind == "tube":
+        solid = occ.cut([(3, occ.addBox(0, 0, 0, 1, 1, 3))], [(3, occ.addBox(0.3, 0.3, 0, 0.4, 0.4, 3))])[0][0][1]
     elif kind == "bend":
         disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
         solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)

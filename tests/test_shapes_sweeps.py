@@ -1,7 +1,7 @@
 """CAD solids that are sweeps, built by gmsh and exported to STEP (tests/shape_helpers
 ``write_sweep_solid``: a cylinder, one with a coaxial hole, a box with one filleted edge, a
-pentagonal prism, a wedge, and two bends: a disk and a pentagon turned about an axis), meshed as
-block sets: each patch's nodes on its own CAD face (gmsh's
+pentagonal prism, a wedge, two bends: a disk and a pentagon turned about an axis, and a square
+tube), meshed as block sets: each patch's nodes on its own CAD face (gmsh's
 closest point), the volume against OCC's, checkMesh on the OpenFOAM case, and the cylinder
 against the built-in pipe at the same counts."""
 
@@ -20,9 +20,9 @@ gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python packag
 
 # about 20 cells across each cap (cylinder: N + 2M; hole: 2M + the hole; fillet: 2M + 2N; n-gons: 2N)
 DIMS = {"cylinder": (10, 5, 6), "hole": (10, 5, 6), "fillet": (7, 3, 6), "pentagon": (10, 1, 6), "wedge": (10, 1, 6)}
-DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12)}
-FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7}  # CAD faces
-BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5}
+DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6)}
+FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7, "tube": 10}
+BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5, "tube": 4}
 
 
 @pytest.fixture(scope="module")
@@ -80,6 +80,16 @@ def test_a_swept_solid_meshes_on_its_cad_faces(solids, kind, method):
     total = sum(enclosed_volume(X) for X in mesh.blocks)
     assert abs(total - volume) < 1e-2 * volume
     gmsh.model.remove()
+
+
+@pytest.mark.parametrize("kind,dims", [("fillet", (14, 6, 4)), ("tube", (30, 8, 4))])
+def test_ring_caps_stay_unfolded_when_finer(solids, kind, dims):
+    """Ring blocks at corners and smooth joints: with the cap's flat sides sliding, the elliptic
+    folded 8 (fillet) and 32 (tube) cells at these counts; their boundary nodes now stay."""
+    mesh = meshgen.mesh(str(solids[kind][0]), dims, method="elliptic")
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    assert any("boundary nodes stay" in line for line in mesh.notes)
 
 
 def test_the_caps_are_the_faces_across_the_sweep(solids):

@@ -17,13 +17,15 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   linking faces (``sweep_read`` checks it), and its ends lie on the caps;
 - patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
 - ``elliptic_options`` (passed on by ``meshgen.run.meshing``): a straight sweep is solved as its
-  cap's 2D mesh, extruded, whose sides slide unless a flat side joins an arc smoothly (sliding
-  would carry nodes past the joint: ``slide_section`` off); on a bend every boundary node stays.
+  cap's 2D mesh, extruded, whose flat sides slide, except in ring blocks at sharp corners or
+  smooth joints (a filleted cap, a square tube: sliding carries nodes past the corner and folds
+  cells, ``slide_section`` off); on a bend every boundary node stays.
 
 - a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
   curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
   midpoint-subdivided, so no block has a corner at a smooth joint;
-- a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them.
+- a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them; a
+  loop of n sharp corners around a hole of as many (a square tube): a ring of n blocks.
 
 Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
@@ -167,32 +169,43 @@ def _quarters(curves):
     return [(k // per, (k % per) / per, (k % per + 1) / per) for k in range(4)]
 
 
-def _annulus_blocks(curves, faces, hole, hole_faces):
-    """Four blocks (``ring0`` .. ``ring3``, xi from the hole outwards, eta counterclockwise)
-    between the outer loop and the hole's, each cut into quarters; the hole's cuts turned to
-    face the outer ones (a single closed curve is cut anywhere, else at its curves' ends)."""
-    outer = [_piece(curves[c], a, b) for c, a, b in _quarters(curves)]
-    cuts = np.array([w(np.zeros(1))[0] for w in outer])
-    centre = np.mean(np.concatenate([h(np.linspace(0.0, 1.0, 65)[:-1]) for h in hole]), axis=0)
-    if len(hole) == 1:  # the hole's point in the direction of the first outer cut
+def _sides(curves, smooth: bool):
+    """A loop's sides for a ring: (piece, curve index) per quarter of a smooth loop of 1, 2 or 4
+    curves, else per curve (a loop of sharp corners)."""
+    if smooth:
+        return [(_piece(curves[c], a, b), c) for c, a, b in _quarters(curves)]
+    return [(curve, k) for k, curve in enumerate(curves)]
+
+
+def _annulus_blocks(curves, faces, hole, hole_faces, smooth: bool):
+    """A ring of blocks (``ring0``.., xi from the hole outwards, eta counterclockwise) between the
+    outer loop and the hole's, both smooth (cut into quarters) or both of n sharp corners (one
+    block per side); the hole's cuts turned to face the outer ones (a single smooth closed curve is
+    cut anywhere, else at its curves' ends)."""
+    outer = _sides(curves, smooth)
+    n = len(outer)
+    cuts = np.array([w(np.zeros(1))[0] for w, _ in outer])
+    if smooth and len(hole) == 1:  # the hole's point in the direction of the first outer cut
+        centre = np.mean(hole[0](np.linspace(0.0, 1.0, 65)[:-1]), axis=0)
         s = np.linspace(0.0, 1.0, 4097)
         along = hole[0](s) - centre
         toward = (cuts[0] - centre) / np.linalg.norm(cuts[0] - centre)
         start = float(s[int(np.argmax(along @ toward / np.linalg.norm(along, axis=1)))])
         closed = hole[0]
         inner = [(lambda t, a=start + k / 4: closed(np.mod(a + 0.25 * np.asarray(t, dtype=float), 1.0)), 0) for k in range(4)]
-    else:
-        pieces = _quarters(hole)
-        firsts = np.array([hole[c](np.array([a]))[0] for c, a, _ in pieces])
-        shift = int(np.argmin(np.linalg.norm(firsts - cuts[0], axis=1)))
-        inner = [(_piece(hole[c], a, b), c) for c, a, b in (pieces[(k + shift) % 4] for k in range(4))]
+    else:  # the turn of the hole's sides that puts their corners nearest the outer ones
+        pieces = _sides(hole, smooth)
+        firsts = np.array([w(np.zeros(1))[0] for w, _ in pieces])
+        gaps = [np.linalg.norm(np.roll(firsts, -shift, axis=0) - cuts, axis=1).sum() for shift in range(n)]
+        shift = int(np.argmin(gaps))
+        inner = [pieces[(k + shift) % n] for k in range(n)]
     blocks, patches, interfaces = {}, {}, []
-    for k in range(4):
+    for k in range(n):
         name, (side, curve) = f"ring{k}", inner[k]
         a0, a1 = side(np.zeros(1))[0], side(np.ones(1))[0]
-        blocks[name] = (side, outer[k], _line(a0, cuts[k]), _line(a1, cuts[(k + 1) % 4]))
-        patches[name] = {"xi0": hole_faces[curve], "xi1": faces[_quarters(curves)[k][0]]}
-        interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
+        blocks[name] = (side, outer[k][0], _line(a0, cuts[k]), _line(a1, cuts[(k + 1) % n]))
+        patches[name] = {"xi0": hole_faces[curve], "xi1": faces[outer[k][1]]}
+        interfaces.append((name, "eta1", f"ring{(k + 1) % n}", "eta0"))
     return blocks, patches, interfaces
 
 
@@ -268,30 +281,40 @@ def sweep_module(path) -> types.ModuleType:
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
     first, second = found["caps"]
-    options, lines_extra = {}, ()
+    options, lines_extra, fixed = {}, (), True
     holes = found.get("holes", [])
-    smooth_hole = bool(holes) and not any(not c["smooth"] for c in holes[0]) and len(holes[0]) in (1, 2, 4)
-    if holes and not (smooth_hole and not any(sharp) and len(loop) in (1, 2, 4)):
+    hole_sharp = [not c["smooth"] for c in holes[0]] if holes else []
+    both_smooth = not any(sharp) and not any(hole_sharp) and len(loop) in (1, 2, 4) and len(hole_sharp) in (1, 2, 4)
+    both_sharp = all(sharp) and all(hole_sharp) and len(loop) == len(hole_sharp)
+    if holes and not (both_smooth or both_sharp):
         raise GeometryError(
             f"{summary}; a sweep whose cap ({names[first]}) has a hole: only a smooth loop of 1, 2 or 4 curves "
-            f"around a smooth hole of 1, 2 or 4 curves is cut into blocks yet: {TOPOLOGY_HINT}"
+            f"around a smooth hole of 1, 2 or 4 curves, or loops of as many sharp corners, are cut into blocks yet: "
+            f"{TOPOLOGY_HINT}"
         )
     if holes:
         hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
-        blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]])
-        how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
-        meaning = "N M A: cells along a quarter of the cap's boundary, across the ring, along the sweep"
+        blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]], both_smooth)
+        if both_smooth:
+            how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
+            meaning = "N M A: cells along a quarter of the cap's boundary, across the ring, along the sweep"
+        else:
+            how = f"a loop of {len(loop)} sharp corners around a hole of as many: a ring of {len(loop)} blocks, one per side"
+            meaning = "N M A: cells along a side of the cap, across the ring, along the sweep"
         counts = {name: (1, 0, 2) for name in blocks}
+        fixed = not both_smooth
     elif not any(sharp) and len(loop) in (1, 2, 4):
         blocks, sides_of, interfaces = _ogrid_blocks(curves, faces)
         how = f"a loop of {len(loop)} curve(s) joining smoothly: an O-grid of 5 blocks (core, ring0..ring3) like the pipe's"
         meaning = "N M A: cells along a quarter of the cap's boundary (and across the core), across the ring, along the sweep"
         counts = {"core": (0, 0, 2), **{f"ring{k}": (1, 0, 2) for k in range(4)}}
+        fixed = False
     elif all(sharp):
         blocks, sides_of, interfaces = _midpoint_blocks(curves, faces)
         how = f"{len(loop)} sharp corners: midpoint subdivision into {len(loop)} blocks (quad0..) around its centroid"
         meaning = "N M A: cells along half a side of the cap (and from its centroid to a side), not used, along the sweep"
         counts = {name: (0, 0, 2) for name in blocks}
+        fixed = False
     else:
         blocks, sides_of, interfaces = _ring_blocks(curves, faces, sharp)
         turns = sum(not s for s in sharp)
@@ -301,10 +324,11 @@ def sweep_module(path) -> types.ModuleType:
         )
         meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
         counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
+    if fixed:  # ring blocks at sharp corners or smooth joints
         options = {"slide_section": False}
         lines_extra = (
-            f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (sliding along a flat side "
-            "would carry them past its smooth joint with an arc)",
+            f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
+            "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
         )
     origin, frame, motion = found["origin"], found["frame"], found["motion"]
     if motion["kind"] == "translation":
@@ -331,7 +355,8 @@ def sweep_module(path) -> types.ModuleType:
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
     lines = (
         f"{path.name}: {found['summary']}: {path_words}; "
-        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both",
+        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both; "
+        f"the outline carried along lies on the linking faces to {motion['gap']:.1e} of the part's size",
         f"{path.name}: cap {names[first]}: {how}",
         f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
         *lines_extra,

@@ -74,7 +74,9 @@ def read_sweep(path, content_hash: str = "") -> dict:
 def moved(motion: dict, points: np.ndarray, t) -> np.ndarray:
     """(N, 3) ``points`` (N, 3) carried a share ``t`` (scalar or (N,)) of the way along the sweep
     ``motion``: {"kind": "translation", "vector" (3,)} or {"kind": "rotation", "point" (3,),
-    "axis" (3,) unit, "angle" radians} (Rodrigues' formula)."""
+    "axis" (3,) unit, "angle" radians} (Rodrigues' formula); read_sweep's also has "gap", how far
+    (relative to the solid's size) the cap's outline carried along it came from the second cap's
+    outline and the linking faces."""
     t = np.broadcast_to(np.asarray(t, dtype=float), points.shape[:1])[:, None]
     if motion["kind"] == "translation":
         return points + t * motion["vector"]
@@ -123,16 +125,16 @@ def _find_caps(gmsh, faces, curves_of, size):
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
         why = f"faces {i + 1} and {j + 1} are planar but not one shape moved along a line or turned about an axis"
         for motion in _motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
-            if _outline_distance(gmsh, curves_of[j], moved(motion, samples, 1.0)) > TOLERANCE * size:
+            gaps = [_outline_distance(gmsh, curves_of[j], moved(motion, samples, 1.0))]
+            if gaps[0] > TOLERANCE * size:
                 continue
-            swept = True
             for curve in curves_of[i]:
                 link = next(k for k in others if curve in curves_of[k])
                 points = _curve_points(gmsh, curve, 9)[1]
                 between = np.concatenate([moved(motion, points, t) for t in (0.25, 0.5, 0.75)])
-                swept &= _distance(gmsh, faces[link], between) <= TOLERANCE * size
-            if swept:
-                return (i, j, motion), ""
+                gaps.append(_distance(gmsh, faces[link], between))
+            if max(gaps) <= TOLERANCE * size:
+                return (i, j, {**motion, "gap": max(gaps) / size}), ""
             why = f"faces {i + 1} and {j + 1} are caps of a sweep along another path (a twist, a helix, a spline)"
     return None, why
 
