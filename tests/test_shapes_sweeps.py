@@ -197,6 +197,23 @@ def test_a_twisted_sweep_is_refused(run_cli, tmp_path):
     refused(run_cli, tmp_path, "twist.step", "7 faces with (", "not one shape moved along a line", "docs/topologies.md")
 
 
+def test_a_concave_cap_that_would_fold_is_refused(run_cli, tmp_path):
+    """An L-shaped prism: midpoint subdivision around the centroid makes the block at the
+    re-entrant corner fold, found on the cap's blocks before anything is meshed."""
+    write_solid(
+        tmp_path / "ell.step", lambda occ: occ.fuse([(3, occ.addBox(0, 0, 0, 2, 1, 1))], [(3, occ.addBox(0, 0, 0, 1, 2, 1))])
+    )
+    refused(
+        run_cli,
+        tmp_path,
+        "ell.step",
+        "8 faces with (",
+        "midpoint subdivision into 6 blocks",
+        "folds in block(s) quad",
+        "docs/topologies.md",
+    )
+
+
 def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):
     def make(occ):
         body = occ.addCylinder(0, 0, 0, 0, 0, 1, 1.0)

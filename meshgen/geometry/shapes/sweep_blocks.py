@@ -261,6 +261,19 @@ def _ring_blocks(curves, faces, sharp):
     return blocks, patches, interfaces
 
 
+def _folded(blocks) -> list[str]:
+    """The blocks whose cap map folds: a cell of its 16 x 16 sample grid with no positive area."""
+    t = np.linspace(0.0, 1.0, 17)
+    xi, eta = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+    folded = []
+    for name, sides in blocks.items():
+        p = _coons(sides, xi, eta).reshape(17, 17, 2)
+        d1, d2 = p[1:, 1:] - p[:-1, :-1], p[:-1, 1:] - p[1:, :-1]  # the cells' diagonals
+        if not (d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0).all():
+            folded.append(name)
+    return folded
+
+
 def sweep_module(path) -> types.ModuleType:
     """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
     (path, size, modification time). GeometryError (one line) when the solid is no sweep
@@ -329,6 +342,11 @@ def sweep_module(path) -> types.ModuleType:
         lines_extra = (
             f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
             "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
+        )
+    folded = _folded(blocks)
+    if folded:
+        raise GeometryError(
+            f"{summary}; its cap {names[first]} ({how}) folds in block(s) {', '.join(folded)} (a concave cap?): {TOPOLOGY_HINT}"
         )
     origin, frame, motion = found["origin"], found["frame"], found["motion"]
     if motion["kind"] == "translation":
