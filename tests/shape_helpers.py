@@ -263,3 +263,75 @@ def voxel_surface(cells):
     quads = inverse.reshape(-1, 4)
     triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     return vertices, triangles, np.concatenate([normals, normals])
+
+
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube")
+
+
+def write_sweep_solid(kind: str, path) -> float:
+    """A swept solid built with gmsh's OCC kernel, written to ``path`` (.step): ``cylinder``
+    (radius 0.5, length 2 along z), ``hole`` (that cylinder with a coaxial hole of radius 0.2),
+    ``fillet`` (a 1 x 1 x 2 box whose edge along z at x = y = 0 is filleted with radius 0.3: its
+    faces z = 0 and z = 2 are the caps), ``pentagon`` (a regular pentagon of circumradius 1 moved
+    1.5 along z), ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z), ``bend`` (a disk of
+    radius 0.5 centred 2 from the z axis turned 90 degrees about it) or ``bent_pentagon`` (a regular
+    pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it) or
+    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis). Returns OCC's
+    volume."""
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    previous = gmsh.model.getCurrent() if not started else None
+    gmsh.model.add(f"sweep-{kind}-{path.name}")
+    occ = gmsh.model.occ
+    if kind in ("cylinder", "hole"):
+        solid = occ.addCylinder(0, 0, 0, 0, 0, 2, 0.5)
+        if kind == "hole":
+            solid = occ.cut([(3, solid)], [(3, occ.addCylinder(0, 0, 0, 0, 0, 2, 0.2))])[0][0][1]
+    elif kind == "fillet":
+        box = occ.addBox(0, 0, 0, 1, 1, 2)
+        occ.synchronize()
+        edge = next(
+            tag
+            for _, tag in gmsh.model.getBoundary(
+                gmsh.model.getBoundary([(3, box)], oriented=False), combined=False, oriented=False
+            )
+            if np.allclose(occ.getBoundingBox(1, abs(tag)), (0, 0, 0, 0, 0, 2), atol=1e-6)
+        )
+        solid = occ.fillet([box], [abs(edge)], [0.3])[0][1]
+    elif kind == "pentagon":
+        angles = np.pi / 2 + 2 * np.pi * np.arange(5) / 5
+        points = [occ.addPoint(np.cos(a), np.sin(a), 0) for a in angles]
+        loop = occ.addCurveLoop([occ.addLine(points[k], points[(k + 1) % 5]) for k in range(5)])
+        extruded = occ.extrude([(2, occ.addPlaneSurface([loop]))], 0, 0, 1.5)
+        solid = next(tag for dim, tag in extruded if dim == 3)
+    elif kind == "wedge":
+        solid = occ.addWedge(0, 0, 0, 1, 1, 2)
+    elif kind == "tube":
+        solid = occ.cut([(3, occ.addBox(0, 0, 0, 1, 1, 3))], [(3, occ.addBox(0.3, 0.3, 0, 0.4, 0.4, 3))])[0][0][1]
+    elif kind == "bend":
+        disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
+        solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)
+    elif kind == "bent_pentagon":
+        angles = np.pi / 2 + 2 * np.pi * np.arange(5) / 5
+        points = [occ.addPoint(2 + 0.5 * np.cos(a), 0, 0.5 * np.sin(a)) for a in angles]
+        loop = occ.addCurveLoop([occ.addLine(points[k], points[(k + 1) % 5]) for k in range(5)])
+        turned = occ.revolve([(2, occ.addPlaneSurface([loop]))], 0, 0, 0, 0, 0, 1, 2 * np.pi / 3)
+        solid = next(tag for dim, tag in turned if dim == 3)
+    else:
+        raise ValueError(kind)
+    occ.synchronize()
+    volume = occ.getMass(3, solid)
+    from meshgen.geometry.shapes.cad import quiet_stdout
+
+    with quiet_stdout():
+        gmsh.write(str(path))
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    elif previous:
+        gmsh.model.setCurrent(previous)
+    return volume

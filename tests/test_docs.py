@@ -144,11 +144,14 @@ def run_shell(command: str, folder: Path) -> tuple[int, str]:
 
 def shape_files(folder: Path) -> None:
     """The files docs/shapes-from-files.md assumes its reader has: a CAD solid ``part.step`` (a
-    twisted loft by the OCC kernel of gmsh) and a multi-solid ASCII STL ``duct.stl`` (a bent duct)."""
+    twisted loft by the OCC kernel of gmsh), swept solids ``cylinder.step`` and ``fillet.step``
+    (a box with one filleted edge) and a multi-solid ASCII STL ``duct.stl`` (a bent duct)."""
     pytest.importorskip("gmsh")
-    from shape_helpers import duct_surface, write_ascii_stl, write_twisted_loft
+    from shape_helpers import duct_surface, write_ascii_stl, write_sweep_solid, write_twisted_loft
 
     write_twisted_loft(folder / "part.step")
+    write_sweep_solid("cylinder", folder / "cylinder.step")
+    write_sweep_solid("fillet", folder / "fillet.step")
     write_ascii_stl(folder / "duct.stl", *duct_surface())
 
 

@@ -57,7 +57,7 @@ def geometries(ctx, as_json):
     console = Console()
     console.print(table)
 
-    formats = Table(title="shape files (-g FILE): a block bounded by six four-cornered faces")
+    formats = Table(title="shape files (-g FILE): a block bounded by six four-cornered faces, or a CAD sweep")
     for column in ("kind", "extensions", "what it must hold"):
         formats.add_column(column)
     for row in FORMAT_HELP:

@@ -36,6 +36,7 @@ from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
 from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
 from meshgen.geometry.shapes.loader import is_shape_file
+from meshgen.geometry.shapes.sweep_blocks import is_sweep_file
 from meshgen.geometry.surface import check_surface_path, grid_triangles
 from meshgen.methods.tfi import tfi
 from meshgen.run.atomic import atomic_write
@@ -121,6 +122,8 @@ def block_spec(geometry) -> str | None:
             return None
     else:
         spec = str(geometry)
+    if is_sweep_file(spec):  # a CAD solid swept from a cap: a block set
+        return spec
     if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml"):
         return None  # a shape file is one block (a topology file, .yaml too, is a block set)
     return spec if is_multiblock(spec) else None
@@ -137,6 +140,8 @@ def measured_block_set(spec: str, params: dict | None = None, dims=None) -> Bloc
 
 def is_multiblock(spec: str) -> bool:
     """Whether the geometry ``spec`` (name or plugin path) declares blocks (a shape file never does)."""
+    if isinstance(spec, str) and is_sweep_file(spec):
+        return True
     if not isinstance(spec, str) or is_shape_file(spec):
         return False
     module, _ = plugin_module(spec)

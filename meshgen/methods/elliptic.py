@@ -237,6 +237,7 @@ def elliptic_blocks(
     slide: bool = True,
     initial=None,
     as_extrusion: bool = True,
+    slide_section: bool = True,
 ):
     """Winslow mesh of the block set ``block_set`` (``meshgen.geometry.blocks.BlockSet``): (list of
     node arrays, one per block, interface nodes identical in every block; info dict as
@@ -256,13 +257,16 @@ def elliptic_blocks(
     (``solve_winslow``, its stopping rule relative to the block set's length): the same mesh.
     ``as_extrusion`` (default on): an extruded set (``meshgen.geometry.extrusion``) started from
     its TFI with its flat caps sliding is solved as its 2D section and extruded, the fixed point
-    of its 3D equations (design notes §20); off, the 3D equations are solved."""
+    of its 3D equations (design notes §20); off, the 3D equations are solved. ``slide_section``
+    (default on): that section's flat sides slide too; off, its boundary nodes stay (a swept CAD
+    cap whose straight side joins an arc smoothly: sliding would carry nodes past the joint)."""
     tol = DEFAULT_TOL if tol is None else tol
     max_cycles = MAX_CYCLES if max_iter is None else max_iter
     start = time.perf_counter()
     extrusion = extrusion_of(block_set) if as_extrusion and slide and initial is None and block_set.dim == 3 else None
     if extrusion is not None:
-        planes, info = elliptic_blocks(section_of(block_set, extrusion), tol=tol, max_iter=max_iter, progress=progress)
+        section = section_of(block_set, extrusion)
+        planes, info = elliptic_blocks(section, tol=tol, max_iter=max_iter, progress=progress, slide=slide_section)
         Xs = extrude(extrusion, planes, block_set.coords[0][2])
         solver = info.get("solver", "the one-block solve")
         info = {**info, "solver": f"the 2D section's elliptic mesh, extruded ({solver})", "extruded": True}

@@ -15,7 +15,8 @@ interfaces as interior faces, the block set's boundary deviation).
 Two optional plugin hooks: ``mesh_elliptic(block_set, tol, max_iter, progress) -> (Xs, info)``
 makes the plugin's ``elliptic`` mesh in place of ``elliptic_blocks`` (the airfoil's: near-wall
 layers marched, the rest solved), and ``notes(block_set) -> [lines]`` adds lines said before the
-work (the airfoil's wall spacing).
+work (the airfoil's wall spacing); a dict ``elliptic_options`` is passed on to the elliptic call
+(a swept CAD solid's ``slide_section``).
 """
 
 from __future__ import annotations
@@ -228,8 +229,10 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
             elif method == "neural":
                 Xs, info = _neural(request, block_set, model, callback)
             else:
-                elliptic = getattr(plugin_module(spec)[0], "mesh_elliptic", None) or elliptic_blocks
-                Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
+                module = plugin_module(spec)[0]
+                elliptic = getattr(module, "mesh_elliptic", None) or elliptic_blocks
+                options = getattr(module, "elliptic_options", {})  # e.g. a swept CAD cap's: slide_section
+                Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback, **options)
             timings.append(time.perf_counter() - start)
     if request.first_cell:
         asked = parse_first_cell(request.first_cell, block_set)

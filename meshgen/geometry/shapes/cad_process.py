@@ -34,11 +34,12 @@ from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
 from meshgen.geometry.shapes.cad import read_cad_block
 from meshgen.geometry.shapes.faces import BoundaryPieces
+from meshgen.geometry.shapes.sweep_read import read_sweep
 from meshgen.run.limits import cad_read_bytes
 from meshgen.run.resources import available_memory
 from meshgen.run.signals import TERMINATING_SIGNALS
 
-__all__ = ["ContainedCadBlock", "cad_block", "close_cad_process"]
+__all__ = ["ContainedCadBlock", "cad_block", "cad_sweep", "close_cad_process"]
 
 PARENT_CHECK_SECONDS = 0.5  # how often a waiting parent checks that the child lives
 
@@ -69,6 +70,13 @@ def cad_block(path, given_faces: dict | None = None, content_hash: str = "", giv
     pieces = _RemotePieces(faces, edges, corners, reflect_eta=reflect, content_hash=content_hash, what=str(path))
     pieces.load = load
     return ContainedCadBlock(names, assignment, pieces, volume, face_tags, box)
+
+
+def cad_sweep(path, content_hash: str = "") -> dict:
+    """The CAD file's solid seen as a straight sweep (``sweep_read.read_sweep``: plain values), read
+    in the CAD process; GeometryError for anything wrong with the file, its crash included."""
+    path = Path(path)
+    return _request(path, ("sweep", (os.getcwd(), str(path), None, content_hash, None), None, None))
 
 
 class _RemotePieces(BoundaryPieces):
@@ -238,7 +246,17 @@ def _serve(connection, parent_end) -> None:
         while True:
             kind, load, name, points = connection.recv()
             try:
-                block = blocks.get(_key(load))
+                block = blocks.get(_key(load)) if kind != "sweep" else None
+                if kind == "sweep":
+                    folder, path, _, content_hash, _ = load
+                    os.chdir(folder)
+                    _limit_memory(cad_read_bytes(os.stat(path).st_size))
+                    try:
+                        answer = ("ok", read_sweep(path, content_hash))
+                    finally:
+                        _limit_memory(int(available_memory()))
+                    connection.send(answer)
+                    continue
                 if block is None:
                     folder, path, faces, content_hash, corners = load
                     os.chdir(folder)  # the parent's working folder now, for a relative path

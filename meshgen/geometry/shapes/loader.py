@@ -1,6 +1,7 @@
 """``load_shape(path)``: a Geometry from a shape file, chosen by the file's extension.
 
-    .step .stp .iges .igs .brep   a CAD solid bounded by six four-cornered faces (gmsh, OCC)
+    .step .stp .iges .igs .brep   a CAD solid bounded by six four-cornered faces (gmsh, OCC); a
+                                  sweep is a block set instead (``sweep_blocks``)
     .stl .obj .ply                a closed triangulated surface (trimesh; ASCII STL solids)
     .yaml .yml                    a geometry file naming the surface file(s), faces and patches
 
@@ -33,7 +34,11 @@ from meshgen.run.inputs import InputError, check_input_file
 __all__ = ["FORMAT_HELP", "is_shape_file", "load_shape"]
 
 FORMAT_HELP = (
-    ("STEP, IGES, BREP", ".step .stp .iges .igs .brep", "one solid bounded by six four-cornered faces (read by gmsh, OCC)"),
+    (
+        "STEP, IGES, BREP",
+        ".step .stp .iges .igs .brep",
+        "one solid bounded by six four-cornered faces, or a sweep (read by gmsh, OCC)",
+    ),
     ("STL, OBJ, PLY", ".stl .obj .ply", "a closed manifold surface; patches from STL solids or sharp edges"),
     ("geometry file", ".yaml .yml", "a surface file or one file per patch, face assignment, patch names and types"),
 )

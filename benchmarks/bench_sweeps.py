@@ -1,0 +1,149 @@
+"""Swept CAD solids: STEP files of straight sweeps meshed as block sets.
+
+    python benchmarks/bench_sweeps.py [--quick] [--json FILE]
+
+One row per solid (each built by gmsh's OCC kernel and exported to STEP, as the tests build
+theirs: tests/shape_helpers.py ``write_sweep_solid``): ``cylinder`` (radius 0.5, length 2),
+``hole`` (that cylinder with a coaxial hole of radius 0.2), ``fillet`` (a 1 x 1 x 2 box with one
+edge filleted, radius 0.3), ``pentagon`` (a regular pentagonal prism), ``wedge`` (a triangular
+prism), ``bend`` (a disk of radius 0.5 turned 90 degrees about an axis 2 away), ``bent_pentagon``
+(a pentagon turned 120 degrees), ``tube`` (a square tube, 1 x 1 less 0.4 x 0.4, 3 long), each at about 20 cells across its cap (--quick: about 10), by TFI and by the elliptic
+method. Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
+distance of a patch node from its own CAD face (gmsh's closest point) over the bounding-box
+diagonal L, the mesh volume's relative difference from OCC's, checkMesh's verdict on the OpenFOAM
+case (None without OpenFOAM), and seconds (reading the file and meshing). The cylinder also gets
+the built-in pipe's worst minimum angle at the same counts.
+
+Targets: 0 inverted, scaled Jacobian >= 0.4, boundary distance <= 1e-6 L, volume error <= 1e-2,
+checkMesh OK; the cylinder's worst minimum angle (elliptic) >= 76 deg and the pipe's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from shape_helpers import SWEEP_SOLIDS, enclosed_volume, write_sweep_solid  # noqa: E402
+
+from meshgen.geometry import cube  # noqa: E402
+from meshgen.run.request import mesh  # noqa: E402
+
+DIMS = {"cylinder": (10, 5, 20), "hole": (10, 5, 20), "fillet": (7, 3, 20), "pentagon": (10, 1, 20), "wedge": (10, 1, 20)}
+DIMS |= {"bend": (10, 5, 20), "bent_pentagon": (10, 1, 20), "tube": (20, 6, 20)}
+QUICK_DIMS = {"cylinder": (5, 3, 8), "hole": (5, 3, 8), "fillet": (4, 2, 8), "pentagon": (5, 1, 8), "wedge": (5, 1, 8)}
+QUICK_DIMS |= {"bend": (5, 3, 8), "bent_pentagon": (5, 1, 8), "tube": (10, 3, 8)}
+
+
+def patch_distance(path: Path, made) -> tuple[float, float]:
+    """(largest distance of a patch node from its own CAD face, bounding-box diagonal L)."""
+    import gmsh
+
+    if not gmsh.isInitialized():
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add(f"bench-{path.name}")
+    gmsh.model.occ.importShapes(str(path))
+    gmsh.model.occ.synchronize()
+    faces = [abs(t) for d, t in gmsh.model.getBoundary(gmsh.model.getEntities(3), oriented=False) if d == 2]
+    box = np.array(gmsh.model.getBoundingBox(-1, -1)).reshape(2, 3)
+    worst = 0.0
+    for (block, face_name), (name, _) in made.geometry.patches.items():
+        face = cube.face_named(face_name, 3)
+        nodes = np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3)
+        tag = faces[int(name.removeprefix("face")) - 1]
+        closest = np.array(gmsh.model.getClosestPoint(2, tag, nodes.ravel().tolist())[0]).reshape(-1, 3)
+        worst = max(worst, float(np.linalg.norm(closest - nodes, axis=1).max()))
+    gmsh.model.remove()
+    return worst, float(np.linalg.norm(box[1] - box[0]))
+
+
+def check_mesh_ok(made, folder: Path):
+    """checkMesh's verdict on the mesh's OpenFOAM case, or None without OpenFOAM."""
+    from openfoam_helpers import check_mesh, missing_reason
+
+    if missing_reason() is not None:
+        return None
+    case = folder / "case"
+    made.write(case, "openfoam", quality=False)
+    return bool(check_mesh(case)["ok"])
+
+
+def bench_solid(kind: str, folder: Path, dims, method: str) -> dict:
+    path = folder / f"{kind}.step"
+    volume = write_sweep_solid(kind, path)
+    start = time.perf_counter()
+    made = mesh(str(path), dims, method=method)
+    seconds = time.perf_counter() - start
+    report = made.report()
+    distance, length = patch_distance(path, made)
+    total = sum(enclosed_volume(X) for X in made.blocks)
+    with tempfile.TemporaryDirectory(dir=folder) as scratch:
+        ok = check_mesh_ok(made, Path(scratch))
+    return {
+        "dims": list(dims),
+        "blocks": len(made.blocks),
+        "cells": int(sum(np.prod(np.array(X.shape[:3]) - 1) for X in made.blocks)),
+        "inverted": int(report["inverted"]["count"]),
+        "scaled_jacobian_min": float(report["metrics"]["scaled_jacobian"]["min"]),
+        "min_angle_min": float(report["metrics"]["min_angle"]["min"]),
+        "boundary_distance_max_rel": distance / length,
+        "volume_rel_error": abs(total - volume) / volume,
+        "checkmesh_ok": ok,
+        "seconds": seconds,
+    }
+
+
+def run(quick: bool = False) -> dict:
+    """Rows ``sweep_<solid>`` -> {"tfi": figures, "elliptic": figures} (module docstring); the
+    cylinder's also ``pipe_min_angle_min`` (the built-in pipe's, elliptic, same counts)."""
+    try:
+        import gmsh  # noqa: F401
+    except ImportError:
+        print("sweeps: skipped, the gmsh Python package is not installed", flush=True)
+        return {}
+    results = {}
+    dims_of = QUICK_DIMS if quick else DIMS
+    with tempfile.TemporaryDirectory() as folder:
+        os.environ["MESHGEN_CACHE_DIR"] = str(Path(folder) / "cache")
+        for kind in SWEEP_SOLIDS:
+            row = results[f"sweep_{kind}"] = {}
+            for method in ("tfi", "elliptic"):
+                m = row[method] = bench_solid(kind, Path(folder), dims_of[kind], method)
+                print(
+                    f"sweep_{kind:9s} {method:8s} {'x'.join(map(str, m['dims']))}  {m['blocks']:2d} blocks  inverted "
+                    f"{m['inverted']}  scaled Jacobian {m['scaled_jacobian_min']:.3f}  min angle {m['min_angle_min']:.1f}  "
+                    f"boundary {m['boundary_distance_max_rel']:.1e} L  volume {m['volume_rel_error']:.1e}  checkMesh "
+                    f"{m['checkmesh_ok']}  {m['seconds']:.2f} s",
+                    flush=True,
+                )
+        pipe = mesh("pipe", dims_of["cylinder"], method="elliptic", params={"radius": 0.5, "length": 2.0})
+        angle = float(pipe.report()["metrics"]["min_angle"]["min"])
+        results["sweep_cylinder"]["pipe_min_angle_min"] = angle
+        print(f"sweep_cylinder  the built-in pipe at the same counts (elliptic): min angle {angle:.1f}", flush=True)
+    return results
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--json", type=Path)
+    args = parser.parse_args(argv)
+    results = run(args.quick)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

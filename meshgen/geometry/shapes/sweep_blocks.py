@@ -1,0 +1,419 @@
+"""A CAD solid that is a sweep as a block set (``meshgen.geometry.blocks``): its cap is cut into
+quadrilateral blocks, each carried from the first cap to the second by the sweep's rigid motion
+(a translation, or a rotation about an axis: ``sweep_read.moved``).
+
+``sweep_module(path)`` returns a block-set plugin module, as ``topology.topology_module`` does for
+a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pipe.py``:
+
+- the cap (read in the CAD process: ``sweep_read``) is one loop of CAD curves, each a cubic
+  spline through its points at arc-length fractions (1025 per curve: exact to about 1e-12 of the
+  part's size for an arc);
+- a loop of one smooth closed curve (or 2 or 4 curves joining smoothly): an O-grid like the pipe's
+  (a core whose sides bulge by ``BULGE``, corners at ``CORE`` of the way to four points a quarter
+  of the loop apart, and four ring blocks); a loop of n sharp corners: midpoint subdivision, n
+  quadrilaterals around the cap's centroid, each with one corner of the cap and two half sides;
+- each block's map is the Coons patch of its four sides in the cap's plane carried a share zeta
+  of the way along the motion, so its outer faces are the cap outline's sweep, which is the
+  linking faces (``sweep_read`` checks it), and its ends lie on the caps;
+- patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
+- ``elliptic_options`` (passed on by ``meshgen.run.meshing``): a straight sweep is solved as its
+  cap's 2D mesh, extruded, whose flat sides slide, except in ring blocks at sharp corners or
+  smooth joints (a filleted cap, a square tube: sliding carries nodes past the corner and folds
+  cells, ``slide_section`` off); on a bend every boundary node stays.
+
+- a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
+  curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
+  midpoint-subdivided, so no block has a corner at a smooth joint;
+- a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them; a
+  loop of n sharp corners around a hole of as many (a square tube): a ring of n blocks.
+
+Other caps with holes and solids that are no such sweep are one GeometryError naming what was
+found and pointing to topology files.
+"""
+
+from __future__ import annotations
+
+import re
+import types
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.errors import GeometryError
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, content_hash, default_patch_type
+from meshgen.geometry.shapes.cad_process import cad_sweep
+from meshgen.geometry.shapes.sweep_read import moved
+
+__all__ = ["BULGE", "CORE", "is_sweep_file", "sweep_module"]
+
+CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
+BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
+RING = 0.6  # a ring-and-core cap's core corners: this share of the way from the centroid to the loop's
+_READ: dict = {}
+_MODULES: dict = {}
+TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
+
+
+def _key(path: Path) -> tuple:
+    status = path.stat()
+    return (str(path.resolve()), status.st_size, status.st_mtime_ns)
+
+
+def _read(path: Path) -> dict:
+    key = _key(path)
+    if key not in _READ:
+        _READ[key] = cad_sweep(path, content_hash([path], {}))
+    return _READ[key]
+
+
+def is_sweep_file(spec) -> bool:
+    """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
+    then meshed as a block set, or refused with a pointer to topology files)."""
+    if not isinstance(spec, (str, Path)) or Path(str(spec)).suffix.lower() not in CAD_FORMATS:
+        return False
+    path = Path(str(spec))
+    if not path.is_file():
+        return False
+    try:
+        return _read(path)["kind"] != "six"
+    except GeometryError:
+        return False  # the single-block reader reports what is wrong with the file
+
+
+def _spline(fractions: np.ndarray, points: np.ndarray):
+    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline), t in [0, 1]."""
+    from scipy.interpolate import CubicSpline
+
+    spline = CubicSpline(fractions, points, axis=0)
+    return lambda t: spline(np.clip(np.asarray(t, dtype=float), 0.0, 1.0))
+
+
+def _line(a: np.ndarray, b: np.ndarray):
+    return lambda t: a + np.asarray(t, dtype=float)[:, None] * (b - a)
+
+
+def _piece(curve, start: float, stop: float):
+    return lambda t: curve(start + np.asarray(t, dtype=float) * (stop - start))
+
+
+def _coons(sides, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
+    """(N, 2) the Coons patch of ``sides`` (left xi=0 and right xi=1 along eta, bottom eta=0 and
+    top eta=1 along xi; callables t (N,) -> (N, 2)) at (xi, eta)."""
+    left, right, bottom, top = sides
+    b0, b1, t0, t1 = bottom(np.zeros(1))[0], bottom(np.ones(1))[0], top(np.zeros(1))[0], top(np.ones(1))[0]
+    x, e = xi[:, None], eta[:, None]
+    return (
+        (1 - x) * left(eta) + x * right(eta) + (1 - e) * bottom(xi) + e * top(xi)
+        - ((1 - x) * (1 - e) * b0 + x * (1 - e) * b1 + (1 - x) * e * t0 + x * e * t1)
+    )  # fmt: skip
+
+
+def _midpoint_blocks(curves, faces):
+    """n quadrilaterals around the centroid (the frame's origin): block k has the corner at the
+    start of curve k, half of curve k - 1 (xi = 1) and half of curve k (eta = 1)."""
+    n, centre = len(curves), np.zeros(2)
+    middle = [curve(np.array([0.5]))[0] for curve in curves]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(n):
+        name = f"quad{k}"
+        blocks[name] = (
+            _line(centre, middle[k]),
+            _piece(curves[k - 1], 0.5, 1.0),
+            _line(centre, middle[k - 1]),
+            _piece(curves[k], 0.5, 0.0),
+        )
+        patches[name] = {"xi1": faces[k - 1], "eta1": faces[k]}
+        interfaces.append((name, "eta0", f"quad{(k - 1) % n}", "xi0"))
+    return blocks, patches, interfaces
+
+
+def _ogrid_blocks(curves, faces):
+    """A core and four ring blocks (``ring0`` .. ``ring3`` counterclockwise, xi from the core
+    outwards), the loop cut at four points a quarter of it apart (at the curves' ends)."""
+    pieces = _quarters(curves)
+    outer = [_piece(curves[c], a, b) for c, a, b in pieces]
+    corners = [CORE * w(np.zeros(1))[0] for w in outer]
+    core_sides = []
+    for k in range(4):
+        a, b = corners[k], corners[(k + 1) % 4]
+        half = 0.5 * (b - a)
+        normal = np.array([half[1], -half[0]])  # outwards: the loop runs counterclockwise
+
+        def side(t, a=a, half=half, normal=normal):
+            s = 2.0 * np.asarray(t, dtype=float)[:, None] - 1.0
+            return a + half + s * half + 0.5 * np.tan(BULGE) * (1.0 - s**2) * normal
+
+        core_sides.append(side)
+    blocks = {
+        "core": (
+            _piece(core_sides[2], 1.0, 0.0),
+            core_sides[0],
+            core_sides[3],
+            _piece(core_sides[1], 1.0, 0.0),
+        )
+    }
+    patches, interfaces = {}, []
+    for k in range(4):
+        name = f"ring{k}"
+        start, stop = outer[k](np.zeros(1))[0], outer[k](np.ones(1))[0]
+        blocks[name] = (core_sides[k], outer[k], _line(corners[k], start), _line(corners[(k + 1) % 4], stop))
+        patches[name] = {"xi1": faces[pieces[k][0]]}
+        interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
+    interfaces += [("core", face, f"ring{k}", "xi0") for k, face in enumerate(("xi1", "eta1", "xi0", "eta0"))]
+    return blocks, patches, interfaces
+
+
+def _quarters(curves):
+    """The loop of 1, 2 or 4 curves cut into four pieces: (curve index, start, stop) each."""
+    per = 4 // len(curves)
+    return [(k // per, (k % per) / per, (k % per + 1) / per) for k in range(4)]
+
+
+def _sides(curves, smooth: bool):
+    """A loop's sides for a ring: (piece, curve index) per quarter of a smooth loop of 1, 2 or 4
+    curves, else per curve (a loop of sharp corners)."""
+    if smooth:
+        return [(_piece(curves[c], a, b), c) for c, a, b in _quarters(curves)]
+    return [(curve, k) for k, curve in enumerate(curves)]
+
+
+def _annulus_blocks(curves, faces, hole, hole_faces, smooth: bool):
+    """A ring of blocks (``ring0``.., xi from the hole outwards, eta counterclockwise) between the
+    outer loop and the hole's, both smooth (cut into quarters) or both of n sharp corners (one
+    block per side); the hole's cuts turned to face the outer ones (a single smooth closed curve is
+    cut anywhere, else at its curves' ends)."""
+    outer = _sides(curves, smooth)
+    n = len(outer)
+    cuts = np.array([w(np.zeros(1))[0] for w, _ in outer])
+    if smooth and len(hole) == 1:  # the hole's point in the direction of the first outer cut
+        centre = np.mean(hole[0](np.linspace(0.0, 1.0, 65)[:-1]), axis=0)
+        s = np.linspace(0.0, 1.0, 4097)
+        along = hole[0](s) - centre
+        toward = (cuts[0] - centre) / np.linalg.norm(cuts[0] - centre)
+        start = float(s[int(np.argmax(along @ toward / np.linalg.norm(along, axis=1)))])
+        closed = hole[0]
+        inner = [(lambda t, a=start + k / 4: closed(np.mod(a + 0.25 * np.asarray(t, dtype=float), 1.0)), 0) for k in range(4)]
+    else:  # the turn of the hole's sides that puts their corners nearest the outer ones
+        pieces = _sides(hole, smooth)
+        firsts = np.array([w(np.zeros(1))[0] for w, _ in pieces])
+        gaps = [np.linalg.norm(np.roll(firsts, -shift, axis=0) - cuts, axis=1).sum() for shift in range(n)]
+        shift = int(np.argmin(gaps))
+        inner = [pieces[(k + shift) % n] for k in range(n)]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(n):
+        name, (side, curve) = f"ring{k}", inner[k]
+        a0, a1 = side(np.zeros(1))[0], side(np.ones(1))[0]
+        blocks[name] = (side, outer[k][0], _line(a0, cuts[k]), _line(a1, cuts[(k + 1) % n]))
+        patches[name] = {"xi0": hole_faces[curve], "xi1": faces[outer[k][1]]}
+        interfaces.append((name, "eta1", f"ring{(k + 1) % n}", "eta0"))
+    return blocks, patches, interfaces
+
+
+def _ring_blocks(curves, faces, sharp):
+    """A ring of two blocks per curve (``a<k>``, ``b<k>``: its halves; xi from the core outwards)
+    around a core polygon, midpoint-subdivided into ``quad<k>``; the core's corners joined to the
+    curves' ends by spokes (at a sharp corner towards the centroid, the core's corner ``RING`` of
+    the way; at a smooth joint along the inward normal, as deep), so every block corner on the
+    cap's boundary is a CAD vertex or a curve's midpoint, and a smooth joint is split at right
+    angles."""
+    n, centre = len(curves), np.zeros(2)
+    vertex = [curve(np.zeros(1))[0] for curve in curves]
+    middle = [curve(np.array([0.5]))[0] for curve in curves]
+    inner = []
+    for k in range(n):  # a corner's spoke runs to the centroid; a smooth joint's along the inward normal
+        if sharp[k]:
+            inner.append(RING * vertex[k])
+        else:
+            tangent = curves[k](np.array([1e-3]))[0] - vertex[k]
+            normal = np.array([-tangent[1], tangent[0]]) / np.linalg.norm(tangent)
+            inner.append(vertex[k] + (1.0 - RING) * np.linalg.norm(vertex[k]) * normal)
+    joint = [0.5 * (inner[k] + inner[(k + 1) % n]) for k in range(n)]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(n):
+        after = (k + 1) % n
+        blocks[f"a{k}"] = (
+            _line(inner[k], joint[k]),
+            _piece(curves[k], 0.0, 0.5),
+            _line(inner[k], vertex[k]),
+            _line(joint[k], middle[k]),
+        )
+        blocks[f"b{k}"] = (
+            _line(joint[k], inner[after]),
+            _piece(curves[k], 0.5, 1.0),
+            _line(joint[k], middle[k]),
+            _line(inner[after], vertex[after]),
+        )
+        blocks[f"quad{k}"] = (
+            _line(centre, joint[k]),
+            _line(joint[k - 1], inner[k]),
+            _line(centre, joint[k - 1]),
+            _line(joint[k], inner[k]),
+        )
+        patches[f"a{k}"] = {"xi1": faces[k]}
+        patches[f"b{k}"] = {"xi1": faces[k]}
+        interfaces += [
+            (f"a{k}", "eta1", f"b{k}", "eta0"),
+            (f"b{k}", "eta1", f"a{after}", "eta0"),
+            (f"quad{k}", "xi1", f"b{(k - 1) % n}", "xi0"),
+            (f"quad{k}", "eta1", f"a{k}", "xi0"),
+            (f"quad{k}", "eta0", f"quad{(k - 1) % n}", "xi0"),
+        ]
+    return blocks, patches, interfaces
+
+
+def _folded(blocks) -> list[str]:
+    """The blocks whose cap map folds: a cell of its 16 x 16 sample grid with no positive area."""
+    t = np.linspace(0.0, 1.0, 17)
+    xi, eta = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
+    folded = []
+    for name, sides in blocks.items():
+        p = _coons(sides, xi, eta).reshape(17, 17, 2)
+        d1, d2 = p[1:, 1:] - p[:-1, :-1], p[:-1, 1:] - p[1:, :-1]  # the cells' diagonals
+        if not (d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0).all():
+            folded.append(name)
+    return folded
+
+
+def sweep_module(path) -> types.ModuleType:
+    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
+    (path, size, modification time). GeometryError (one line) when the solid is no sweep
+    this meshes."""
+    path = Path(path)
+    key = _key(path)
+    if key in _MODULES:
+        return _MODULES[key]
+    found = _read(path)
+    summary = f"{path}: the solid has {found['summary']}"
+    if found["kind"] == "six":
+        raise GeometryError(f"{summary}: one block, not a sweep")
+    if found["kind"] != "sweep":
+        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
+    names = found["names"]
+    loop = found["curves"]
+    curves = [_spline(c["fractions"], c["points"]) for c in loop]
+    faces = [c["face"] for c in loop]
+    sharp = [not c["smooth"] for c in loop]
+    first, second = found["caps"]
+    options, lines_extra, fixed = {}, (), True
+    holes = found.get("holes", [])
+    hole_sharp = [not c["smooth"] for c in holes[0]] if holes else []
+    both_smooth = not any(sharp) and not any(hole_sharp) and len(loop) in (1, 2, 4) and len(hole_sharp) in (1, 2, 4)
+    both_sharp = all(sharp) and all(hole_sharp) and len(loop) == len(hole_sharp)
+    if holes and not (both_smooth or both_sharp):
+        raise GeometryError(
+            f"{summary}; a sweep whose cap ({names[first]}) has a hole: only a smooth loop of 1, 2 or 4 curves "
+            f"around a smooth hole of 1, 2 or 4 curves, or loops of as many sharp corners, are cut into blocks yet: "
+            f"{TOPOLOGY_HINT}"
+        )
+    if holes:
+        hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
+        blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]], both_smooth)
+        if both_smooth:
+            how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
+            meaning = "N M A: cells along a quarter of the cap's boundary, across the ring, along the sweep"
+        else:
+            how = f"a loop of {len(loop)} sharp corners around a hole of as many: a ring of {len(loop)} blocks, one per side"
+            meaning = "N M A: cells along a side of the cap, across the ring, along the sweep"
+        counts = {name: (1, 0, 2) for name in blocks}
+        fixed = not both_smooth
+    elif not any(sharp) and len(loop) in (1, 2, 4):
+        blocks, sides_of, interfaces = _ogrid_blocks(curves, faces)
+        how = f"a loop of {len(loop)} curve(s) joining smoothly: an O-grid of 5 blocks (core, ring0..ring3) like the pipe's"
+        meaning = "N M A: cells along a quarter of the cap's boundary (and across the core), across the ring, along the sweep"
+        counts = {"core": (0, 0, 2), **{f"ring{k}": (1, 0, 2) for k in range(4)}}
+        fixed = False
+    elif all(sharp):
+        blocks, sides_of, interfaces = _midpoint_blocks(curves, faces)
+        how = f"{len(loop)} sharp corners: midpoint subdivision into {len(loop)} blocks (quad0..) around its centroid"
+        meaning = "N M A: cells along half a side of the cap (and from its centroid to a side), not used, along the sweep"
+        counts = {name: (0, 0, 2) for name in blocks}
+        fixed = False
+    else:
+        blocks, sides_of, interfaces = _ring_blocks(curves, faces, sharp)
+        turns = sum(not s for s in sharp)
+        how = (
+            f"{len(loop)} curves, {len(loop) - turns} sharp corners and {turns} smooth joint(s): a ring of "
+            f"{2 * len(loop)} blocks (a0, b0, ..: two per curve) around a core cut into {len(loop)} (quad0..)"
+        )
+        meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
+        counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
+    if fixed:  # ring blocks at sharp corners or smooth joints
+        options = {"slide_section": False}
+        lines_extra = (
+            f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
+            "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
+        )
+    folded = _folded(blocks)
+    if folded:
+        raise GeometryError(
+            f"{summary}; its cap {names[first]} ({how}) folds in block(s) {', '.join(folded)} (a concave cap?): {TOPOLOGY_HINT}"
+        )
+    origin, frame, motion = found["origin"], found["frame"], found["motion"]
+    if motion["kind"] == "translation":
+        path_words = f"a straight sweep along ({', '.join(f'{v:.6g}' for v in motion['vector'])})"
+        cap_words = "planar, parallel, one shape"
+    else:
+        path_words = (
+            f"a sweep turning by {np.degrees(motion['angle']):.6g} deg about the axis through "
+            f"({', '.join(f'{v:.6g}' for v in motion['point'])}) along ({', '.join(f'{v:.6g}' for v in motion['axis'])})"
+        )
+        cap_words = "planar, one shape turned onto the other"
+        options = {"slide": False}
+        lines_extra = (
+            f"{path.name}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
+            "the line where two flat faces meet can pass a corner)",
+        )
+    kinds = {name: default_patch_type(name) for name in names}
+    block_patches = {}
+    for name in blocks:
+        block_patches[name] = {face: (names[index], kinds[names[index]]) for face, index in sides_of.get(name, {}).items()}
+        block_patches[name]["zeta0"] = (names[first], kinds[names[first]])
+        block_patches[name]["zeta1"] = (names[second], kinds[names[second]])
+    size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
+    stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
+    lines = (
+        f"{path.name}: {found['summary']}: {path_words}; "
+        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both; "
+        f"the outline carried along lies on the linking faces to {motion['gap']:.1e} of the part's size",
+        f"{path.name}: cap {names[first]}: {how}",
+        f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
+        *lines_extra,
+    )
+
+    module = types.ModuleType(f"meshgen_sweep_{stem}")
+    module.__file__ = str(path)
+    module.name, module.dim = stem, 3
+    module.description = f"CAD solid {path.name}: a sweep of its cap {names[first]} ({len(blocks)} blocks)"
+    module.params = {}
+    module.blocks = tuple(blocks)
+    module.dims_meaning = meaning
+    module.interfaces = interfaces
+    module.block_patches = block_patches
+    module.volume = found["volume"]
+    module.face_tags = found["face_tags"]
+    module.decisions = lines
+    module.elliptic_options = options
+
+    def characteristic_length():
+        return size
+
+    def block_coords(dims):
+        """Per block, uniform node coordinates per axis: the --dims numbers its axes count."""
+        axes = [np.linspace(0.0, 1.0, int(n) + 1) for n in dims]
+        return {name: [axes[a] for a in counts[name]] for name in blocks}
+
+    def boundary(block, points):
+        """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
+        points = np.asarray(points, dtype=float)
+        xy = _coons(blocks[block], points[:, 0], points[:, 1])
+        return moved(motion, origin + xy @ frame, points[:, 2])
+
+    def notes(block_set):
+        return list(lines)
+
+    module.characteristic_length = characteristic_length
+    module.block_coords = block_coords
+    module.boundary = boundary
+    module.notes = notes
+    _MODULES[key] = module
+    return module

@@ -1,0 +1,233 @@
+"""CAD solids that are sweeps, built by gmsh and exported to STEP (tests/shape_helpers
+``write_sweep_solid``: a cylinder, one with a coaxial hole, a box with one filleted edge, a
+pentagonal prism, a wedge, two bends: a disk and a pentagon turned about an axis, and a square
+tube), meshed as block sets: each patch's nodes on its own CAD face (gmsh's
+closest point), the volume against OCC's, checkMesh on the OpenFOAM case, and the cylinder
+against the built-in pipe at the same counts."""
+
+import itertools
+
+import numpy as np
+import pytest
+from openfoam_helpers import check_mesh, needs_openfoam
+from shape_helpers import SWEEP_SOLIDS, enclosed_volume, write_sweep_solid
+
+import meshgen
+from meshgen.geometry import cube
+from meshgen.geometry.blocks import block_spec
+
+gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python package (pip install gmsh)")
+
+# about 20 cells across each cap (cylinder: N + 2M; hole: 2M + the hole; fillet: 2M + 2N; n-gons: 2N)
+DIMS = {"cylinder": (10, 5, 6), "hole": (10, 5, 6), "fillet": (7, 3, 6), "pentagon": (10, 1, 6), "wedge": (10, 1, 6)}
+DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6)}
+FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7, "tube": 10}
+BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5, "tube": 4}
+
+
+@pytest.fixture(scope="module")
+def solids(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("sweeps")
+    return {kind: (folder / f"{kind}.step", write_sweep_solid(kind, folder / f"{kind}.step")) for kind in SWEEP_SOLIDS}
+
+
+def cad_faces(path):
+    """Per CAD face of the solid (in the order meshgen names them face1..): (tag, number of
+    boundary curves), and the bounding-box diagonal, read by gmsh in a model of its own."""
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add(f"faces-{path.name}")
+    gmsh.model.occ.importShapes(str(path))
+    gmsh.model.occ.synchronize()
+    faces = [abs(t) for d, t in gmsh.model.getBoundary(gmsh.model.getEntities(3), oriented=False) if d == 2]
+    sides = [len(gmsh.model.getBoundary([(2, f)], oriented=False, combined=False)) for f in faces]
+    box = np.array(gmsh.model.getBoundingBox(-1, -1)).reshape(2, 3)
+    return faces, sides, float(np.linalg.norm(box[1] - box[0]))
+
+
+def distance_to_face(path, face: int, points) -> float:
+    """Largest distance of ``points`` (N, 3) from CAD face ``face`` (gmsh's closest point)."""
+    gmsh.model.setCurrent(f"faces-{path.name}")
+    closest = np.array(gmsh.model.getClosestPoint(2, face, np.ravel(points).tolist())[0]).reshape(-1, 3)
+    return float(np.linalg.norm(closest - points, axis=1).max())
+
+
+def patch_nodes(mesh) -> dict:
+    """Patch name -> (N, 3) the nodes of every block face on it."""
+    found = {}
+    for (block, face_name), (name, _) in mesh.geometry.patches.items():
+        face = cube.face_named(face_name, 3)
+        nodes = np.take(mesh.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3)
+        found.setdefault(name, []).append(nodes)
+    return {name: np.concatenate(parts) for name, parts in found.items()}
+
+
+@pytest.mark.parametrize("kind,method", list(itertools.product(SWEEP_SOLIDS, ("tfi", "elliptic"))))
+def test_a_swept_solid_meshes_on_its_cad_faces(solids, kind, method):
+    path, volume = solids[kind]
+    mesh = meshgen.mesh(str(path), DIMS[kind], method=method)
+    assert len(mesh.blocks) == BLOCKS[kind]
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0
+    assert report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    faces, sides, length = cad_faces(path)
+    nodes = patch_nodes(mesh)
+    assert sorted(nodes) == sorted(f"face{k + 1}" for k in range(FACES[kind])) and len(faces) == FACES[kind]
+    for k, face in enumerate(faces):  # each patch on its own CAD face
+        assert distance_to_face(path, face, nodes[f"face{k + 1}"]) < 1e-6 * length, f"face{k + 1}"
+    total = sum(enclosed_volume(X) for X in mesh.blocks)
+    assert abs(total - volume) < 1e-2 * volume
+    gmsh.model.remove()
+
+
+@pytest.mark.parametrize("kind,dims", [("fillet", (14, 6, 4)), ("tube", (30, 8, 4))])
+def test_ring_caps_stay_unfolded_when_finer(solids, kind, dims):
+    """Ring blocks at corners and smooth joints: with the cap's flat sides sliding, the elliptic
+    folded 8 (fillet) and 32 (tube) cells at these counts; their boundary nodes now stay."""
+    mesh = meshgen.mesh(str(solids[kind][0]), dims, method="elliptic")
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    assert any("boundary nodes stay" in line for line in mesh.notes)
+
+
+def test_the_caps_are_the_faces_across_the_sweep(solids):
+    """The fillet's caps are the box's two faces across the filleted edge (z = 0 and z = 2, five
+    curves each); the wedge's its two triangles."""
+    for kind, z in (("fillet", (0.0, 2.0)), ("wedge", (0.0, 2.0))):
+        path, _ = solids[kind]
+        mesh = meshgen.mesh(str(path), (2, 1, 2), method="tfi")
+        faces, sides, _ = cad_faces(path)
+        gmsh.model.remove()
+        nodes = patch_nodes(mesh)
+        caps = sorted(name for name in nodes if np.ptp(nodes[name][:, 2]) < 1e-12)
+        assert sorted(np.round(nodes[name][0, 2], 12) for name in caps) == list(z)
+        expected = 5 if kind == "fillet" else 3
+        assert sorted(f"face{k + 1}" for k, n in enumerate(sides) if n == expected) == caps
+        assert any("caps " in line and caps[0] in line and caps[1] in line for line in mesh.notes)
+
+
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_the_cylinder_is_as_good_as_the_pipe(solids, method):
+    """The same O-grid as the built-in pipe (radius 0.5, length 2) at the same counts: the same
+    worst minimum angle (turned and swept the other way, so not node for node)."""
+    path, _ = solids["cylinder"]
+    dims = (10, 5, 20)
+    cylinder = meshgen.mesh(str(path), dims, method=method).report()["metrics"]["min_angle"]["min"]
+    pipe = meshgen.mesh("pipe", dims, method=method, params={"radius": 0.5, "length": 2.0}).report()
+    assert cylinder == pytest.approx(pipe["metrics"]["min_angle"]["min"], abs=1e-3 if method == "elliptic" else 1e-8)
+    if method == "elliptic":
+        assert cylinder >= 76.0
+
+
+@needs_openfoam
+@pytest.mark.parametrize("kind", SWEEP_SOLIDS)
+def test_the_openfoam_case_passes_checkmesh(solids, tmp_path, kind):
+    path, _ = solids[kind]
+    mesh = meshgen.mesh(str(path), DIMS[kind], method="tfi")
+    mesh.write(tmp_path / "case", "openfoam", quality=False)
+    checked = check_mesh(tmp_path / "case")
+    assert checked["ok"], checked["log"][-2000:]
+    assert sorted(checked["patches"]) == sorted(f"face{k + 1}" for k in range(FACES[kind]))
+    assert checked["cells"] == sum(int(np.prod(np.array(X.shape[:3]) - 1)) for X in mesh.blocks)
+
+
+def test_the_cli_says_each_decision(run_cli, tmp_path, solids):
+    path, _ = solids["pentagon"]
+    result = run_cli("mesh", "-g", path, "--method", "tfi", "--dims", "4", "1", "3", "-o", "p.vtu")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("pentagon.step:")]
+    assert len(said) == 3
+    assert "a straight sweep along (0, 0, 1.5)" in said[0] and "midpoint subdivision into 5 blocks" in said[1]
+    assert (tmp_path / "p.vtu").exists() and block_spec(str(path)) == str(path)
+    path, _ = solids["bend"]
+    result = run_cli("mesh", "-g", path, "--method", "tfi", "--dims", "4", "2", "3", "-o", "b.vtu")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("bend.step:")]
+    assert "a sweep turning by " in said[0] and " 90 deg about the axis through (" in said[0].replace("-90", " 90")
+    assert "O-grid of 5 blocks" in said[1]
+
+
+def refused(run_cli, folder, geometry, *words):
+    result = run_cli("mesh", "-g", geometry, "--method", "tfi", "--dims", "2", "2", "2", "-o", "m.vtu")
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2, result.stderr
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+    assert not (folder / "m.vtu").exists()
+
+
+def write_solid(path, make):
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.model.add(f"solid-{path.name}")
+    make(gmsh.model.occ)
+    gmsh.model.occ.synchronize()
+    from meshgen.geometry.shapes.cad import quiet_stdout
+
+    with quiet_stdout():
+        gmsh.write(str(path))
+    gmsh.model.remove()
+
+
+def test_a_solid_that_is_no_sweep_points_to_topology_files(run_cli, tmp_path):
+    write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
+    refused(run_cli, tmp_path, "cone.step", "3 faces with (", "not of one area", "docs/topologies.md")
+    write_solid(tmp_path / "ball.step", lambda occ: occ.addSphere(0, 0, 0, 1.0))
+    refused(run_cli, tmp_path, "ball.step", "1 faces with (", "docs/topologies.md")
+
+
+def test_a_twisted_sweep_is_refused(run_cli, tmp_path):
+    """A loft between a pentagon and the same pentagon turned by 30 degrees: planar, parallel caps
+    of one area that every other face touches, but no rigid motion carries one onto the other."""
+
+    def make(occ):
+        wires = []
+        for z, turn in ((0.0, 0.0), (2.0, np.pi / 6)):
+            angles = turn + 2 * np.pi * np.arange(5) / 5
+            points = [occ.addPoint(np.cos(a), np.sin(a), z) for a in angles]
+            wires.append(occ.addWire([occ.addLine(points[k], points[(k + 1) % 5]) for k in range(5)]))
+        occ.addThruSections(wires, makeSolid=True, makeRuled=True)
+
+    write_solid(tmp_path / "twist.step", make)
+    refused(run_cli, tmp_path, "twist.step", "7 faces with (", "not one shape moved along a line", "docs/topologies.md")
+
+
+def test_a_concave_cap_that_would_fold_is_refused(run_cli, tmp_path):
+    """An L-shaped prism: midpoint subdivision around the centroid makes the block at the
+    re-entrant corner fold, found on the cap's blocks before anything is meshed."""
+    write_solid(
+        tmp_path / "ell.step", lambda occ: occ.fuse([(3, occ.addBox(0, 0, 0, 2, 1, 1))], [(3, occ.addBox(0, 0, 0, 1, 2, 1))])
+    )
+    refused(
+        run_cli,
+        tmp_path,
+        "ell.step",
+        "8 faces with (",
+        "midpoint subdivision into 6 blocks",
+        "folds in block(s) quad",
+        "docs/topologies.md",
+    )
+
+
+def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):
+    def make(occ):
+        body = occ.addCylinder(0, 0, 0, 0, 0, 1, 1.0)
+        holes = [(3, occ.addCylinder(x, 0, 0, 0, 0, 1, 0.2)) for x in (-0.5, 0.5)]
+        occ.cut([(3, body)], holes)
+
+    write_solid(tmp_path / "two.step", make)
+    refused(run_cli, tmp_path, "two.step", "more than one hole", "docs/topologies.md")
+
+
+def test_six_faced_solids_stay_one_block(tmp_path):
+    write_solid(tmp_path / "box.step", lambda occ: occ.addBox(0, 0, 0, 1, 2, 3))
+    assert block_spec(str(tmp_path / "box.step")) is None
+    X = meshgen.mesh(str(tmp_path / "box.step"), (2, 3, 4), method="tfi").X
+    corners = X[[0, -1]][:, [0, -1]][:, :, [0, -1]].reshape(-1, 3)
+    expected = np.array(list(itertools.product((0, 1), (0, 2), (0, 3))), dtype=float)
+    assert sorted(map(tuple, np.round(corners, 12))) == sorted(map(tuple, expected))
