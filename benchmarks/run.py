@@ -122,6 +122,7 @@ SECTIONS = [
     "blocks_neural",
     "blocks",
     "airfoil",
+    "sweeps",
     "gpu",
 ]
 
@@ -225,6 +226,16 @@ TARGETS = {
         "x",
         "elliptic pipe 50 50 80 (1.0e6 hexahedra) / semicylinder 100^3 (1.0e6), seconds, one run",
     ),
+    "sweep_worst_scaled_jacobian": (">=", 0.4, "", "swept CAD solids (8 shapes, TFI and elliptic): worst scaled Jacobian"),
+    "sweep_inverted": ("<=", 0, "", "swept CAD solids: inverted cells, all shapes and methods"),
+    "sweep_boundary_distance": ("<=", 1e-6, "of L", "swept CAD solids: largest distance of a patch node from its CAD face"),
+    "sweep_volume_error": (
+        "<=",
+        1e-2,
+        "",
+        "swept CAD solids: largest relative difference of the mesh's volume from the CAD volume",
+    ),
+    "sweep_cylinder_min_angle": (">=", 76.0, "deg", "CAD cylinder, elliptic: worst min angle (the built-in pipe's in the note)"),
     "gpu_elliptic_100_seconds": ("<=", 1.0, "s", "elliptic semicylinder 100^3 by the torch multigrid on the GPU"),
     "gpu_quality_1e9_seconds": ("<=", 60.0, "s", "the seven metrics and their summary of 1e9 hexahedra on one GPU"),
     "gpu_neural_1e9_seconds": (
@@ -673,6 +684,12 @@ def airfoil(quick: bool) -> dict:
     import bench_airfoil
 
     return bench_airfoil.run(quick)
+
+
+def sweeps(quick: bool) -> dict:
+    import bench_sweeps
+
+    return {**bench_sweeps.run(quick), "quick": quick}  # --quick: about 10 cells across, not the targets' 20
 
 
 def gpu(quick: bool) -> dict:
@@ -1256,9 +1273,44 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 note=f"CL {solved['CL']:.4f} (x Prandtl-Glauert {solved['CL_prandtl_glauert']:.4f}); {note}")  # fmt: skip
             add("NACA 0012 alpha 10: CD - 0.0125", solved["CD"] - 0.0125, "", key="airfoil_cd_alpha_10",
                 note=f"CD {solved['CD']:.5f}; {'converged' if solved['converged'] else 'NOT converged'}")  # fmt: skip
+    if sections.get("sweeps"):
+        sweep_rows(sections["sweeps"], add)
     if "gpu" in sections and "skipped" not in sections["gpu"]:
         gpu_rows(sections["gpu"], add)
     return rows
+
+
+def sweep_rows(data: dict, add) -> None:
+    """The rows of the ``sweeps`` section (``bench_sweeps.run``): each target over every shape and
+    method, the worst case named."""
+    shapes = {name: row for name, row in data.items() if name.startswith("sweep_")}
+    judged = not data.get("quick")
+    figures = [(name[len("sweep_") :], method, row[method]) for name, row in shapes.items() for method in ("tfi", "elliptic")]
+
+    def worst(key, largest=True):
+        pick = max if largest else min
+        shape, method, row = pick(figures, key=lambda f: f[2][key])
+        return row[key], f"{shape} ({method})"
+
+    value, where = worst("scaled_jacobian_min", largest=False)
+    add("swept CAD solids: worst scaled Jacobian", value, "", key="sweep_worst_scaled_jacobian", judged=judged, note=where)
+    add("swept CAD solids: inverted cells", sum(f[2]["inverted"] for f in figures), "", key="sweep_inverted", judged=judged,
+        note=f"{len(shapes)} shapes x 2 methods; checkMesh OK on {sum(bool(f[2]['checkmesh_ok']) for f in figures)} of {len(figures)}")  # fmt: skip
+    value, where = worst("boundary_distance_max_rel")
+    add(
+        "swept CAD solids: patch node distance from its CAD face",
+        value,
+        "of L",
+        key="sweep_boundary_distance",
+        judged=judged,
+        note=where,
+    )
+    value, where = worst("volume_rel_error")
+    add("swept CAD solids: volume error", value, "", key="sweep_volume_error", judged=judged, note=where)
+    cylinder = data.get("sweep_cylinder")
+    if cylinder:
+        add("CAD cylinder, elliptic: worst min angle", cylinder["elliptic"]["min_angle_min"], "deg", key="sweep_cylinder_min_angle", judged=judged,
+            note=f"built-in pipe at the same counts: {cylinder['pipe_min_angle_min']:.1f} deg")  # fmt: skip
 
 
 def gpu_rows(data: dict, add) -> None:
@@ -1437,6 +1489,7 @@ def main(argv=None) -> int:
         "blocks_neural": lambda: blocks_neural(args.quick),
         "blocks": lambda: blocks(args.quick),
         "airfoil": lambda: airfoil(args.quick),
+        "sweeps": lambda: sweeps(args.quick),
         "gpu": lambda: gpu(args.quick),
     }
     for name in chosen:
