@@ -5,7 +5,9 @@ Section (``meshgen.geometry.airfoils``): NACA 4- or 5-digit ``naca`` (a number: 
 2412, 23012), chord 1, turned by ``alpha`` degrees (nose up) about the quarter chord with its whole
 grid (the wake cut leaves along the chord line, the outflow square to it); ``sharp=1``
 closes its trailing edge (NACA 0012: the NASA TMR formula, whose wall nodes lie on it to
-rounding; others: a4 = -0.1036).
+rounding; others: a4 = -0.1036). Or a Selig or Lednicer coordinate file named as the geometry
+(``-g naca2414.dat``: ``file_module``): its C2 spline is the wall (the wall nodes lie on it), the
+file's trailing edge decides C- or O-grid, and ``naca``, ``sharp`` are not parameters.
 
 Blocks ``lower``, ``section``, ``upper`` in a row along the wall (xi along it, eta from the wall
 outwards; (xi, eta) right-handed). C-grid: ``lower`` lies under the wake cut (xi from the outflow
@@ -74,6 +76,29 @@ BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended
 FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing is smoothed
 
 
+SECTION_FILE = None  # the coordinate file of a copy made by ``file_module``; None: the NACA section
+FILE_SECTION = None  # its spline Section
+
+
+def file_module(path):
+    """A copy of this plugin whose section is the Selig or Lednicer file ``path`` (read and checked
+    now: GeometryError on one line for a bad file), without the ``naca`` and ``sharp`` parameters."""
+    import importlib.util
+    import sys
+
+    from meshgen.geometry.airfoils import read_section
+
+    section = read_section(path)
+    spec = importlib.util.spec_from_file_location(f"{__name__}_file_{abs(hash(str(path))):x}", __file__)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    module.SECTION_FILE, module.FILE_SECTION = str(path), section
+    module.params = {k: v for k, v in params.items() if k not in ("naca", "sharp")}
+    module.description = f"airfoil section of {path} ({section.name}) in a far field, to the wall (y+ 1)"
+    return module
+
+
 def _sharp_te(values) -> bool:
     return _setup(_key(values)).sharp
 
@@ -102,6 +127,10 @@ def characteristic_length(**values):
 
 def _key(values) -> tuple:
     return tuple(float(values.get(k, v)) for k, v in params.items())
+
+
+def _values(key: tuple) -> dict:
+    return {"naca": 12.0, "sharp": 0.0, **dict(zip(params, key))}
 
 
 def _check(v: dict) -> None:
@@ -158,13 +187,16 @@ def _setup(key: tuple) -> _Setup:
     from meshgen.geometry.airfoil_curve import leading_edge_arc, points_at, trailing_edge
     from meshgen.geometry.airfoils import load_section
 
-    v = dict(zip(params, key))
+    v = _values(key)
     _check(v)
-    designation = _designation(v)
-    try:
-        section = load_section(designation, closed_te=bool(v["sharp"]) and designation != "tmr0012")
-    except (GeometryError, ParameterError) as exc:
-        raise GeometryError(f"geometry 'airfoil': naca={v['naca']:g}: {exc}") from None
+    if SECTION_FILE is not None:
+        section = FILE_SECTION
+    else:
+        designation = _designation(v)
+        try:
+            section = load_section(designation, closed_te=bool(v["sharp"]) and designation != "tmr0012")
+        except (GeometryError, ParameterError) as exc:
+            raise GeometryError(f"geometry 'airfoil': naca={v['naca']:g}: {exc}") from None
     edge = trailing_edge(section)
     alpha = math.radians(v["alpha"])
     turn = np.array([[math.cos(alpha), math.sin(alpha)], [-math.sin(alpha), math.cos(alpha)]])

@@ -121,7 +121,7 @@ def block_spec(geometry) -> str | None:
             return None
     else:
         spec = str(geometry)
-    if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml"):
+    if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml", ".dat"):
         return None  # a shape file is one block (a topology file, .yaml too, is a block set)
     return spec if is_multiblock(spec) else None
 

@@ -46,12 +46,14 @@ from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.trust import check_plugin_name, note_given_plugin, recorded_spec
 
 __all__ = [
+    "AIRFOIL_FILE_SUFFIXES",
     "ENTRY_POINT_GROUP",
     "Geometry",
     "available_names",
     "bind",
     "builtin_dir",
     "check_boundary",
+    "is_airfoil_file",
     "list_geometries",
     "load_geometry",
     "load_recorded_geometry",
@@ -61,6 +63,8 @@ __all__ = [
 ]
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
+AIRFOIL_FILE_SUFFIXES = (".dat",)  # Selig or Lednicer coordinates: the built-in airfoil plugin meshes them
+_AIRFOIL_FILES: dict = {}
 
 
 def builtin_dir(kind: str) -> Path:
@@ -186,10 +190,28 @@ def _declared_patches(declared, dim: int, source: str) -> dict:
     return declared
 
 
+def is_airfoil_file(spec) -> bool:
+    """Whether ``spec`` names an airfoil coordinate file (Selig or Lednicer) by its extension."""
+    return Path(str(spec)).suffix.lower() in AIRFOIL_FILE_SUFFIXES
+
+
+def _airfoil_module(path: Path) -> ModuleType:
+    """The built-in airfoil plugin's copy for the coordinate file ``path`` (its ``file_module``),
+    kept per (path, size, modification time)."""
+    status = path.stat()
+    key = (str(path.resolve()), status.st_size, status.st_mtime_ns)
+    if key not in _AIRFOIL_FILES:
+        _AIRFOIL_FILES[key] = _import_file(_builtin_files()["airfoil"]).file_module(path)
+    return _AIRFOIL_FILES[key]
+
+
 def looks_like_path(spec: str) -> bool:
-    """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, or anything with a folder
-    separator) rather than a built-in or installed geometry."""
-    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec) or is_topology_file(spec)
+    """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, an airfoil coordinate file, or
+    anything with a folder separator) rather than a built-in or installed geometry."""
+    return (
+        spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec) or is_topology_file(spec)
+        or is_airfoil_file(spec)
+    )  # fmt: skip
 
 
 def plugin_module(spec: str) -> tuple[ModuleType, str]:
@@ -199,7 +221,10 @@ def plugin_module(spec: str) -> tuple[ModuleType, str]:
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
-        module = topology_module(path) if is_topology_file(path) else _import_file(path)
+        if is_airfoil_file(path):
+            module = _airfoil_module(path)
+        else:
+            module = topology_module(path) if is_topology_file(path) else _import_file(path)
         note_given_plugin(path)  # named by the user: a file recording this path may load it too
         return module, str(path)
     builtins = _builtin_files()
