@@ -28,6 +28,10 @@ marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the
 chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
 the designed, wall-normal spacing: see ``mesh_elliptic``).
 
+A third --dims number K extrudes the set into a straight wing section (``extruded``): every block
+times [0, ``span``] along z, K equal cells, the 2D patches plus ``front`` (z = 0) and ``back``
+(z = span), symmetry planes; the cut stays an interface; the mesh is the 2D mesh extruded.
+
 Grid families: ``level`` K scales the cells per direction by 1.5^K (DPW) and every designed length
 (first cell, leading- and trailing-edge spacing) by (2/3)^K, so the family's grids are similar
 (the y+ of the first cell falls with them).
@@ -61,9 +65,11 @@ params = {
     "level": 0.0,
 }
 dims_meaning = (
-    "N M: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
+    "N M [K]: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
     "of them on each side of the cut at least; O-grid: round the section and across its blunt base), "
-    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M)"
+    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M); "
+    "a third number K: a straight wing section, K equal cells along the span (z, --param span=S chords, "
+    "default 1; side planes front and back, symmetry)"
 )
 LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
@@ -97,6 +103,18 @@ def file_module(path):
     module.params = {k: v for k, v in params.items() if k not in ("naca", "sharp")}
     module.description = f"airfoil section of {path} ({section.name}) in a far field, to the wall (y+ 1)"
     return module
+
+
+@functools.lru_cache(maxsize=1)
+def extruded():
+    """The 3D straight wing section (``--dims N M K``): this block set swept ``span`` chords along z
+    (``meshgen.geometry.extrusion.extruded_plugin``: side planes ``front``, ``back``, symmetry)."""
+    import sys
+
+    from meshgen.geometry.extrusion import extruded_plugin
+
+    sides = (("front", "symmetry"), ("back", "symmetry"))
+    return extruded_plugin(sys.modules[__name__], "span", 1.0, sides, filled=True)  # w + eta D e fills the square
 
 
 def _sharp_te(values) -> bool:

@@ -214,9 +214,18 @@ def looks_like_path(spec: str) -> bool:
     )  # fmt: skip
 
 
-def plugin_module(spec: str) -> tuple[ModuleType, str]:
+def plugin_module(spec: str, dims=None) -> tuple[ModuleType, str]:
     """The plugin module of a geometry name (built-in or entry point) or ``.py`` path, imported,
-    with a description of where it came from (its file, or the entry point)."""
+    with a description of where it came from (its file, or the entry point). With ``dims`` of one
+    number more than the plugin's dim, a 2D block set that defines ``extruded()`` gives its 3D
+    version (``meshgen.geometry.extrusion.extruded_plugin``: the third number counts along z)."""
+    module, source = _plugin_module(spec)
+    if dims is not None and len(dims) == getattr(module, "dim", 0) + 1 and callable(getattr(module, "extruded", None)):
+        module = call_plugin(source, "extruded", module.extruded)
+    return module, source
+
+
+def _plugin_module(spec: str) -> tuple[ModuleType, str]:
     if looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
@@ -240,13 +249,13 @@ def plugin_module(spec: str) -> tuple[ModuleType, str]:
     return module, f"entry point {eps[spec].value}"
 
 
-def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
+def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True, dims=None) -> Geometry:
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
     (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
     OBJ, PLY, or a YAML geometry file: ``meshgen.geometry.shapes.loader``) gives a geometry without
-    parameters."""
-    geometry = load_shape(spec) if is_shape_file(spec) else _from_module(*plugin_module(spec))
+    parameters. ``dims``: the cell counts, when they choose a plugin's 3D version (``plugin_module``)."""
+    geometry = load_shape(spec) if is_shape_file(spec) else _from_module(*plugin_module(spec, dims))
     geometry = bind(geometry, params)
     if check:
         check_boundary(geometry)

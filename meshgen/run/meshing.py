@@ -228,7 +228,7 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
             elif method == "neural":
                 Xs, info = _neural(request, block_set, model, callback)
             else:
-                elliptic = getattr(plugin_module(spec)[0], "mesh_elliptic", None) or elliptic_blocks
+                elliptic = getattr(plugin_module(spec, request.dims)[0], "mesh_elliptic", None) or elliptic_blocks
                 Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback)
             timings.append(time.perf_counter() - start)
     if request.first_cell:
@@ -321,7 +321,7 @@ def _check(request, spec: str, say):
         heights = parse_first_cell(request.first_cell, block_set)
         block_set = graded_block_set(block_set, heights, parse_wall_clusters(request.clusters, block_set))
     output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
-    notes.extend(getattr(plugin_module(spec)[0], "notes", lambda _: [])(block_set))
+    notes.extend(getattr(plugin_module(spec, request.dims)[0], "notes", lambda _: [])(block_set))
     for line in notes:
         say(line)
     return method, block_set, output, notes, model
