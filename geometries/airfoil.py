@@ -71,6 +71,7 @@ dims_meaning = (
     "a third number K: a straight wing section, K equal cells along the span (z, --param span=S chords, "
     "default 1; side planes front and back, symmetry)"
 )
+shown_dims = (448, 128)  # what `meshgen geometries show` builds the set with (4 cells cannot reach the far field)
 LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
 WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut

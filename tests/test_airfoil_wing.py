@@ -5,6 +5,10 @@ the layer's height), the wake cut still a 1-to-1 CGNS connection, checkMesh pass
 OpenFOAM case, and the listing says what the third number counts."""
 
 import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +16,7 @@ import pytest
 from meshgen.formats._cgns import read_zones
 from tests.openfoam_helpers import check_mesh, needs_openfoam
 
+REPO = Path(__file__).resolve().parents[1]
 SMALL = ["--param", "sharp=1", "--param", "farfield=5", "--param", "wake=5", "--param", "first_height=0.005", "-m", "elliptic"]
 
 
@@ -109,3 +114,30 @@ def test_the_listing_says_what_the_third_number_counts(run_cli):
     result = run_cli("geometries", "--json")
     entry = next(item for item in json.loads(result.stdout) if item["name"] == "airfoil")
     assert entry["dims"].startswith("N M [K]") and "third number K" in entry["dims"] and "span" in entry["dims"]
+
+
+@needs_openfoam
+@pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="simpleFoam not installed")
+def test_the_three_commands_mesh_check_and_solve(run_cli, tmp_path):
+    # docs/airfoil.md's "Mesh, check, solve": as written there, with 224 cells along the wall and 20 iterations.
+    made = run_cli("mesh", "-g", "airfoil", "--param", "sharp=1", "--yplus", "1", "--reynolds", "6e6", "--dims", "224", "128",
+                   "--method", "elliptic", "--format", "openfoam", "-o", "naca")  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    report = check_mesh(tmp_path / "naca")
+    assert report["cells"] == 224 * 128 and report["log"].count("***") == 1  # the aspect ratio only (y+ 1)
+    script = REPO / "examples" / "naca0012" / "run_naca0012.py"
+    args = ["--case", "naca", "--no-mesh", "--alpha", "10", "--max-iterations", "20", "--json", "out.json"]
+    solved = subprocess.run([sys.executable, str(script), *args], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert solved.returncode == 0, solved.stdout[-2000:] + solved.stderr[-2000:]
+    result = json.loads((tmp_path / "out.json").read_text())
+    assert result["cells"] == 224 * 128 and result["iterations"] == 20
+    assert 0.5 < result["CL"] < 1.5 and result["yplus"]["max"] < 5  # lift at 10 degrees, the wall at y+ about 1
+
+
+def test_geometries_show_builds_the_airfoil(run_cli, tmp_path):
+    # 4 cells per --dims number cannot reach the far field: the plugin's shown_dims are used.
+    result = run_cli("geometries", "show", "airfoil", "-o", "a.stl")
+    assert result.returncode == 0, result.stderr
+    area = float(result.stdout.split("area ")[1])
+    # The far field: 100 to 100.5 chords from the mid-chord (radial from it, 100 from the wall), sampled as a polygon.
+    assert 0.98 * np.pi * 100**2 < area < np.pi * 100.5**2

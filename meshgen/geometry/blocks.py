@@ -128,10 +128,10 @@ def block_spec(geometry) -> str | None:
 
 def measured_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet:
     """The block set of plugin ``spec`` to measure a mesh against or to show: with the cell counts
-    ``dims`` its mesh was made with (its coordinates then seed the boundary deviation), else 4
-    cells per --dims number (the blocks' maps, patches and interfaces do not depend on them)."""
-    dim = load_geometry(spec, params, check=False, dims=dims).dim
-    dims = tuple(int(n) for n in dims) if dims is not None and len(dims) == dim else (4,) * dim
+    ``dims`` its mesh was made with (its coordinates then seed the boundary deviation), else the
+    plugin's ``shown_dims`` or 4 cells per --dims number (maps, patches, interfaces do not depend on them)."""
+    dim, module = load_geometry(spec, params, check=False, dims=dims).dim, plugin_module(spec, dims)[0]
+    dims = tuple(int(n) for n in dims) if dims is not None and len(dims) == dim else getattr(module, "shown_dims", (4,) * dim)
     return load_block_set(spec, params, dims)
 
 
