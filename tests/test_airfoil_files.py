@@ -136,3 +136,29 @@ def test_a_file_has_no_naca_parameter_and_a_missing_file_is_one_line(run_cli, tm
     missing = run_cli("mesh", "-g", "missing.dat", *SMALL, "-o", "x.cgns")
     assert missing.returncode == 2 and "missing.dat" in missing.stderr and len(missing.stderr.strip().splitlines()) == 1
     assert not list(tmp_path.glob("x*"))
+
+
+def test_evaluate_measures_against_the_file_not_the_built_in_naca_0012(run_cli, tmp_path):
+    # The file's plugin is named "airfoil" as the built-in is: the mesh records the file, so a later
+    # evaluate never measures it against the default NACA 0012 section.
+    upper, lower = naca4("2414")
+    (tmp_path / "a.dat").write_text(selig(upper, lower))
+    made = run_cli("mesh", "-g", "a.dat", "--dims", "160", "120", "-m", "tfi", "--no-quality", "-o", "x.cgns")
+    assert made.returncode == 0, made.stderr
+    given = run_cli("evaluate", "x.cgns", "-g", "a.dat")
+    assert given.returncode == 0, given.stderr
+    assert float(given.stdout.split("boundary deviation max")[1].split()[0]) < 1e-10
+    # Without -g: the recorded file, trusted in this process only because -g named it above (a fresh
+    # process says to pass -g PATH); never the built-in NACA 0012, 0.02 chord away from this NACA 2414.
+    alone = run_cli("evaluate", "x.cgns")
+    assert alone.returncode == 0, alone.stderr
+    assert float(alone.stdout.split("boundary deviation max")[1].split()[0]) < 1e-10
+
+
+def test_a_fresh_process_asks_for_the_file_when_evaluating(run_cli_process, tmp_path):
+    upper, lower = naca4("2414")
+    (tmp_path / "a.dat").write_text(selig(upper, lower))
+    made = run_cli_process("mesh", "-g", "a.dat", *SMALL, "-m", "tfi", "--no-quality", "-o", "x.cgns")
+    assert made.returncode == 0, made.stderr
+    alone = run_cli_process("evaluate", "x.cgns")
+    assert alone.returncode == 0 and "pass -g PATH" in alone.stderr and "n/a (no geometry)" in alone.stdout

@@ -34,7 +34,7 @@ from meshgen.formats.multiblock import check_block_output, write_blocks
 from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged_mesh, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
-from meshgen.geometry.plugins import Geometry, load_geometry, plugin_module
+from meshgen.geometry.plugins import Geometry, is_airfoil_file, load_geometry, plugin_module
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.device import inference_device
 from meshgen.neural.inference import is_block_model, neural_blocks
@@ -107,6 +107,9 @@ class Mesh:
         }
         if self.blocks is not None:
             recorded["block_set"] = recorded.pop("geometry")
+            source = self.geometry.geometries[0].source
+            if is_airfoil_file(source):  # named "airfoil" as the built-in is: the file names its section
+                recorded["block_set"] = source
             recorded["block_dims"] = recorded.pop("dims")
             recorded["blocks"] = {
                 name: [len(t) - 1 for t in coords] for name, coords in zip(self.geometry.names, self.geometry.coords)
