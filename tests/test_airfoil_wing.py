@@ -45,6 +45,7 @@ def meshes(tmp_path_factory):
     )
 
 
+@pytest.mark.slow
 def test_the_wing_is_the_2d_mesh_extruded_along_the_span(meshes):
     flat, wing, output = meshes
     assert "inverted cells: 0 (0.00%)" in output and "3 blocks, 23040 cells" in output
@@ -57,6 +58,7 @@ def test_the_wing_is_the_2d_mesh_extruded_along_the_span(meshes):
         assert _areas(X2).min() > 0  # every hex: a positive quad times a positive height
 
 
+@pytest.mark.slow
 def test_the_wake_cut_is_still_one_to_one(meshes):
     _, wing, _ = meshes
     cut = [c for c in wing["lower"]["connections"] if c["donor"] == "upper"]
@@ -74,6 +76,7 @@ def test_the_wake_cut_is_still_one_to_one(meshes):
     assert np.array_equal(here, there) and np.abs(here[:, 1]).max() == 0.0
 
 
+@pytest.mark.slow
 @needs_openfoam
 def test_checkmesh_passes_on_the_wing(run_cli, tmp_path):
     result = run_cli("mesh", "-g", "airfoil", *SMALL, "--dims", "160", "48", "3", "-o", "case", "--format", "openfoam")
@@ -116,6 +119,7 @@ def test_the_listing_says_what_the_third_number_counts(run_cli):
     assert entry["dims"].startswith("N M [K]") and "third number K" in entry["dims"] and "span" in entry["dims"]
 
 
+@pytest.mark.slow
 @needs_openfoam
 @pytest.mark.skipif(shutil.which("simpleFoam") is None, reason="simpleFoam not installed")
 def test_the_three_commands_mesh_check_and_solve(run_cli, tmp_path):
