@@ -14,14 +14,28 @@ at alpha 10 on that mesh: CL, CD, the wall's y+, against TMR's (CFL3D: CL 1.0909
 M 0.15; simpleFoam is incompressible: CL x 1.0114 by Prandtl-Glauert is printed beside it).
 Targets: CL within [1.075, 1.100], CD within [0.0120, 0.0130], y+ at most 1.5 on average and 5
 at most, the mesh in at most 5 s.
+``classy_blocks`` (the anchor): classy_blocks' example ``examples/complex/airfoil/airfoil.py``
+(NACA 2414 at 10 deg in a box two chords long, 3,719 cells) run from a checkout of
+damogranlabs/classy_blocks (``--classy-blocks DIR`` or ``CLASSY_BLOCKS_REPO``; skipped, with the
+reason, without one or without the package), then blockMesh and checkMesh; beside it meshgen's
+counterpart from the example's own coordinate file: ``meshgen mesh -g naca2414.dat --param
+alpha=10 --param farfield=5 --param first_height=0.002 --param growth=1.2 --dims 100 37`` (3,700
+cells, the first cell the example's 0.001 at chord 0.5) and checkMesh. The example is run from a
+copy in a temporary folder with the fixes classy_blocks 1.10.0's own API needs (``optimize()``
+takes no ``relax``; ``take="max"`` moved from ``grade()`` to ``SimpleGrader``). Seconds: the script
+plus blockMesh against the meshgen command (both separate processes, imports included). Target:
+max non-orthogonality and max skewness no worse than classy_blocks'.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import inspect
 import json
 import os
 import re
+import shutil
 import statistics
 import subprocess
 import sys
@@ -125,6 +139,116 @@ def mesh_rows(repeat: int) -> dict:
     return row
 
 
+CLASSY_EXAMPLE = Path("examples") / "complex" / "airfoil"
+CLASSY_MESHGEN = ["--param", "alpha=10", "--param", "farfield=5", "--param", "first_height=0.002", "--param", "growth=1.2"]
+CLASSY_DIMS = ("100", "37")
+CONTROL_DICT = """FoamFile { version 2.0; format ascii; class dictionary; object controlDict; }
+application blockMesh; startFrom startTime; startTime 0; stopAt endTime; endTime 1; deltaT 1;
+writeControl timeStep; writeInterval 1;
+"""
+FV_DICTS = {  # checkMesh reads both: empty ones do
+    "fvSchemes": "FoamFile { version 2.0; format ascii; class dictionary; object fvSchemes; }\n"
+    "ddtSchemes {} gradSchemes {} divSchemes {} laplacianSchemes {} interpolationSchemes {} snGradSchemes {}\n",
+    "fvSolution": "FoamFile { version 2.0; format ascii; class dictionary; object fvSolution; }\nsolvers {}\n",
+}
+
+
+def check_mesh_case(case: Path, env: dict) -> dict:
+    """checkMesh's cells, max non-orthogonality, max skewness and verdict of an OpenFOAM case."""
+    text = subprocess.run(["checkMesh", "-case", str(case)], env=env, capture_output=True, text=True, timeout=600).stdout
+
+    def number(pattern):
+        found = re.search(pattern, text)
+        return float(found[1]) if found else None
+
+    return {
+        "cells": int(number(r"cells:\s+(\d+)") or 0),
+        "max_non_orthogonality": number(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)"),
+        "max_skewness": number(r"Max skewness = ([0-9.eE+-]+)"),
+        "mesh_ok": "Mesh OK" in text,
+    }
+
+
+def fixed_example(text: str) -> tuple[str, list[str]]:
+    """The example's text with the fixes the installed classy_blocks needs, and what they were."""
+    import classy_blocks as cb
+
+    fixes = []
+    if "relax" not in inspect.signature(cb.SketchOptimizer.optimize).parameters and ", relax=True)" in text:
+        text = text.replace(", relax=True)", ")")
+        fixes.append("optimize(relax=True) -> optimize()")
+    if "take" in inspect.signature(cb.SimpleGrader).parameters and 'grade(take="max")' in text:
+        text = text.replace("cb.SimpleGrader(mesh, CELL_SIZE)", 'cb.SimpleGrader(mesh, CELL_SIZE, take="max")')
+        text = text.replace('grade(take="max")', "grade()")
+        fixes.append('grade(take="max") -> SimpleGrader(..., take="max").grade()')
+    return text, fixes
+
+
+def classy_blocks_rows(repo: Path | None) -> dict:
+    """classy_blocks' NACA 2414 example (blockMesh, checkMesh) and meshgen's counterpart (checkMesh)."""
+    sys.path.insert(0, str(REPO / "examples"))
+    from foam_case import foam_environment
+
+    if shutil.which("checkMesh") is None:
+        return {"skipped": "OpenFOAM (blockMesh, checkMesh) not installed"}
+    env = foam_environment()
+    example = repo / CLASSY_EXAMPLE if repo is not None else None
+    result = {}
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        data = example / "naca2414.dat" if example is not None and (example / "naca2414.dat").is_file() else None
+        spec = ["-g", str(data)] if data is not None else ["-g", "airfoil", "--param", "naca=2414"]
+        command = [sys.executable, "-m", "meshgen", "mesh", *spec, *CLASSY_MESHGEN, "--dims", *CLASSY_DIMS, "-m", "elliptic"]
+        command += ["--no-quality", "-o", str(folder / "meshgen"), "--format", "openfoam"]
+        start = time.perf_counter()
+        made = subprocess.run(command, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(REPO)})
+        seconds = time.perf_counter() - start
+        if made.returncode != 0:
+            raise RuntimeError(made.stderr)
+        result["meshgen"] = {
+            "command": " ".join(["meshgen", *command[3:]]),
+            "seconds": seconds,
+            **check_mesh_case(folder / "meshgen", env),
+        }
+        if importlib.util.find_spec("classy_blocks") is None:
+            result["skipped"] = "classy_blocks not installed (pip install classy_blocks)"
+        elif example is None or not (example / "airfoil.py").is_file():
+            result["skipped"] = (
+                "no classy_blocks checkout with examples/complex/airfoil (--classy-blocks DIR or CLASSY_BLOCKS_REPO)"
+            )
+        else:
+            from importlib.metadata import version
+
+            work = folder / "classy" / CLASSY_EXAMPLE
+            work.mkdir(parents=True)
+            shutil.copy(example / "naca2414.dat", work)
+            text, fixes = fixed_example((example / "airfoil.py").read_text())
+            (work / "airfoil.py").write_text(text)
+            case = folder / "classy" / "examples" / "case"
+            (case / "system").mkdir(parents=True)
+            for name, text in {"controlDict": CONTROL_DICT, **FV_DICTS}.items():
+                (case / "system" / name).write_text(text)
+            start = time.perf_counter()
+            script = subprocess.run([sys.executable, "airfoil.py"], cwd=work, capture_output=True, text=True)
+            script_seconds = time.perf_counter() - start
+            if script.returncode != 0:
+                raise RuntimeError(script.stderr[-2000:])
+            start = time.perf_counter()
+            subprocess.run(["blockMesh", "-case", str(case)], env=env, capture_output=True, text=True, check=True)
+            block_mesh_seconds = time.perf_counter() - start
+            result["classy_blocks"] = {
+                "version": version("classy_blocks"), "fixes": fixes, "script_seconds": script_seconds,
+                "blockmesh_seconds": block_mesh_seconds, "seconds": script_seconds + block_mesh_seconds, **check_mesh_case(case, env),
+            }  # fmt: skip
+    for name, row in ((n, result.get(n)) for n in ("classy_blocks", "meshgen")):
+        if row:
+            print(f"NACA 2414 alpha 10, {name}: {row['cells']} cells, checkMesh max non-orthogonality {row['max_non_orthogonality']}, "
+                  f"max skewness {row['max_skewness']}, {row['seconds']:.2f} s", flush=True)  # fmt: skip
+    if "skipped" in result:
+        print(f"NACA 2414 alpha 10, classy_blocks: skipped: {result['skipped']}", flush=True)
+    return result
+
+
 def solver_row() -> dict:
     sys.path.insert(0, str(REPO / "examples" / "naca0012"))
     from run_naca0012 import run
@@ -133,8 +257,10 @@ def solver_row() -> dict:
         return run(10.0, 0, Path(folder) / "case")
 
 
-def run(quick: bool) -> dict:
+def run(quick: bool, classy_blocks: Path | None = None) -> dict:
     result = {"load_average": list(os.getloadavg()), "mesh": mesh_rows(1 if quick else 3)}
+    repo = classy_blocks or (Path(os.environ["CLASSY_BLOCKS_REPO"]) if os.environ.get("CLASSY_BLOCKS_REPO") else None)
+    result["classy_blocks"] = classy_blocks_rows(repo)
     if not quick:
         result["simplefoam_alpha_10"] = solver_row()
     return result
@@ -144,8 +270,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="the mesh rows only (the solver runs for about an hour)")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--classy-blocks", type=Path, default=None, help="a checkout of damogranlabs/classy_blocks")
     args = parser.parse_args()
-    result = run(args.quick)
+    result = run(args.quick, args.classy_blocks)
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))
 

@@ -248,6 +248,18 @@ TARGETS = {
     "airfoil_first_cell_error": ("<=", 0.02, "", "airfoil: largest |first-cell height / asked - 1| over the wall nodes"),
     "airfoil_wall_angle_degrees": ("<=", 2.0, "deg", "airfoil: largest angle of a first grid line off the wall normal"),
     "airfoil_expansion_ratio": ("<=", 1.15, "x", "airfoil: largest wall-normal expansion ratio (the cap)"),
+    "airfoil_classy_blocks_non_orthogonality": (
+        "<=",
+        0.0,
+        "deg",
+        "NACA 2414 alpha 10, about 3,719 cells: checkMesh max non-orthogonality, meshgen minus classy_blocks' example",
+    ),
+    "airfoil_classy_blocks_skewness": (
+        "<=",
+        0.0,
+        "",
+        "NACA 2414 alpha 10, about 3,719 cells: checkMesh max skewness, meshgen minus classy_blocks' example",
+    ),
     "airfoil_cl_alpha_10": (
         "abs<=",
         0.0125,
@@ -1266,6 +1278,18 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
             cm = mesh["check_mesh"]
             add("airfoil: checkMesh max non-orthogonality", cm["max_non_orthogonality"], "deg",
                 note=f"max skewness {cm['max_skewness']}; {'Mesh OK' if cm['mesh_ok'] else str(cm['failed_checks']) + ' failed (aspect ratio)'}")  # fmt: skip
+        anchor = sections["airfoil"].get("classy_blocks") or {}
+        ours, theirs = anchor.get("meshgen"), anchor.get("classy_blocks")
+        if ours and theirs:
+            said = f"meshgen {ours['cells']} cells {ours['seconds']:.1f} s; classy_blocks {theirs['version']} {theirs['cells']} cells {theirs['seconds']:.1f} s"
+            add("NACA 2414 alpha 10: max non-orthogonality, meshgen - classy_blocks",
+                ours["max_non_orthogonality"] - theirs["max_non_orthogonality"], "deg", key="airfoil_classy_blocks_non_orthogonality",
+                note=f"{ours['max_non_orthogonality']:.1f} vs {theirs['max_non_orthogonality']:.1f}; {said}")  # fmt: skip
+            add("NACA 2414 alpha 10: max skewness, meshgen - classy_blocks", ours["max_skewness"] - theirs["max_skewness"], "",
+                key="airfoil_classy_blocks_skewness", note=f"{ours['max_skewness']:.2f} vs {theirs['max_skewness']:.2f}")  # fmt: skip
+        elif ours:
+            add("NACA 2414 alpha 10 (3,700 cells): meshgen max non-orthogonality", ours["max_non_orthogonality"], "deg",
+                note=f"max skewness {ours['max_skewness']:.2f}; classy_blocks skipped: {anchor.get('skipped')}")  # fmt: skip
         solved = sections["airfoil"].get("simplefoam_alpha_10")
         if solved:
             note = f"{solved['cells']} cells, y+ mean {solved['yplus']['average']:.2f} max {solved['yplus']['max']:.2f}"

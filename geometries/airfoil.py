@@ -5,7 +5,9 @@ Section (``meshgen.geometry.airfoils``): NACA 4- or 5-digit ``naca`` (a number: 
 2412, 23012), chord 1, turned by ``alpha`` degrees (nose up) about the quarter chord with its whole
 grid (the wake cut leaves along the chord line, the outflow square to it); ``sharp=1``
 closes its trailing edge (NACA 0012: the NASA TMR formula, whose wall nodes lie on it to
-rounding; others: a4 = -0.1036).
+rounding; others: a4 = -0.1036). Or a Selig or Lednicer coordinate file named as the geometry
+(``-g naca2414.dat``: ``file_module``): its C2 spline is the wall (the wall nodes lie on it), the
+file's trailing edge decides C- or O-grid, and ``naca``, ``sharp`` are not parameters.
 
 Blocks ``lower``, ``section``, ``upper`` in a row along the wall (xi along it, eta from the wall
 outwards; (xi, eta) right-handed). C-grid: ``lower`` lies under the wake cut (xi from the outflow
@@ -25,6 +27,10 @@ the asked height; the parametric eta nodes are the wall-normal distances over D
 marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the layers beyond one
 chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
 the designed, wall-normal spacing: see ``mesh_elliptic``).
+
+A third --dims number K extrudes the set into a straight wing section (``extruded``): every block
+times [0, ``span``] along z, K equal cells, the 2D patches plus ``front`` (z = 0) and ``back``
+(z = span), symmetry planes; the cut stays an interface; the mesh is the 2D mesh extruded.
 
 Grid families: ``level`` K scales the cells per direction by 1.5^K (DPW) and every designed length
 (first cell, leading- and trailing-edge spacing) by (2/3)^K, so the family's grids are similar
@@ -59,10 +65,13 @@ params = {
     "level": 0.0,
 }
 dims_meaning = (
-    "N M: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
+    "N M [K]: cells along the wall (C-grid: round the section and along both sides of the wake cut, a fifth "
     "of them on each side of the cut at least; O-grid: round the section and across its blunt base), "
-    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M)"
+    "cells from the wall to the far field; --param level=K makes them round(1.5^K N), round(1.5^K M); "
+    "a third number K: a straight wing section, K equal cells along the span (z, --param span=S chords, "
+    "default 1; side planes front and back, symmetry)"
 )
+shown_dims = (448, 128)  # what `meshgen geometries show` builds the set with (4 cells cannot reach the far field)
 LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
 WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
@@ -72,6 +81,41 @@ RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1):
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
 BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into straight lines
 FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing is smoothed
+
+
+SECTION_FILE = None  # the coordinate file of a copy made by ``file_module``; None: the NACA section
+FILE_SECTION = None  # its spline Section
+
+
+def file_module(path):
+    """A copy of this plugin whose section is the Selig or Lednicer file ``path`` (read and checked
+    now: GeometryError on one line for a bad file), without the ``naca`` and ``sharp`` parameters."""
+    import importlib.util
+    import sys
+
+    from meshgen.geometry.airfoils import read_section
+
+    section = read_section(path)
+    spec = importlib.util.spec_from_file_location(f"{__name__}_file_{abs(hash(str(path))):x}", __file__)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    module.SECTION_FILE, module.FILE_SECTION = str(path), section
+    module.params = {k: v for k, v in params.items() if k not in ("naca", "sharp")}
+    module.description = f"airfoil section of {path} ({section.name}) in a far field, to the wall (y+ 1)"
+    return module
+
+
+@functools.lru_cache(maxsize=1)
+def extruded():
+    """The 3D straight wing section (``--dims N M K``): this block set swept ``span`` chords along z
+    (``meshgen.geometry.extrusion.extruded_plugin``: side planes ``front``, ``back``, symmetry)."""
+    import sys
+
+    from meshgen.geometry.extrusion import extruded_plugin
+
+    sides = (("front", "symmetry"), ("back", "symmetry"))
+    return extruded_plugin(sys.modules[__name__], "span", 1.0, sides, filled=True)  # w + eta D e fills the square
 
 
 def _sharp_te(values) -> bool:
@@ -102,6 +146,10 @@ def characteristic_length(**values):
 
 def _key(values) -> tuple:
     return tuple(float(values.get(k, v)) for k, v in params.items())
+
+
+def _values(key: tuple) -> dict:
+    return {"naca": 12.0, "sharp": 0.0, **dict(zip(params, key))}
 
 
 def _check(v: dict) -> None:
@@ -158,13 +206,16 @@ def _setup(key: tuple) -> _Setup:
     from meshgen.geometry.airfoil_curve import leading_edge_arc, points_at, trailing_edge
     from meshgen.geometry.airfoils import load_section
 
-    v = dict(zip(params, key))
+    v = _values(key)
     _check(v)
-    designation = _designation(v)
-    try:
-        section = load_section(designation, closed_te=bool(v["sharp"]) and designation != "tmr0012")
-    except (GeometryError, ParameterError) as exc:
-        raise GeometryError(f"geometry 'airfoil': naca={v['naca']:g}: {exc}") from None
+    if SECTION_FILE is not None:
+        section = FILE_SECTION
+    else:
+        designation = _designation(v)
+        try:
+            section = load_section(designation, closed_te=bool(v["sharp"]) and designation != "tmr0012")
+        except (GeometryError, ParameterError) as exc:
+            raise GeometryError(f"geometry 'airfoil': naca={v['naca']:g}: {exc}") from None
     edge = trailing_edge(section)
     alpha = math.radians(v["alpha"])
     turn = np.array([[math.cos(alpha), math.sin(alpha)], [-math.sin(alpha), math.cos(alpha)]])

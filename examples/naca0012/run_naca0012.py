@@ -3,6 +3,7 @@ and the Spalart-Allmaras model: lift and drag against the published values.
 
     python examples/naca0012/run_naca0012.py --alpha 10                 # level 0, print CL, CD, y+
     python examples/naca0012/run_naca0012.py --alpha 10 --level 1 --json out.json
+    python examples/naca0012/run_naca0012.py --alpha 10 --case naca --no-mesh   # solve a case meshgen wrote
 
 The TMR case (turbmodels.larc.nasa.gov, "2D NACA 0012 Airfoil Validation"): the NACA 0012 with a
 sharp trailing edge (meshgen's ``tmr0012`` section), Re = 6e6 per chord, M = 0.15, alpha = 0, 10,
@@ -93,7 +94,7 @@ def set_up(case: Path, alpha: float, end_time: int) -> None:
         case / "system" / "controlDict",
         "dictionary",
         f"application simpleFoam;\nstartFrom latestTime;\nstartTime 0;\nstopAt endTime;\nendTime {end_time};\ndeltaT 1;\n"
-        f"writeControl timeStep;\nwriteInterval {ROUND};\npurgeWrite 1;\nwriteFormat binary;\nwritePrecision 12;\n"
+        f"writeControl timeStep;\nwriteInterval {end_time};\npurgeWrite 1;\nwriteFormat binary;\nwritePrecision 12;\n"
         "runTimeModifiable true;\nfunctions\n{\n"
         '    coefficients { type forceCoeffs; libs ("libforces.so"); writeControl timeStep; writeInterval 1;\n'
         f"        patches ({walls}); rho rhoInf; rhoInf 1; liftDir ({-math.sin(a):.17g} {math.cos(a):.17g} 0);\n"
@@ -159,29 +160,34 @@ def run(
     quiet=False,
     extra=(),
     dims=DIMS,
+    mesh=True,
 ):
-    """Mesh, check, set up, solve; returns cells, y+, CL, CD (and with Prandtl-Glauert), the
-    reference and the convergence figures."""
+    """Mesh (not with ``mesh`` False: ``case`` holds the mesh already), check, set up, solve;
+    returns cells, y+, CL, CD (and with Prandtl-Glauert), the reference and the convergence figures."""
     env = foam_environment()
     if shutil.which("simpleFoam", path=env.get("PATH")) is None:
         raise SystemExit("simpleFoam not found: install OpenFOAM (Debian: apt install openfoam)")
-    shutil.rmtree(case, ignore_errors=True)
     start = time.perf_counter()
-    meshed = subprocess.run(mesh_command(dims, level, case, extra), capture_output=True, text=True)
-    if meshed.returncode != 0:
-        raise SystemExit(meshed.stderr)
+    if mesh:
+        shutil.rmtree(case, ignore_errors=True)
+        meshed = subprocess.run(mesh_command(dims, level, case, extra), capture_output=True, text=True)
+        if meshed.returncode != 0:
+            raise SystemExit(meshed.stderr)
+    elif not (case / "constant" / "polyMesh" / "owner").is_file():
+        raise SystemExit(f"{case}: no OpenFOAM mesh (meshgen mesh ... --format openfoam -o {case})")
     mesh_seconds = time.perf_counter() - start
     checked = subprocess.run(["checkMesh", "-case", str(case)], env=env, capture_output=True, text=True)
-    set_up(case, alpha, ROUND)
+    step = min(ROUND, max_iterations)  # a round: ROUND iterations, or all of a shorter run
+    set_up(case, alpha, step)
     control = case / "system" / "controlDict"
     start, iterations, changes = time.perf_counter(), 0, {"CL": math.inf, "CD": math.inf}
     while iterations < max_iterations:
         # the next round: only endTime changes (the case restarts from its latest time)
-        control.write_text(re.sub(r"endTime \d+;", f"endTime {iterations + ROUND};", control.read_text()))
+        control.write_text(re.sub(r"endTime \d+;", f"endTime {iterations + step};", control.read_text()))
         solved = subprocess.run(["simpleFoam", "-case", str(case)], env=env, capture_output=True, text=True)
         if solved.returncode != 0:
             raise SystemExit(solved.stdout[-3000:] + solved.stderr[-3000:])
-        iterations += ROUND
+        iterations += step
         table = coefficient_rows(case)
         if iterations > WINDOW:
             found = history(table, ["Cd", "Cl"], WINDOW, relative=False)
@@ -228,8 +234,9 @@ def main() -> None:
     parser.add_argument("--case", default="naca0012-case", type=Path)
     parser.add_argument("--max-iterations", type=int, default=20000)
     parser.add_argument("--json", type=Path, default=None, help="also write the figures here")
+    parser.add_argument("--no-mesh", action="store_true", help="solve the mesh --case holds (a meshgen OpenFOAM case)")
     args = parser.parse_args()
-    result = run(args.alpha, args.level, args.case, args.max_iterations, dims=tuple(args.dims))
+    result = run(args.alpha, args.level, args.case, args.max_iterations, dims=tuple(args.dims), mesh=not args.no_mesh)
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))
 

@@ -103,7 +103,7 @@ def geometry_options(default="semicylinder"):
 def load_selected_geometry(spec, params, dims=None):
     """Load the geometry chosen on the command line; check dims against its dimension. A block set
     is loaded unchecked: its blocks are checked when ``meshgen.run.request.carry_out`` meshes it."""
-    geometry = load_geometry(spec, parse_params(params), check=block_spec(spec) is None)
+    geometry = load_geometry(spec, parse_params(params), check=block_spec(spec) is None, dims=dims)
     for line in getattr(geometry.boundary_map, "face_lines", ()):  # a shape file's face assignment
         click.echo(f"{geometry.name}: {line}", err=True)
     if dims is not None and len(dims) != geometry.dim:

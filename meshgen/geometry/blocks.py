@@ -124,17 +124,17 @@ def block_spec(geometry) -> str | None:
         spec = str(geometry)
     if is_sweep_file(spec):  # a CAD solid swept from a cap: a block set
         return spec
-    if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml"):
+    if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml", ".dat"):
         return None  # a shape file is one block (a topology file, .yaml too, is a block set)
     return spec if is_multiblock(spec) else None
 
 
 def measured_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet:
     """The block set of plugin ``spec`` to measure a mesh against or to show: with the cell counts
-    ``dims`` its mesh was made with (its coordinates then seed the boundary deviation), else 4
-    cells per --dims number (the blocks' maps, patches and interfaces do not depend on them)."""
-    dim = load_geometry(spec, params, check=False).dim
-    dims = tuple(int(n) for n in dims) if dims is not None and len(dims) == dim else (4,) * dim
+    ``dims`` its mesh was made with (its coordinates then seed the boundary deviation), else the
+    plugin's ``shown_dims`` or 4 cells per --dims number (maps, patches, interfaces do not depend on them)."""
+    dim, module = load_geometry(spec, params, check=False, dims=dims).dim, plugin_module(spec, dims)[0]
+    dims = tuple(int(n) for n in dims) if dims is not None and len(dims) == dim else getattr(module, "shown_dims", (4,) * dim)
     return load_block_set(spec, params, dims)
 
 
@@ -152,8 +152,8 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
     """The block set of plugin ``spec`` with ``params`` over its defaults and the cell counts
     ``dims`` (what the plugin's ``dims_meaning`` says), its interfaces derived and checked."""
 
-    module, source = plugin_module(spec)
-    base = load_geometry(spec, params, check=False)
+    module, source = plugin_module(spec, dims)
+    base = load_geometry(spec, params, check=False, dims=dims)
     for attribute in ("blocks", "block_coords", "interfaces", "block_patches"):
         if not hasattr(module, attribute):
             raise GeometryError(f"multi-block geometry plugin {source} does not define '{attribute}'")

@@ -20,15 +20,18 @@ keeps zeta as zeta (transform entry 3). The section's 2D coordinates are those i
 from __future__ import annotations
 
 import dataclasses
+import types
 from dataclasses import dataclass
 
 import numpy as np
 
+from meshgen.errors import GeometryError, ParameterError
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet, Interface
 from meshgen.geometry.domain import Geometry
+from meshgen.methods.tfi import transfinite
 
-__all__ = ["TOLERANCE", "Extrusion", "extrude", "extrusion_of", "section_of", "sweep_frame"]
+__all__ = ["TOLERANCE", "Extrusion", "extrude", "extruded_plugin", "extrusion_of", "section_of", "sweep_frame"]
 
 TOLERANCE = 1e-9  # relative to the block set's characteristic length
 _SAMPLES = 9  # sample points per face axis of the test
@@ -146,3 +149,70 @@ def extrude(extrusion: Extrusion, sections, zeta: np.ndarray) -> list[np.ndarray
         plane = extrusion.origin + np.asarray(S, dtype=float) @ extrusion.frame  # (n1, n2, 3)
         blocks.append(plane[:, :, None, :] + zeta[None, None, :, None] * extrusion.direction)
     return blocks
+
+
+def extruded_plugin(section, depth="span", default=1.0, sides=(("front", "symmetry"), ("back", "symmetry")), filled=False):
+    """The 3D block-set plugin (a module) of the 2D block-set plugin module ``section`` swept
+    ``depth`` (a new parameter, default ``default``) along z: each block the section's times
+    [0, depth] (on the caps its Coons patch or, ``filled``, its own map, which the section then
+    defines on the whole unit square), the section's interfaces and patches with zeta0 and
+    zeta1 of every block the patches ``sides`` (name, type); --dims N M K: the section's N M, K
+    cells along z, equally spaced. The section's ``mesh_elliptic`` and ``notes`` hooks carry over:
+    the 3D mesh is the extrusion of the section's (module docstring)."""
+    names = tuple(section.params)
+    module = types.ModuleType(f"{section.__name__}_extruded")
+    module.__file__ = getattr(section, "__file__", None)
+    module.name, module.dim, module.blocks = section.name, 3, tuple(section.blocks)
+    module.description = f"{section.description}; extruded {depth} along z"
+    module.params = {**section.params, depth: float(default)}
+    module.dims_meaning = getattr(section, "dims_meaning", "")
+
+    def own(values):
+        return {key: value for key, value in values.items() if key in names}
+
+    def declared(attribute, values):
+        value = getattr(section, attribute)
+        return value(**own(values)) if callable(value) else value
+
+    def check(values) -> float:
+        length = float(values.get(depth, default))
+        if not (0.0 < length <= 1e4):
+            raise ParameterError(depth, f"{{name}} {length:g}: the extrusion's length must lie in (0, 10000]")
+        return length
+
+    def characteristic_length(**values):
+        size = section.characteristic_length(**own(values)) if hasattr(section, "characteristic_length") else 1.0
+        return float(np.hypot(size, check(values)))
+
+    def block_coords(dims, **values):
+        check(values)
+        coords = section.block_coords(tuple(dims[:2]), **own(values))
+        return {block: [*axes, np.linspace(0.0, 1.0, int(dims[2]) + 1)] for block, axes in coords.items()}
+
+    def boundary(block, points, **values):
+        length = check(values)
+        if filled:
+            return np.column_stack([section.boundary(block, points[:, :2], **own(values)), length * points[:, 2]])
+        xy = transfinite(lambda p: section.boundary(block, p, **own(values)), [points[:, 0], points[:, 1]])
+        return np.column_stack([xy, length * points[:, 2]])
+
+    module.characteristic_length, module.block_coords, module.boundary = characteristic_length, block_coords, boundary
+    module.interfaces = lambda **values: list(declared("interfaces", values))
+    faces = {"zeta0": tuple(sides[0]), "zeta1": tuple(sides[1])}
+    module.block_patches = lambda **values: {
+        block: {**declared("block_patches", values).get(block, {}), **faces} for block in module.blocks
+    }
+    if hasattr(section, "notes"):
+        module.notes = section.notes
+    if hasattr(section, "mesh_elliptic"):
+
+        def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
+            """The section's ``mesh_elliptic``, extruded (``extrude``)."""
+            extrusion = extrusion_of(block_set)
+            if extrusion is None:
+                raise GeometryError(f"geometry '{block_set.name}': the extruded block set is not an extrusion")
+            Xs, info = section.mesh_elliptic(section_of(block_set, extrusion), tol=tol, max_iter=max_iter, progress=progress)
+            return extrude(extrusion, Xs, block_set.coords[0][2]), info
+
+        module.mesh_elliptic = mesh_elliptic
+    return module

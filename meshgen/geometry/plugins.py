@@ -47,12 +47,14 @@ from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.trust import check_plugin_name, note_given_plugin, recorded_spec
 
 __all__ = [
+    "AIRFOIL_FILE_SUFFIXES",
     "ENTRY_POINT_GROUP",
     "Geometry",
     "available_names",
     "bind",
     "builtin_dir",
     "check_boundary",
+    "is_airfoil_file",
     "list_geometries",
     "load_geometry",
     "load_recorded_geometry",
@@ -62,6 +64,8 @@ __all__ = [
 ]
 
 ENTRY_POINT_GROUP = "meshgen.geometries"
+AIRFOIL_FILE_SUFFIXES = (".dat",)  # Selig or Lednicer coordinates: the built-in airfoil plugin meshes them
+_AIRFOIL_FILES: dict = {}
 
 
 def builtin_dir(kind: str) -> Path:
@@ -187,20 +191,49 @@ def _declared_patches(declared, dim: int, source: str) -> dict:
     return declared
 
 
+def is_airfoil_file(spec) -> bool:
+    """Whether ``spec`` names an airfoil coordinate file (Selig or Lednicer) by its extension."""
+    return Path(str(spec)).suffix.lower() in AIRFOIL_FILE_SUFFIXES
+
+
+def _airfoil_module(path: Path) -> ModuleType:
+    """The built-in airfoil plugin's copy for the coordinate file ``path`` (its ``file_module``),
+    kept per (path, size, modification time)."""
+    status = path.stat()
+    key = (str(path.resolve()), status.st_size, status.st_mtime_ns)
+    if key not in _AIRFOIL_FILES:
+        _AIRFOIL_FILES[key] = _import_file(_builtin_files()["airfoil"]).file_module(path)
+    return _AIRFOIL_FILES[key]
+
+
 def looks_like_path(spec: str) -> bool:
-    """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, or anything with a folder
-    separator) rather than a built-in or installed geometry."""
-    return spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec) or is_topology_file(spec)
+    """Whether ``spec`` names a file (a ``.py`` plugin, a shape file, an airfoil coordinate file, or
+    anything with a folder separator) rather than a built-in or installed geometry."""
+    return (
+        spec.endswith(".py") or "/" in spec or "\\" in spec or is_shape_file(spec) or is_topology_file(spec)
+        or is_airfoil_file(spec)
+    )  # fmt: skip
 
 
-def plugin_module(spec: str) -> tuple[ModuleType, str]:
+def plugin_module(spec: str, dims=None) -> tuple[ModuleType, str]:
     """The plugin module of a geometry name (built-in or entry point) or ``.py`` path, imported,
-    with a description of where it came from (its file, or the entry point)."""
+    with a description of where it came from (its file, or the entry point). With ``dims`` of one
+    number more than the plugin's dim, a 2D block set that defines ``extruded()`` gives its 3D
+    version (``meshgen.geometry.extrusion.extruded_plugin``: the third number counts along z)."""
+    module, source = _plugin_module(spec)
+    if dims is not None and len(dims) == getattr(module, "dim", 0) + 1 and callable(getattr(module, "extruded", None)):
+        module = call_plugin(source, "extruded", module.extruded)
+    return module, source
+
+
+def _plugin_module(spec: str) -> tuple[ModuleType, str]:
     if looks_like_path(spec):
         path = Path(spec)
         if not path.is_file():
             raise GeometryError(f"geometry file {spec} does not exist")
-        if is_topology_file(path):
+        if is_airfoil_file(path):
+            module = _airfoil_module(path)
+        elif is_topology_file(path):
             module = topology_module(path)
         else:  # a CAD solid other than six four-cornered faces: a sweep's block set
             module = sweep_module(path) if is_sweep_file(path) else _import_file(path)
@@ -219,14 +252,14 @@ def plugin_module(spec: str) -> tuple[ModuleType, str]:
     return module, f"entry point {eps[spec].value}"
 
 
-def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True) -> Geometry:
+def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool = True, dims=None) -> Geometry:
     """Load a geometry by name (built-in or entry point) or by path to a ``.py`` plugin file,
     bind ``params`` over its defaults and, with ``check``, verify its boundary map
     (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
     OBJ, PLY, or a YAML geometry file: ``meshgen.geometry.shapes.loader``) gives a geometry without
-    parameters."""
+    parameters. ``dims``: the cell counts, when they choose a plugin's 3D version (``plugin_module``)."""
     single = is_shape_file(spec) and not is_sweep_file(spec)
-    geometry = load_shape(spec) if single else _from_module(*plugin_module(spec))
+    geometry = load_shape(spec) if single else _from_module(*plugin_module(spec, dims))
     geometry = bind(geometry, params)
     if check:
         check_boundary(geometry)

@@ -35,7 +35,7 @@ from meshgen.formats.multiblock import check_block_output, write_blocks
 from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged_mesh, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
-from meshgen.geometry.plugins import Geometry, load_geometry, plugin_module
+from meshgen.geometry.plugins import Geometry, is_airfoil_file, load_geometry, plugin_module
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.device import inference_device
 from meshgen.neural.inference import is_block_model, neural_blocks
@@ -108,6 +108,9 @@ class Mesh:
         }
         if self.blocks is not None:
             recorded["block_set"] = recorded.pop("geometry")
+            source = self.geometry.geometries[0].source
+            if is_airfoil_file(source):  # named "airfoil" as the built-in is: the file names its section
+                recorded["block_set"] = source
             recorded["block_dims"] = recorded.pop("dims")
             recorded["blocks"] = {
                 name: [len(t) - 1 for t in coords] for name, coords in zip(self.geometry.names, self.geometry.coords)
@@ -229,7 +232,7 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
             elif method == "neural":
                 Xs, info = _neural(request, block_set, model, callback)
             else:
-                module = plugin_module(spec)[0]
+                module = plugin_module(spec, request.dims)[0]
                 elliptic = getattr(module, "mesh_elliptic", None) or elliptic_blocks
                 options = getattr(module, "elliptic_options", {})  # e.g. a swept CAD cap's: slide_section
                 Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback, **options)
@@ -324,7 +327,7 @@ def _check(request, spec: str, say):
         heights = parse_first_cell(request.first_cell, block_set)
         block_set = graded_block_set(block_set, heights, parse_wall_clusters(request.clusters, block_set))
     output = check_block_output(request.output, request.format, block_set) if request.output is not None else None
-    notes.extend(getattr(plugin_module(spec)[0], "notes", lambda _: [])(block_set))
+    notes.extend(getattr(plugin_module(spec, request.dims)[0], "notes", lambda _: [])(block_set))
     for line in notes:
         say(line)
     return method, block_set, output, notes, model
