@@ -83,6 +83,7 @@ LAYERS = [
         "meshgen.geometry.surface",
         "meshgen.geometry.domain",
         "meshgen.geometry.blocks",
+        "meshgen.geometry.set_surface",
         "meshgen.geometry.shapes",
         "meshgen.geometry.topology_file",
         "meshgen.geometry.topology",

@@ -9,9 +9,10 @@ import click
 
 from meshgen.cli._options import load_selected_geometry
 from meshgen.errors import GeometryError
-from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set, write_block_set_surface
+from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
 from meshgen.geometry.blocks import describe as describe_blocks
 from meshgen.geometry.plugins import available_names, load_geometry, parse_params
+from meshgen.geometry.set_surface import write_block_set_surface
 from meshgen.geometry.shapes.loader import FORMAT_HELP
 from meshgen.geometry.shapes.show import write_face_surface
 from meshgen.geometry.surface import check_surface_path, write_surface

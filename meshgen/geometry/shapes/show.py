@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, block_set_surface
+from meshgen.geometry.blocks import BlockSet
 from meshgen.geometry.patches import geometry_patches
+from meshgen.geometry.set_surface import block_set_surface
 from meshgen.geometry.surface import boundary_surface
 from meshgen.run.atomic import atomic_write, check_output_file
 
@@ -32,7 +33,7 @@ def write_face_surface(geometry, path, resolution: int = 32) -> tuple[Path, int]
     """Write ``face_surface`` as VTU with cell arrays ``cube_face`` (0..5: xi0, xi1, eta0, eta1,
     zeta0, zeta1) and ``patch`` (the index of the face's patch in the geometry's patch list),
     atomically; of a block set (``meshgen.geometry.blocks.BlockSet``) its patch faces with
-    ``block`` too (``meshgen.geometry.surface.block_set_surface``). Returns the path and the
+    ``block`` too (``meshgen.geometry.set_surface.block_set_surface``). Returns the path and the
     triangle count."""
     import meshio
 
