@@ -48,7 +48,7 @@ from meshgen.formats._openfoam import FV_SCHEMES, FV_SOLUTION, foam_header  # no
 EXAMPLES = {
     "karman": ("karman.py", "karman-2d.yaml"),
     "elbow": ("elbow.py", "elbow-taper-3d.yaml"),
-    "t_joint": ("t_joint.py", None),
+    "t_joint": ("t_joint.py", "t-joint-3d.yaml"),
 }
 METHODS = ("tfi", "elliptic")
 CONTROL = "application blockMesh;\nstartFrom startTime;\nstartTime 0;\nstopAt endTime;\nendTime 1;\ndeltaT 1;\nwriteControl timeStep;\nwriteInterval 1;\n"  # fmt: skip

@@ -18,7 +18,7 @@ diameter along the joint's normal, and 6 wall blocks round them) from its end fa
 faces: the half-planes through the joint's axis (the line through ``center`` along the arms'
 plane normal) that bisect the angle to the next arm on either side. Two arms' mitres are one
 plane, so their blocks share the faces there; a pipe cut obliquely meets the mitre in an ellipse
-(spline edges through it). The vertices are named ``<arm>.<point>`` (``j.<point>`` on the axis, ``m<arm>.<point>`` on
+(spline edges through 15 of its points). The vertices are named ``<arm>.<point>`` (``j.<point>`` on the axis, ``m<arm>.<point>`` on
 the mitre towards the next arm counterclockwise about the normal).
 """
 
@@ -38,7 +38,7 @@ _RING = ("br", "tr", "t", "tl", "bl", "b")  # counterclockwise from -45 degrees
 _ANGLES = {"br": -45.0, "tr": 45.0, "t": 90.0, "tl": 135.0, "bl": 225.0, "b": 270.0}
 _MIRROR = {"tl": "tr", "bl": "br", "t": "t", "b": "b"}  # a point on an arm's side < 0: the previous arm's name
 _OWN = {("br", "tr"): (-45.0, 45.0), ("tr", "t"): (45.0, 90.0), ("b", "br"): (-90.0, -45.0)}
-_SAMPLES = 7  # points inside each mitre ellipse arc (its spline)
+_SAMPLES = 15  # points inside each mitre ellipse arc (its spline)
 
 
 def _fail(path, text: str):
@@ -86,14 +86,7 @@ def expand_joint(path, data: dict) -> dict:
     core = float(_positive(path, "core", joint.get("core", 0.5)))
     if core >= np.sqrt(0.5):
         _fail(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
-    arms = joint["arms"]
-    if not isinstance(arms, list) or len(arms) < 2:
-        _fail(path, "arms must list at least two arms, each {end: [x, y, z], patch: name}")
-    ends, patches = [], []
-    for number, arm in enumerate(arms):
-        arm = _keys(path, f"arms[{number}]", arm, _ARM_KEYS)
-        ends.append(_vector(path, f"arms[{number}]: end", arm.get("end")))
-        patches.append(str(arm.get("patch", f"end{number}")))
+    ends, patches = _arms(path, joint["arms"])
     directions = np.array([e - center for e in ends])
     lengths = np.linalg.norm(directions, axis=1)
     if np.any(lengths <= 1e-12 * radius):
@@ -186,6 +179,18 @@ def expand_joint(path, data: dict) -> dict:
     data["edges"] = list(data.get("edges") or []) + edges
     data.setdefault("default_patch", {"name": str(joint.get("wall", "walls")), "type": "wall"})
     return data
+
+
+def _arms(path, arms) -> tuple[list, list]:
+    """(end centres (3,), end patch names) of the ``arms`` list."""
+    if not isinstance(arms, list) or len(arms) < 2:
+        _fail(path, "arms must list at least two arms, each {end: [x, y, z], patch: name}")
+    ends, patches = [], []
+    for number, arm in enumerate(arms):
+        arm = _keys(path, f"arms[{number}]", arm, _ARM_KEYS)
+        ends.append(_vector(path, f"arms[{number}]: end", arm.get("end")))
+        patches.append(str(arm.get("patch", f"end{number}")))
+    return ends, patches
 
 
 def _merge(data: dict, patch: str, faces: list) -> dict:
