@@ -106,7 +106,7 @@ def test_bench_input_lines(tmp_path):
     assert input_lines(path) == (2, 6)
 
 
-def _min_corner_jacobian(X: np.ndarray) -> float:
+def min_corner_jacobian(X: np.ndarray) -> float:
     """The smallest of the 8 corner Jacobians (triple products of the edges at the corner) of the hexes of X."""
     n = [s - 1 for s in X.shape[:3]]
     found = np.inf
@@ -136,4 +136,4 @@ def test_tapered_elbow_caps_do_not_slide_and_elliptic_does_not_fold():
     blocks = load_block_set(ELBOW, None, (1, 1, 1))
     Xs, info = elliptic_blocks(blocks)
     assert info["converged"]
-    assert min(_min_corner_jacobian(X) for X in Xs) > 0  # sliding caps folded 14 cells at the outlet rim
+    assert min(min_corner_jacobian(X) for X in Xs) > 0  # sliding caps folded 14 cells at the outlet rim

@@ -83,3 +83,18 @@ def test_t_joint_checkmesh_against_classy_blocks(tmp_path):
     assert angle <= 51.6 and skew <= 2.38
     assert set(found["patches"]) == {"inlet", "outlet_1", "outlet_2", "walls"}
     assert found["patches"]["inlet"] == found["patches"]["outlet_1"] == 2 * 8 * 16 + 5 * (4 * 8 + 2 * 16)
+
+
+def test_t_joint_elliptic_does_not_fold_at_its_inner_block_corners():
+    from test_topology_examples import min_corner_jacobian
+
+    from meshgen.methods.elliptic import elliptic_blocks
+
+    # The mitres' block corners are inside the set (6 and 12 blocks meet there): they had no
+    # junction equation and stayed at the TFI while their neighbours moved by ~0.5, folding 30 cells.
+    blocks = load_block_set(TJOINT, None, (1, 1, 1))
+    Xs, info = elliptic_blocks(blocks)
+    assert info["converged"]
+    assert min(min_corner_jacobian(X) for X in Xs) > 0
+    moved = [np.abs(X - T).max() for X, T in zip(Xs, tfi_blocks(blocks))]
+    assert max(moved) > 0.1  # the solve did move the mesh (not the TFI returned)
