@@ -98,3 +98,23 @@ def test_t_joint_elliptic_does_not_fold_at_its_inner_block_corners():
     assert min(min_corner_jacobian(X) for X in Xs) > 0
     moved = [np.abs(X - T).max() for X, T in zip(Xs, tfi_blocks(blocks))]
     assert max(moved) > 0.1  # the solve did move the mesh (not the TFI returned)
+
+
+@pytest.mark.parametrize(
+    "arms, normal",
+    [
+        ("[{end: [4, 0, 0]}, {end: [-2, 3.4641016151, 0]}, {end: [-2, -3.4641016151, 0]}]", ""),  # a Y, 120 degrees apart
+        ("[{end: [4, 0, 0]}, {end: [0, 0, 4]}, {end: [-4, 0, 0]}, {end: [0, 0, -4]}]", "normal: [0, 1, 0], "),  # a cross
+    ],
+)
+def test_other_joints_conform_and_do_not_fold(tmp_path, arms, normal):
+    from test_topology_examples import min_corner_jacobian
+
+    path = joint(
+        tmp_path, f"joint: {{center: [0, 0, 0], radius: 1, {normal}arms: {arms}, cells: {{core: 3, radial: 2, along: 6}}}}\n"
+    )
+    blocks = load_block_set(path, None, (1, 1, 1))
+    count = arms.count("end")
+    # Per arm 13 interfaces inside its sections; its 8 mitre faces are shared with its neighbours'.
+    assert len(blocks.names) == 8 * count and len(blocks.interfaces) == 13 * count + 8 * count // 2
+    assert min(min_corner_jacobian(X) for X in tfi_blocks(blocks)) > 0
