@@ -47,7 +47,7 @@ from meshgen.formats._openfoam import FV_SCHEMES, FV_SOLUTION, foam_header  # no
 # name: (classy_blocks script under benchmarks/anchors/, topology file under examples/topologies/ or None)
 EXAMPLES = {
     "karman": ("karman.py", "karman-2d.yaml"),
-    "elbow": ("elbow.py", "elbow-taper-3d.yaml"),
+    "elbow": ("elbow.py", "elbow-pipe-3d.yaml"),
     "t_joint": ("t_joint.py", "t-joint-3d.yaml"),
 }
 METHODS = ("tfi", "elliptic")

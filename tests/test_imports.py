@@ -84,7 +84,7 @@ LAYERS = [
         "meshgen.geometry.domain",
         "meshgen.geometry.blocks",
         "meshgen.geometry.shapes",
-        "meshgen.geometry.topology_joint",
+        "meshgen.geometry.topology_shorthand",
         "meshgen.geometry.topology_file",
         "meshgen.geometry.topology",
         "meshgen.run.trust",

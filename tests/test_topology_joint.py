@@ -1,4 +1,4 @@
-"""The ``joint`` shorthand of topology files (``meshgen.geometry.topology_joint``): pipes of one
+"""The ``joint`` shorthand of topology files (``meshgen.geometry.topology_shorthand``): pipes of one
 radius meeting in a plane, expanded into mitred 8-block O-grid arms; its cell count against the
 closed form, its walls and mitres against the cylinders and bisector planes, its one-line errors,
 and checkMesh on examples/topologies/t-joint-3d.yaml against classy_blocks' T-joint."""

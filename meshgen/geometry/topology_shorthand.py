@@ -1,6 +1,7 @@
-"""The ``joint`` shorthand of a topology file: round pipes of one radius whose axes meet at one
-point in one plane (a T, a cross, a Y), written as one entry and expanded into the file's
-vertices, blocks, edges, counts, ratios and patches before the file is checked::
+"""The shorthands of a topology file, each expanded into the file's vertices, blocks, edges,
+counts, ratios and patches before the file is checked: ``pipe`` (``expand_pipe``: one round pipe
+of 5-block O-grid sections, straight or bent) and ``joint`` (``expand_joint``): round pipes of
+one radius whose axes meet at one point in one plane (a T, a cross, a Y)::
 
     joint:
       center: [5, 5, 0]                  # where the axes meet
@@ -28,9 +29,11 @@ import numpy as np
 
 from meshgen.errors import GeometryError, did_you_mean
 
-__all__ = ["JOINT_KEYS", "expand_joint"]
+__all__ = ["JOINT_KEYS", "PIPE_KEYS", "expand_joint", "expand_pipe"]
 
 JOINT_KEYS = ("center", "radius", "arms", "wall", "core", "cells", "grading", "normal")
+PIPE_KEYS = ("start", "end", "bend", "length", "wall", "core", "cells", "grading")
+_PIPE_CORNERS = (225.0, 315.0, 45.0, 135.0)  # the 5-block section's k0..k3 / w0..w3, degrees from e1 towards e2
 _ARM_KEYS = ("end", "patch")
 # The section in (side, up) coordinates over the radius: core points k*, wall points w* at 45-degree
 # steps; side > 0 faces the next arm counterclockwise, up is the joint's normal.
@@ -42,7 +45,8 @@ _SAMPLES = 15  # points inside each mitre ellipse arc (its spline)
 
 
 def _fail(path, text: str):
-    raise GeometryError(f"topology file {path}: joint: {text}")
+    """``path``: the file and its shorthand's key ("f.yaml: joint")."""
+    raise GeometryError(f"topology file {path}: {text}")
 
 
 def _vector(path, where, value, dim=3) -> np.ndarray:
@@ -77,6 +81,7 @@ def expand_joint(path, data: dict) -> dict:
     blocks, edges, cells, grading and patches (added to any the file gives); GeometryError (one
     line) for a bad entry: arms not in one plane, two arms in one direction, an arm shorter than
     its mitre."""
+    path = f"{path}: joint"
     joint = _keys(path, "the entry", data["joint"], JOINT_KEYS)
     for key in ("center", "radius", "arms"):
         if key not in joint:
@@ -237,3 +242,113 @@ def _left_handed(vertices: dict, bottom: list, top: list) -> bool:
     eta = (P[2] + P[3] + P[6] + P[7] - P[0] - P[1] - P[4] - P[5]) / 4
     zeta = (P[4:].sum(axis=0) - P[:4].sum(axis=0)) / 4
     return float(np.cross(xi, eta) @ zeta) < 0
+
+
+def expand_pipe(path, data: dict) -> dict:
+    """``data`` with its ``pipe`` entry expanded: a round pipe of 5-block O-grid sections (a square
+    core, corners k0..k3, and 4 wall blocks to w0..w3 at 45 degrees) from its start section to its
+    end section, straight (``length``) or bent about an axis (``bend``: center, axis, angle in
+    degrees), its radius changing linearly; vertices ``a.k0`` .. ``b.w3`` (a: start, b: end)."""
+    path = f"{path}: pipe"
+    pipe = _keys(path, "the entry", data["pipe"], PIPE_KEYS)
+    start = _keys(path, "start", pipe.get("start"), ("center", "normal", "radius", "patch"))
+    end = _keys(path, "end", pipe.get("end") or {}, ("radius", "patch"))
+    if ("bend" in pipe) == ("length" in pipe):
+        _fail(path, "needs one of 'bend' ({center, axis, angle}) and 'length' (a straight pipe)")
+    center = _vector(path, "start: center", start.get("center"))
+    normal = _vector(path, "start: normal", start.get("normal"))
+    if np.linalg.norm(normal) < 1e-12:
+        _fail(path, "start: normal must not be zero")
+    normal = normal / np.linalg.norm(normal)
+    radii = (float(_positive(path, "start: radius", start.get("radius"))), 0.0)
+    radii = (radii[0], float(_positive(path, "end: radius", end.get("radius", radii[0]))))
+    core = float(_positive(path, "core", pipe.get("core", 0.4)))
+    if core >= np.sqrt(0.5):
+        _fail(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
+    if "bend" in pipe:
+        bend = _keys(path, "bend", pipe["bend"], ("center", "axis", "angle"))
+        pivot, axis = _vector(path, "bend: center", bend.get("center")), _vector(path, "bend: axis", bend.get("axis"))
+        angle = bend.get("angle")
+        if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not 0 < abs(angle) < 360:
+            _fail(path, f"bend: angle must be a number of degrees between -360 and 360, not 0, got {angle!r}"[:160])
+        axis = axis / max(np.linalg.norm(axis), 1e-300)
+        arm = center - pivot - ((center - pivot) @ axis) * axis  # from the bend's axis to the start centre
+        if abs(normal @ axis) > 1e-9 or abs(normal @ arm) > 1e-9 * max(np.linalg.norm(arm), 1.0):
+            _fail(path, "start: normal must be tangent to the bend (normal to its axis and to the line from its center)")
+        if np.linalg.norm(arm) <= max(radii) * (1 + 1e-9):
+            _fail(
+                path,
+                f"bend: its axis is within the pipe's radius of the start centre ({np.linalg.norm(arm):.4g}): the sections would fold",
+            )
+        e1 = -arm / np.linalg.norm(arm)  # towards the bend's axis
+
+        def place(point, fraction):
+            return _rotate(point, pivot, axis, np.radians(angle) * fraction)
+    else:
+        length = float(_positive(path, "length", pipe["length"]))
+        e1 = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        e1 = e1 - (e1 @ normal) * normal
+        e1 /= np.linalg.norm(e1)
+
+        def place(point, fraction):
+            return point + fraction * length * normal
+
+    e2 = np.cross(normal, e1)
+
+    def point(corner: float, scale: float, fraction: float) -> np.ndarray:
+        radius = (1 - fraction) * radii[0] + fraction * radii[1]
+        t = np.radians(corner)
+        return place(center + radius * scale * (np.cos(t) * e1 + np.sin(t) * e2), fraction)
+
+    vertices, edges = {}, []
+    corner_scale = core * np.sqrt(2.0)  # the core's corners on the 45-degree lines
+    for section, fraction in (("a", 0.0), ("b", 1.0)):
+        middle = place(center, fraction) if "bend" in pipe else center + fraction * length * normal
+        for i, corner in enumerate(_PIPE_CORNERS):
+            vertices[f"{section}.k{i}"] = point(corner, corner_scale, fraction).tolist()
+            vertices[f"{section}.w{i}"] = point(corner, 1.0, fraction).tolist()
+        for i in range(4):
+            edges.append({"arc": [f"{section}.w{i}", f"{section}.w{(i + 1) % 4}"], "center": middle.tolist()})
+    if "bend" in pipe:
+        for i, corner in enumerate(_PIPE_CORNERS):
+            for kind, scale in (("k", corner_scale), ("w", 1.0)):
+                edges.append({"arc": [f"a.{kind}{i}", f"b.{kind}{i}"], "through": point(corner, scale, 0.5).tolist()})
+    faces = [[f"k{i}" for i in range(4)]] + [[f"w{i}", f"w{(i + 1) % 4}", f"k{(i + 1) % 4}", f"k{i}"] for i in range(4)]
+    blocks = []
+    for face in faces:
+        bottom, top = [f"a.{p}" for p in face], [f"b.{p}" for p in face]
+        blocks.append((bottom[::-1] + top[::-1]) if _left_handed(vertices, bottom, top) else bottom + top)
+    cells = _keys(path, "cells", pipe.get("cells") or {}, ("tangential", "radial", "along"))
+    grading = _keys(path, "grading", pipe.get("grading") or {}, ("radial", "along"))
+    counts = {
+        k: _positive(path, f"cells: {k}", cells.get(k, d), whole=True)
+        for k, d in (("tangential", 10), ("radial", 5), ("along", 10))
+    }
+    data = {k: v for k, v in data.items() if k != "pipe"}
+    data["vertices"] = {**(data.get("vertices") or {}), **vertices}
+    data["blocks"] = list(data.get("blocks") or []) + blocks
+    data["edges"] = list(data.get("edges") or []) + edges
+    data["cells"] = dict(data.get("cells") or {})
+    data["cells"]["counts"] = list(data["cells"].get("counts") or []) + [
+        ["a.k0", "a.k1", counts["tangential"]], ["a.k0", "a.k3", counts["tangential"]],
+        ["a.w0", "a.k0", counts["radial"]], ["a.k0", "b.k0", counts["along"]],
+    ]  # fmt: skip
+    data["grading"] = dict(data.get("grading") or {})
+    ratios = list(data["grading"].get("ratios") or [])
+    if "radial" in grading:
+        ratios.append(["a.k0", "a.w0", _positive(path, "grading: radial", grading["radial"])])
+    if "along" in grading:
+        ratios.append(["a.k0", "b.k0", _positive(path, "grading: along", grading["along"])])
+    data["grading"]["ratios"] = ratios
+    data = _merge(data, str(start.get("patch", "inlet")), [[f"a.{p}" for p in face] for face in faces])
+    data = _merge(data, str(end.get("patch", "outlet")), [[f"b.{p}" for p in face] for face in faces])
+    data.setdefault("default_patch", {"name": str(pipe.get("wall", "walls")), "type": "wall"})
+    return data
+
+
+def _rotate(point: np.ndarray, pivot: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """``point`` turned by ``angle`` (radians, right-handed) about the line through ``pivot`` along the unit ``axis``."""
+    offset = point - pivot
+    return pivot + (
+        offset * np.cos(angle) + np.cross(axis, offset) * np.sin(angle) + axis * (axis @ offset) * (1 - np.cos(angle))
+    )
