@@ -85,6 +85,7 @@ LAYERS = [
         "meshgen.geometry.blocks",
         "meshgen.geometry.set_surface",
         "meshgen.geometry.shapes",
+        "meshgen.geometry.topology_shorthand",
         "meshgen.geometry.topology_file",
         "meshgen.geometry.topology",
         "meshgen.run.trust",

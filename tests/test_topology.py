@@ -145,7 +145,7 @@ GOOD_2D = (
     [
         (
             GOOD_2D + "cels: {size: 1}\n",
-            "unknown key 'cels' in the file (keys: name, description, vertices, blocks, edges, cells, grading, patches, default_patch); did you mean 'cells'?",
+            "unknown key 'cels' in the file (keys: name, description, vertices, blocks, joint, pipe, edges, cells, grading, patches, default_patch); did you mean 'cells'?",
         ),
         (GOOD_2D.replace("[b, c, g, f]", "[b, c, q, f]"), "block 'b1' names a missing vertex 'q'"),
         (GOOD_2D.replace("[b, c, g, f]", "[b, f, g, c]"), "block 'b1' is left-handed (inverted)"),
@@ -264,3 +264,18 @@ def test_tfi_of_a_topology_is_blockmeshs_mesh_of_the_same_blocks(tmp_path):
     ours = points[np.lexsort(np.round(points, 9).T)]
     theirs = theirs[np.lexsort(np.round(theirs, 9).T)]
     np.testing.assert_allclose(ours, theirs, atol=1e-9)
+
+
+def test_spline_edge_is_scipys_natural_cubic_spline():
+    from scipy.interpolate import CubicSpline
+
+    from meshgen.geometry.topology import curve
+
+    rng = np.random.default_rng(3)
+    for inner in (1, 2, 7, 40):
+        points = rng.random((inner + 2, 3))
+        chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+        t = np.linspace(0.0, 1.0, 517)
+        expected = CubicSpline(chord / chord[-1], points, axis=0, bc_type="natural")(t)
+        found = curve("spline", points[0], points[-1], (None, points[1:-1]))(t)
+        np.testing.assert_allclose(found, expected, atol=1e-13)

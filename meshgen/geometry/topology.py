@@ -87,10 +87,41 @@ def curve(kind: str, a: np.ndarray, b: np.ndarray, extra=None, where: str = "edg
     chord /= chord[-1]
     if kind == "polyline":
         return lambda t: np.stack([np.interp(t, chord, points[:, d]) for d in range(points.shape[1])], axis=1)
-    from scipy.interpolate import CubicSpline
+    return _natural_spline(chord, points)
 
-    spline = CubicSpline(chord, points, axis=0, bc_type="natural")
-    return lambda t: spline(np.asarray(t, float))
+
+def _natural_spline(knots: np.ndarray, points: np.ndarray):
+    """The natural cubic spline through ``points`` (K, dim) at the increasing ``knots`` (K,), as a
+    map t (N,) -> (N, dim) (scipy's CubicSpline with bc_type="natural", without importing
+    scipy.interpolate: ~1 s of a command's start). Second derivatives by the Thomas algorithm
+    (a loop over the curve's points)."""
+    h = np.diff(knots)
+    slopes = np.diff(points, axis=0) / h[:, None]
+    moments = np.zeros_like(points)
+    count = len(knots) - 2  # interior knots: h[i-1] M[i-1] + 2 (h[i-1] + h[i]) M[i] + h[i] M[i+1] = 6 (slope[i] - slope[i-1])
+    if count > 0:
+        diagonal = 2.0 * (h[:-1] + h[1:])
+        rhs = 6.0 * np.diff(slopes, axis=0)
+        for i in range(1, count):
+            factor = h[i] / diagonal[i - 1]
+            diagonal[i] -= factor * h[i]
+            rhs[i] -= factor * rhs[i - 1]
+        inner = np.zeros_like(rhs)
+        inner[-1] = rhs[-1] / diagonal[-1]
+        for i in range(count - 2, -1, -1):
+            inner[i] = (rhs[i] - h[i + 1] * inner[i + 1]) / diagonal[i]
+        moments[1:-1] = inner
+
+    def spline(t):
+        t = np.asarray(t, float)
+        i = np.clip(np.searchsorted(knots, t, side="right") - 1, 0, len(h) - 1)
+        a, b, w = (knots[i + 1] - t)[:, None], (t - knots[i])[:, None], h[i][:, None]
+        left, right = moments[i], moments[i + 1]
+        return (
+            (left * a**3 + right * b**3) / (6 * w) + (points[i] / w - left * w / 6) * a + (points[i + 1] / w - right * w / 6) * b
+        )
+
+    return spline
 
 
 def _arc(a, b, how: str, point, where: str):
@@ -219,11 +250,16 @@ def _check_blocks(topology: Topology) -> tuple[list, dict]:
 
 def _merged(points: np.ndarray, size: float) -> list[int]:
     """Per vertex, the smallest index of a vertex at the same point (within ``GAP`` of the size)."""
-    from scipy.spatial import cKDTree
-
-    pairs = cKDTree(points).query_pairs(GAP * size, output_type="ndarray")
+    tolerance = GAP * size
+    order = np.argsort(points[:, 0], kind="stable")
+    ordered = points[order]
+    reach = np.searchsorted(ordered[:, 0], ordered[:, 0] + tolerance, side="right")
+    pairs = []
+    for a in range(len(points)):  # a loop over the file's vertices, each against those within tolerance in x
+        near = a + 1 + np.flatnonzero(np.linalg.norm(ordered[a + 1 : reach[a]] - ordered[a], axis=1) <= tolerance)
+        pairs += [tuple(sorted((int(order[a]), int(order[b])))) for b in near]
     label = np.arange(len(points))
-    for i, j in sorted(map(tuple, pairs)):
+    for i, j in sorted(pairs):
         label[label == label[j]] = label[i]
     return [int(x) for x in label]
 

@@ -37,18 +37,20 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError, did_you_mean
+from meshgen.geometry.topology_shorthand import expand_joint, expand_pipe
 from meshgen.run.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = ["EDGE_KINDS", "TOPOLOGY_KEYS", "Topology", "is_topology_file", "read_topology"]
 
-TOPOLOGY_KEYS = ("name", "description", "vertices", "blocks", "edges", "cells", "grading", "patches", "default_patch")
+TOPOLOGY_KEYS = ("name", "description", "vertices", "blocks", "joint", "pipe", "edges", "cells", "grading", "patches")
+TOPOLOGY_KEYS += ("default_patch",)
 EDGE_KINDS = ("arc", "polyline", "spline")
 _EDGE_KEYS = EDGE_KINDS + ("through", "center", "points")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
 _PATCH_KEYS = ("type", "faces")
 _PATCH_TYPES = ("wall", "patch", "symmetry")
-_MARK = re.compile(r"^(vertices|blocks)\s*:", re.MULTILINE)
+_MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
 
 
@@ -146,6 +148,10 @@ def read_topology(path) -> Topology:
             f"topology file {path} is not plain YAML data{line}: {str(getattr(exc, 'problem', ''))[:80]}"
         ) from None
     data = _keys(path, "the file", data, TOPOLOGY_KEYS)
+    if "joint" in data:
+        data = expand_joint(path, data)
+    if "pipe" in data:
+        data = expand_pipe(path, data)
     for key in ("vertices", "blocks"):
         if key not in data:
             _fail(path, f"needs '{key}'")

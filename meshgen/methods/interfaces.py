@@ -15,8 +15,11 @@ owner; tangential coordinates are a's).
 Junctions: the nodes that neither a block's interior nor an interface face's interior holds and
 that are on no patch (an O-grid core's corners: straight grid lines would give 90, 135 and 135
 degrees there) satisfy the mean over the grid quadrilaterals at the node of the parallelogram
-completion x_a + x_b - x_ab (in 3D the quads across the block edge the node is on), whose fixed
-point makes the cells around it as parallelogram-like as their neighbours allow.
+completion x_a + x_b - x_ab (in 3D the quads across the block edge the node is on; at a block
+corner inside the set, where stacked O-grid sections or mitred pipes meet, the quads of the
+block's three faces there), whose fixed point makes the cells around it as parallelogram-like as
+their neighbours allow. A corner without a rule would keep its TFI place while its neighbours
+move, and fold the cells round it.
 """
 
 from __future__ import annotations
@@ -106,12 +109,16 @@ def junction_stencil(block_set: BlockSet, numbering, junctions):
             continue
         shape = np.array(ids.shape)
         free = ~((local == 0) | (local == shape - 1))  # axes along which the node is inside the block
-        for edge_axis in range(dim) if dim == 3 else [None]:
+        cases = [(None, [0, 1])] if dim == 2 else [(axis, [a for a in range(3) if a != axis]) for axis in range(3)]
+        if dim == 3:  # a block corner inside the set (stacked O-grid sections): the quads of the block's 3 faces there
+            cases += [("corner", plane) for plane in ([1, 2], [0, 2], [0, 1])]
+        for edge_axis, plane in cases:
             if edge_axis is None:
-                rows, plane = np.arange(len(local)), [0, 1]
+                rows = np.arange(len(local))
+            elif edge_axis == "corner":
+                rows = np.flatnonzero(free.sum(axis=1) == 0)
             else:  # on a block edge along edge_axis: the quads across the edge, in the node's layer
                 rows = np.flatnonzero(free[:, edge_axis] & (free.sum(axis=1) == 1))
-                plane = [axis for axis in range(dim) if axis != edge_axis]
             for step_a in (-1, 1):
                 for step_b in (-1, 1):
                     a, b = local[rows].copy(), local[rows].copy()

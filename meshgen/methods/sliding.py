@@ -7,7 +7,8 @@ level (``meshgen.methods.multigrid_set``):
   the same way: grid lines meet flat inlets, outlets and straight walls at right angles, and a
   straight extrusion (the pipe, the 3D channel) is meshed as the extrusion of its section's mesh
   (``planar_sliding``, ``SlideRule``). Nodes on curved patches, on a corner of two lines (2D)
-  or on three planes stay where the TFI put them;
+  or on three planes stay where the TFI put them, and so do a plane's nodes where a curved patch
+  meets it obliquely (``OBLIQUE``: a tapered pipe's caps);
 - the local cell size of every node (``local_cell_sizes``), the unit of the stopping rule.
 """
 
@@ -18,7 +19,12 @@ import numpy as np
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet
 
-__all__ = ["Rule", "SlideRule", "distinct_planes", "local_cell_sizes", "planar_sliding"]
+__all__ = ["OBLIQUE", "Rule", "SlideRule", "distinct_planes", "local_cell_sizes", "planar_sliding"]
+
+# A flat patch whose rim on a curved patch leaves it at a grid-line angle with cosine below this
+# (about 8 degrees off its normal: a tapered pipe's inlet) does not slide: sliding would push its
+# nodes towards the right angle that the fixed rim cannot give, and fold the cells at the rim.
+OBLIQUE = 0.99
 
 
 def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float = 1e-12):
@@ -51,6 +57,15 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
         on_plane[ids, plane] = True
     kinds = on_plane.sum(axis=1)
     free = ~curved & ((kinds == 1) | ((kinds == 2) & (dim == 3)))
+    values = np.zeros((count, dim))
+    for block, X in enumerate(Xs):
+        values[numbering[block].reshape(-1)] = X.reshape(-1, dim)
+    for (ids, inside, _, normal), plane in zip(records, planes):
+        rim = curved[ids]  # the face's nodes on a curved patch: they stay, so the plane's grid lines must meet them
+        offsets = values[inside[rim]] - values[ids[rim]]
+        along = np.abs(offsets @ normal) / np.maximum(np.linalg.norm(offsets, axis=1), 1e-300)
+        if len(along) and along.min() < OBLIQUE:
+            free[on_plane[:, plane]] = False  # a curved wall meets the plane obliquely: right angles cannot hold
     nodes, inner, projectors = [], [], []
     for ids, inside, _, normal in records:
         keep = free[ids]
