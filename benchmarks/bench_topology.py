@@ -1,18 +1,19 @@
 """Topology files against classy_blocks: its example scripts + blockMesh + checkMesh, and the same
 layouts as meshgen topology files (TFI and elliptic) + checkMesh, in one run on one machine.
 
-    python benchmarks/bench_topology.py [--json FILE] [--repeat N]
+    python benchmarks/bench_topology.py [--classy-blocks DIR] [--json FILE] [--repeat N]
 
-Rows, one per example (``EXAMPLES``): classy_blocks' script (copied under benchmarks/anchors/, run
-unchanged from a scratch folder so that its ``../case/system/blockMeshDict`` lands in a scratch
-case), then ``blockMesh``; meshgen's topology file under examples/topologies/ through
+Rows, one per example (``EXAMPLES``): classy_blocks' script, read from a checkout of its
+repository (``--classy-blocks DIR`` or ``CLASSY_BLOCKS_REPO``: its examples are not copied here),
+run unchanged from a scratch folder so that its ``../case/system/blockMeshDict`` lands in a scratch
+case, then ``blockMesh``; meshgen's topology file under examples/topologies/ through
 ``meshgen mesh --method tfi|elliptic --no-quality --format openfoam`` (checkMesh measures the
 mesh). Per run: cells, checkMesh's max non-orthogonality (degrees) and max skewness, "Mesh OK",
 seconds (wall clock of the processes: the script and blockMesh together; meshgen's command, its
 imports included; the median of --repeat runs) and input lines (the file's lines that are not
 blank and not only a comment; ``lines_total`` counts every line). An example without a topology
 file yet has its meshgen rows ``None`` with the reason; without classy_blocks or blockMesh the
-anchor rows are ``None`` with the reason.
+anchor rows are ``None`` with the reason (also without a checkout).
 
 Targets per example: meshgen's cells within 10 % of the anchor's; its max non-orthogonality and
 max skewness no worse than the anchor's; Mesh OK; fewer input lines; no slower; the elliptic
@@ -35,7 +36,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ANCHORS = ROOT / "benchmarks" / "anchors"
 TOPOLOGIES = ROOT / "examples" / "topologies"
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "examples"))
@@ -44,11 +44,11 @@ from foam_case import foam_environment  # noqa: E402
 
 from meshgen.formats._openfoam import FV_SCHEMES, FV_SOLUTION, foam_header  # noqa: E402
 
-# name: (classy_blocks script under benchmarks/anchors/, topology file under examples/topologies/ or None)
+# name: (classy_blocks script in its repository, topology file under examples/topologies/ or None)
 EXAMPLES = {
-    "karman": ("karman.py", "karman-2d.yaml"),
-    "elbow": ("elbow.py", "elbow-pipe-3d.yaml"),
-    "t_joint": ("t_joint.py", "t-joint-3d.yaml"),
+    "karman": ("examples/complex/karman.py", "karman-2d.yaml"),
+    "elbow": ("examples/shape/elbow.py", "elbow-pipe-3d.yaml"),
+    "t_joint": ("examples/assembly/t_joint.py", "t-joint-3d.yaml"),
 }
 METHODS = ("tfi", "elliptic")
 CONTROL = "application blockMesh;\nstartFrom startTime;\nstartTime 0;\nstopAt endTime;\nendTime 1;\ndeltaT 1;\nwriteControl timeStep;\nwriteInterval 1;\n"  # fmt: skip
@@ -88,8 +88,10 @@ def _timed(command, cwd, env) -> float:
     return seconds
 
 
-def anchor_missing() -> str | None:
+def anchor_missing(repo: Path | None) -> str | None:
     """Why the classy_blocks rows cannot run here, or None."""
+    if repo is None or not all((repo / script).is_file() for script, _ in EXAMPLES.values()):
+        return "no classy_blocks checkout with its examples (--classy-blocks DIR or CLASSY_BLOCKS_REPO)"
     if importlib.util.find_spec("classy_blocks") is None:
         return "classy_blocks is not installed (pip install classy_blocks)"
     if shutil.which("blockMesh") is None or shutil.which("checkMesh") is None:
@@ -97,7 +99,7 @@ def anchor_missing() -> str | None:
     return None
 
 
-def anchor_row(script: str, env: dict, repeat: int) -> dict:
+def anchor_row(script: Path, env: dict, repeat: int) -> dict:
     """classy_blocks' ``script`` + blockMesh: seconds (median), checkMesh's figures, input lines."""
     runs = []
     with tempfile.TemporaryDirectory() as folder:
@@ -108,11 +110,11 @@ def anchor_row(script: str, env: dict, repeat: int) -> dict:
             (case / "system" / name).write_text(foam_header("dictionary", "system", name) + text)
         for _ in range(repeat):
             shutil.rmtree(case / "constant", ignore_errors=True)
-            seconds = _timed([sys.executable, str(ANCHORS / script)], work, env)
+            seconds = _timed([sys.executable, str(script)], work, env)
             seconds += _timed(["blockMesh", "-case", str(case)], work, env)
             runs.append(seconds)
         row = check_mesh(case, env)
-    lines, total = input_lines(ANCHORS / script)
+    lines, total = input_lines(script)
     return {**row, "seconds": statistics.median(runs), "runs_seconds": runs, "input_lines": lines, "lines_total": total}
 
 
@@ -153,16 +155,17 @@ def verdict(anchor: dict | None, rows: dict) -> dict | None:
     return found
 
 
-def run(repeat: int = 1, names=None) -> dict:
+def run(repeat: int = 1, names=None, classy_blocks: Path | None = None) -> dict:
     env = foam_environment()
-    missing = anchor_missing()
+    repo = classy_blocks or (Path(os.environ["CLASSY_BLOCKS_REPO"]) if os.environ.get("CLASSY_BLOCKS_REPO") else None)
+    missing = anchor_missing(repo)
     result = {"load_average": list(os.getloadavg()), "versions": versions(env), "examples": {}}
     for name, (script, topology) in EXAMPLES.items():
         if names and name not in names:
             continue
         entry: dict = {"anchor": None, "anchor_skipped": missing}
         if missing is None:
-            entry["anchor"] = anchor_row(script, env, repeat)
+            entry["anchor"] = anchor_row(repo / script, env, repeat)
         for method in METHODS:
             if topology is None:
                 entry[method], entry[f"{method}_skipped"] = None, "no topology file for this example yet"
@@ -211,8 +214,9 @@ def main() -> None:
     parser.add_argument("--json", type=Path, default=None, help="write the rows here as JSON")
     parser.add_argument("--repeat", type=int, default=3, help="runs per row; the median is reported (default 3)")
     parser.add_argument("--only", nargs="*", choices=sorted(EXAMPLES), help="these examples only")
+    parser.add_argument("--classy-blocks", type=Path, default=None, help="a checkout of classy_blocks' repository")
     args = parser.parse_args()
-    result = run(max(1, args.repeat), args.only)
+    result = run(max(1, args.repeat), args.only, args.classy_blocks)
     print(f"classy_blocks {result['versions']['classy_blocks']}, OpenFOAM {result['versions']['openfoam']}")
     print(table(result))
     for name, entry in result["examples"].items():
