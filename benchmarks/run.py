@@ -123,6 +123,7 @@ SECTIONS = [
     "blocks",
     "airfoil",
     "sweeps",
+    "topology",
     "gpu",
 ]
 
@@ -236,6 +237,22 @@ TARGETS = {
         "swept CAD solids: largest relative difference of the mesh's volume from the CAD volume",
     ),
     "sweep_cylinder_min_angle": (">=", 76.0, "deg", "CAD cylinder, elliptic: worst min angle (the built-in pipe's in the note)"),
+    **{
+        f"topology_{name}_{figure}": (
+            comparison,
+            target,
+            unit,
+            f"topology file {name} (TFI) against classy_blocks + blockMesh: {what}",
+        )
+        for name in ("karman", "elbow", "t_joint")
+        for figure, comparison, target, unit, what in (
+            ("non_orthogonality", "<=", 0.0, "deg", "checkMesh max non-orthogonality, meshgen's minus the anchor's"),
+            ("skewness", "<=", 0.0, "", "checkMesh max skewness, meshgen's minus the anchor's"),
+            ("cells", "abs<=", 0.1, "", "cell count / the anchor's - 1"),
+            ("seconds", "<=", 1.0, "x", "seconds / the anchor's (script + blockMesh), same run"),
+            ("elliptic", "<=", 0.0, "deg", "elliptic max non-orthogonality minus TFI's (blockMesh's at the same nodes)"),
+        )
+    },
     "gpu_elliptic_100_seconds": ("<=", 1.0, "s", "elliptic semicylinder 100^3 by the torch multigrid on the GPU"),
     "gpu_quality_1e9_seconds": ("<=", 60.0, "s", "the seven metrics and their summary of 1e9 hexahedra on one GPU"),
     "gpu_neural_1e9_seconds": (
@@ -702,6 +719,12 @@ def sweeps(quick: bool) -> dict:
     import bench_sweeps
 
     return {**bench_sweeps.run(quick), "quick": quick}  # --quick: about 10 cells across, not the targets' 20
+
+
+def topology(quick: bool) -> dict:
+    import bench_topology
+
+    return bench_topology.run(1 if quick else 3)
 
 
 def gpu(quick: bool) -> dict:
@@ -1299,6 +1322,8 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 note=f"CD {solved['CD']:.5f}; {'converged' if solved['converged'] else 'NOT converged'}")  # fmt: skip
     if sections.get("sweeps"):
         sweep_rows(sections["sweeps"], add)
+    if sections.get("topology"):
+        topology_rows(sections["topology"], add)
     if "gpu" in sections and "skipped" not in sections["gpu"]:
         gpu_rows(sections["gpu"], add)
     return rows
@@ -1335,6 +1360,30 @@ def sweep_rows(data: dict, add) -> None:
     if cylinder:
         add("CAD cylinder, elliptic: worst min angle", cylinder["elliptic"]["min_angle_min"], "deg", key="sweep_cylinder_min_angle", judged=judged,
             note=f"built-in pipe at the same counts: {cylinder['pipe_min_angle_min']:.1f} deg")  # fmt: skip
+
+
+def topology_rows(data: dict, add) -> None:
+    """The rows of the ``topology`` section (``bench_topology.run``): meshgen's TFI mesh of each
+    example's topology file against classy_blocks' script + blockMesh in the same run, and the
+    elliptic mesh's max non-orthogonality beside the TFI's (blockMesh's, at the same nodes)."""
+    for name, entry in data.get("examples", {}).items():
+        anchor, tfi, elliptic = entry.get("anchor"), entry.get("tfi"), entry.get("elliptic")
+        if anchor is None or tfi is None:
+            why = entry.get("anchor_skipped") or entry.get("tfi_skipped")
+            add(f"topology {name}: classy_blocks anchor", None, "", note=f"skipped: {why}")
+            continue
+        lines = f"{tfi['input_lines']} input lines against {anchor['input_lines']}"
+        add(f"topology {name} (TFI): max non-orthogonality - classy_blocks'", tfi["max_non_orthogonality"] - anchor["max_non_orthogonality"],
+            "deg", key=f"topology_{name}_non_orthogonality", note=f"{tfi['max_non_orthogonality']:.1f} against {anchor['max_non_orthogonality']:.1f}")  # fmt: skip
+        add(f"topology {name} (TFI): max skewness - classy_blocks'", tfi["max_skewness"] - anchor["max_skewness"], "",
+            key=f"topology_{name}_skewness", note=f"{'Mesh OK' if tfi['mesh_ok'] else 'checkMesh FAILED'}; {lines}")  # fmt: skip
+        add(f"topology {name} (TFI): cells / classy_blocks' - 1", tfi["cells"] / anchor["cells"] - 1.0, "",
+            key=f"topology_{name}_cells", note=f"{tfi['cells']} cells")  # fmt: skip
+        add(f"topology {name} (TFI): seconds / classy_blocks + blockMesh's", tfi["seconds"] / anchor["seconds"], "x",
+            key=f"topology_{name}_seconds", note=f"{tfi['seconds']:.1f} s against {anchor['seconds']:.1f} s")  # fmt: skip
+        if elliptic is not None:
+            add(f"topology {name} (elliptic): max non-orthogonality - blockMesh's", elliptic["max_non_orthogonality"] - tfi["max_non_orthogonality"],
+                "deg", key=f"topology_{name}_elliptic", note=f"{elliptic['max_non_orthogonality']:.1f}; max skewness {elliptic['max_skewness']:.3f}; {elliptic['seconds']:.1f} s")  # fmt: skip
 
 
 def gpu_rows(data: dict, add) -> None:
@@ -1514,6 +1563,7 @@ def main(argv=None) -> int:
         "blocks": lambda: blocks(args.quick),
         "airfoil": lambda: airfoil(args.quick),
         "sweeps": lambda: sweeps(args.quick),
+        "topology": lambda: topology(args.quick),
         "gpu": lambda: gpu(args.quick),
     }
     for name in chosen:
