@@ -1371,6 +1371,10 @@ def topology_rows(data: dict, add) -> None:
         if anchor is None or tfi is None:
             why = entry.get("anchor_skipped") or entry.get("tfi_skipped")
             add(f"topology {name}: classy_blocks anchor", None, "", note=f"skipped: {why}")
+        if tfi is not None and elliptic is not None:
+            add(f"topology {name} (elliptic): max non-orthogonality - blockMesh's", elliptic["max_non_orthogonality"] - tfi["max_non_orthogonality"],
+                "deg", key=f"topology_{name}_elliptic", note=f"{elliptic['max_non_orthogonality']:.1f}; max skewness {elliptic['max_skewness']:.3f}; {elliptic['seconds']:.1f} s")  # fmt: skip
+        if anchor is None or tfi is None:
             continue
         lines = f"{tfi['input_lines']} input lines against {anchor['input_lines']}"
         add(f"topology {name} (TFI): max non-orthogonality - classy_blocks'", tfi["max_non_orthogonality"] - anchor["max_non_orthogonality"],
@@ -1381,9 +1385,6 @@ def topology_rows(data: dict, add) -> None:
             key=f"topology_{name}_cells", note=f"{tfi['cells']} cells")  # fmt: skip
         add(f"topology {name} (TFI): seconds / classy_blocks + blockMesh's", tfi["seconds"] / anchor["seconds"], "x",
             key=f"topology_{name}_seconds", note=f"{tfi['seconds']:.1f} s against {anchor['seconds']:.1f} s")  # fmt: skip
-        if elliptic is not None:
-            add(f"topology {name} (elliptic): max non-orthogonality - blockMesh's", elliptic["max_non_orthogonality"] - tfi["max_non_orthogonality"],
-                "deg", key=f"topology_{name}_elliptic", note=f"{elliptic['max_non_orthogonality']:.1f}; max skewness {elliptic['max_skewness']:.3f}; {elliptic['seconds']:.1f} s")  # fmt: skip
 
 
 def gpu_rows(data: dict, add) -> None:
