@@ -59,7 +59,7 @@ def wall_first_cells(made):
     return height, angle[1:-1]
 
 
-@pytest.mark.parametrize("dims", [TRAINED_DIMS, (320, 150), (180, 130)])
+@pytest.mark.parametrize("dims", [TRAINED_DIMS, (320, 150), (600, 180)])
 def test_neural_c_grid_has_the_asked_wall_spacing_normal_lines_and_no_inverted_cell(c_grid_checkpoint, dims):
     made = meshgen.mesh("airfoil", dims, method="neural", params=C_GRID, model=str(c_grid_checkpoint))
     assert made.method == "neural" and made.blocks[0].dtype == np.float64
