@@ -86,7 +86,9 @@ class TrainedModel:
             steps += f", unfinished: saved in stage {stage}"
         parts.append(steps)
         loss = checkpoint.get("test_loss") or {}
-        if isinstance(loss.get("total"), (int, float)):
+        if isinstance(loss.get("fit"), (int, float)):  # a wall-layer model: a fit, no PDE term
+            parts.append(f"held-out misfit {loss['fit']:.3g}")
+        elif isinstance(loss.get("total"), (int, float)):
             parts.append(
                 f"test loss {loss['total']:.3g} (PDE {loss.get('pde', float('nan')):.3g}, "
                 f"boundary {loss.get('boundary', float('nan')):.3g})"

@@ -97,10 +97,11 @@ def wall_frame(block_set: BlockSet, layout: dict, tables=None) -> WallFrame:
     walls, normals, q = [], [], []
     for b, (geometry, coords) in enumerate(zip(block_set.geometries, block_set.coords)):
         xi = np.asarray(coords[0], dtype=float)
-        zero = np.zeros_like(xi)
-        walls.append(geometry.boundary(np.stack([xi, zero], axis=1)))
         lo, hi = np.clip(xi - _STEP, 0.0, 1.0), np.clip(xi + _STEP, 0.0, 1.0)
-        tangent = geometry.boundary(np.stack([hi, zero], axis=1)) - geometry.boundary(np.stack([lo, zero], axis=1))
+        points = np.concatenate([xi, lo, hi])  # one call of the boundary map for the wall and its tangents
+        images = geometry.boundary(np.stack([points, np.zeros_like(points)], axis=1)).reshape(3, len(xi), 2)
+        walls.append(images[0])
+        tangent = images[2] - images[1]
         normals.append(_unit(np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)))  # (xi, eta) right-handed: eta to the left
         table = xi if tables is None else np.asarray(tables[b], dtype=float)
         q.append((b + np.interp(xi, table, np.linspace(0.0, 1.0, len(table)))) / count)
