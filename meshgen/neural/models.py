@@ -53,6 +53,7 @@ class TrainedModel:
     checkpoint: dict
     source: str  # "checkpoint" (given), "run" (newest under ./runs/), "bundled"
     record: dict = field(default_factory=dict)  # a bundled model's model.json
+    named_preset: str | None = field(default=None, repr=False, compare=False)  # preset(), found once
 
     @property
     def geometry_entry(self) -> dict:
@@ -63,7 +64,10 @@ class TrainedModel:
         return int(self.checkpoint["model"]["dim"])
 
     def preset(self) -> str:
-        return self.record.get("preset") or preset_of(self.checkpoint)
+        """The preset the model was trained with (``preset_of``: every preset resolved, so found once per model)."""
+        if self.named_preset is None:
+            self.named_preset = self.record.get("preset") or preset_of(self.checkpoint)
+        return self.named_preset
 
     def sha256(self) -> str:
         digest = hashlib.sha256()
