@@ -56,7 +56,6 @@ __all__ = [
 KIND = "wall_map"  # checkpoint["model"]["kind"] of a wall-layer model
 BLEND_DISTANCE = 1e-3  # d0 where the plugin's wall_layout names none: below it the grid lines are the wall normals
 _STEP = 1e-6  # parametric step of the wall's finite-difference tangent
-_FAR_SAMPLES = 4000  # polyline points per block of the far field the outer nodes are projected onto
 
 
 HOOKS = ("wall_layout", "wall_teacher", "wall_finish")  # what a plugin defines to have wall-layer models
