@@ -25,6 +25,11 @@ copy in a temporary folder with the fixes classy_blocks 1.10.0's own API needs (
 takes no ``relax``; ``take="max"`` moved from ``grade()`` to ``SimpleGrader``). Seconds: the script
 plus blockMesh against the meshgen command (both separate processes, imports included). Target:
 max non-orthogonality and max skewness no worse than classy_blocks'.
+
+``neural_rows`` (``--neural [CHECKPOINT]``): the same mesh by a trained wall-layer model
+(``meshgen.neural.wall_map``): seconds (median of 3 after loading), mean minimum angle against the
+elliptic mesh's of the same run, first-cell error, wall angle, inverted cells. Targets: at most 0.1 s,
+within 0.5 deg of the elliptic mesh's mean minimum angle, the wall figures as the elliptic mesh's.
 """
 
 from __future__ import annotations
@@ -257,11 +262,81 @@ def solver_row() -> dict:
         return run(10.0, 0, Path(folder) / "case")
 
 
+def _median_seconds(call, repeat: int) -> tuple[float, list]:
+    runs = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        call()
+        runs.append(time.perf_counter() - start)
+    return statistics.median(runs), runs
+
+
+def neural_rows(checkpoint=None, preset: str = "default", repeat: int = 3) -> dict:
+    """The neural C-grid (``meshgen.neural.wall_map``) at DIMS: a model trained with ``preset`` (``meshgen
+    train -g airfoil --param sharp=1``, timed) unless ``checkpoint`` is given; after loading it and a
+    first call, the median of ``repeat`` meshes: ``seconds`` (network and the airfoil's finish,
+    ``neural_blocks``), ``request_seconds`` (``meshgen.mesh``, the block set and checks included),
+    the forward pass alone in float32 and float64; the mean minimum angle against the elliptic
+    mesh's in the same run, the first-cell error and the wall angle at every wall node, inverted cells."""
+    import meshgen
+    from meshgen.geometry.blocks import load_block_set
+    from meshgen.neural import wall_map
+    from meshgen.neural.inference import neural_blocks
+    from meshgen.neural.models import load_model
+
+    row = {"dims": list(DIMS), "preset": None if checkpoint else preset}
+    with tempfile.TemporaryDirectory() as folder:
+        if checkpoint is None:
+            checkpoint = Path(folder) / "run" / "checkpoint.pt"
+            command = [sys.executable, "-m", "meshgen", "train", "-g", "airfoil", "--param", "sharp=1", "-p", preset]
+            start = time.perf_counter()
+            subprocess.run([*command, "--out", str(checkpoint.parent), "-q"], check=True, capture_output=True,
+                           env={**os.environ, "PYTHONPATH": str(REPO)})  # fmt: skip
+            row["train_wall_seconds"] = time.perf_counter() - start
+        model = load_model(checkpoint)
+        row["training_seconds"] = float(model.checkpoint["elapsed_seconds"])
+        row["held_out_misfit"] = float(model.checkpoint["test_loss"]["total"])
+        block_set = load_block_set("airfoil", PARAMS, DIMS)
+        description = model.checkpoint["model"]
+        neural_blocks(block_set, description)  # first call: caches
+        row["seconds"], row["runs_seconds"] = _median_seconds(lambda: neural_blocks(block_set, description), repeat)
+        made = meshgen.mesh("airfoil", DIMS, method="neural", params=PARAMS, model=model)
+        row["request_seconds"] = _median_seconds(
+            lambda: meshgen.mesh("airfoil", DIMS, method="neural", params=PARAMS, model=model), repeat
+        )[0]
+        frame = wall_map.wall_frame(
+            block_set, wall_map.wall_hooks(block_set).wall_layout(block_set.values), description["tables"]
+        )
+        inputs = [wall_map.network_inputs(q, frame.d, description["scales"]) for q in frame.q]
+        layers = wall_map.network_layers(description)
+        doubled = [(w.astype(np.float64), b.astype(np.float64)) for w, b in layers]
+        row["forward_float32_seconds"] = _median_seconds(lambda: [wall_map.forward(layers, x) for x in inputs], repeat)[0]
+        row["forward_float64_seconds"] = _median_seconds(
+            lambda: [wall_map.forward_with(doubled, x, np.float64) for x in inputs], repeat
+        )[0]
+    elliptic = meshgen.mesh("airfoil", DIMS, method="elliptic", params=PARAMS)
+    row["cells"] = sum(int(np.prod([n - 1 for n in X.shape[:-1]])) for X in made.blocks)
+    row["mean_min_angle"] = made.report()["metrics"]["min_angle"]["mean"]
+    row["elliptic_mean_min_angle"] = elliptic.report()["metrics"]["min_angle"]["mean"]
+    row["min_angle_below_elliptic"] = row["elliptic_mean_min_angle"] - row["mean_min_angle"]
+    row.update(wall_figures(made))
+    print(f"airfoil neural C-grid {DIMS[0]} x {DIMS[1]} ({row['cells']} cells): {row['seconds']:.3f} s "
+          f"(meshgen.mesh {row['request_seconds']:.3f} s; forward float32 {row['forward_float32_seconds']:.3f} s, float64 "
+          f"{row['forward_float64_seconds']:.3f} s); mean min angle {row['mean_min_angle']:.2f} deg, elliptic "
+          f"{row['elliptic_mean_min_angle']:.2f}; first-cell error {row['first_cell_error']:.2e}, worst wall angle "
+          f"{row['worst_wall_angle_degrees']:.3f} deg, {row['inverted']} inverted; trained in {row['training_seconds']:.0f} s",
+          flush=True)  # fmt: skip
+    return row
+
+
 def run(quick: bool, classy_blocks: Path | None = None) -> dict:
+    """The mesh rows and the classy_blocks anchor; a full run also trains the neural C-grid
+    (``neural_rows``, minutes) and runs simpleFoam (about an hour)."""
     result = {"load_average": list(os.getloadavg()), "mesh": mesh_rows(1 if quick else 3)}
     repo = classy_blocks or (Path(os.environ["CLASSY_BLOCKS_REPO"]) if os.environ.get("CLASSY_BLOCKS_REPO") else None)
     result["classy_blocks"] = classy_blocks_rows(repo)
     if not quick:
+        result["neural"] = neural_rows()
         result["simplefoam_alpha_10"] = solver_row()
     return result
 
@@ -271,8 +346,13 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the mesh rows only (the solver runs for about an hour)")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--classy-blocks", type=Path, default=None, help="a checkout of damogranlabs/classy_blocks")
+    parser.add_argument("--neural", nargs="?", const="", default=None, metavar="CHECKPOINT",
+                        help="the neural rows only (neural_rows), of CHECKPOINT or of a model trained now")  # fmt: skip
     args = parser.parse_args()
-    result = run(args.quick, args.classy_blocks)
+    if args.neural is not None:
+        result = {"load_average": list(os.getloadavg()), "neural": neural_rows(args.neural or None)}
+    else:
+        result = run(args.quick, args.classy_blocks)
     if args.json is not None:
         args.json.write_text(json.dumps(result, indent=2))
 

@@ -74,6 +74,7 @@ dims_meaning = (
 shown_dims = (448, 128)  # what `meshgen geometries show` builds the set with (4 cells cannot reach the far field)
 LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
+train_dims = (448, 128)  # meshgen train: the marched mesh the wall-layer network learns (TMR's 449 x 129 points)
 WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
 MIN_SECTION_CELLS = 16
 MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
@@ -126,6 +127,18 @@ def interfaces(**values):
     """The cut (C-grid) or the base's middle (O-grid) closes the row of blocks."""
     ring = [("lower", "xi1", "section", "xi0"), ("section", "xi1", "upper", "xi0")]
     return ring + ([("lower", "eta0", "upper", "eta0")] if _sharp_te(values) else [("upper", "xi1", "lower", "xi0")])
+
+
+def wall_layout(values):
+    """The row of blocks round the wall for ``meshgen.neural.wall_map``: node eta at distance eta D
+    from the wall (or the cut); a ring of blocks (O-grid) or an open row (C-grid)."""
+    v = {**params, **values}
+    setup = _setup(_key(v))
+    # Below d0 the grid lines are the wall normals: about the trailing-edge spacing for a C-grid (beyond it
+    # the march has turned the lines at the concave trailing edge apart), several base widths for an
+    # O-grid (the normals of the base's convex corners part: the march fans them out beyond).
+    blend = v["te_spacing"] * level_scale(v) if setup.sharp else max(4.0 * setup.gap, v["te_spacing"] * level_scale(v))
+    return {"distance": float(v["farfield"]), "closed": not setup.sharp, "blend_distance": float(blend)}
 
 
 def block_patches(**values):
@@ -457,19 +470,37 @@ def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
     return out * ds.sum() / out.sum()
 
 
+_FAR_CURVES = {}  # id(setup) -> (setup, dense far-field curve, its arc lengths): the curve of every --dims
+
+
+def _far_curve(setup: _Setup) -> tuple[np.ndarray, np.ndarray]:
+    """The far-field curve w + D e (4001 points per block, unturned) and its arc lengths, made once per setup."""
+    cached = _FAR_CURVES.get(id(setup))
+    if cached is not None and cached[0] is setup:
+        return cached[1], cached[2]
+    dense = []
+    for block in blocks:
+        points, direction = _wall(setup, block, np.linspace(0.0, 1.0, 4001), turned=False)
+        dense.append(points + setup.distance * direction)
+    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
+    if len(_FAR_CURVES) > 16:
+        _FAR_CURVES.clear()
+    _FAR_CURVES[id(setup)] = (setup, dense, arc)
+    return dense, arc
+
+
 def far_field(setup: _Setup, coords) -> np.ndarray:
     """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
     curve (w + D e), spaced as the boundary map spaces them but with the logarithm of the spacing
     diffused over ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
     the wake blocks' where they meet)."""
-    designed, dense = [], []
+    designed = []
     for block, c in zip(blocks, coords):
-        for target, xi in ((designed, np.asarray(c[0])), (dense, np.linspace(0.0, 1.0, 4001))):
-            points, direction = _wall(setup, block, xi, turned=False)
-            target.append(points + setup.distance * direction)
+        points, direction = _wall(setup, block, np.asarray(c[0]), turned=False)
+        designed.append(points + setup.distance * direction)
     designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
-    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
+    dense, arc = _far_curve(setup)
     spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
     s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
     out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
@@ -499,23 +530,14 @@ def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
     return out
 
 
-def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
-    """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
-    wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
-    to the wall), then the layers beyond ``BLEND_START`` chords blended into straight lines from the
-    wall nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes at the designed
-    distances: weight smoothstep(log(d / BLEND_START) / log(D / BLEND_START)). No Winslow equations
-    are solved: a Winslow outer region keeps harmonic, not designed, wall-normal spacing (logarithmic
-    round the front, linear in the wake) and leaves the marched layer at up to 80 degrees.
-    ``tol``, ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
-    from meshgen.geometry.blocks import unify_interfaces
-    from meshgen.methods.hyperbolic import cell_areas, march
+def _marched(setup: _Setup, block_set) -> tuple[list, np.ndarray]:
+    """The marched layers of the row of blocks (``meshgen.methods.hyperbolic.march``), turned: one
+    array (n + 1, m + 1, 2) for the whole row (its first node repeated last for a ring), and the
+    block offsets along it."""
+    from meshgen.methods.hyperbolic import march
 
-    start = time.perf_counter()
-    setup = _setup(_key(block_set.values))
     d = np.asarray(block_set.coords[0][1]) * setup.distance
     walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
-    sizes = [len(w) for w in walls]
     curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
     try:
         if setup.sharp:
@@ -529,20 +551,71 @@ def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
         ) from None
     if not setup.sharp:
         marched = np.concatenate([marched, marched[:1]])
-    marched = _turned(setup, marched)  # marched square to the cut, turned with the section
-    t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(setup.distance / BLEND_START), 0.0, 1.0)
-    weight = (t * t * (3.0 - 2.0 * t))[None, :, None]
+    return _turned(setup, marched), np.cumsum([0] + [len(w) - 1 for w in walls[:2]])
+
+
+def blend_weight(values, d) -> np.ndarray:
+    """The share (m + 1,) of the straight lines in the mesh at distances ``d`` (m + 1,):
+    smoothstep(log(d / BLEND_START) / log(D / BLEND_START)), 0 within ``BLEND_START`` chords."""
+    distance = float({**params, **values}["farfield"])
+    t = np.clip(np.log(np.maximum(d, BLEND_START) / BLEND_START) / math.log(distance / BLEND_START), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def wall_teacher(block_set):
+    """The mesh ``meshgen.neural.wall_map`` learns: the elliptic mesh (``mesh_elliptic``), per block (n_b, m + 1, 2)."""
+    return mesh_elliptic(block_set)[0]
+
+
+def wall_finish(block_set, Xs, check=True):
+    """A learned mesh ``Xs`` (per block (n_b, m + 1, 2), the network's image of the elliptic mesh)
+    finished as the elliptic mesh is (``_blend``): beyond ``BLEND_START`` chords blended into the
+    straight lines to the far-field nodes, nodes at the designed distances, interfaces identical;
+    the network's error there fades with the blend weight, and the far field is exact.
+    GeometryError for inverted cells with ``check``. Returns the node arrays."""
+    return _blend(block_set, Xs, check)
+
+
+def _blend(block_set, near, check=True):
+    """The mesh from the marched layers ``near`` (per block (n_b, m + 1, 2), turned; or a learned
+    mesh, ``wall_finish``): the layers beyond ``BLEND_START`` chords blended into straight lines from the wall
+    nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes slid along each line
+    to the designed distances (``_respaced``), interface nodes made identical. GeometryError when a
+    cell is inverted (``check``)."""
+    from meshgen.geometry.blocks import unify_interfaces
+    from meshgen.methods.hyperbolic import cell_areas
+
+    setup = _setup(_key(block_set.values))
+    d = np.asarray(block_set.coords[0][1]) * setup.distance
+    walls = [_wall(setup, b, np.asarray(c[0]), turned=False)[0] for b, c in zip(blocks, block_set.coords)]
+    sizes = [len(w) for w in walls]
+    curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
+    weight = blend_weight(block_set.values, d)[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
     lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far_field(setup, block_set.coords) - curve)[:, None]
     lines = _turned(setup, lines)
-    Xs = [(1.0 - weight) * marched[o : o + size] + weight * lines[o : o + size] for o, size in zip(offsets, sizes)]
+    Xs = [(1.0 - weight) * X + weight * lines[o : o + size] for X, o, size in zip(near, offsets, sizes)]
     Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
-    if inverted:
-        raise GeometryError(
-            f"geometry 'airfoil': {inverted} cells of the marched mesh are inverted (try more cells or a smaller growth)"
-        )
+    if inverted and check:
+        raise GeometryError(f"geometry 'airfoil': {inverted} cells of the mesh are inverted (try more cells or a smaller growth)")
+    return Xs
+
+
+def mesh_elliptic(block_set, tol=None, max_iter=None, progress=None):
+    """The hook of ``meshgen.run.meshing`` for ``--method elliptic``: every layer marched off the
+    wall (``meshgen.methods.hyperbolic.march``: first cells of the asked height, grid lines square
+    to the wall, ``_marched``), then blended beyond ``BLEND_START`` chords into straight lines
+    to the far field (``_blend``: nodes at the designed distances, weight
+    smoothstep(log(d / BLEND_START) / log(D / BLEND_START))). No Winslow equations are solved: a
+    Winslow outer region keeps harmonic, not designed, wall-normal spacing (logarithmic round the
+    front, linear in the wake) and leaves the marched layer at up to 80 degrees. ``tol``,
+    ``max_iter``: not used (no iteration). Returns (node arrays per block, info)."""
+    start = time.perf_counter()
+    d = np.asarray(block_set.coords[0][1])
+    marched, offsets = _marched(_setup(_key(block_set.values)), block_set)
+    Xs = _blend(block_set, [marched[o : o + len(c[0])] for o, c in zip(offsets, block_set.coords)])
     info = {
         "solver": f"hyperbolic march of all {len(d) - 1} layers, blended into straight lines to the far field beyond {BLEND_START:g} chord",
         "sweeps": 0,

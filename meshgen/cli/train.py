@@ -160,10 +160,12 @@ def train(
         return
     dims = " ".join(str(n) for n in summary["dims"])
     size = " x ".join(str(n) for n in summary["dims"])
-    echo(
-        f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s "
-        f"(test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g})"
+    losses = (
+        f"held-out misfit of the grid lines' directions {result.test_loss['fit']:.3g}"
+        if "fit" in result.test_loss  # a wall-layer model (meshgen.neural.wall_map): fitted, no PDE term
+        else f"test-set loss: PDE {result.test_loss['pde']:.3g}, boundary {result.test_loss['boundary']:.3g}"
     )
+    echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s ({losses})")
     extrusion = extrusion_of(run.block_set) if run.block_set is not None else None
     if extrusion is not None:
         sweep = ", ".join(f"{v:g}" for v in extrusion.direction)
@@ -175,6 +177,10 @@ def train(
         corrected = "faces made conforming" if run.block_set is not None else "N + TFI[g - N]"
         echo(f"Network corrected to {corrected} (what meshgen mesh writes), {size} mesh:")
         for line in summary_lines(summary["corrected"]):
+            echo(f"  {line}")
+    if "elliptic" in summary:  # a wall-layer model: the marched mesh it learned
+        echo(f"Elliptic (the marched mesh the network learned), {size} mesh:")
+        for line in summary_lines(summary["elliptic"]):
             echo(f"  {line}")
     echo(f"TFI, {size} mesh:")
     for line in summary_lines(summary["tfi"]):

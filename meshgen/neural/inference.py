@@ -32,6 +32,7 @@ from meshgen.methods.correction import add_boundary_correction
 from meshgen.methods.tfi import boundary_faces
 from meshgen.neural.checkpoint_data import CheckpointError, check_network
 from meshgen.neural.network_map import mesh_from_model
+from meshgen.neural.wall_map import check_wall_model, is_wall_model, neural_wall_blocks
 
 __all__ = [
     "FLAT_TOLERANCE",
@@ -104,7 +105,9 @@ def check_block_model(model: dict) -> None:
 def check_model(model: dict) -> None:
     """CheckpointError (one line) unless ``model`` is a meshgen model: a block set's networks
     (:func:`check_block_model`) or one network (``check_network``), before any work is done."""
-    if is_block_model(model):
+    if is_wall_model(model):
+        check_wall_model(model)
+    elif is_block_model(model):
         check_block_model(model)
     else:
         check_network(model)
@@ -215,6 +218,8 @@ def neural_blocks(block_set: BlockSet, model: dict, correct: bool = True, device
     their targets to round-off, interface nodes identical; without it, the networks' own nodes
     with the interfaces merely unified (refused when they do not coincide). ``info``: the
     interface gap and boundary error before the correction (relative to the set's length)."""
+    if is_wall_model(model):  # a row of blocks round a wall: the plugin's outer blend makes it conforming
+        return neural_wall_blocks(block_set, model)
     section = _section(model, block_set)
     if section is not None:
         extrusion, plane = section

@@ -53,6 +53,7 @@ class TrainedModel:
     checkpoint: dict
     source: str  # "checkpoint" (given), "run" (newest under ./runs/), "bundled"
     record: dict = field(default_factory=dict)  # a bundled model's model.json
+    named_preset: str | None = field(default=None, repr=False, compare=False)  # preset(), found once
 
     @property
     def geometry_entry(self) -> dict:
@@ -63,7 +64,10 @@ class TrainedModel:
         return int(self.checkpoint["model"]["dim"])
 
     def preset(self) -> str:
-        return self.record.get("preset") or preset_of(self.checkpoint)
+        """The preset the model was trained with (``preset_of``: every preset resolved, so found once per model)."""
+        if self.named_preset is None:
+            self.named_preset = self.record.get("preset") or preset_of(self.checkpoint)
+        return self.named_preset
 
     def sha256(self) -> str:
         digest = hashlib.sha256()
@@ -86,7 +90,9 @@ class TrainedModel:
             steps += f", unfinished: saved in stage {stage}"
         parts.append(steps)
         loss = checkpoint.get("test_loss") or {}
-        if isinstance(loss.get("total"), (int, float)):
+        if isinstance(loss.get("fit"), (int, float)):  # a wall-layer model: a fit, no PDE term
+            parts.append(f"held-out misfit {loss['fit']:.3g}")
+        elif isinstance(loss.get("total"), (int, float)):
             parts.append(
                 f"test loss {loss['total']:.3g} (PDE {loss.get('pde', float('nan')):.3g}, "
                 f"boundary {loss.get('boundary', float('nan')):.3g})"

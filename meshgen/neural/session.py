@@ -13,7 +13,7 @@ from pathlib import Path
 
 from meshgen.errors import MeshgenError
 from meshgen.geometry.blocks import is_multiblock, load_block_set
-from meshgen.geometry.plugins import load_geometry, load_recorded_geometry, looks_like_path, parse_params
+from meshgen.geometry.plugins import load_geometry, load_recorded_geometry, looks_like_path, parse_params, plugin_module
 from meshgen.neural.config import (
     ConfigError,
     dotted_items,
@@ -205,7 +205,9 @@ def prepare_run(
     if blocks:  # its blocks, interfaces and patches checked now, before the run folder exists
         from meshgen.neural.interface_stages import SUMMARY_DIMS
 
-        block_set = load_block_set(geometry, geometry_object.values, (SUMMARY_DIMS,) * geometry_object.dim)
+        # A plugin whose blocks need more cells than the default (the airfoil's wall spacing) names its own.
+        dims = getattr(plugin_module(geometry)[0], "train_dims", (SUMMARY_DIMS,) * geometry_object.dim)
+        block_set = load_block_set(geometry, geometry_object.values, tuple(dims))
     started = None if init is None else {"path": str(init), "checkpoint": check_init(init, config, geometry_object, block_set)}
     return Run(
         config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,

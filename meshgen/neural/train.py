@@ -66,6 +66,8 @@ from meshgen.neural.steps import (
     make_optimizer,
     pretrain_step,
 )
+from meshgen.neural.wall_map import wall_hooks
+from meshgen.neural.wall_train import wall_job
 from meshgen.quality import quality_report, write_json
 
 __all__ = [
@@ -161,7 +163,13 @@ def train(
     terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
     """
     run_dir = Path(run_dir)
-    if isinstance(subject, BlockSet):
+    if isinstance(subject, BlockSet) and wall_hooks(subject) is not None:
+        if init is not None:
+            raise MeshgenError(
+                f"--init is not available for '{subject.name}': its model is a wall-layer network (meshgen.neural.wall_map)"
+            )
+        job = wall_job(config, subject, torch.device(device), resume, geometry_spec)
+    elif isinstance(subject, BlockSet):
         job = set_job(config, subject, torch.device(device), resume, geometry_spec, init)
     elif init is not None:
         raise MeshgenError(f"--init is made for block sets (one network per block); '{subject.name}' is one block")
