@@ -45,6 +45,7 @@ import time
 import numpy as np
 
 from meshgen.errors import GeometryError, ParameterError
+from meshgen.methods.clustering import respaced_lines, smoothed_spacing
 
 name = "airfoil"
 dim = 2
@@ -456,20 +457,6 @@ def notes(block_set):
 # the elliptic mesh: near-wall layers marched, the rest solved
 
 
-def _smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
-    """Spacings (n,) whose logarithm is that of ``ds`` (n,) diffused over about ``width`` cells
-    (one implicit step, zero-flux ends), scaled to the same sum."""
-    from scipy.linalg import solve_banded
-
-    lam = width**2
-    bands = np.zeros((3, len(ds)))
-    bands[0, 1:] = bands[2, :-1] = -lam
-    bands[1] = 1.0 + 2.0 * lam
-    bands[1, 0] = bands[1, -1] = 1.0 + lam
-    out = np.exp(solve_banded((1, 1), bands, np.log(ds)))
-    return out * ds.sum() / out.sum()
-
-
 _FAR_CURVES = {}  # id(setup) -> (setup, dense far-field curve, its arc lengths): the curve of every --dims
 
 
@@ -501,32 +488,10 @@ def far_field(setup: _Setup, coords) -> np.ndarray:
         designed.append(points + setup.distance * direction)
     designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
     dense, arc = _far_curve(setup)
-    spacing = _smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
+    spacing = smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
     s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
     out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
     out[0], out[-1] = designed[0], designed[-1]
-    return out
-
-
-def _respaced(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
-    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
-    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
-    ratio stays the designed one where the blend bends or stretches the lines."""
-    n, nodes = X.shape[0], X.shape[1]
-    arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
-    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
-    target[:, -1] = arc[:, -1]
-    lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
-    wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
-    segment = np.clip(np.searchsorted(lifted.ravel(), wanted.ravel(), side="right") - 1, 0, n * nodes - 2)
-    segment = np.minimum(segment, (np.arange(n)[:, None] * nodes + nodes - 2).repeat(nodes, axis=1).ravel())
-    flat, lifted = X.reshape(-1, 2), lifted.ravel()
-    step = lifted[segment + 1] - lifted[segment]
-    fraction = np.where(step > 0, (wanted.ravel() - lifted[segment]) / np.where(step > 0, step, 1.0), 0.0)
-    out = flat[segment] + fraction[:, None] * (flat[segment + 1] - flat[segment])
-    out = out.reshape(X.shape)
-    out[:, 0], out[:, -1] = X[:, 0], X[:, -1]
     return out
 
 
@@ -580,7 +545,7 @@ def _blend(block_set, near, check=True):
     """The mesh from the marched layers ``near`` (per block (n_b, m + 1, 2), turned; or a learned
     mesh, ``wall_finish``): the layers beyond ``BLEND_START`` chords blended into straight lines from the wall
     nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes slid along each line
-    to the designed distances (``_respaced``), interface nodes made identical. GeometryError when a
+    to the designed distances (``meshgen.methods.clustering.respaced_lines``), interface nodes made identical. GeometryError when a
     cell is inverted (``check``)."""
     from meshgen.geometry.blocks import unify_interfaces
     from meshgen.methods.hyperbolic import cell_areas
@@ -595,7 +560,7 @@ def _blend(block_set, near, check=True):
     lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far_field(setup, block_set.coords) - curve)[:, None]
     lines = _turned(setup, lines)
     Xs = [(1.0 - weight) * X + weight * lines[o : o + size] for X, o, size in zip(near, offsets, sizes)]
-    Xs = [_respaced(X, d, weight[0, :, 0]) for X in Xs]
+    Xs = [respaced_lines(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
     if inverted and check:

@@ -19,7 +19,16 @@ import numpy as np
 from meshgen.errors import ParameterError
 from meshgen.run.limits import check_memory, chunked_mesh_bytes, node_count
 
-__all__ = ["AXES", "SIDES", "Cluster", "clustered_coordinates", "node_coordinates", "parse_cluster"]
+__all__ = [
+    "AXES",
+    "SIDES",
+    "Cluster",
+    "clustered_coordinates",
+    "node_coordinates",
+    "parse_cluster",
+    "respaced_lines",
+    "smoothed_spacing",
+]
 
 AXES = {"xi": 0, "eta": 1, "zeta": 2, "i": 0, "j": 1, "k": 2}
 SIDES = {"0": "min", "min": "min", "1": "max", "max": "max", "both": "both"}
@@ -112,3 +121,39 @@ def node_coordinates(dims, specs=()) -> list[np.ndarray]:
         seen.add(cluster.axis)
         coords[cluster.axis] = clustered_coordinates(int(dims[cluster.axis]), cluster)
     return coords
+
+
+def smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
+    """Spacings (n,) whose logarithm is that of ``ds`` (n,) diffused over about ``width`` cells
+    (one implicit step, zero-flux ends), scaled to the same sum."""
+    from scipy.linalg import solve_banded
+
+    lam = width**2
+    bands = np.zeros((3, len(ds)))
+    bands[0, 1:] = bands[2, :-1] = -lam
+    bands[1] = 1.0 + 2.0 * lam
+    bands[1, 0] = bands[1, -1] = 1.0 + lam
+    out = np.exp(solve_banded((1, 1), bands, np.log(ds)))
+    return out * ds.sum() / out.sum()
+
+
+def respaced_lines(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
+    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
+    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
+    ratio stays the designed one where the blend bends or stretches the lines."""
+    n, nodes = X.shape[0], X.shape[1]
+    arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
+    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
+    target[:, -1] = arc[:, -1]
+    lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
+    wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
+    segment = np.clip(np.searchsorted(lifted.ravel(), wanted.ravel(), side="right") - 1, 0, n * nodes - 2)
+    segment = np.minimum(segment, (np.arange(n)[:, None] * nodes + nodes - 2).repeat(nodes, axis=1).ravel())
+    flat, lifted = X.reshape(-1, 2), lifted.ravel()
+    step = lifted[segment + 1] - lifted[segment]
+    fraction = np.where(step > 0, (wanted.ravel() - lifted[segment]) / np.where(step > 0, step, 1.0), 0.0)
+    out = flat[segment] + fraction[:, None] * (flat[segment + 1] - flat[segment])
+    out = out.reshape(X.shape)
+    out[:, 0], out[:, -1] = X[:, 0], X[:, -1]
+    return out
