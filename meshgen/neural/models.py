@@ -60,7 +60,9 @@ class TrainedModel:
 
     @property
     def dim(self) -> int:
-        return int(self.checkpoint["model"]["dim"])
+        """The dimension of the meshes it makes: its network's, plus one for a section model (``extruded``)."""
+        model = self.checkpoint["model"]
+        return int(model["dim"]) + ("extruded" in model)
 
     def preset(self) -> str:
         return self.record.get("preset") or preset_of(self.checkpoint)
