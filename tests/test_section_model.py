@@ -185,3 +185,27 @@ def test_section_steps_train_the_section_from_the_lattice_solution(run_cli, tmp_
     corrected = meshio.read(tmp_path / "m.vtu").points.reshape(shape)
     for cap in (0, -1):  # X + C[g - X] with the (1 - t)^p blending: the caps on the layout's nodes
         np.testing.assert_allclose(corrected[:, :, cap], laid_out[:, :, cap], rtol=0, atol=1e-11)
+
+
+def test_an_interrupted_section_run_resumes_through_the_cli_as_the_uninterrupted_one(run_cli, tmp_path, semicylinder):
+    """A section run stopped in its Adam stage goes on with ``meshgen train --resume`` (its 2D
+    network on the 3D geometry) to the weights of the run that was never stopped."""
+    from neural_helpers import Recorder
+
+    from meshgen.neural.checkpoint import load_checkpoint
+    from meshgen.neural.train import train
+
+    config = tiny_config("pretrain.steps=0", "adam.section_steps=8", "lbfgs.section_steps=2", preset="exact")
+    for name in ("straight", "stopped"):
+        (tmp_path / name).mkdir()
+    straight = train(config, semicylinder, tmp_path / "straight", summary=False)
+    assert straight.step == 10 and straight.checkpoint["model"]["dim"] == 2
+    recorder = Recorder(stop_after=5)
+    train(config, semicylinder, tmp_path / "stopped", reporter=recorder, stop=recorder.should_stop, summary=False)
+    assert load_checkpoint(tmp_path / "stopped" / "checkpoint.pt")["stage"] == "adam"
+    result = run_cli("train", "--resume", tmp_path / "stopped" / "checkpoint.pt", "-q")
+    assert result.returncode == 0, result.stderr
+    resumed = load_checkpoint(tmp_path / "stopped" / "checkpoint.pt")
+    assert resumed["stage"] == "done" and resumed["step"] == 10
+    for key, tensor in straight.checkpoint["model"]["state_dict"].items():
+        assert torch.equal(tensor, resumed["model"]["state_dict"][key]), key
