@@ -106,7 +106,7 @@ class AdamConfig:
     decay: float = 0.9  # the learning rate is multiplied by this ...
     decay_every: int = 1000  # ... every this many steps
     weights_lr: float | None = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
-    # a run that trains an extruded shape's 2D section (design notes §20): its Adam steps (null: steps)
+    # a one-block run that trains an extruded shape's 2D section (design notes §20): its Adam steps (null: steps)
     section_steps: int | None = None
 
 
@@ -119,7 +119,7 @@ class LbfgsConfig:
     # the network and its residual in float64 for this stage (float32 otherwise): in float32 the
     # finite-difference residual's round-off stops L-BFGS well above what the network can reach
     float64: bool = False
-    section_steps: int | None = None  # a run that trains an extruded shape's 2D section: its L-BFGS steps (null: steps)
+    section_steps: int | None = None  # a one-block run that trains an extruded shape's 2D section: its L-BFGS steps (null: steps)
 
 
 @dataclass
