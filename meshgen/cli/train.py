@@ -6,7 +6,7 @@ import click
 
 from meshgen.cli._options import geometry_options
 from meshgen.cli._text import echo
-from meshgen.geometry.extrusion import extrusion_of
+from meshgen.geometry.extrusion import extrusion_from, extrusion_of
 from meshgen.neural.config import list_presets as preset_list
 from meshgen.neural.progress import FIELD_HELP
 from meshgen.neural.session import prepare_run, run_training
@@ -167,6 +167,8 @@ def train(
     )
     echo(f"Trained {run.geometry.name} for {result.step} steps in {result.seconds:.1f} s ({losses})")
     extrusion = extrusion_of(run.block_set) if run.block_set is not None else None
+    if extrusion is None and "extruded" in result.checkpoint["model"]:  # a one-block section model
+        extrusion = extrusion_from(result.checkpoint["model"]["extruded"])
     if extrusion is not None:
         sweep = ", ".join(f"{v:g}" for v in extrusion.direction)
         echo(f"'{run.geometry.name}' is an extrusion along ({sweep}): the networks map its 2D section (docs/design.md §20)")

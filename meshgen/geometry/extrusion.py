@@ -31,7 +31,18 @@ from meshgen.geometry.blocks import BlockSet, Interface
 from meshgen.geometry.domain import Geometry
 from meshgen.methods.tfi import transfinite
 
-__all__ = ["TOLERANCE", "Extrusion", "extrude", "extruded_plugin", "extrusion_of", "section_of", "sweep_frame"]
+__all__ = [
+    "TOLERANCE",
+    "Extrusion",
+    "extrude",
+    "extruded_plugin",
+    "extrusion_from",
+    "extrusion_of",
+    "geometry_extrusion",
+    "section_geometry",
+    "section_of",
+    "sweep_frame",
+]
 
 TOLERANCE = 1e-9  # relative to the block set's characteristic length
 _SAMPLES = 9  # sample points per face axis of the test
@@ -56,6 +67,11 @@ class Extrusion:
         mine = np.concatenate([self.origin, self.frame.ravel(), self.direction])
         theirs = np.concatenate([np.ravel(entry[key]) for key in ("origin", "frame", "direction")]).astype(float)
         return mine.shape == theirs.shape and bool(np.max(np.abs(mine - theirs)) <= TOLERANCE * max(length, 1.0))
+
+
+def extrusion_from(entry: dict) -> Extrusion:
+    """The ``Extrusion`` of its plain data ``entry`` (``Extrusion.describe``)."""
+    return Extrusion(*(np.asarray(entry[key], dtype=float) for key in ("origin", "frame", "direction")))
 
 
 def sweep_frame(direction: np.ndarray) -> np.ndarray:
@@ -111,6 +127,36 @@ def extrusion_of(block_set: BlockSet) -> Extrusion | None:
     return Extrusion(float(heights.mean()) * unit, sweep_frame(direction), direction)
 
 
+def geometry_extrusion(geometry: Geometry) -> Extrusion | None:
+    """The ``Extrusion`` of a one-block 3D geometry along its zeta axis (:func:`extrusion_of` of the
+    set of that one block), or None when it is not one."""
+    if geometry.dim != 3:
+        return None
+    ends = (np.array([0.0, 1.0]),) * 3
+    one = BlockSet(
+        geometry.name,
+        3,
+        "",
+        dict(geometry.values),
+        (geometry.name,),
+        (geometry,),
+        (ends,),
+        (),
+        {},
+        "",
+        geometry.characteristic_length,
+    )
+    return extrusion_of(one)
+
+
+def section_geometry(geometry: Geometry, extrusion: Extrusion) -> Geometry:
+    """The 2D geometry of the zeta = 0 cap of the extruded 3D ``geometry`` in the frame's
+    coordinates: boundary map (N, 2) -> (N, 2), (g(xi, eta, 0) - origin) . (e1, e2)."""
+    return dataclasses.replace(
+        geometry, name=f"{geometry.name}.section", dim=2, boundary_map=_section_map(geometry, extrusion), length_map=None
+    )
+
+
 def _section_map(geometry: Geometry, extrusion: Extrusion):
     def section(points, **values):
         points = np.asarray(points, dtype=float)
@@ -123,10 +169,7 @@ def _section_map(geometry: Geometry, extrusion: Extrusion):
 def section_of(block_set: BlockSet, extrusion: Extrusion) -> BlockSet:
     """The 2D block set of the extruded ``block_set``'s section (its zeta = 0 cap in the frame's
     coordinates): the same blocks, interfaces and side patches, each block's first two axes."""
-    geometries = tuple(
-        dataclasses.replace(g, name=f"{g.name}.section", dim=2, boundary_map=_section_map(g, extrusion), length_map=None)
-        for g in block_set.geometries
-    )
+    geometries = tuple(section_geometry(g, extrusion) for g in block_set.geometries)
     interfaces = tuple(
         Interface(i.a, cube.face_named(i.face_a.name, 2), i.b, cube.face_named(i.face_b.name, 2), tuple(i.transform[:2]))
         for i in block_set.interfaces

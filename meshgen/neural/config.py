@@ -106,6 +106,8 @@ class AdamConfig:
     decay: float = 0.9  # the learning rate is multiplied by this ...
     decay_every: int = 1000  # ... every this many steps
     weights_lr: float | None = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
+    # a one-block run that trains an extruded shape's 2D section (design notes §20): its Adam steps (null: steps)
+    section_steps: int | None = None
 
 
 @dataclass
@@ -117,6 +119,7 @@ class LbfgsConfig:
     # the network and its residual in float64 for this stage (float32 otherwise): in float32 the
     # finite-difference residual's round-off stops L-BFGS well above what the network can reach
     float64: bool = False
+    section_steps: int | None = None  # a one-block run that trains an extruded shape's 2D section: its L-BFGS steps (null: steps)
 
 
 @dataclass
@@ -180,10 +183,12 @@ BOUNDS = {
     "adam.decay": (0.0, 1.0),
     "adam.decay_every": (1, 10**9),
     "adam.weights_lr": (0.0, 1e3),
+    "adam.section_steps": (0, 10**8),
     "lbfgs.steps": (0, 10**7),
     "lbfgs.max_iter": (1, 10**4),
     "lbfgs.history_size": (1, 10**4),
     "lbfgs.lr": (0.0, 1e3),
+    "lbfgs.section_steps": (0, 10**7),
     "checkpoint.every": (1, 10**9),
     "guard.max_retries": (0, 1000),
     "guard.lr_factor": (0.0, 1.0),

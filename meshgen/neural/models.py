@@ -61,7 +61,9 @@ class TrainedModel:
 
     @property
     def dim(self) -> int:
-        return int(self.checkpoint["model"]["dim"])
+        """The dimension of the meshes it makes: its network's, plus one for a section model (``extruded``)."""
+        model = self.checkpoint["model"]
+        return int(model["dim"]) + ("extruded" in model)
 
     def preset(self) -> str:
         """The preset the model was trained with (``preset_of``: every preset resolved, so found once per model)."""

@@ -7,6 +7,11 @@ float32 arithmetic per node on large grids; BLAS on small grids, always evaluate
 a mesh made block by block equals the whole-grid one bit for bit), so meshing with a trained model
 imports no torch; torch (``meshgen.neural.gpu_forward``) runs it on a GPU only: ``--device cuda``, or
 ``auto`` where ``meshgen.neural.device`` finds one.
+
+A section model (``model["extruded"]``: the 2D network of an extruded one-block geometry's
+section, ``meshgen.geometry.extrusion``) maps the section once, on the grid's first two axes (its
+base is the laid-out zeta = 0 cap itself, not the TFI of the cap's edges), and its mesh is that
+plane swept along zeta: an exact extrusion at every --dims.
 """
 
 from __future__ import annotations
@@ -17,8 +22,10 @@ import numpy as np
 
 from meshgen.errors import MeshgenError
 from meshgen.geometry import cube
+from meshgen.geometry.extrusion import extrusion_from, geometry_extrusion
+from meshgen.geometry.layout import unsmoothed
 from meshgen.methods.tfi import add_face_terms, boundary_faces, face_terms, face_values, tfi
-from meshgen.neural.checkpoint_data import check_network
+from meshgen.neural.checkpoint_data import CheckpointError, check_network
 from meshgen.neural.device import inference_device
 from meshgen.neural.mlp_numpy import CHUNK_NODES, compiled_for, finite_output, forward_on_grid
 
@@ -29,9 +36,11 @@ __all__ = [
     "bubble_on_grid",
     "evaluate_network",
     "exact_boundary_terms",
+    "is_section_model",
     "map_on_block",
     "mesh_from_model",
     "model_boundary_errors",
+    "section_plane",
     "spans_cube",
 ]
 
@@ -69,14 +78,55 @@ def spans_cube(coords) -> bool:
     return bool(coords) and all(c[0] == 0.0 and c[-1] == 1.0 for c in coords)
 
 
-def exact_boundary_terms(model: dict, geometry, coords):
-    """The TFI face terms (``meshgen.methods.tfi.face_terms``, face-sized) the exact-boundary map
-    of ``model`` needs on the grid of ``coords`` (spanning the cube); None for a soft-boundary model."""
+def is_section_model(model: dict, coords) -> bool:
+    """Whether ``model`` is the 2D section network of an extruded one-block geometry
+    (``model["extruded"]``, ``meshgen.geometry.extrusion``) asked for on the 3D grid ``coords``: its
+    mesh is the section's extruded (a block set's section networks are asked for on 2D grids)."""
+    return "extruded" in model and len(coords) == int(model["dim"]) + 1
+
+
+def section_plane(model: dict, geometry, coords, device: str = "cpu") -> np.ndarray:
+    """The section network's map on the grid of ``coords[:2]`` in the zeta = 0 plane: (n1, n2, 3)
+    float64, C(xi, eta) + scale b(xi, eta) (N1 e1 + N2 e2), C the laid-out 3D ``geometry``'s zeta = 0 cap (the section's base in place of TFI,
+    ``meshgen.neural.problem.Problem.interior_map``), N the 2D network in the frame's coordinates."""
+    if geometry is None:
+        raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
+    extrusion = extrusion_from(model["extruded"])
+    own = geometry_extrusion(unsmoothed(geometry))  # tested on the geometry's own boundary map
+    if own is None or not own.matches(model["extruded"], geometry.characteristic_length):
+        raise CheckpointError(
+            f"the model maps the section of an extruded geometry, and '{geometry.name}' with these parameters is not "
+            "that extrusion (design notes §20)"
+        )
+    plane = [np.asarray(c, dtype=float) for c in coords[:2]]
+    shape = tuple(len(c) for c in plane)
+    grid = np.stack(np.meshgrid(*plane, indexing="ij"), axis=-1).reshape(-1, 2)
+    cap = geometry.boundary(np.column_stack([grid, np.zeros(len(grid))])).reshape(*shape, 3)
+    N = evaluate_network(model, plane, device=device).reshape(*shape, 2)
+    N *= (float(model["scale"]) * bubble_on_grid(plane))[..., None]
+    return cap + N @ extrusion.frame
+
+
+def exact_boundary_terms(model: dict, geometry, coords, values=None, device: str = "cpu"):
+    """What :func:`map_on_block` adds to the network of ``model`` on the grid of ``coords`` (spanning
+    the cube): the TFI face terms (``meshgen.methods.tfi.face_terms``, face-sized; ``values`` the
+    boundary map at the face nodes when the caller has them) of an exact-boundary model, the
+    :func:`section_plane` of a section model, None for a soft-boundary model."""
+    if is_section_model(model, coords):
+        return section_plane(model, geometry, coords, device)
     if not model["exact_boundary"]:
         return None
     if geometry is None:
         raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
-    return face_terms(face_values(geometry.boundary, coords), coords)
+    return face_terms(face_values(geometry.boundary, coords) if values is None else values, coords)
+
+
+def extruded_block(model: dict, plane: np.ndarray, coords, block) -> np.ndarray:
+    """The nodes ``block`` of a section model's mesh: plane + zeta direction, (m1, m2, m3, 3) float64
+    (``plane`` from :func:`section_plane` on the whole grid, so any block has the whole mesh's bits)."""
+    direction = np.asarray(model["extruded"]["direction"], dtype=float)
+    zeta = np.asarray(coords[2], dtype=float)[block[2]]
+    return plane[block[0], block[1]][:, :, None, :] + zeta[None, None, :, None] * direction
 
 
 _SMALL_GRIDS: list = []  # [(model, coordinate bytes, network values)]: the last few small grids evaluated
@@ -112,6 +162,8 @@ def map_on_block(model: dict, coords, block=None, tfi_terms=None, workers=None, 
     the block is cut from the whole grid's values (:func:`small_grid_network`)."""
     dim = len(coords)
     block = tuple(block) if block is not None else (slice(None),) * dim
+    if is_section_model(model, coords):
+        return extruded_block(model, tfi_terms, coords, block)
     sub_coords = [c[b] for c, b in zip(coords, block)]
     shape = tuple(len(c) for c in sub_coords)
     compiled = compiled_for(model, int(np.prod([len(c) for c in coords])))  # by the whole grid: one path per mesh
@@ -135,12 +187,14 @@ def mesh_from_model(
     ``coords``: the node array X, shape (len(coords[0]), ..., d), float64.
 
     Soft boundary: X = center + scale N(xi). Exact boundary: X = TFI(xi) + scale b(xi) N(xi), which
-    needs ``geometry`` (the bound Geometry the model was trained on). ``chunk`` is kept for
+    needs ``geometry`` (the bound Geometry the model was trained on). Section model: the section's
+    map extruded (:func:`section_plane`, :func:`extruded_block`). ``chunk`` is kept for
     callers of 0.2; the result does not depend on it.
     """
     coords = [np.asarray(c, dtype=float) for c in coords]
-    if not model["exact_boundary"] or spans_cube(coords):
-        return map_on_block(model, coords, None, exact_boundary_terms(model, geometry, coords), workers, device)
+    if is_section_model(model, coords) or not model["exact_boundary"] or spans_cube(coords):
+        terms = exact_boundary_terms(model, geometry, coords, device=device)
+        return map_on_block(model, coords, None, terms, workers, device)
     if geometry is None:
         raise MeshgenError("an exact-boundary model needs its geometry to be evaluated")
     # a grid that does not span the cube: the direct form

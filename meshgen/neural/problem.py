@@ -36,6 +36,7 @@ __all__ = [
     "TEST_STENCIL_H",
     "Problem",
     "apply_map",
+    "base_values",
     "boundary_draw",
     "boundary_pool",
     "boundary_rows",
@@ -77,6 +78,19 @@ class Problem:
     exact: bool  # exact-boundary form: TFI + b N
     device: torch.device
     lattice_tfi: object = None  # TFI's differences on the whole lattice (``lattice_tfi``), made at the first call
+    # the exact form's base is the boundary map itself at every point, not the TFI of its edges: an
+    # extruded shape's section (``meshgen.geometry.extrusion.section_geometry``), whose map is the cap
+    interior_map: bool = False
+
+
+def base_values(problem: Problem, points) -> np.ndarray:
+    """The exact form's base at the points ``points`` (one array per axis, broadcasting: as
+    ``meshgen.methods.tfi.transfinite`` takes them): the TFI of the boundary map, or with
+    ``problem.interior_map`` the map itself; (broadcast shape, d) float64, normalised units."""
+    if not problem.interior_map:
+        return transfinite(problem.boundary, points)
+    grids = np.broadcast_arrays(*[np.asarray(p, dtype=float) for p in points])
+    return problem.boundary(np.stack([g.ravel() for g in grids], axis=-1)).reshape(grids[0].shape + (problem.dim,))
 
 
 def grid_tfi_derivatives(problem: Problem, axes, spacing, dtype=torch.float32) -> tuple[torch.Tensor, torch.Tensor]:
@@ -89,7 +103,7 @@ def grid_tfi_derivatives(problem: Problem, axes, spacing, dtype=torch.float32) -
     dim = problem.dim
     batch = list(axes[0].shape[:-1])  # a batch of grids (lattice blocks): (B, n_i) per axis
     broadcast = [a.cpu().reshape(batch + [-1 if d == i else 1 for d in range(dim)]).numpy() for i, a in enumerate(axes)]
-    values = torch.from_numpy(transfinite(problem.boundary, broadcast))
+    values = torch.from_numpy(base_values(problem, broadcast))
     _, first, second = grid_derivatives(values, [float(h) for h in spacing])
     return first.to(dtype), second.to(dtype)
 
@@ -316,7 +330,7 @@ def test_loss(network: MLP, problem: Problem, test_set: dict) -> dict:
 
     def mapped(points, key):
         if problem.exact and key not in cache:
-            cache[key] = torch.from_numpy(transfinite(problem.boundary, list(points.numpy().T)))
+            cache[key] = torch.from_numpy(base_values(problem, list(points.numpy().T)))
         return apply_map(exact_network, problem, points, cache.get(key))
 
     with torch.no_grad():
@@ -338,7 +352,7 @@ def pretrain_pool(problem: Problem, config: TrainConfig) -> dict:
             sample_boundary(config.pretrain.points, problem.dim, generator),
         ]
     ).double()
-    targets = torch.from_numpy(transfinite(problem.boundary, list(points.numpy().T)))
+    targets = torch.from_numpy(base_values(problem, list(points.numpy().T)))
     return {"points": points.float().to(problem.device), "targets": targets.float().to(problem.device)}
 
 

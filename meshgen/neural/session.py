@@ -37,7 +37,15 @@ __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_di
 RUN_FILES = ("checkpoint.pt", "config.yaml", "history.csv", "summary.json")
 # What a resumed run may change: how long it goes on and how it saves or guards, nothing that
 # would make the checkpoint's weights or optimiser state mean something else.
-RESUMABLE_KEYS = ("adam.steps", "lbfgs.steps", "checkpoint.every", "guard.max_retries", "guard.lr_factor")
+RESUMABLE_KEYS = (
+    "adam.steps",
+    "lbfgs.steps",
+    "adam.section_steps",
+    "lbfgs.section_steps",
+    "checkpoint.every",
+    "guard.max_retries",
+    "guard.lr_factor",
+)
 
 
 @dataclass
@@ -160,7 +168,7 @@ def prepare_run(
                 f"checkpoint {resume_path} was trained on {trained_on['name']} {trained_on['params']}, "
                 f"not on {geometry_object.name} {geometry_object.values}"
             )
-        if geometry_object.dim != checkpoint["model"]["dim"]:
+        if geometry_object.dim != checkpoint["model"]["dim"] + ("extruded" in checkpoint["model"]):
             raise CheckpointError(
                 f"checkpoint {resume_path} holds a {checkpoint['model']['dim']}D map; "
                 f"geometry '{geometry_object.name}' is {geometry_object.dim}D"

@@ -57,6 +57,7 @@ class Stage:
     start: Callable = lambda training, say: None  # (Training, say) before the stage's first step
     # (Training) -> steps taken between two reads of their rows (one wait for the device)
     block: Callable = lambda training: 1
+    total: Callable | None = None  # (Training) -> the stage's steps; None: the configuration's <name>.steps
 
 
 @dataclass
@@ -203,7 +204,7 @@ def run_stages(
     interrupted = False
     try:
         for stage in stage_table[names.index(state.stage) :] if state.stage != "done" else ():
-            total = getattr(config, stage.name).steps
+            total = stage.total(training) if stage.total is not None else getattr(config, stage.name).steps
             state.stage = stage.name
             if state.stage_step >= total:
                 state.stage_step = 0

@@ -28,6 +28,8 @@ initialisation comes from one generator whose state the checkpoint keeps, so a r
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import time
 from pathlib import Path
 
@@ -36,6 +38,7 @@ import torch
 
 from meshgen.errors import MeshgenError
 from meshgen.geometry.blocks import BlockSet
+from meshgen.geometry.extrusion import Extrusion, extrusion_from, geometry_extrusion, section_geometry
 from meshgen.geometry.layout import with_layout
 from meshgen.methods.correction import correct_boundary
 from meshgen.methods.tfi import parametric_grid, tfi
@@ -71,12 +74,15 @@ from meshgen.neural.wall_train import wall_job
 from meshgen.quality import quality_report, write_json
 
 __all__ = [
+    "SECTION_STAGE_TABLE",
     "STAGES",
     "STAGE_TABLE",
     "SUMMARY_CELLS",
     "adam_steps",
     "corrected",
     "one_block_job",
+    "section_extrusion",
+    "section_steps",
     "start_training",
     "train",
     "write_summary",
@@ -134,6 +140,19 @@ STAGE_TABLE = (
 STAGES = tuple(stage.name for stage in STAGE_TABLE)
 
 
+def section_steps(training: Training, name: str) -> int:
+    """The steps of stage ``name`` in a run that trains an extruded shape's section: the stage's
+    ``section_steps`` where the configuration sets it, else its ``steps``."""
+    stage = getattr(training.config, name)
+    chosen = getattr(stage, "section_steps", None)
+    return stage.steps if chosen is None else chosen
+
+
+SECTION_STAGE_TABLE = tuple(
+    dataclasses.replace(stage, total=functools.partial(section_steps, name=stage.name)) for stage in STAGE_TABLE
+)
+
+
 def train(
     config: TrainConfig,
     subject,
@@ -183,18 +202,37 @@ def train(
     return TrainResult.of_run(saver, job.state, interrupted, checkpoint, quality)
 
 
+def section_extrusion(config: TrainConfig, geometry, resume=None) -> Extrusion | None:
+    """The extrusion whose 2D section a one-block run trains (design notes §20), or None (a network
+    of the geometry's dimension): an exact-boundary run on an extruded 3D geometry
+    (``meshgen.geometry.extrusion.geometry_extrusion``); a resumed run keeps its checkpoint's kind."""
+    if resume is not None:
+        entry = resume["model"].get("extruded")
+        return None if entry is None else extrusion_from(entry)
+    return geometry_extrusion(geometry) if config.model.exact_boundary else None
+
+
 def one_block_job(config: TrainConfig, geometry, device: torch.device, resume=None, geometry_spec=None) -> Job:
     """The run (``meshgen.neural.stages.Job``) of a geometry of one boundary map: one network on
     the terms of ``meshgen.neural.problem``, :data:`STAGE_TABLE`, 0.2's checkpoint layout (one
-    network under ``layers.<k>.``, no ``blocks`` entry), the summary of :func:`write_summary`."""
+    network under ``layers.<k>.``, no ``blocks`` entry), the summary of :func:`write_summary`.
+    An extruded geometry under the exact boundary (:func:`section_extrusion`) trains the 2D
+    network of its section: X = C + b N, C the laid-out boundary's zeta = 0 cap (on the smoothed
+    layout, the section's 2D Winslow grid on the layout's fine lattice) in place of TFI; the
+    checkpoint records the extrusion (``model["extruded"]``), its stages take ``section_steps``
+    (:data:`SECTION_STAGE_TABLE`) and its mesh is the section's extruded
+    (``meshgen.neural.network_map.section_plane``)."""
+    extrusion = section_extrusion(config, geometry, resume)
     geometry = with_layout(geometry, config.boundary_layout)  # the boundary the network learns
-    training, state = start_training(config, geometry, device, resume)
+    trained = geometry if extrusion is None else section_geometry(geometry, extrusion)
+    training, state = start_training(config, trained, device, resume, interior_map=extrusion is not None)
     problem, test_set = training.problem, make_test_set(training.problem, config)
 
     def describe_run() -> dict:
         network = training.network
+        model = describe(network, config.model.widths, problem.exact, problem.center, problem.scale)
         return {
-            "model": describe(network, config.model.widths, problem.exact, problem.center, problem.scale),
+            "model": model if extrusion is None else {**model, "extruded": extrusion.describe()},
             "geometry": {
                 "name": geometry.name,
                 "spec": geometry_spec or geometry.name,
@@ -208,16 +246,18 @@ def one_block_job(config: TrainConfig, geometry, device: torch.device, resume=No
     def summary(checkpoint, run_dir):
         return write_summary(checkpoint, geometry, run_dir)
 
-    return Job(training, state, STAGE_TABLE, describe_run, summary)
+    return Job(training, state, STAGE_TABLE if extrusion is None else SECTION_STAGE_TABLE, describe_run, summary)
 
 
-def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None):
-    """The Training (network initialised from the seed, or from ``resume``) and its TrainState."""
+def start_training(config: TrainConfig, geometry, device: torch.device, resume: dict | None, interior_map: bool = False):
+    """The Training (network initialised from the seed, or from ``resume``) and its TrainState.
+    ``interior_map``: the exact form's base is the geometry's map itself (``Problem.interior_map``)."""
     dim = geometry.dim
     center, scale = normalisation(geometry)
     if resume is not None:  # the checkpoint's normalisation, bit for bit
         center, scale = np.asarray(resume["model"]["center"]), float(resume["model"]["scale"])
-    problem = Problem(dim, normalised_boundary(geometry, center, scale), center, scale, config.model.exact_boundary, device)
+    boundary = normalised_boundary(geometry, center, scale)
+    problem = Problem(dim, boundary, center, scale, config.model.exact_boundary, device, interior_map=interior_map)
     torch.manual_seed(config.seed)
     network = MLP(dim, config.model.widths)
     if problem.exact:  # N = 0: training starts from TFI itself

@@ -44,7 +44,7 @@ from meshgen.geometry.grid import BLOCK_NODES, block_slices
 from meshgen.geometry.patches import geometry_patches
 from meshgen.methods.correction import add_correction_terms, correction_terms, error_figures, snap_to_boundary
 from meshgen.methods.tfi import add_face_terms, face_terms, face_values
-from meshgen.neural.network_map import map_on_block, model_boundary_errors
+from meshgen.neural.network_map import exact_boundary_terms, map_on_block, model_boundary_errors
 from meshgen.quality.chunked import chunked_report
 from meshgen.quality.files import sidecar_path, write_json
 from meshgen.run.atomic import atomic_path
@@ -153,7 +153,7 @@ def neural_array(
     """
     coords = [np.asarray(c, dtype=float) for c in coords]
     boundary_values = face_values(geometry.boundary, coords)
-    tfi_terms = face_terms(boundary_values, coords) if model["exact_boundary"] else None
+    tfi_terms = exact_boundary_terms(model, geometry, coords, values=boundary_values)  # or a section model's plane
     info = {"corrected": False}
     error_terms = None
     if correct_boundary:
