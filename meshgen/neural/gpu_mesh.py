@@ -26,7 +26,7 @@ from meshgen.geometry import cube
 from meshgen.methods.correction import CORRECTION_POWER, correction_terms, error_figures
 from meshgen.methods.tfi import face_terms, face_values
 from meshgen.neural.gpu_forward import network_layers, network_on_planes
-from meshgen.neural.network_map import model_boundary_errors
+from meshgen.neural.network_map import is_section_model, model_boundary_errors
 from meshgen.quality.kernels import DEGENERATE_TOLERANCE
 
 __all__ = ["SLAB_PLANES", "SlabMesher", "slabs"]
@@ -56,8 +56,8 @@ class SlabMesher:
         self.device = torch.device(device)
         self.coords = [np.asarray(c, dtype=float) for c in coords]
         self.shape = tuple(len(c) for c in self.coords)
-        if len(self.shape) != 3:
-            raise ValueError("SlabMesher makes 3D meshes")
+        if len(self.shape) != 3 or is_section_model(model):
+            raise ValueError("SlabMesher makes 3D meshes of 3D networks (a section model is meshed by map_on_block)")
         values = face_values(geometry.boundary, self.coords)
         self.exact = bool(model["exact_boundary"])
         self.scale = float(model["scale"])
