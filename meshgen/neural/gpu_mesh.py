@@ -56,7 +56,7 @@ class SlabMesher:
         self.device = torch.device(device)
         self.coords = [np.asarray(c, dtype=float) for c in coords]
         self.shape = tuple(len(c) for c in self.coords)
-        if len(self.shape) != 3 or is_section_model(model):
+        if len(self.shape) != 3 or is_section_model(model, self.coords):
             raise ValueError("SlabMesher makes 3D meshes of 3D networks (a section model is meshed by map_on_block)")
         values = face_values(geometry.boundary, self.coords)
         self.exact = bool(model["exact_boundary"])
