@@ -261,6 +261,14 @@ TARGETS = {
         "s",
         "1e9 hexahedra of the bundled network made, corrected and quality-checked on one GPU, writing excluded",
     ),
+    "airfoil_neural_mesh_seconds": ("<=", 0.1, "s", "airfoil C-grid 448 x 128 by a trained model (network and finish), 2 cores"),
+    "airfoil_neural_min_angle_below_elliptic": (
+        "<=",
+        0.5,
+        "deg",
+        "airfoil: the elliptic mesh's mean min angle minus the neural mesh's, same run (negative: the network's is better)",
+    ),
+    "airfoil_neural_first_cell_error": ("<=", 0.02, "", "airfoil, neural: largest |first-cell height / asked - 1|"),
     "airfoil_mesh_seconds": ("<=", 5.0, "s", "airfoil C-grid 448 x 128 (57,344 cells, y+ 1 at Re 6e6), elliptic, 2 cores"),
     "airfoil_first_cell_error": ("<=", 0.02, "", "airfoil: largest |first-cell height / asked - 1| over the wall nodes"),
     "airfoil_wall_angle_degrees": ("<=", 2.0, "deg", "airfoil: largest angle of a first grid line off the wall normal"),
@@ -1313,6 +1321,14 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
         elif ours:
             add("NACA 2414 alpha 10 (3,700 cells): meshgen max non-orthogonality", ours["max_non_orthogonality"], "deg",
                 note=f"max skewness {ours['max_skewness']:.2f}; classy_blocks skipped: {anchor.get('skipped')}")  # fmt: skip
+        neural = sections["airfoil"].get("neural")
+        if neural:
+            add(f"airfoil C-grid {neural['cells']} cells, neural (trained model)", neural["seconds"], "s", key="airfoil_neural_mesh_seconds",
+                note=f"meshgen.mesh {neural['request_seconds']:.3f} s; trained {neural['training_seconds']:.0f} s")  # fmt: skip
+            add("airfoil: elliptic mean min angle - neural's", neural["min_angle_below_elliptic"], "deg",
+                key="airfoil_neural_min_angle_below_elliptic", note=f"{neural['inverted']} inverted")  # fmt: skip
+            add("airfoil, neural: first-cell height error", neural["first_cell_error"], "", key="airfoil_neural_first_cell_error",
+                note=f"wall angle {neural['worst_wall_angle_degrees']:.2f} deg")  # fmt: skip
         solved = sections["airfoil"].get("simplefoam_alpha_10")
         if solved:
             note = f"{solved['cells']} cells, y+ mean {solved['yplus']['average']:.2f} max {solved['yplus']['max']:.2f}"
