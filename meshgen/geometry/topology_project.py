@@ -1,8 +1,9 @@
 """Surfaces of a topology file (``surfaces:``) and the projection of its faces and edges onto them.
 
 A surface is a map X (N, dim) -> its closest points (N, dim): ``sphere`` {center, radius} (2D: a
-circle), ``cylinder`` {axis, point, radius} (2D: {point, radius}, a circle), ``plane`` {point,
-normal} and ``file`` {file: part.stl} (3D: the closest point on the triangulation). A face with
+circle), ``cylinder`` {axis, point, radius} (2D: {point, radius}, a circle), ``torus`` {center,
+axis, major, minor} (a bent pipe's wall: the tube of radius minor round the circle of radius major
+about the axis), ``plane`` {point, normal} and ``file`` {file: part.stl} (3D: the closest point on the triangulation). A face with
 ``project: NAME`` has its vertices, its edges and (3D) its interior projected; a vertex or edge on
 faces of several surfaces goes to their intersection (alternating projection). ``projected``
 returns the vertices and edge curves moved; the block maps of ``meshgen.geometry.topology``
@@ -20,8 +21,9 @@ from meshgen.errors import GeometryError, did_you_mean
 
 __all__ = ["REACH", "SURFACE_KINDS", "Surface", "on_surfaces", "projected", "read_surfaces"]
 
-SURFACE_KINDS = ("sphere", "cylinder", "plane", "file")
+SURFACE_KINDS = ("sphere", "cylinder", "torus", "plane", "file")
 _KEYS = {"sphere": ("center", "radius"), "cylinder": ("axis", "point", "radius"), "plane": ("point", "normal")}
+_KEYS["torus"] = ("center", "axis", "major", "minor")
 REACH = 0.1  # a face farther than this (relative to its block's size) from its surface is not on it
 _CHUNK = 4096  # query points per batch of the STL search
 
@@ -85,26 +87,41 @@ def _analytic(said: str, kind: str, spec: dict, dim: int):
             raise GeometryError(f"{said}: the plane's normal is zero")
         normal = normal / np.linalg.norm(normal)
         return lambda X: X - ((X - point) @ normal)[:, None] * normal
-    radius = spec["radius"]
-    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not np.isfinite(radius) or radius <= 0:
-        raise GeometryError(f"{said}: {kind} radius must be a positive number, got {radius!r}"[:200])
-    center = _vector(said, "center" if kind == "sphere" else "point", spec["center" if kind == "sphere" else "point"], dim)
+    for key in ("radius", "major", "minor"):
+        value = spec.get(key, 1.0)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+            raise GeometryError(f"{said}: {kind} {key} must be a positive number, got {value!r}"[:200])
+    if kind == "torus" and dim != 3:
+        raise GeometryError(f"{said}: a torus needs a 3D topology")
+    center = _vector(said, "point" if kind == "cylinder" else "center", spec["point" if kind == "cylinder" else "center"], dim)
     axis = np.zeros(dim)
-    if kind == "cylinder" and dim == 3:
+    if kind in ("cylinder", "torus") and dim == 3:
         axis = _vector(said, "axis", spec["axis"], dim)
         if not np.linalg.norm(axis) > 0:
             raise GeometryError(f"{said}: the cylinder's axis is zero")
         axis = axis / np.linalg.norm(axis)
-    radius = float(radius)
+    spare = np.eye(dim)[np.argmin(np.abs(axis))]  # a direction for points on the axis
+
+    def unit(v):
+        length = np.linalg.norm(v, axis=1, keepdims=True)
+        return np.where(length > 0, v / np.where(length > 0, length, 1.0), spare)
+
+    if kind == "torus":  # the closest point of the ring (the tube's centre line), then of the tube about it
+        major, minor = float(spec["major"]), float(spec["minor"])
+
+        def project(X):
+            X = np.asarray(X, float)
+            d = X - center
+            ring = center + major * unit(d - (d @ axis)[:, None] * axis)
+            return ring + minor * unit(X - ring)
+
+        return project
+    radius = float(spec["radius"])
 
     def project(X):
         d = np.asarray(X, float) - center
         along = (d @ axis)[:, None] * axis
-        radial = d - along
-        length = np.linalg.norm(radial, axis=1, keepdims=True)
-        spare = np.eye(dim)[np.argmin(np.abs(axis))]  # a direction for points on the axis
-        radial = np.where(length > 0, radial / np.where(length > 0, length, 1.0), spare)
-        return center + along + radius * radial
+        return center + along + radius * unit(d - along)
 
     return project
 
@@ -185,7 +202,8 @@ def _check(surfaces, where: str, samples: np.ndarray, size: float) -> np.ndarray
 
 def projected(topology, curves: dict) -> tuple[np.ndarray, dict]:
     """(vertex points (V, dim), {(i, j): curve}) of ``topology`` with every projected face's
-    vertices and edges moved onto its surface (edges of several surfaces: their intersection);
+    vertices and edges moved onto its surface (edges of several surfaces: their intersection; the
+    other edges at a moved vertex follow it);
     GeometryError for a face or edge farther than ``REACH`` of its block's size from its surface."""
     points, names = topology.points.copy(), topology.vertex_names
     where = f"topology file {topology.path}"
@@ -217,7 +235,7 @@ def projected(topology, curves: dict) -> tuple[np.ndarray, dict]:
     for v, listed in on_vertex.items():  # a loop over the projected vertices
         surfaces = [topology.surfaces[n] for n in sorted(listed)]
         moved[v] = on_surfaces(surfaces, points[v : v + 1], float(np.ptp(points, axis=0).max()))[0]
-    result = dict(curves)
+    result = {(i, j): _shifted(function, moved[i] - points[i], moved[j] - points[j]) for (i, j), function in curves.items()}
     t = np.linspace(0.0, 1.0, 17)
     for (i, j), listed in on_edge.items():
         surfaces = [topology.surfaces[n] for n in sorted(set(listed))]
@@ -225,6 +243,14 @@ def projected(topology, curves: dict) -> tuple[np.ndarray, dict]:
         _check(surfaces, f"{where}: the edge {names[i]}-{names[j]}", curves[i, j](t), size)
         result[i, j] = _projected_curve(curves[i, j], surfaces, points[i], points[j], moved[i], moved[j], size)
     return moved, result
+
+
+def _shifted(function, shift_a, shift_b):
+    """The curve ``function`` with its ends moved by ``shift_a`` and ``shift_b`` (linearly between):
+    an edge off the surfaces that ends at a projected vertex."""
+    if not (np.any(shift_a) or np.any(shift_b)):
+        return function
+    return lambda t: function(t) + (1.0 - np.asarray(t, float)[:, None]) * shift_a + np.asarray(t, float)[:, None] * shift_b
 
 
 def _projected_curve(function, surfaces, a, b, new_a, new_b, size: float):
