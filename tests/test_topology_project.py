@@ -210,7 +210,8 @@ def test_2d_patch_on_a_circle(tmp_path):
         (("{ball: {sphere:", "{ball: {spheer:"), "needs one surface kind"),
         ((f"radius: {INNER}", "radius: 0.05"), "does not contain it"),
         ((SPHERE, "{file: missing.stl}"), "no file"),
-        ((SPHERE, "{file: part.step, face: 3}"), "CAD faces are not supported"),
+        ((SPHERE, "{file: ball.stl, face: 3}"), "'face' is for a CAD file"),
+        ((SPHERE, "{file: part.step}"), "needs 'face'"),
         ((f"radius: {INNER}", "radius: -1"), "radius must be a positive number"),
     ],
 )
@@ -241,3 +242,42 @@ def test_cylinder_3d_example_passes_checkmesh(run_cli, tmp_path):
         pytest.skip(missing_reason())
     report = check_mesh(tmp_path / "case")
     assert report["ok"], report["log"][-2000:]
+
+
+QUARTER = """surfaces: {{pipe: {surface}}}
+vertices: {{a: [0.5, 0, 0.5], b: [1, 0, 0.5], c: [1, 1, 0.5], m: [0.35, 0.35, 0.5], d: [0, 1, 0.5], e: [0, 0.5, 0.5],
+  A: [0.5, 0, 1.5], B: [1, 0, 1.5], C: [1, 1, 1.5], M: [0.35, 0.35, 1.5], D: [0, 1, 1.5], E: [0, 0.5, 1.5]}}
+blocks: [[a, b, c, m, A, B, C, M], [m, c, d, e, M, C, D, E]]
+cells: {{size: 0.1}}
+patches: {{wall: {{type: wall, project: pipe, faces: [[a, m, M, A], [m, e, E, M]]}}}}
+"""
+
+
+def test_cad_face_projection_is_the_cylinder(tmp_path):
+    pytest.importorskip("gmsh")
+    from shape_helpers import write_sweep_solid
+
+    write_sweep_solid("cylinder", tmp_path / "rod.step")  # radius 0.5, 0 <= z <= 2 about the z axis
+    import gmsh
+
+    started = not gmsh.isInitialized()
+    if started:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    gmsh.model.add("faces of the rod")
+    gmsh.model.occ.importShapes(str(tmp_path / "rod.step"))
+    gmsh.model.occ.synchronize()
+    face = next(tag for dim, tag in gmsh.model.getEntities(2) if gmsh.model.getType(dim, tag) == "Cylinder")
+    gmsh.model.remove()
+    if started:
+        gmsh.finalize()
+    walls = {}
+    for name, surface in (
+        ("cad", f"{{file: rod.step, face: {face}}}"),
+        ("exact", "{cylinder: {axis: [0, 0, 1], point: [0, 0, 0], radius: 0.5}}"),
+    ):
+        blocks = load_block_set(write(tmp_path, QUARTER.format(surface=surface), f"{name}.yaml"), None, (1, 1, 1))
+        walls[name] = wall_nodes(blocks, tfi_blocks(blocks), "wall")
+    assert np.max(np.abs(np.linalg.norm(walls["cad"][:, :2], axis=1) - 0.5)) <= 1e-9
+    np.testing.assert_allclose(walls["cad"], walls["exact"], atol=1e-9)
+    with pytest.raises(GeometryError, match="has no face 99"):
+        load_block_set(write(tmp_path, QUARTER.format(surface="{file: rod.step, face: 99}"), "bad.yaml"), None, (1, 1, 1))

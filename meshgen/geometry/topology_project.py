@@ -3,7 +3,9 @@
 A surface is a map X (N, dim) -> its closest points (N, dim): ``sphere`` {center, radius} (2D: a
 circle), ``cylinder`` {axis, point, radius} (2D: {point, radius}, a circle), ``torus`` {center,
 axis, major, minor} (a bent pipe's wall: the tube of radius minor round the circle of radius major
-about the axis), ``plane`` {point, normal} and ``file`` {file: part.stl} (3D: the closest point on the triangulation). A face with
+about the axis), ``plane`` {point, normal} and ``file`` {file: part.stl} (.stl, .obj, .ply; 3D: the closest point on the triangulation)
+or {file: part.step, face: N} (3D: OCC's closest point on the CAD file's face N, in meshgen's CAD
+process, ``meshgen.geometry.shapes.cad_process``). A face with
 ``project: NAME`` has its vertices, its edges and (3D) its interior projected; a vertex or edge on
 faces of several surfaces goes to their intersection (alternating projection). ``projected``
 returns the vertices and edge curves moved; the block maps of ``meshgen.geometry.topology``
@@ -18,6 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError, did_you_mean
+from meshgen.geometry.shapes.assemble import CAD_FORMATS
+from meshgen.geometry.shapes.cad_process import cad_face_projection
+from meshgen.geometry.shapes.surface_patches import SURFACE_FORMATS, read_surface
 
 __all__ = ["REACH", "SURFACE_KINDS", "Surface", "on_surfaces", "projected", "read_surfaces"]
 
@@ -129,27 +134,37 @@ def _analytic(said: str, kind: str, spec: dict, dim: int):
 def _file_surface(path, said: str, entry: dict, dim: int):
     """The closest-point map of the triangulated surface ``entry['file']`` (3D only)."""
     for key in entry:
-        if key not in ("file",):
-            extra = " (CAD faces are not supported: export the face as STL)" if key == "face" else ""
-            raise GeometryError(f"{said}: unknown key '{key}' in a file surface (keys: file){extra}")
+        if key not in ("file", "face"):
+            raise GeometryError(
+                f"{said}: unknown key '{key}' in a file surface (keys: file, face){did_you_mean(str(key), ('file', 'face'))}"
+            )
     name = Path(str(entry["file"]))
     file = name if name.is_absolute() else Path(path).parent / name
     if dim != 3:
         raise GeometryError(f"{said}: a file surface needs a 3D topology (2D: sphere, cylinder or plane)")
-    if file.suffix.lower() not in (".stl", ".ply", ".obj", ".off"):
-        raise GeometryError(f"{said}: {name} is no triangulated surface (.stl, .ply, .obj, .off)")
+    if file.suffix.lower() in CAD_FORMATS:
+        face = entry.get("face")
+        if isinstance(face, bool) or not isinstance(face, int) or face < 1:
+            raise GeometryError(f"{said}: a CAD file surface needs 'face': the face's number (1, 2, ...), got {face!r}"[:200])
+        if not file.is_file():
+            raise GeometryError(f"{said}: no file {file}")
+        return cad_face_projection(file.resolve(), face)
+    if "face" in entry:
+        raise GeometryError(f"{said}: 'face' is for a CAD file ({', '.join(CAD_FORMATS)}); {name} is a triangulated surface")
+    if file.suffix.lower() not in SURFACE_FORMATS:
+        raise GeometryError(
+            f"{said}: {name} is no triangulated surface ({', '.join(SURFACE_FORMATS)}) and no CAD file ({', '.join(CAD_FORMATS)})"
+        )
     if not file.is_file():
         raise GeometryError(f"{said}: no file {file}")
     import trimesh
     from scipy.spatial import cKDTree
 
     try:
-        mesh = trimesh.load(str(file), force="mesh")
-    except Exception as exc:  # trimesh raises many kinds on a broken file
-        raise GeometryError(f"{said}: {name} cannot be read: {str(exc)[:80]}") from None
-    triangles = np.asarray(getattr(mesh, "triangles", np.zeros((0, 3, 3))), dtype=float)
-    if len(triangles) == 0 or not np.all(np.isfinite(triangles)):
-        raise GeometryError(f"{said}: {name} holds no triangles")
+        surface = read_surface(file)  # meshgen's checked reading: limits, no file named inside it opened
+    except GeometryError as exc:
+        raise GeometryError(f"{said}: {exc}") from None
+    triangles = surface.vertices[surface.triangles]
     centroids = triangles.mean(axis=1)
     reach = float(np.max(np.linalg.norm(triangles - centroids[:, None], axis=2)))
     tree = cKDTree(centroids)
