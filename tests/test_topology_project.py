@@ -203,6 +203,22 @@ def test_2d_patch_on_a_circle(tmp_path):
     assert len(wall) > 10 and np.max(np.abs(np.linalg.norm(wall, axis=1) - 1)) <= 1e-15
 
 
+def test_an_edge_entry_projects_like_the_patch(tmp_path):
+    base = (
+        "surfaces: {round: {cylinder: {point: [0, 0], radius: 1}}}\n"
+        "vertices: {a: [1, 0], b: [3, 0], c: [0, 3], d: [0, 1]}\nblocks: [[a, b, c, d]]\ncells: {size: 0.1}\n"
+    )
+    by_patch = base + "patches: {wall: {type: wall, project: round, faces: [[d, a]]}}\n"
+    by_edge = base + "edges: [{line: [a, d], project: round}]\npatches: {wall: {type: wall, faces: [[d, a]]}}\n"
+    found = []
+    for name, text in (("patch", by_patch), ("edge", by_edge)):
+        blocks = load_block_set(write(tmp_path, text, f"{name}.yaml"), None, (1, 1))
+        found.append(tfi_blocks(blocks)[0])
+    np.testing.assert_array_equal(found[0], found[1])
+    with pytest.raises(GeometryError, match="a line entry only projects"):
+        load_block_set(write(tmp_path, base + "edges: [{line: [a, d]}]\n", "line.yaml"), None, (1, 1))
+
+
 @pytest.mark.parametrize(
     "change, words",
     [

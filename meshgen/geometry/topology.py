@@ -8,6 +8,8 @@ shows or measures a block set takes a topology file as it takes ``geometries/pip
 - Boundary map of a block: the transfinite interpolation of its edges (straight, arc, polyline,
   spline): X = sum over edges of their blended curves - (dim - 1) sum over corners of theirs,
   which on each face is that face's Coons patch, so two blocks sharing a face see one surface.
+  Faces with ``project`` (``meshgen.geometry.topology_project``): their vertices and edges are
+  moved onto the surface first, and the map projects the inside of such a face (3D) too.
 - Cell counts: per chain of topologically parallel edges (union-find over each block's parallel
   edges; a shared edge joins the chains of its blocks), from ``cells.size`` (the chain's longest
   edge over the size) or a count on one of its edges; ``--param refine=R`` scales them.
