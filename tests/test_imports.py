@@ -86,6 +86,7 @@ LAYERS = [
         "meshgen.geometry.set_surface",
         "meshgen.geometry.shapes",
         "meshgen.geometry.topology_shorthand",
+        "meshgen.geometry.topology_project",
         "meshgen.geometry.topology_file",
         "meshgen.geometry.topology",
         "meshgen.run.trust",

@@ -145,7 +145,7 @@ GOOD_2D = (
     [
         (
             GOOD_2D + "cels: {size: 1}\n",
-            "unknown key 'cels' in the file (keys: name, description, vertices, blocks, joint, pipe, edges, cells, grading, patches, default_patch); did you mean 'cells'?",
+            "unknown key 'cels' in the file (keys: name, description, vertices, blocks, joint, pipe, edges, cells, grading, patches, default_patch, surfaces); did you mean 'cells'?",
         ),
         (GOOD_2D.replace("[b, c, g, f]", "[b, c, q, f]"), "block 'b1' names a missing vertex 'q'"),
         (GOOD_2D.replace("[b, c, g, f]", "[b, f, g, c]"), "block 'b1' is left-handed (inverted)"),

@@ -8,6 +8,8 @@ shows or measures a block set takes a topology file as it takes ``geometries/pip
 - Boundary map of a block: the transfinite interpolation of its edges (straight, arc, polyline,
   spline): X = sum over edges of their blended curves - (dim - 1) sum over corners of theirs,
   which on each face is that face's Coons patch, so two blocks sharing a face see one surface.
+  Faces with ``project`` (``meshgen.geometry.topology_project``): their vertices and edges are
+  moved onto the surface first, and the map projects the inside of such a face (3D) too.
 - Cell counts: per chain of topologically parallel edges (union-find over each block's parallel
   edges; a shared edge joins the chains of its blocks), from ``cells.size`` (the chain's longest
   edge over the size) or a count on one of its edges; ``--param refine=R`` scales them.
@@ -24,6 +26,7 @@ import numpy as np
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
 from meshgen.geometry.topology_file import Topology, is_topology_file, read_topology
+from meshgen.geometry.topology_project import projected
 from meshgen.methods.clustering import Cluster, clustered_coordinates
 
 __all__ = [
@@ -460,10 +463,16 @@ def _patch_faces(topology: Topology, boundary: dict) -> dict:
 # the plugin module
 
 
-def _boundary_map(topology: Topology, curves: dict, block: int):
-    """The block's map of the unit cube (N, dim) -> (N, dim): its edges' transfinite interpolation."""
+def _boundary_map(topology: Topology, curves: dict, block: int, points: np.ndarray):
+    """The block's map of the unit cube (N, dim) -> (N, dim): its edges' transfinite interpolation
+    (``points``: the vertices), the inside of a projected face (3D) projected onto its surface."""
     dim, row = topology.dim, topology.blocks[block]
-    corners = topology.points[row]
+    corners = points[row]
+    onto = []
+    for face in cube.faces(dim) if dim == 3 else ():
+        name = topology.projections.get(frozenset(int(row[c]) for c in _face_corners(face)))
+        if name is not None:
+            onto.append((face.axis, face.side, topology.surfaces[name].project))
     pieces = []
     for axis, f, t in block_edges(dim):
         i, j = int(row[f]), int(row[t])
@@ -481,6 +490,11 @@ def _boundary_map(topology: Topology, curves: dict, block: int):
         for corner, X in zip(CORNERS[dim], corners):
             weight = np.prod([weights[d][int(corner[d])] for d in range(dim)], axis=0)
             result -= (dim - 1) * weight[:, None] * X
+        for axis, side, project in onto:
+            others = np.delete(points, axis, axis=1)
+            inside = (points[:, axis] == side) & np.all((others > 0) & (others < 1), axis=1)
+            if inside.any():
+                result[inside] = project(result[inside])
         return result
 
     return boundary
@@ -505,8 +519,9 @@ def topology_module(path) -> types.ModuleType:
     faces = _patch_faces(topology, boundary)
     curves = edge_curves(topology)
     topology_chains(topology, curves)  # every chain has a count and consistent grading: fail now
+    points, projected_curves = projected(topology, curves) if topology.surfaces else (topology.points, curves)
     dim, block_names = topology.dim, topology.block_names
-    maps = [_boundary_map(topology, curves, b) for b in range(len(block_names))]
+    maps = [_boundary_map(topology, projected_curves, b, points) for b in range(len(block_names))]
     module = types.ModuleType(f"meshgen_topology_{topology.name}")
     module.__file__ = str(path)
     module.name, module.dim, module.description = topology.name, dim, topology.description

@@ -21,6 +21,9 @@
     patches:                             # faces by their vertices (3D: 4, 2D: 2)
       inlet: {type: patch, faces: [[a, d]]}
     default_patch: {name: walls, type: wall}     # every face not listed (default: defaultFaces, wall)
+    surfaces:                            # optional: surfaces that faces are projected onto
+      wall: {cylinder: {axis: [0, 0, 1], point: [0, 0, 0], radius: 0.5}}
+    # project: wall   in a patch (its faces), a block ({xi0: wall}: faces by name) or an edge entry
 
 ``read_topology`` parses and checks it (one-line GeometryError per problem); ``is_topology_file``
 tells a topology file from the YAML geometry file of ``meshgen.geometry.shapes``.
@@ -37,18 +40,20 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError, did_you_mean
+from meshgen.geometry.cube import face_named, face_names
+from meshgen.geometry.topology_project import read_surfaces
 from meshgen.geometry.topology_shorthand import expand_joint, expand_pipe
 from meshgen.run.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = ["EDGE_KINDS", "TOPOLOGY_KEYS", "Topology", "is_topology_file", "read_topology"]
 
 TOPOLOGY_KEYS = ("name", "description", "vertices", "blocks", "joint", "pipe", "edges", "cells", "grading", "patches")
-TOPOLOGY_KEYS += ("default_patch",)
+TOPOLOGY_KEYS += ("default_patch", "surfaces")
 EDGE_KINDS = ("arc", "polyline", "spline")
-_EDGE_KEYS = EDGE_KINDS + ("through", "center", "points")
+_EDGE_KEYS = EDGE_KINDS + ("line", "through", "center", "points", "project")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
-_PATCH_KEYS = ("type", "faces")
+_PATCH_KEYS = ("type", "faces", "project")
 _PATCH_TYPES = ("wall", "patch", "symmetry")
 _MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
@@ -58,7 +63,9 @@ _SEEN: dict = {}
 class Topology:
     """A topology file checked: vertex names and points (V, dim), blocks as vertex indices (8 or
     4 each), curved edges {(i, j): (kind, points (K, dim))}, counts [(i, j, n)], ratios [(i, j,
-    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}."""
+    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, surfaces
+    {name: Surface}, projected faces {frozenset of vertex indices: surface name} and projected
+    edges {(i, j), i < j: surface name}."""
 
     path: Path
     name: str
@@ -76,6 +83,9 @@ class Topology:
     growth: float | None = None
     patches: dict = field(default_factory=dict)
     default_patch: tuple = ("defaultFaces", "wall")
+    surfaces: dict = field(default_factory=dict)
+    projections: dict = field(default_factory=dict)
+    edge_projections: dict = field(default_factory=dict)
 
 
 def is_topology_file(spec) -> bool:
@@ -159,7 +169,7 @@ def read_topology(path) -> Topology:
     if len(set(names)) != len(names):
         _fail(path, "two vertices have one name")
     index = {name: i for i, name in enumerate(names)}
-    block_names, blocks, dim = _blocks(path, data["blocks"], index)
+    block_names, blocks, dim, block_projections = _blocks(path, data["blocks"], index)
     points = _points(path, "vertices", raw, dim) if len(raw) else None
     if points is None or len(points) != len(names):
         _fail(path, f"vertices must be points of {dim} numbers each")
@@ -169,6 +179,11 @@ def read_topology(path) -> Topology:
         dim, names, points, block_names, blocks,
     )  # fmt: skip
 
+    topology.surfaces = read_surfaces(path, data["surfaces"], dim) if "surfaces" in data else {}
+    for block, faces in block_projections.items():
+        for face, name in faces.items():
+            corners = _BLOCK_FACES[dim][face]
+            _project(topology, f"block '{block_names[block]}' {face}", frozenset(int(blocks[block][c]) for c in corners), name)
     _edges(topology, data.get("edges") or [])
     _cells(topology, _keys(path, "cells", data.get("cells") or {}, _CELL_KEYS))
     _grading(topology, _keys(path, "grading", data.get("grading") or {}, _GRADING_KEYS))
@@ -205,12 +220,20 @@ def _edges(topology: Topology, entries) -> None:
         _fail(path, "edges must be a list of curved edges")
     for number, entry in enumerate(entries):
         entry = _keys(path, f"edges[{number}]", entry, _EDGE_KEYS)
-        kinds = [k for k in EDGE_KINDS if k in entry]
+        kinds = [k for k in EDGE_KINDS + ("line",) if k in entry]
         if len(kinds) != 1:
-            _fail(path, f"edges[{number}] needs one of {', '.join(EDGE_KINDS)} naming its two vertices")
+            _fail(path, f"edges[{number}] needs one of {', '.join(EDGE_KINDS)} (or line with project) naming its two vertices")
         kind = kinds[0]
         i, j = _pair(topology, f"edges[{number}] ({kind})", entry[kind])
         where = f"edge {kind} {names[i]}-{names[j]}"
+        if "project" in entry:
+            if (min(i, j), max(i, j)) in topology.edge_projections:
+                _fail(path, f"{where} is given twice")
+            topology.edge_projections[min(i, j), max(i, j)] = _surface_name(topology, where, entry["project"])
+        if kind == "line":
+            if "project" not in entry or len(entry) != 2:
+                _fail(path, f"{where}: a line entry only projects a straight edge: {{line: [a, b], project: NAME}}")
+            continue
         if kind == "arc":
             if ("through" in entry) == ("center" in entry):
                 _fail(path, f"{where} needs one of 'through' (a point on the arc) and 'center'")
@@ -278,6 +301,26 @@ def _patches(topology: Topology, patches) -> None:
                 _fail(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
             listed.append(tuple(_vertex(topology, f"patch '{name}'", v) for v in face))
         topology.patches[str(name)] = (kind, listed)
+        if "project" in entry:
+            for face in listed:
+                _project(topology, f"patch '{name}'", frozenset(face), entry["project"])
+
+
+def _surface_name(topology: Topology, where: str, name) -> str:
+    """``name`` checked against the file's surfaces."""
+    known = list(topology.surfaces)
+    if str(name) not in known:
+        listed = f" (surfaces: {', '.join(known)})" if known else " (the file declares no surfaces)"
+        _fail(topology.path, f"{where} projects onto an unknown surface '{name}'{listed}{did_you_mean(str(name), known)}")
+    return str(name)
+
+
+def _project(topology: Topology, where: str, face: frozenset, name) -> None:
+    """Record that ``face`` (its vertex indices) is projected onto the surface ``name``."""
+    name = _surface_name(topology, where, name)
+    if topology.projections.get(face, name) != name:
+        _fail(topology.path, f"{where}: its face is projected onto '{topology.projections[face]}' and '{name}'")
+    topology.projections[face] = name
 
 
 def _vertices(path, value) -> tuple[list, list]:
@@ -289,15 +332,20 @@ def _vertices(path, value) -> tuple[list, list]:
     _fail(path, "vertices must be a list of points or a mapping name -> point")
 
 
-def _blocks(path, value, index) -> tuple[list, np.ndarray, int]:
-    """(block names, vertex indices (B, 4 or 8), dim) of ``blocks``."""
+def _blocks(path, value, index) -> tuple[list, np.ndarray, int, dict]:
+    """(block names, vertex indices (B, 4 or 8), dim, {block: {face name: surface name}}) of ``blocks``."""
     if not isinstance(value, list) or not value:
         _fail(path, "blocks must be a list of blocks (3D: 8 vertices each, 2D: 4)")
-    names, rows = [], []
+    names, rows, projections = [], [], {}
     for number, entry in enumerate(value):
         if isinstance(entry, dict):
-            entry = _keys(path, f"blocks[{number}]", entry, ("name", "vertices"))
+            entry = _keys(path, f"blocks[{number}]", entry, ("name", "vertices", "project"))
             name, vertices = str(entry.get("name", f"b{number}")), entry.get("vertices")
+            if "project" in entry:
+                allowed = face_names(3 if isinstance(vertices, list) and len(vertices) == 8 else 2)
+                projections[number] = {
+                    str(k): v for k, v in _keys(path, f"block '{name}' project", entry["project"], allowed).items()
+                }
         else:
             name, vertices = f"b{number}", entry
         if not isinstance(vertices, list) or len(vertices) not in (4, 8):
@@ -315,4 +363,15 @@ def _blocks(path, value, index) -> tuple[list, np.ndarray, int]:
         rows.append(row)
     if len({len(r) for r in rows}) != 1:
         _fail(path, "blocks mix 8 vertices (3D) and 4 (2D)")
-    return names, np.array(rows, dtype=int), 3 if len(rows[0]) == 8 else 2
+    return names, np.array(rows, dtype=int), 3 if len(rows[0]) == 8 else 2, projections
+
+
+# The corners (blockMesh order; 2D: the first four) of each named face of a block.
+_CUBE = {3: np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])}
+_CUBE[2] = _CUBE[3][:4, :2]
+_BLOCK_FACES = {
+    dim: {
+        name: np.flatnonzero(_CUBE[dim][:, face_named(name, dim).axis] == face_named(name, dim).side) for name in face_names(dim)
+    }
+    for dim in (2, 3)
+}

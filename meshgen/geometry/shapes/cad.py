@@ -36,7 +36,7 @@ from meshgen.geometry.shapes.faces import (
     swap_eta,
 )
 
-__all__ = ["CadBlock", "gmsh_model", "quiet_stdout", "read_cad_block"]
+__all__ = ["CadBlock", "closest_on_face", "gmsh_model", "quiet_stdout", "read_cad_block"]
 
 ARC_SAMPLES = 2001  # parameter samples per curve for its arc length
 SIDE_SAMPLES = 513  # arc-length samples per face side for its (u, v) trace
@@ -79,6 +79,23 @@ def gmsh_model(path: Path, model: str):
         for name, value in previous.items():
             gmsh.option.setNumber(name, value)
     return gmsh
+
+
+def closest_on_face(path, face: int, points: np.ndarray) -> np.ndarray:
+    """The closest points (N, 3) of ``points`` (N, 3) on the face numbered ``face`` (gmsh's
+    surface tag, 1, 2, ...) of the CAD file ``path``: OCC's projection, all points in one call."""
+    path = Path(path)
+    gmsh = gmsh_model(path, f"faces of {path}")
+    tags = sorted(tag for _, tag in gmsh.model.getEntities(2))
+    if face not in tags:
+        raise GeometryError(
+            f"{path} has no face {face} (its faces: {', '.join(map(str, tags[:12]))}{' ...' if len(tags) > 12 else ''})"
+        )
+    points = np.ascontiguousarray(points, dtype=float).reshape(-1, 3)
+    if len(points) == 0:
+        return points
+    closest, _ = gmsh.model.getClosestPoint(2, face, points.ravel().tolist())
+    return np.asarray(closest, dtype=float).reshape(-1, 3)
 
 
 @contextlib.contextmanager

@@ -32,14 +32,14 @@ import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
-from meshgen.geometry.shapes.cad import read_cad_block
+from meshgen.geometry.shapes.cad import closest_on_face, read_cad_block
 from meshgen.geometry.shapes.faces import BoundaryPieces
 from meshgen.geometry.shapes.sweep_read import read_sweep
 from meshgen.run.limits import cad_read_bytes
 from meshgen.run.resources import available_memory
 from meshgen.run.signals import TERMINATING_SIGNALS
 
-__all__ = ["ContainedCadBlock", "cad_block", "cad_sweep", "close_cad_process"]
+__all__ = ["ContainedCadBlock", "cad_block", "cad_face_projection", "cad_sweep", "close_cad_process"]
 
 PARENT_CHECK_SECONDS = 0.5  # how often a waiting parent checks that the child lives
 
@@ -77,6 +77,20 @@ def cad_sweep(path, content_hash: str = "") -> dict:
     in the CAD process; GeometryError for anything wrong with the file, its crash included."""
     path = Path(path)
     return _request(path, ("sweep", (os.getcwd(), str(path), None, content_hash, None), None, None))
+
+
+def cad_face_projection(path, face: int):
+    """The map points (N, 3) -> their closest points on face ``face`` of the CAD file ``path``
+    (``cad.closest_on_face``, in the CAD process: one round trip per call); the file and the face
+    are checked now (GeometryError)."""
+    path = Path(path)
+    load = (os.getcwd(), str(path), int(face), "", None)
+
+    def project(points):
+        return _request(path, ("closest", load, None, np.ascontiguousarray(points, dtype=float).reshape(-1, 3)))
+
+    project(np.zeros((0, 3)))
+    return project
 
 
 class _RemotePieces(BoundaryPieces):
@@ -246,7 +260,17 @@ def _serve(connection, parent_end) -> None:
         while True:
             kind, load, name, points = connection.recv()
             try:
-                block = blocks.get(_key(load)) if kind != "sweep" else None
+                block = blocks.get(_key(load)) if kind not in ("sweep", "closest") else None
+                if kind == "closest":
+                    folder, path, face, _, _ = load
+                    os.chdir(folder)
+                    _limit_memory(cad_read_bytes(os.stat(path).st_size))
+                    try:
+                        answer = ("ok", closest_on_face(path, face, points))
+                    finally:
+                        _limit_memory(int(available_memory()))
+                    connection.send(answer)
+                    continue
                 if kind == "sweep":
                     folder, path, _, content_hash, _ = load
                     os.chdir(folder)
