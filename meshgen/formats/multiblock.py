@@ -26,6 +26,7 @@ from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
+from meshgen.geometry.cyclic import CYCLIC, matching_order
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import Patch, as_records
 from meshgen.run.atomic import atomic_write, check_output_file
@@ -59,6 +60,11 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
             f"{fmt.name} does not take multi-block meshes ('{block_set.name}' has {len(block_set.names)} blocks); "
             f"write .cgns (a zone per block), --format openfoam, .vtm (a .vts per block) or "
             f".{', .'.join(MERGED_FORMATS)}, .su2, .msh (one merged mesh)"
+        )
+    if block_set.cyclic and fmt.name not in ("openfoam", *MERGED_FORMATS):
+        raise FormatError(
+            f"{fmt.name} does not take cyclic patches ('{block_set.name}' pairs {block_set.cyclic[0][0]} with "
+            f"{block_set.cyclic[0][1]}): write --format openfoam (cyclic patches) or .{', .'.join(MERGED_FORMATS)}"
         )
     path = check_output_path(path, fmt.name, block_set.dim)
     if fmt.name in ("cgns", "openfoam", *SOLVER_FORMATS):
@@ -162,6 +168,13 @@ def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     ``0/U`` and ``0/p`` from the patches' types and roles, re-mesh rules and atomic publication."""
     points, cells, _ = merged_mesh(block_set, Xs)
     faces = patch_faces(block_set)
+    cyclic = []
+    for a, b, separation in block_set.cyclic:  # b's faces in a's order: the i-th of b is the i-th of a translated
+        index = {name: k for k, (name, _, _) in enumerate(faces)}
+        first, second = faces[index[a]][2], faces[index[b]][2]
+        order = matching_order(points, first, second, separation, block_set.length)
+        faces[index[b]] = (b, CYCLIC, second[order])
+        cyclic.append((a, b, (*separation, 0.0)[:3]))
     if block_set.dim == 2:
         check_extrusion_patch([Patch(name, kind, ()) for name, kind, _ in faces], 2)
         points, cells, walls, front_back, _ = extrude_quads(points, cells, [elements for _, _, elements in faces])
@@ -170,6 +183,6 @@ def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     patches = [Patch(name, kind, ()) for name, kind, _ in faces if name != EXTRUDED_PATCH]
 
     def write_folder(folder, _patches):
-        write_poly_mesh(folder, points, cells, faces)
+        write_poly_mesh(folder, points, cells, faces, cyclic)
 
     write_case(case, (0,) * block_set.dim, metadata, patches, write_folder, block_set=block_set.name)

@@ -20,6 +20,8 @@
       growth: 1.2                        # the largest cell-to-cell growth first_cell may make
     patches:                             # faces by their vertices (3D: 4, 2D: 2)
       inlet: {type: patch, faces: [[a, d]]}
+      left: {type: cyclic, neighbour: right, faces: [[a, d]]}   # a pair, each naming the other:
+      right: {type: cyclic, neighbour: left, faces: [[b, c]]}   # the same faces up to a translation
     default_patch: {name: walls, type: wall}     # every face not listed (default: defaultFaces, wall)
 
 ``read_topology`` parses and checks it (one-line GeometryError per problem); ``is_topology_file``
@@ -48,8 +50,8 @@ EDGE_KINDS = ("arc", "polyline", "spline")
 _EDGE_KEYS = EDGE_KINDS + ("through", "center", "points")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
-_PATCH_KEYS = ("type", "faces")
-_PATCH_TYPES = ("wall", "patch", "symmetry")
+_PATCH_KEYS = ("type", "faces", "neighbour")
+_PATCH_TYPES = ("wall", "patch", "symmetry", "cyclic")
 _MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
 
@@ -58,7 +60,8 @@ _SEEN: dict = {}
 class Topology:
     """A topology file checked: vertex names and points (V, dim), blocks as vertex indices (8 or
     4 each), curved edges {(i, j): (kind, points (K, dim))}, counts [(i, j, n)], ratios [(i, j,
-    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}."""
+    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, cyclic pairs
+    [(patch, its neighbour)] (each pair once, in the order of the file)."""
 
     path: Path
     name: str
@@ -76,6 +79,7 @@ class Topology:
     growth: float | None = None
     patches: dict = field(default_factory=dict)
     default_patch: tuple = ("defaultFaces", "wall")
+    cyclic: list = field(default_factory=list)
 
 
 def is_topology_file(spec) -> bool:
@@ -176,8 +180,8 @@ def read_topology(path) -> Topology:
     if "default_patch" in data:
         default = _keys(path, "default_patch", data["default_patch"], ("name", "type"))
         kind = str(default.get("type", "wall"))
-        if kind not in _PATCH_TYPES:
-            _fail(path, f"default_patch has unknown type '{kind}' (types: {', '.join(_PATCH_TYPES)})")
+        if kind not in _PATCH_TYPES or kind == "cyclic":
+            _fail(path, f"default_patch has type '{kind}' (types: wall, patch, symmetry; a cyclic patch needs its pair)")
         topology.default_patch = (str(default.get("name", "defaultFaces")), kind)
     return topology
 
@@ -278,6 +282,27 @@ def _patches(topology: Topology, patches) -> None:
                 _fail(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
             listed.append(tuple(_vertex(topology, f"patch '{name}'", v) for v in face))
         topology.patches[str(name)] = (kind, listed)
+        if (kind == "cyclic") != ("neighbour" in entry):
+            _fail(
+                path,
+                f"patch '{name}': "
+                + (
+                    "a cyclic patch needs 'neighbour': the patch it pairs with"
+                    if kind == "cyclic"
+                    else "only a cyclic patch has a 'neighbour'"
+                ),
+            )
+    for name, (kind, _) in topology.patches.items():
+        if kind != "cyclic":
+            continue
+        other = str(patches[name]["neighbour"])
+        back = patches.get(other) if other in topology.patches else None
+        if other == name or not isinstance(back, dict) or back.get("type") != "cyclic" or str(back.get("neighbour")) != name:
+            _fail(
+                path, f"cyclic patch '{name}': its neighbour '{other}' must be another cyclic patch whose neighbour is '{name}'"
+            )
+        if (other, name) not in topology.cyclic:
+            topology.cyclic.append((name, other))
 
 
 def _vertices(path, value) -> tuple[list, list]:
