@@ -8,6 +8,8 @@ on their left).
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +27,17 @@ from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
+from meshgen.geometry.blocks import (
+    BlockSet,
+    Interface,
+    block_patches,
+    connectivity_records,
+    face_index,
+    global_numbering,
+    merged_mesh,
+)
 from meshgen.geometry.cyclic import CYCLIC, matching_order
+from meshgen.geometry.cyclic import TOLERANCE as CYCLIC_TOLERANCE
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import Patch, as_records
 from meshgen.run.atomic import atomic_write, check_output_file
@@ -61,10 +72,10 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
             f"write .cgns (a zone per block), --format openfoam, .vtm (a .vts per block) or "
             f".{', .'.join(MERGED_FORMATS)}, .su2, .msh (one merged mesh)"
         )
-    if block_set.cyclic and fmt.name not in ("openfoam", *MERGED_FORMATS):
+    if block_set.cyclic and fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS):
         raise FormatError(
             f"{fmt.name} does not take cyclic patches ('{block_set.name}' pairs {block_set.cyclic[0][0]} with "
-            f"{block_set.cyclic[0][1]}): write --format openfoam (cyclic patches) or .{', .'.join(MERGED_FORMATS)}"
+            f"{block_set.cyclic[0][1]}): write .cgns, --format openfoam (cyclic patches) or .{', .'.join(MERGED_FORMATS)}"
         )
     path = check_output_path(path, fmt.name, block_set.dim)
     if fmt.name in ("cgns", "openfoam", *SOLVER_FORMATS):
@@ -126,9 +137,15 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
         return write_blocks_vtm(path, list(zip(block_set.names, Xs, block_patches(block_set, interfaces=True))), metadata)
     fmt = format_for(path, format_name)
     if fmt.name == "cgns":
-        zones = [(name, X, patches) for name, X, patches in zip(block_set.names, Xs, block_patches(block_set))]
+        zones = [
+            (name, X, [p for p in patches if p.type != CYCLIC])  # cyclic faces: periodic connectivity, not BCs
+            for name, X, patches in zip(block_set.names, Xs, block_patches(block_set))
+        ]
+        records = connectivity_records(block_set)
+        for block, periodic in enumerate(periodic_records(block_set, Xs)):
+            records[block] += periodic
         with atomic_write(path, FormatError) as temporary:
-            write_zones(temporary, zones, metadata, connectivity_records(block_set))
+            write_zones(temporary, zones, metadata, records)
         return path
     if fmt.name == "openfoam":
         _write_openfoam(path, block_set, Xs, metadata)
@@ -160,6 +177,48 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
     with atomic_write(path, FormatError) as temporary:
         meshio.write(temporary, mesh, file_format=fmt.name if fmt.name != "vtk" else "vtk")
     return path
+
+
+def periodic_records(block_set: BlockSet, Xs) -> list[list[tuple]]:
+    """Per block, the CGNS 1-to-1 records of its cyclic faces (``connectivity_records``' with the
+    translation to the donor's face appended): each face of a pair's first patch joined to the
+    face of its second patch that it matches node by node under the separation, the Transform the
+    one whose node map does; FormatError when a face has no such partner (a side split into
+    block faces differently from the other's)."""
+    dim, shapes = block_set.dim, block_set.node_shapes
+    periodic = []
+    for a, b, separation in block_set.cyclic:
+        sides = [[key for key, (name, _) in block_set.patches.items() if name == patch] for patch in (a, b)]
+        for block, face_name in sides[0]:
+            face = cube.face_named(face_name, dim)
+            found = None
+            for donor, donor_name in sides[1]:
+                other = cube.face_named(donor_name, dim)
+                for permutation in itertools.permutations(other.tangent_axes):
+                    if [shapes[block][t] for t in face.tangent_axes] != [shapes[donor][t] for t in permutation]:
+                        continue
+                    for signs in itertools.product((1, -1), repeat=dim - 1):
+                        transform = [0] * dim
+                        for axis, target, sign in zip(face.tangent_axes, permutation, signs):
+                            transform[axis] = sign * (target + 1)
+                        transform[face.axis] = (1 if face.side != other.side else -1) * (other.axis + 1)
+                        interface = Interface(block, face, donor, other, tuple(transform))
+                        here, there = face_index(block_set, interface)
+                        gap = Xs[donor].reshape(-1, dim)[there] - Xs[block].reshape(-1, dim)[here] - np.asarray(separation)
+                        if np.abs(gap).max() <= CYCLIC_TOLERANCE * block_set.length:
+                            found = interface
+            if found is None:
+                raise FormatError(
+                    f"cgns: the face {block_set.names[block]}.{face_name} of cyclic patch '{a}' matches no block face of '{b}' "
+                    "node by node: write --format openfoam"
+                )
+            periodic.append(found)
+    records = connectivity_records(dataclasses.replace(block_set, interfaces=tuple(periodic)))
+    for block, entries in enumerate(records):
+        for k, (name, donor, point_range, donor_range, transform) in enumerate(entries):
+            start, end = Xs[block][tuple(point_range[0] - 1)], Xs[block_set.names.index(donor)][tuple(donor_range[0] - 1)]
+            entries[k] = (f"periodic_{name}"[:32], donor, point_range, donor_range, transform, end - start)
+    return records
 
 
 def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:

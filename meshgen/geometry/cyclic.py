@@ -1,5 +1,6 @@
 """Cyclic (periodic) patch pairs of a block set: two boundary patches whose nodes match under a
-translation, so a solver treats them as one interface (OpenFOAM ``cyclic``).
+translation, so a solver treats them as one interface (OpenFOAM ``cyclic``, CGNS periodic
+1-to-1 connectivity: ``meshgen.formats.multiblock``).
 
 A pair is (patch a, patch b, separation (dim,)) with ``b = a + separation``. ``check_cyclic``
 compares the two sides' nodes after meshing (counts and positions, within ``TOLERANCE`` of the
