@@ -16,10 +16,11 @@ import numpy as np
 from meshgen.errors import GeometryError
 from meshgen.geometry import cube
 
-__all__ = ["CYCLIC", "TOLERANCE", "check_cyclic", "matching_order", "side_nodes"]
+__all__ = ["CYCLIC", "TOLERANCE", "VERTEX_GAP", "check_cyclic", "cyclic_pairs", "matching_order", "side_nodes"]
 
 CYCLIC = "cyclic"
 TOLERANCE = 1e-9  # the largest mismatch of paired nodes, relative to the block set's length
+VERTEX_GAP = 1e-9  # that of a topology file's paired vertices, relative to its size (its vertices' GAP)
 
 
 def side_nodes(block_set, Xs, patch: str) -> np.ndarray:
@@ -67,3 +68,27 @@ def matching_order(points: np.ndarray, first: np.ndarray, second: np.ndarray, se
         worst = float(distance.max()) if len(distance) else 0.0
         raise GeometryError(f"cyclic faces do not pair up: {len(first)} and {len(second)} faces, largest mismatch {worst:.3g}")
     return order
+
+
+def cyclic_pairs(topology) -> list[tuple[str, str, tuple]]:
+    """[(patch, neighbour, separation)] of a topology file's cyclic pairs
+    (``meshgen.geometry.topology_file.Topology``), the separation (dim,) taking
+    the patch's vertices onto the neighbour's; GeometryError (the pair, its largest mismatch) when
+    no translation does."""
+    size = float(np.ptp(topology.points, axis=0).max()) or 1.0
+    pairs = []
+    for a, b in topology.cyclic:
+        first, second = (sorted({v for face in topology.patches[p][1] for v in face}) for p in (a, b))
+        X, Y = topology.points[first], topology.points[second]
+        separation = Y.mean(axis=0) - X.mean(axis=0)
+        said = f"topology file {topology.path}: cyclic patches '{a}' and '{b}'"
+        if len(first) != len(second):
+            raise GeometryError(f"{said} do not match: {len(first)} and {len(second)} vertices")
+        gaps = np.linalg.norm(X[:, None] + separation - Y[None], axis=2)  # (vertices, vertices): a patch has few
+        mismatch = float(max(gaps.min(axis=1).max(), gaps.min(axis=0).max()))
+        if mismatch > VERTEX_GAP * size or np.linalg.norm(separation) <= VERTEX_GAP * size:
+            raise GeometryError(
+                f"{said} do not match under a translation: the largest mismatch of their vertices is {mismatch:.3g}"
+            )
+        pairs.append((a, b, tuple(float(v) for v in separation)))
+    return pairs

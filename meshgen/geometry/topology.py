@@ -12,8 +12,8 @@ shows or measures a block set takes a topology file as it takes ``geometries/pip
   edges; a shared edge joins the chains of its blocks), from ``cells.size`` (the chain's longest
   edge over the size) or a count on one of its edges; ``--param refine=R`` scales them.
 - Grading: per chain too (one 1D node distribution, reversed where an edge runs the other way).
-- Cyclic pairs: the translation from one patch's vertices to its neighbour's (``cyclic_pairs``),
-  checked vertex by vertex here and node by node after meshing (``meshgen.geometry.cyclic``).
+- Cyclic pairs: the translation from one patch's vertices to its neighbour's, checked vertex by
+  vertex here and node by node after meshing (``meshgen.geometry.cyclic``).
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
+from meshgen.geometry.cyclic import cyclic_pairs
 from meshgen.geometry.topology_file import Topology, is_topology_file, read_topology
 from meshgen.methods.clustering import Cluster, clustered_coordinates
 
@@ -35,7 +36,6 @@ __all__ = [
     "Chains",
     "block_edges",
     "curve",
-    "cyclic_pairs",
     "edge_curves",
     "topology_chains",
     "topology_module",
@@ -457,29 +457,6 @@ def _patch_faces(topology: Topology, boundary: dict) -> dict:
         known = sorted({name for name, _ in faces.values()})
         raise GeometryError(f"{where}: grading: first_cell names no patch '{unknown[0]}' (patches: {', '.join(known)})")
     return faces
-
-
-def cyclic_pairs(topology: Topology) -> list[tuple[str, str, tuple]]:
-    """[(patch, neighbour, separation)] of the file's cyclic pairs, the separation (dim,) taking
-    the patch's vertices onto the neighbour's; GeometryError (the pair, its largest mismatch) when
-    no translation does."""
-    size = float(np.ptp(topology.points, axis=0).max()) or 1.0
-    pairs = []
-    for a, b in topology.cyclic:
-        first, second = (sorted({v for face in topology.patches[p][1] for v in face}) for p in (a, b))
-        X, Y = topology.points[first], topology.points[second]
-        separation = Y.mean(axis=0) - X.mean(axis=0)
-        said = f"topology file {topology.path}: cyclic patches '{a}' and '{b}'"
-        if len(first) != len(second):
-            raise GeometryError(f"{said} do not match: {len(first)} and {len(second)} vertices")
-        gaps = np.linalg.norm(X[:, None] + separation - Y[None], axis=2)  # (vertices, vertices): a patch has few
-        mismatch = float(max(gaps.min(axis=1).max(), gaps.min(axis=0).max()))
-        if mismatch > GAP * size or np.linalg.norm(separation) <= GAP * size:
-            raise GeometryError(
-                f"{said} do not match under a translation: the largest mismatch of their vertices is {mismatch:.3g}"
-            )
-        pairs.append((a, b, tuple(float(v) for v in separation)))
-    return pairs
 
 
 # ---------------------------------------------------------------------------------------------
