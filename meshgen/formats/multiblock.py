@@ -36,7 +36,7 @@ from meshgen.geometry.blocks import (
     global_numbering,
     merged_mesh,
 )
-from meshgen.geometry.cyclic import CYCLIC, matching_order
+from meshgen.geometry.cyclic import CYCLIC, matching_order, pair_map
 from meshgen.geometry.cyclic import TOLERANCE as CYCLIC_TOLERANCE
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import Patch, as_records
@@ -49,6 +49,7 @@ __all__ = [
     "check_block_output",
     "merged_boundary",
     "patch_faces",
+    "periodic_records",
     "read_zones",
     "write_blocks",
     "zone_count",
@@ -76,6 +77,12 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
         raise FormatError(
             f"{fmt.name} does not take cyclic patches ('{block_set.name}' pairs {block_set.cyclic[0][0]} with "
             f"{block_set.cyclic[0][1]}): write .cgns, --format openfoam (cyclic patches) or .{', .'.join(MERGED_FORMATS)}"
+        )
+    rotational = [pair[:2] for pair in block_set.cyclic if len(pair) > 3 and pair[3] is not None]
+    if rotational and fmt.name == "cgns":
+        raise FormatError(
+            f"cgns: the cyclic pair '{rotational[0][0]}' and '{rotational[0][1]}' is rotational: meshgen writes "
+            "translational periodic connectivity only: write --format openfoam"
         )
     path = check_output_path(path, fmt.name, block_set.dim)
     if fmt.name in ("cgns", "openfoam", *SOLVER_FORMATS):
@@ -187,7 +194,14 @@ def periodic_records(block_set: BlockSet, Xs) -> list[list[tuple]]:
     block faces differently from the other's)."""
     dim, shapes = block_set.dim, block_set.node_shapes
     periodic = []
-    for a, b, separation in block_set.cyclic:
+    for pair in block_set.cyclic:
+        a, b = pair[:2]
+        if len(pair) > 3 and pair[3] is not None:
+            raise FormatError(
+                f"cgns: the cyclic pair '{a}' and '{b}' is rotational: meshgen writes translational periodic "
+                "connectivity only: write --format openfoam"
+            )
+        separation = pair[2]
         sides = [[key for key, (name, _) in block_set.patches.items() if name == patch] for patch in (a, b)]
         for block, face_name in sides[0]:
             face = cube.face_named(face_name, dim)
@@ -221,6 +235,29 @@ def periodic_records(block_set: BlockSet, Xs) -> list[list[tuple]]:
     return records
 
 
+def _foam_transform(pair, dim: int) -> tuple:
+    """(R (3, 3), t (3,), {patch: its boundary entry's lines}) of a cyclic pair in OpenFOAM's
+    terms: ``translational`` with each side's ``separationVector`` to the other, or
+    ``rotational`` with one ``rotationAxis`` and ``rotationCentre`` on both sides."""
+    a, b = pair[:2]
+    R2, t2 = pair_map(pair, dim)
+    R, t = np.eye(3), np.zeros(3)
+    R[:dim, :dim], t[:dim] = R2, t2
+
+    def vector(values):
+        return " ".join(f"{v + 0.0:.17g}" for v in values)
+
+    lines = {}
+    for name, other, sign in ((a, b, 1.0), (b, a, -1.0)):
+        if len(pair) < 4 or pair[3] is None:
+            how = f"translational;\n        separationVector ({vector(sign * t)});\n"
+        else:
+            centre, axis, _ = pair[3]
+            how = f"rotational;\n        rotationAxis    ({vector(axis)});\n        rotationCentre  ({vector((*centre, 0.0)[:3])});\n"
+        lines[name] = f"        neighbourPatch  {other};\n        transform       {how}"
+    return R, t, lines
+
+
 def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     """The OpenFOAM case of the merged mesh (interfaces as internal faces) through the one case
     writer of a single block (``meshgen.formats._openfoam.write_case``): the same system files,
@@ -228,12 +265,13 @@ def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     points, cells, _ = merged_mesh(block_set, Xs)
     faces = patch_faces(block_set)
     cyclic = []
-    for a, b, separation in block_set.cyclic:  # b's faces in a's order: the i-th of b is the i-th of a translated
+    for pair in block_set.cyclic:  # b's faces in a's order: the i-th of b is the i-th of a mapped
+        a, b = pair[:2]
         index = {name: k for k, (name, _, _) in enumerate(faces)}
         first, second = faces[index[a]][2], faces[index[b]][2]
-        order = matching_order(points, first, second, separation, block_set.length)
+        order = matching_order(points, first, second, pair, block_set.length)
         faces[index[b]] = (b, CYCLIC, second[order])
-        cyclic.append((a, b, (*separation, 0.0)[:3]))
+        cyclic.append((a, b, *_foam_transform(pair, block_set.dim)))
     if block_set.dim == 2:
         check_extrusion_patch([Patch(name, kind, ()) for name, kind, _ in faces], 2)
         points, cells, walls, front_back, _ = extrude_quads(points, cells, [elements for _, _, elements in faces])

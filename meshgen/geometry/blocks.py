@@ -82,8 +82,8 @@ class BlockSet:
 
     ``geometries``: one ``Geometry`` per block; ``coords``: per block, the parametric node
     coordinates per axis; ``patches``: (block index, face name) -> (patch name, type) for every
-    face that is not on an interface; ``cyclic``: (patch, neighbour patch, separation (dim,)) of
-    its cyclic pairs (``meshgen.geometry.cyclic``)."""
+    face that is not on an interface; ``cyclic``: (patch, neighbour patch, separation (dim,)[,
+    rotation]) of its cyclic pairs (``meshgen.geometry.cyclic``)."""
 
     name: str
     dim: int
@@ -227,11 +227,11 @@ def _cyclic(name: str, declared, patches: dict, dim: int) -> tuple:
     ``dim`` numbers; every cyclic patch is in one pair."""
     kinds = {patch: kind for patch, kind in patches.values()}
     pairs, paired = [], []
-    for a, b, separation in declared:
+    for a, b, separation, *rotation in declared:
         separation = np.asarray(separation, dtype=float)
         if kinds.get(a) != CYCLIC or kinds.get(b) != CYCLIC or a == b or separation.shape != (dim,):
             raise GeometryError(f"geometry '{name}': the cyclic pair ({a}, {b}) needs two cyclic patches and a separation")
-        pairs.append((a, b, tuple(float(v) for v in separation)))
+        pairs.append((a, b, tuple(float(v) for v in separation), *rotation[:1]))
         paired += [a, b]
     lone = sorted({p for p, k in kinds.items() if k == CYCLIC and paired.count(p) != 1})
     if lone:

@@ -22,6 +22,8 @@
       inlet: {type: patch, faces: [[a, d]]}
       left: {type: cyclic, neighbour: right, faces: [[a, d]]}   # a pair, each naming the other:
       right: {type: cyclic, neighbour: left, faces: [[b, c]]}   # the same faces up to a translation
+      # or, on one side of a pair: rotation: {center: [0, 0], angle: 90}  (3D: axis: [0, 0, 1] too):
+      # its neighbour is it turned by the angle (degrees, right-handed) about the axis through center
     default_patch: {name: walls, type: wall}     # every face not listed (default: defaultFaces, wall)
 
 ``read_topology`` parses and checks it (one-line GeometryError per problem); ``is_topology_file``
@@ -50,7 +52,7 @@ EDGE_KINDS = ("arc", "polyline", "spline")
 _EDGE_KEYS = EDGE_KINDS + ("through", "center", "points")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
-_PATCH_KEYS = ("type", "faces", "neighbour")
+_PATCH_KEYS = ("type", "faces", "neighbour", "rotation")
 _PATCH_TYPES = ("wall", "patch", "symmetry", "cyclic")
 _MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
@@ -61,7 +63,8 @@ class Topology:
     """A topology file checked: vertex names and points (V, dim), blocks as vertex indices (8 or
     4 each), curved edges {(i, j): (kind, points (K, dim))}, counts [(i, j, n)], ratios [(i, j,
     r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, cyclic pairs
-    [(patch, its neighbour)] (each pair once, in the order of the file)."""
+    [(patch, its neighbour)] (each pair once, in the order of the file; a rotating patch first),
+    rotations {patch: (centre (dim,), axis (3,), angle in degrees)}."""
 
     path: Path
     name: str
@@ -80,6 +83,7 @@ class Topology:
     patches: dict = field(default_factory=dict)
     default_patch: tuple = ("defaultFaces", "wall")
     cyclic: list = field(default_factory=list)
+    rotations: dict = field(default_factory=dict)
 
 
 def is_topology_file(spec) -> bool:
@@ -282,6 +286,8 @@ def _patches(topology: Topology, patches) -> None:
                 _fail(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
             listed.append(tuple(_vertex(topology, f"patch '{name}'", v) for v in face))
         topology.patches[str(name)] = (kind, listed)
+        if kind != "cyclic" and "rotation" in entry:
+            _fail(path, f"patch '{name}': only a cyclic patch has a 'rotation'")
         if (kind == "cyclic") != ("neighbour" in entry):
             _fail(
                 path,
@@ -301,8 +307,27 @@ def _patches(topology: Topology, patches) -> None:
             _fail(
                 path, f"cyclic patch '{name}': its neighbour '{other}' must be another cyclic patch whose neighbour is '{name}'"
             )
-        if (other, name) not in topology.cyclic:
-            topology.cyclic.append((name, other))
+        if "rotation" in patches[name]:
+            if "rotation" in back:
+                _fail(path, f"cyclic patches '{name}' and '{other}' both give a rotation: give it on one side")
+            topology.rotations[name] = _rotation(topology, name, patches[name]["rotation"])
+        if (other, name) not in topology.cyclic and (name, other) not in topology.cyclic:
+            topology.cyclic.append((name, other) if "rotation" in patches[name] or "rotation" not in back else (other, name))
+
+
+def _rotation(topology: Topology, name: str, value) -> tuple:
+    """(centre (dim,), unit axis (3,), angle in degrees) of a cyclic patch's ``rotation``."""
+    path, dim = topology.path, topology.dim
+    where = f"patch '{name}': rotation"
+    value = _keys(path, where, value, ("center", "axis", "angle"))
+    if "center" not in value or "angle" not in value or (dim == 3 and "axis" not in value):
+        _fail(path, f"{where} needs center and angle (degrees)" + (" and axis" if dim == 3 else ""))
+    centre = _points(path, f"{where}: center", value["center"], dim)[0]
+    axis = _points(path, f"{where}: axis", value.get("axis", [0, 0, 1]), 3)[0]
+    if not np.linalg.norm(axis) > 0 or (dim == 2 and (axis[0] or axis[1])):
+        _fail(path, f"{where}: axis must be a nonzero vector" + (" along z (a 2D set turns about z)" if dim == 2 else ""))
+    angle = _number(path, f"{where}: angle", value["angle"], positive=False)
+    return tuple(float(v) for v in centre), tuple(float(v) for v in axis / np.linalg.norm(axis)), angle
 
 
 def _vertices(path, value) -> tuple[list, list]:
