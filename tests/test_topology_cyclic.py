@@ -227,3 +227,72 @@ def test_cgns_periodic_connectivity_maps_each_side_onto_the_other_translated(run
     check = subprocess.run(["cgnscheck", str(tmp_path / "box.cgns")], capture_output=True, text=True, timeout=120)
     assert check.returncode == 0 and "ERROR" not in check.stdout.upper(), check.stdout[-2000:]
     assert "checking periodic data Translation" in check.stdout
+
+
+RING = """# a quarter annulus (radii 1 and 2) of two blocks, its two straight sides a rotational pair
+vertices: {a: [1, 0], b: [2, 0], c: [1.4142135623730951, 1.4142135623730951],
+  d: [0.7071067811865476, 0.7071067811865476], e: [0, 2], f: [0, 1]}
+blocks: [[a, b, c, d], [d, c, e, f]]
+edges:
+  - {arc: [b, c], center: [0, 0]}
+  - {arc: [c, e], center: [0, 0]}
+  - {arc: [a, d], center: [0, 0]}
+  - {arc: [d, f], center: [0, 0]}
+cells: {size: 0.1}
+patches:
+  low: {type: cyclic, neighbour: high, rotation: {center: [0, 0], angle: 90}, faces: [[a, b]]}
+  high: {type: cyclic, neighbour: low, faces: [[f, e]]}
+"""
+QUARTER = np.array([[0.0, -1.0], [1.0, 0.0]])  # +90 degrees about z: x @ QUARTER.T
+
+
+def test_rotational_pair_matches_after_elliptic_and_in_openfoam(run_cli, tmp_path):
+    (tmp_path / "ring.yaml").write_text(RING)
+    blocks = load_block_set(str(tmp_path / "ring.yaml"), None, (1, 1))
+    assert blocks.cyclic == (("low", "high", (0.0, 0.0), ((0.0, 0.0), (0.0, 0.0, 1.0), 90.0)),)
+    Xs, _ = elliptic_blocks(blocks)
+    low, high = Xs[0][:, 0], Xs[1][:, -1]  # eta0 of the first block (a -> b), eta1 of the second (f -> e)
+    np.testing.assert_allclose(high, low @ QUARTER.T, rtol=0, atol=1e-13)
+    result = run_cli("mesh", "-g", "ring.yaml", "--method", "elliptic", "--format", "openfoam", "-o", "case")
+    assert result.returncode == 0, result.stderr
+    case = tmp_path / "case"
+    entries = boundary_entries(case)
+    assert entries["low"]["transform"] == entries["high"]["transform"] == "rotational"
+    assert entries["low"]["rotationAxis"] == entries["high"]["rotationAxis"] == "(0 0 1)"
+    points = read_list(case / "constant" / "polyMesh" / "points", 3)
+    faces = read_list(case / "constant" / "polyMesh" / "faces", 4).astype(int)
+    sides = [points[faces[int(entries[n]["startFace"]) :][: int(entries[n]["nFaces"])]] for n in ("low", "high")]
+    turned = sides[0][:, [0, 3, 2, 1]].copy()
+    turned[..., :2] = turned[..., :2] @ QUARTER.T
+    np.testing.assert_allclose(sides[1], turned, rtol=0, atol=1e-12)
+    if missing_reason() is not None:
+        pytest.skip(missing_reason())
+    report = check_mesh(case)
+    assert report["ok"], report["log"][-2000:]
+    assert "Coupled point location match" in report["log"]
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "words"),
+    [
+        ("angle: 90}", "angle: 80}", "do not match under the rotation 80 deg about (0 0 1) through (0 0): the largest mismatch of their vertices is " + f"{4 * np.sin(np.radians(5)):.3g}"),  # b at radius 2, 10 degrees short
+        ("neighbour: low, ", "neighbour: low, rotation: {center: [0, 0], angle: -90}, ", "cyclic patches 'low' and 'high' both give a rotation"),
+        ("center: [0, 0], angle", "center: [0, 0], axis: [1, 0, 0], angle", "axis must be a nonzero vector along z"),
+        ("center: [0, 0], angle: 90", "angle: 90", "rotation needs center and angle"),
+    ],
+)  # fmt: skip
+def test_bad_rotations_are_one_line(tmp_path, old, new, words):
+    assert old in RING
+    (tmp_path / "bad.yaml").write_text(RING.replace(old, new))
+    with pytest.raises(GeometryError) as info:
+        load_block_set(str(tmp_path / "bad.yaml"), None, (1, 1))
+    assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_cgns_refuses_a_rotational_pair_before_meshing(run_cli, tmp_path):
+    (tmp_path / "ring.yaml").write_text(RING)
+    result = run_cli("mesh", "-g", "ring.yaml", "--method", "elliptic", "-o", "ring.cgns")
+    assert result.returncode == 2
+    assert "cgns: the cyclic pair 'low' and 'high' is rotational" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not list(tmp_path.glob("ring.cgns*"))
