@@ -80,6 +80,7 @@ LAYERS = [
         "meshgen.methods.orthogonal",
         "meshgen.methods.hyperbolic",
         "meshgen.geometry.patches",
+        "meshgen.geometry.cyclic",
         "meshgen.geometry.surface",
         "meshgen.geometry.domain",
         "meshgen.geometry.blocks",

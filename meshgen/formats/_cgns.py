@@ -467,8 +467,10 @@ def _coordinate_arrays(zone, dim: int, path) -> list:
 def write_zones(path, zones, metadata, connections) -> None:
     """Write one structured zone per block: ``zones`` a list of (zone name, node array X, patches
     of that zone), ``connections`` per zone a list of (record name, donor zone name, PointRange,
-    PointRangeDonor, Transform), ranges as (2, IndexDimension) 1-based vertex indices: each
-    becomes a GridConnectivity1to1 in the zone's ZoneGridConnectivity."""
+    PointRangeDonor, Transform[, translation]), ranges as (2, IndexDimension) 1-based vertex
+    indices: each becomes a GridConnectivity1to1 in the zone's ZoneGridConnectivity; one with a
+    translation (dim,) (from this zone's face to the donor's) is periodic: its
+    GridConnectivityProperty/Periodic holds it (no rotation)."""
     import h5py
 
     dim = zones[0][1].shape[-1]
@@ -488,11 +490,28 @@ def write_zones(path, zones, metadata, connections) -> None:
                 write_zone_bc(base, zone, node_shape, patches)
             if records:
                 connectivity = new_node(zone, "ZoneGridConnectivity", "ZoneGridConnectivity_t")
-                for record, donor, point_range, donor_range, transform in records:
+                for record, donor, point_range, donor_range, transform, *translation in records:
                     link = new_node(connectivity, record, "GridConnectivity1to1_t", chars(donor))
                     new_node(link, "Transform", '"int[IndexDimension]"', np.asarray(transform, dtype="<i4"))
                     new_node(link, "PointRange", "IndexRange_t", np.asarray(point_range, dtype="<i4"))
                     new_node(link, "PointRangeDonor", "IndexRange_t", np.asarray(donor_range, dtype="<i4"))
+                    if translation:
+                        periodic = new_node(
+                            new_node(link, "GridConnectivityProperty", "GridConnectivityProperty_t"), "Periodic", "Periodic_t"
+                        )
+                        angle = np.array([0.0, 0.0, 0.0, 0.0, 1.0], dtype="<f4")
+                        for key, value, exponents in (
+                            ("RotationCenter", 0.0, LENGTH_EXPONENTS),
+                            ("RotationAngle", 0.0, angle),
+                            ("Translation", translation[0], LENGTH_EXPONENTS),
+                        ):
+                            data = np.broadcast_to(np.asarray(value, dtype="<f4"), (dim,)).copy()
+                            new_node(
+                                new_node(periodic, key, "DataArray_t", data),
+                                "DimensionalExponents",
+                                "DimensionalExponents_t",
+                                exponents,
+                            )
 
 
 def read_zones(path) -> list[dict]:

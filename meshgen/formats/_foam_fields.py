@@ -48,8 +48,8 @@ TAIL_BYTES = 64 * 2**20  # a field larger than this is parsed from its head and 
 
 def starting_fields(patches, header) -> dict[str, str]:
     """{"U": text, "p": text}: potential flow from the patches' types and roles (1 m/s into the
-    domain normal to the inlet, p = 0 on the outlet, slip walls, symmetry and empty as their
-    types, zero gradient elsewhere). ``header(class_name, location, object_name)`` gives the
+    domain normal to the inlet, p = 0 on the outlet, slip walls, symmetry, empty and cyclic as
+    their types, zero gradient elsewhere). ``header(class_name, location, object_name)`` gives the
     FoamFile header."""
     U, p = {}, {}
     for patch in patches:
@@ -60,7 +60,7 @@ def starting_fields(patches, header) -> dict[str, str]:
             U[patch.name], p[patch.name] = "type zeroGradient;", "type fixedValue; value uniform 0;"
         elif patch.type == "wall":
             U[patch.name], p[patch.name] = "type slip;", "type zeroGradient;"
-        elif patch.type in ("symmetry", "empty"):
+        elif patch.type in ("symmetry", "empty", "cyclic"):
             U[patch.name] = p[patch.name] = f"type {patch.type};"
         else:
             U[patch.name], p[patch.name] = "type zeroGradient;", "type zeroGradient;"

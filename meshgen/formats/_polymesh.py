@@ -18,7 +18,7 @@ import numpy as np
 
 from meshgen.errors import FormatError
 
-__all__ = ["HEX_FACES", "extrude_quads", "write_poly_mesh"]
+__all__ = ["HEX_FACES", "align_cyclic", "extrude_quads", "write_poly_mesh"]
 
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
 BANNER = """/*--------------------------------*- C++ -*----------------------------------*\\\\
@@ -100,11 +100,31 @@ def poly_mesh(points, cells, patches):
     return np.concatenate(all_faces), np.concatenate(all_owner), neighbour, entries
 
 
-def write_poly_mesh(folder, points3, cells, patches) -> None:
+def align_cyclic(points3: np.ndarray, faces: np.ndarray, entries: list, pair) -> None:
+    """Turn the faces of the cyclic pair ``pair`` (patch a, patch b, R (3, 3), t (3,): b's points
+    are a's @ R.T + t), already in matching order, so that each b face starts at the image of its
+    a face's first vertex (its others then run backwards, the normals being opposite), as
+    OpenFOAM's coupled patches need; in place in ``faces``."""
+    a, b, R, t = pair[:4]
+    span = {name: slice(first, first + count) for name, _, count, first in entries}
+    first, second = faces[span[a]], faces[span[b]]
+    target = points3[first[:, 0]] @ np.asarray(R).T + np.asarray(t)
+    gaps = np.linalg.norm(points3[second] - target[:, None], axis=2)  # (F, 4): each b vertex to a's first, mapped
+    turn = np.argmin(gaps, axis=1)
+    faces[span[b]] = np.take_along_axis(second, (turn[:, None] + np.arange(4)) % 4, axis=1)
+
+
+def write_poly_mesh(folder, points3, cells, patches, cyclic=()) -> None:
     """Write the polyMesh files (ASCII) of hexahedra ``cells`` on ``points3`` (N, 3) with
     ``patches`` [(name, type, faces)] into ``folder`` (a new polyMesh folder, which
-    ``meshgen.formats._openfoam.write_case`` swaps in with the case's other files)."""
+    ``meshgen.formats._openfoam.write_case`` swaps in with the case's other files); ``cyclic``:
+    [(patch a, patch b, R, t, {patch: the lines its boundary entry adds})] pairs whose faces are
+    given in matching order (``align_cyclic``)."""
     faces, owner, neighbour, entries = poly_mesh(points3, cells, patches)
+    extras = {}
+    for pair in cyclic:
+        align_cyclic(points3, faces, entries, pair)
+        extras.update(pair[4])
     folder = Path(folder)
     note = f"nPoints:{len(points3)} nCells:{len(cells)} nFaces:{len(faces)} nInternalFaces:{len(neighbour)}"
     _write(folder / "points", "vectorField", "points", points3, "({:.17g} {:.17g} {:.17g})")
@@ -116,9 +136,10 @@ def write_poly_mesh(folder, points3, cells, patches) -> None:
         f"{len(entries)}\n(\n",
     ]
     for name, kind, count, first in entries:
-        group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry") else ""
+        group = f"        inGroups        1({kind});\n" if kind in ("wall", "empty", "symmetry", "cyclic") else ""
+        more = extras.get(name, "")
         lines.append(
-            f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n    }}\n"
+            f"    {name}\n    {{\n        type            {kind};\n{group}        nFaces          {count};\n        startFace       {first};\n{more}    }}\n"
         )
     lines.append(")\n")
     (folder / "boundary").write_text("".join(lines))

@@ -8,6 +8,8 @@ on their left).
 
 from __future__ import annotations
 
+import dataclasses
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +27,17 @@ from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, block_patches, connectivity_records, global_numbering, merged_mesh
+from meshgen.geometry.blocks import (
+    BlockSet,
+    Interface,
+    block_patches,
+    connectivity_records,
+    face_index,
+    global_numbering,
+    merged_mesh,
+)
+from meshgen.geometry.cyclic import CYCLIC, matching_order, pair_map
+from meshgen.geometry.cyclic import TOLERANCE as CYCLIC_TOLERANCE
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import Patch, as_records
 from meshgen.run.atomic import atomic_write, check_output_file
@@ -37,6 +49,7 @@ __all__ = [
     "check_block_output",
     "merged_boundary",
     "patch_faces",
+    "periodic_records",
     "read_zones",
     "write_blocks",
     "zone_count",
@@ -59,6 +72,17 @@ def check_block_output(path, format_name: str | None, block_set: BlockSet) -> Pa
             f"{fmt.name} does not take multi-block meshes ('{block_set.name}' has {len(block_set.names)} blocks); "
             f"write .cgns (a zone per block), --format openfoam, .vtm (a .vts per block) or "
             f".{', .'.join(MERGED_FORMATS)}, .su2, .msh (one merged mesh)"
+        )
+    if block_set.cyclic and fmt.name not in ("cgns", "openfoam", *MERGED_FORMATS):
+        raise FormatError(
+            f"{fmt.name} does not take cyclic patches ('{block_set.name}' pairs {block_set.cyclic[0][0]} with "
+            f"{block_set.cyclic[0][1]}): write .cgns, --format openfoam (cyclic patches) or .{', .'.join(MERGED_FORMATS)}"
+        )
+    rotational = [pair[:2] for pair in block_set.cyclic if len(pair) > 3 and pair[3] is not None]
+    if rotational and fmt.name == "cgns":
+        raise FormatError(
+            f"cgns: the cyclic pair '{rotational[0][0]}' and '{rotational[0][1]}' is rotational: meshgen writes "
+            "translational periodic connectivity only: write --format openfoam"
         )
     path = check_output_path(path, fmt.name, block_set.dim)
     if fmt.name in ("cgns", "openfoam", *SOLVER_FORMATS):
@@ -120,9 +144,15 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
         return write_blocks_vtm(path, list(zip(block_set.names, Xs, block_patches(block_set, interfaces=True))), metadata)
     fmt = format_for(path, format_name)
     if fmt.name == "cgns":
-        zones = [(name, X, patches) for name, X, patches in zip(block_set.names, Xs, block_patches(block_set))]
+        zones = [
+            (name, X, [p for p in patches if p.type != CYCLIC])  # cyclic faces: periodic connectivity, not BCs
+            for name, X, patches in zip(block_set.names, Xs, block_patches(block_set))
+        ]
+        records = connectivity_records(block_set)
+        for block, periodic in enumerate(periodic_records(block_set, Xs)):
+            records[block] += periodic
         with atomic_write(path, FormatError) as temporary:
-            write_zones(temporary, zones, metadata, connectivity_records(block_set))
+            write_zones(temporary, zones, metadata, records)
         return path
     if fmt.name == "openfoam":
         _write_openfoam(path, block_set, Xs, metadata)
@@ -156,12 +186,92 @@ def write_blocks(path, block_set: BlockSet, Xs, metadata: dict | None = None, fo
     return path
 
 
+def periodic_records(block_set: BlockSet, Xs) -> list[list[tuple]]:
+    """Per block, the CGNS 1-to-1 records of its cyclic faces (``connectivity_records``' with the
+    translation to the donor's face appended): each face of a pair's first patch joined to the
+    face of its second patch that it matches node by node under the separation, the Transform the
+    one whose node map does; FormatError when a face has no such partner (a side split into
+    block faces differently from the other's)."""
+    dim, shapes = block_set.dim, block_set.node_shapes
+    periodic = []
+    for pair in block_set.cyclic:
+        a, b = pair[:2]
+        if len(pair) > 3 and pair[3] is not None:
+            raise FormatError(
+                f"cgns: the cyclic pair '{a}' and '{b}' is rotational: meshgen writes translational periodic "
+                "connectivity only: write --format openfoam"
+            )
+        separation = pair[2]
+        sides = [[key for key, (name, _) in block_set.patches.items() if name == patch] for patch in (a, b)]
+        for block, face_name in sides[0]:
+            face = cube.face_named(face_name, dim)
+            found = None
+            for donor, donor_name in sides[1]:
+                other = cube.face_named(donor_name, dim)
+                for permutation in itertools.permutations(other.tangent_axes):
+                    if [shapes[block][t] for t in face.tangent_axes] != [shapes[donor][t] for t in permutation]:
+                        continue
+                    for signs in itertools.product((1, -1), repeat=dim - 1):
+                        transform = [0] * dim
+                        for axis, target, sign in zip(face.tangent_axes, permutation, signs):
+                            transform[axis] = sign * (target + 1)
+                        transform[face.axis] = (1 if face.side != other.side else -1) * (other.axis + 1)
+                        interface = Interface(block, face, donor, other, tuple(transform))
+                        here, there = face_index(block_set, interface)
+                        gap = Xs[donor].reshape(-1, dim)[there] - Xs[block].reshape(-1, dim)[here] - np.asarray(separation)
+                        if np.abs(gap).max() <= CYCLIC_TOLERANCE * block_set.length:
+                            found = interface
+            if found is None:
+                raise FormatError(
+                    f"cgns: the face {block_set.names[block]}.{face_name} of cyclic patch '{a}' matches no block face of '{b}' "
+                    "node by node: write --format openfoam"
+                )
+            periodic.append(found)
+    records = connectivity_records(dataclasses.replace(block_set, interfaces=tuple(periodic)))
+    for block, entries in enumerate(records):
+        for k, (name, donor, point_range, donor_range, transform) in enumerate(entries):
+            start, end = Xs[block][tuple(point_range[0] - 1)], Xs[block_set.names.index(donor)][tuple(donor_range[0] - 1)]
+            entries[k] = (f"periodic_{name}"[:32], donor, point_range, donor_range, transform, end - start)
+    return records
+
+
+def _foam_transform(pair, dim: int) -> tuple:
+    """(R (3, 3), t (3,), {patch: its boundary entry's lines}) of a cyclic pair in OpenFOAM's
+    terms: ``translational`` with each side's ``separationVector`` to the other, or
+    ``rotational`` with one ``rotationAxis`` and ``rotationCentre`` on both sides."""
+    a, b = pair[:2]
+    R2, t2 = pair_map(pair, dim)
+    R, t = np.eye(3), np.zeros(3)
+    R[:dim, :dim], t[:dim] = R2, t2
+
+    def vector(values):
+        return " ".join(f"{v + 0.0:.17g}" for v in values)
+
+    lines = {}
+    for name, other, sign in ((a, b, 1.0), (b, a, -1.0)):
+        if len(pair) < 4 or pair[3] is None:
+            how = f"translational;\n        separationVector ({vector(sign * t)});\n"
+        else:
+            centre, axis, _ = pair[3]
+            how = f"rotational;\n        rotationAxis    ({vector(axis)});\n        rotationCentre  ({vector((*centre, 0.0)[:3])});\n"
+        lines[name] = f"        neighbourPatch  {other};\n        transform       {how}"
+    return R, t, lines
+
+
 def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     """The OpenFOAM case of the merged mesh (interfaces as internal faces) through the one case
     writer of a single block (``meshgen.formats._openfoam.write_case``): the same system files,
     ``0/U`` and ``0/p`` from the patches' types and roles, re-mesh rules and atomic publication."""
     points, cells, _ = merged_mesh(block_set, Xs)
     faces = patch_faces(block_set)
+    cyclic = []
+    for pair in block_set.cyclic:  # b's faces in a's order: the i-th of b is the i-th of a mapped
+        a, b = pair[:2]
+        index = {name: k for k, (name, _, _) in enumerate(faces)}
+        first, second = faces[index[a]][2], faces[index[b]][2]
+        order = matching_order(points, first, second, pair, block_set.length)
+        faces[index[b]] = (b, CYCLIC, second[order])
+        cyclic.append((a, b, *_foam_transform(pair, block_set.dim)))
     if block_set.dim == 2:
         check_extrusion_patch([Patch(name, kind, ()) for name, kind, _ in faces], 2)
         points, cells, walls, front_back, _ = extrude_quads(points, cells, [elements for _, _, elements in faces])
@@ -170,6 +280,6 @@ def _write_openfoam(case, block_set: BlockSet, Xs, metadata: dict) -> None:
     patches = [Patch(name, kind, ()) for name, kind, _ in faces if name != EXTRUDED_PATCH]
 
     def write_folder(folder, _patches):
-        write_poly_mesh(folder, points, cells, faces)
+        write_poly_mesh(folder, points, cells, faces, cyclic)
 
     write_case(case, (0,) * block_set.dim, metadata, patches, write_folder, block_set=block_set.name)

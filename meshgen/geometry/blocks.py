@@ -11,6 +11,7 @@ A multi-block plugin is a geometry plugin (``meshgen.geometry.plugins``) that al
     def boundary(block, points, **params): ...     # the block's map of the unit cube's boundary
     interfaces = [("core", "xi1", "east", "xi0"), ...]   # faces that meet (orientation derived)
     block_patches = {"east": {"xi1": ("wall", "wall")}, ...}   # every other face: a patch
+    cyclic = [("left", "right", (2.0, 0.0))]       # optional: cyclic patch pairs, right = left + separation
 
 ``interfaces`` and ``block_patches`` may be functions of the parameters (a topology that depends on them).
 
@@ -31,6 +32,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
+from meshgen.geometry.cyclic import CYCLIC, check_cyclic
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
 from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
@@ -80,7 +82,8 @@ class BlockSet:
 
     ``geometries``: one ``Geometry`` per block; ``coords``: per block, the parametric node
     coordinates per axis; ``patches``: (block index, face name) -> (patch name, type) for every
-    face that is not on an interface."""
+    face that is not on an interface; ``cyclic``: (patch, neighbour patch, separation (dim,)[,
+    rotation]) of its cyclic pairs (``meshgen.geometry.cyclic``)."""
 
     name: str
     dim: int
@@ -93,6 +96,7 @@ class BlockSet:
     patches: dict = field(default_factory=dict)
     dims_meaning: str = ""
     length: float = 1.0
+    cyclic: tuple = ()
 
     @property
     def node_shapes(self) -> list[tuple[int, ...]]:
@@ -194,9 +198,10 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
         for face_name, (patch, kind) in faces.items():
             _face(face_name, dim, base.name)
             check_patch_name(patch)
-            if kind not in PATCH_TYPES:
+            if kind not in (*PATCH_TYPES, CYCLIC):
                 raise GeometryError(f"geometry '{base.name}': patch '{patch}' has unknown type '{kind}'")
             patches[names.index(block), face_name] = (patch, kind)
+    cyclic = _cyclic(base.name, getattr(module, "cyclic", ()), patches, dim)
     declared = []
     for entry in declared_interfaces:
         block_a, face_a, block_b, face_b = entry[:4]
@@ -208,13 +213,30 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
         )
     block_set = BlockSet(
         base.name, dim, base.description, dict(base.values), names, tuple(geometries), block_coords, (), patches,
-        getattr(module, "dims_meaning", ""), length,
+        getattr(module, "dims_meaning", ""), length, cyclic,
     )  # fmt: skip
     _check_faces(block_set, declared)
     interfaces = tuple(Interface(a, fa, b, fb, _derive_transform(block_set, a, fa, b, fb)) for a, fa, b, fb in declared)
     block_set = BlockSet(**{**block_set.__dict__, "interfaces": interfaces})
     check_interfaces(block_set)
     return block_set
+
+
+def _cyclic(name: str, declared, patches: dict, dim: int) -> tuple:
+    """The plugin's cyclic pairs checked: each names two cyclic patches and a separation of
+    ``dim`` numbers; every cyclic patch is in one pair."""
+    kinds = {patch: kind for patch, kind in patches.values()}
+    pairs, paired = [], []
+    for a, b, separation, *rotation in declared:
+        separation = np.asarray(separation, dtype=float)
+        if kinds.get(a) != CYCLIC or kinds.get(b) != CYCLIC or a == b or separation.shape != (dim,):
+            raise GeometryError(f"geometry '{name}': the cyclic pair ({a}, {b}) needs two cyclic patches and a separation")
+        pairs.append((a, b, tuple(float(v) for v in separation), *rotation[:1]))
+        paired += [a, b]
+    lone = sorted({p for p, k in kinds.items() if k == CYCLIC and paired.count(p) != 1})
+    if lone:
+        raise GeometryError(f"geometry '{name}': the cyclic patch '{lone[0]}' is not in exactly one cyclic pair")
+    return tuple(pairs)
 
 
 def _declared(module, attribute: str, geometry: Geometry):
@@ -498,10 +520,12 @@ def block_patches(block_set: BlockSet, interfaces: bool = False) -> list[list[Pa
 
 
 def tfi_blocks(block_set: BlockSet) -> list[np.ndarray]:
-    """Transfinite interpolation of every block, interface nodes checked and made identical."""
+    """Transfinite interpolation of every block, interface nodes checked and made identical,
+    cyclic pairs checked (``meshgen.geometry.cyclic.check_cyclic``)."""
     Xs = [tfi(geometry, None, list(coords)) for geometry, coords in zip(block_set.geometries, block_set.coords)]
     unify_interfaces(block_set, Xs)
     check_handedness(block_set, Xs)
+    check_cyclic(block_set, Xs)
     return Xs
 
 

@@ -14,6 +14,8 @@ shows or measures a block set takes a topology file as it takes ``geometries/pip
   edges; a shared edge joins the chains of its blocks), from ``cells.size`` (the chain's longest
   edge over the size) or a count on one of its edges; ``--param refine=R`` scales them.
 - Grading: per chain too (one 1D node distribution, reversed where an edge runs the other way).
+- Cyclic pairs: the translation from one patch's vertices to its neighbour's, checked vertex by
+  vertex here and node by node after meshing (``meshgen.geometry.cyclic``).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
+from meshgen.geometry.cyclic import cyclic_pairs
 from meshgen.geometry.topology_file import Topology, is_topology_file, read_topology
 from meshgen.geometry.topology_project import projected
 from meshgen.methods.clustering import Cluster, clustered_coordinates
@@ -533,6 +536,7 @@ def topology_module(path) -> types.ModuleType:
     for (block, face), entry in faces.items():
         patches.setdefault(block_names[block], {})[face] = entry
     module.block_patches = patches
+    module.cyclic = cyclic_pairs(topology)
     module.topology = topology
     size = float(np.linalg.norm(np.ptp(topology.points, axis=0)))
 

@@ -20,6 +20,10 @@
       growth: 1.2                        # the largest cell-to-cell growth first_cell may make
     patches:                             # faces by their vertices (3D: 4, 2D: 2)
       inlet: {type: patch, faces: [[a, d]]}
+      left: {type: cyclic, neighbour: right, faces: [[a, d]]}   # a pair, each naming the other:
+      right: {type: cyclic, neighbour: left, faces: [[b, c]]}   # the same faces up to a translation
+      # or, on one side of a pair: rotation: {center: [0, 0], angle: 90}  (3D: axis: [0, 0, 1] too):
+      # its neighbour is it turned by the angle (degrees, right-handed) about the axis through center
     default_patch: {name: walls, type: wall}     # every face not listed (default: defaultFaces, wall)
     surfaces:                            # optional: surfaces that faces are projected onto
       wall: {cylinder: {axis: [0, 0, 1], point: [0, 0, 0], radius: 0.5}}
@@ -53,8 +57,8 @@ EDGE_KINDS = ("arc", "polyline", "spline")
 _EDGE_KEYS = EDGE_KINDS + ("line", "through", "center", "points", "project")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
-_PATCH_KEYS = ("type", "faces", "project")
-_PATCH_TYPES = ("wall", "patch", "symmetry")
+_PATCH_KEYS = ("type", "faces", "neighbour", "rotation", "project")
+_PATCH_TYPES = ("wall", "patch", "symmetry", "cyclic")
 _MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
 
@@ -63,9 +67,11 @@ _SEEN: dict = {}
 class Topology:
     """A topology file checked: vertex names and points (V, dim), blocks as vertex indices (8 or
     4 each), curved edges {(i, j): (kind, points (K, dim))}, counts [(i, j, n)], ratios [(i, j,
-    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, surfaces
-    {name: Surface}, projected faces {frozenset of vertex indices: surface name} and projected
-    edges {(i, j), i < j: surface name}."""
+    r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, cyclic pairs
+    [(patch, its neighbour)] (each pair once, in the order of the file; a rotating patch first),
+    rotations {patch: (centre (dim,), axis (3,), angle in degrees)}, surfaces {name: Surface},
+    projected faces {frozenset of vertex indices: surface name} and projected edges {(i, j), i < j:
+    surface name}."""
 
     path: Path
     name: str
@@ -83,6 +89,8 @@ class Topology:
     growth: float | None = None
     patches: dict = field(default_factory=dict)
     default_patch: tuple = ("defaultFaces", "wall")
+    cyclic: list = field(default_factory=list)
+    rotations: dict = field(default_factory=dict)
     surfaces: dict = field(default_factory=dict)
     projections: dict = field(default_factory=dict)
     edge_projections: dict = field(default_factory=dict)
@@ -191,8 +199,8 @@ def read_topology(path) -> Topology:
     if "default_patch" in data:
         default = _keys(path, "default_patch", data["default_patch"], ("name", "type"))
         kind = str(default.get("type", "wall"))
-        if kind not in _PATCH_TYPES:
-            _fail(path, f"default_patch has unknown type '{kind}' (types: {', '.join(_PATCH_TYPES)})")
+        if kind not in _PATCH_TYPES or kind == "cyclic":
+            _fail(path, f"default_patch has type '{kind}' (types: wall, patch, symmetry; a cyclic patch needs its pair)")
         topology.default_patch = (str(default.get("name", "defaultFaces")), kind)
     return topology
 
@@ -304,6 +312,48 @@ def _patches(topology: Topology, patches) -> None:
         if "project" in entry:
             for face in listed:
                 _project(topology, f"patch '{name}'", frozenset(face), entry["project"])
+        if kind != "cyclic" and "rotation" in entry:
+            _fail(path, f"patch '{name}': only a cyclic patch has a 'rotation'")
+        if (kind == "cyclic") != ("neighbour" in entry):
+            _fail(
+                path,
+                f"patch '{name}': "
+                + (
+                    "a cyclic patch needs 'neighbour': the patch it pairs with"
+                    if kind == "cyclic"
+                    else "only a cyclic patch has a 'neighbour'"
+                ),
+            )
+    for name, (kind, _) in topology.patches.items():
+        if kind != "cyclic":
+            continue
+        other = str(patches[name]["neighbour"])
+        back = patches.get(other) if other in topology.patches else None
+        if other == name or not isinstance(back, dict) or back.get("type") != "cyclic" or str(back.get("neighbour")) != name:
+            _fail(
+                path, f"cyclic patch '{name}': its neighbour '{other}' must be another cyclic patch whose neighbour is '{name}'"
+            )
+        if "rotation" in patches[name]:
+            if "rotation" in back:
+                _fail(path, f"cyclic patches '{name}' and '{other}' both give a rotation: give it on one side")
+            topology.rotations[name] = _rotation(topology, name, patches[name]["rotation"])
+        if (other, name) not in topology.cyclic and (name, other) not in topology.cyclic:
+            topology.cyclic.append((name, other) if "rotation" in patches[name] or "rotation" not in back else (other, name))
+
+
+def _rotation(topology: Topology, name: str, value) -> tuple:
+    """(centre (dim,), unit axis (3,), angle in degrees) of a cyclic patch's ``rotation``."""
+    path, dim = topology.path, topology.dim
+    where = f"patch '{name}': rotation"
+    value = _keys(path, where, value, ("center", "axis", "angle"))
+    if "center" not in value or "angle" not in value or (dim == 3 and "axis" not in value):
+        _fail(path, f"{where} needs center and angle (degrees)" + (" and axis" if dim == 3 else ""))
+    centre = _points(path, f"{where}: center", value["center"], dim)[0]
+    axis = _points(path, f"{where}: axis", value.get("axis", [0, 0, 1]), 3)[0]
+    if not np.linalg.norm(axis) > 0 or (dim == 2 and (axis[0] or axis[1])):
+        _fail(path, f"{where}: axis must be a nonzero vector" + (" along z (a 2D set turns about z)" if dim == 2 else ""))
+    angle = _number(path, f"{where}: angle", value["angle"], positive=False)
+    return tuple(float(v) for v in centre), tuple(float(v) for v in axis / np.linalg.norm(axis)), angle
 
 
 def _surface_name(topology: Topology, where: str, name) -> str:

@@ -8,7 +8,8 @@ level (``meshgen.methods.multigrid_set``):
   straight extrusion (the pipe, the 3D channel) is meshed as the extrusion of its section's mesh
   (``planar_sliding``, ``SlideRule``). Nodes on curved patches, on a corner of two lines (2D)
   or on three planes stay where the TFI put them, and so do a plane's nodes where a curved patch
-  meets it obliquely (``OBLIQUE``: a tapered pipe's caps);
+  meets it obliquely (``OBLIQUE``: a tapered pipe's caps) and the nodes of cyclic patches (they
+  keep matching their pair's: ``meshgen.geometry.cyclic``);
 - the local cell size of every node (``local_cell_sizes``), the unit of the stopping rule.
 """
 
@@ -38,9 +39,12 @@ def planar_sliding(block_set: BlockSet, Xs, numbering, count, tolerance: float =
     dim = block_set.dim
     curved = np.zeros(count, dtype=bool)
     records = []  # (node ids, inner neighbour ids, centre, normal) per flat patch face
-    for (block, face_name), _ in block_set.patches.items():
+    for (block, face_name), (_, kind) in block_set.patches.items():
         face = cube.face_named(face_name, dim)
         ids = numbering[block][face.node_index].reshape(-1)
+        if kind == "cyclic":  # its nodes stay where the TFI put them: sliding would part them from their pair's
+            curved[ids] = True
+            continue
         points = Xs[block][face.node_index].reshape(-1, dim)
         centre = points.mean(axis=0)
         _, singular, vt = np.linalg.svd(points - centre, full_matrices=False)
