@@ -121,6 +121,15 @@ def evaluate_on_grid(
     return finite_output(out)
 
 
+def _forward(layers, hidden):
+    """The MLP of ``layers`` on the rows of ``hidden`` (a new tensor per layer: a GPU's products)."""
+    for index, (weight, bias) in enumerate(layers):
+        hidden = torch.addmm(bias, hidden, weight)
+        if index < len(layers) - 1:
+            hidden = torch.tanh(hidden)
+    return hidden
+
+
 def network_on_planes(layers, axes, i0: int, i1: int, chunk: int = GPU_CHUNK_NODES):
     """The network of ``layers`` (:func:`network_layers`, on the device) at the node planes
     i0 <= i < i1 of the tensor grid of ``axes`` (1D float32 tensors of u = 2 xi - 1 per axis, on the
@@ -132,12 +141,7 @@ def network_on_planes(layers, axes, i0: int, i1: int, chunk: int = GPU_CHUNK_NOD
     with torch.inference_mode():
         for first in range(start, stop, chunk):
             last = min(stop, first + chunk)
-            hidden = _grid_inputs(axes, first, last)
-            for index, (weight, bias) in enumerate(layers):
-                hidden = torch.addmm(bias, hidden, weight)
-                if index < len(layers) - 1:
-                    hidden = torch.tanh(hidden)
-            result[first - start : last - start] = hidden
+            result[first - start : last - start] = _forward(layers, _grid_inputs(axes, first, last))
     return result
 
 
@@ -151,10 +155,5 @@ def _evaluate_on_gpu(layers, axes, count: int, out: np.ndarray) -> np.ndarray:
     with torch.inference_mode():
         for start in range(0, count, GPU_CHUNK_NODES):
             stop = min(count, start + GPU_CHUNK_NODES)
-            hidden = _grid_inputs(axes, start, stop)
-            for index, (weight, bias) in enumerate(layers):
-                hidden = torch.addmm(bias, hidden, weight)
-                if index < len(layers) - 1:
-                    hidden = torch.tanh(hidden)
-            target[start:stop].copy_(hidden.double())
+            target[start:stop].copy_(_forward(layers, _grid_inputs(axes, start, stop)).double())
     return out
