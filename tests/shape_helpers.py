@@ -265,7 +265,7 @@ def voxel_surface(cells):
     return vertices, triangles, np.concatenate([normals, normals])
 
 
-SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube")
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube", "wing")
 
 
 def write_sweep_solid(kind: str, path) -> float:
@@ -276,8 +276,10 @@ def write_sweep_solid(kind: str, path) -> float:
     1.5 along z), ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z), ``bend`` (a disk of
     radius 0.5 centred 2 from the z axis turned 90 degrees about it) or ``bent_pentagon`` (a regular
     pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it) or
-    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis). Returns OCC's
-    volume."""
+    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis) or ``wing`` (a
+    NACA 0012 section of chord 1 with a sharp trailing edge: two splines through 61 points each,
+    upper and lower, meeting with a vertical tangent at the leading edge; extruded 1 along z).
+    Returns OCC's volume."""
     import gmsh
 
     started = not gmsh.isInitialized()
@@ -312,6 +314,19 @@ def write_sweep_solid(kind: str, path) -> float:
         solid = occ.addWedge(0, 0, 0, 1, 1, 2)
     elif kind == "tube":
         solid = occ.cut([(3, occ.addBox(0, 0, 0, 1, 1, 3))], [(3, occ.addBox(0.3, 0.3, 0, 0.4, 0.4, 3))])[0][0][1]
+    elif kind == "wing":
+        x = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, 61)))[::-1]  # trailing edge to leading edge
+        y = 0.6 * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x**2 + 0.2843 * x**3 - 0.1036 * x**4)
+        upper = [occ.addPoint(a, b, 0) for a, b in zip(x, y)]
+        lower = [upper[-1]] + [occ.addPoint(a, -b, 0) for a, b in zip(x[::-1][1:-1], y[::-1][1:-1])] + [upper[0]]
+        down = np.zeros((61, 3))  # the tangents: none but a vertical one at the leading edge
+        down[-1, 1] = -1.0
+        curves = [
+            occ.addSpline(upper, tangents=down.ravel().tolist()),
+            occ.addSpline(lower, tangents=down[::-1].ravel().tolist()),
+        ]
+        surface = occ.addPlaneSurface([occ.addCurveLoop(curves)])
+        solid = next(tag for dim, tag in occ.extrude([(2, surface)], 0, 0, 1.0) if dim == 3)
     elif kind == "bend":
         disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
         solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)
