@@ -252,6 +252,14 @@ def test_a_concave_cap_that_would_fold_is_refused(run_cli, tmp_path):
     )
 
 
+def test_a_triangulated_cylinder_points_to_the_cad_route(run_cli, tmp_path):
+    """An STL cylinder (three sharp-edge patches: two caps and the side) is refused, the line
+    pointing to the CAD file and topology routes; nothing is written."""
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    trimesh.creation.cylinder(radius=0.5, height=2.0, sections=64).export(tmp_path / "cylinder.stl")
+    refused(run_cli, tmp_path, "cylinder.stl", "splits into 3 patch(es)", "from its CAD file", "docs/topologies.md")
+
+
 def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):
     def make(occ):
         body = occ.addCylinder(0, 0, 0, 0, 0, 1, 1.0)
