@@ -8,7 +8,8 @@ theirs: tests/shape_helpers.py ``write_sweep_solid``): ``cylinder`` (radius 0.5,
 edge filleted, radius 0.3), ``pentagon`` (a regular pentagonal prism), ``wedge`` (a triangular
 prism), ``bend`` (a disk of radius 0.5 turned 90 degrees about an axis 2 away), ``bent_pentagon``
 (a pentagon turned 120 degrees), ``tube`` (a square tube, 1 x 1 less 0.4 x 0.4, 3 long), ``wing``
-(a NACA 0012 section of chord 1, sharp trailing edge, extruded 1), each at about 20 cells across
+(a NACA 0012 section of chord 1, sharp trailing edge, extruded 1), ``loft`` (a ruled loft from a
+circle of radius 0.5 to a 0.8 x 0.8 square 2 above it), each at about 20 cells across
 its cap (--quick: about 10), by TFI and by the elliptic method (the wing's keeps the TFI mesh). Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
 distance of a patch node from its own CAD face (gmsh's closest point) over the bounding-box
 diagonal L, the mesh volume's relative difference from OCC's, checkMesh's verdict on the OpenFOAM
@@ -43,9 +44,9 @@ from meshgen.geometry import cube  # noqa: E402
 from meshgen.run.request import mesh  # noqa: E402
 
 DIMS = {"cylinder": (10, 5, 20), "hole": (10, 5, 20), "fillet": (7, 3, 20), "pentagon": (10, 1, 20), "wedge": (10, 1, 20)}
-DIMS |= {"bend": (10, 5, 20), "bent_pentagon": (10, 1, 20), "tube": (20, 6, 20), "wing": (10, 5, 20)}
+DIMS |= {"bend": (10, 5, 20), "bent_pentagon": (10, 1, 20), "tube": (20, 6, 20), "wing": (10, 5, 20), "loft": (10, 5, 20)}
 QUICK_DIMS = {"cylinder": (5, 3, 8), "hole": (5, 3, 8), "fillet": (4, 2, 8), "pentagon": (5, 1, 8), "wedge": (5, 1, 8)}
-QUICK_DIMS |= {"bend": (5, 3, 8), "bent_pentagon": (5, 1, 8), "tube": (10, 3, 8), "wing": (5, 3, 8)}
+QUICK_DIMS |= {"bend": (5, 3, 8), "bent_pentagon": (5, 1, 8), "tube": (10, 3, 8), "wing": (5, 3, 8), "loft": (5, 3, 8)}
 
 
 def patch_distance(path: Path, made) -> tuple[float, float]:

@@ -265,7 +265,7 @@ def voxel_surface(cells):
     return vertices, triangles, np.concatenate([normals, normals])
 
 
-SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube", "wing")
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube", "wing", "loft")
 
 
 def write_sweep_solid(kind: str, path) -> float:
@@ -278,8 +278,9 @@ def write_sweep_solid(kind: str, path) -> float:
     pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it) or
     ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis) or ``wing`` (a
     NACA 0012 section of chord 1 with a sharp trailing edge: two splines through 61 points each,
-    upper and lower, meeting with a vertical tangent at the leading edge; extruded 1 along z).
-    Returns OCC's volume."""
+    upper and lower, meeting with a vertical tangent at the leading edge; extruded 1 along z) or
+    ``loft`` (a ruled loft, ``addThruSections``, from a circle of radius 0.5 at z = 0, four arcs
+    from -45 degrees, to a 0.8 x 0.8 square at z = 2, its corners at the arcs' ends' angles). Returns OCC's volume."""
     import gmsh
 
     started = not gmsh.isInitialized()
@@ -327,6 +328,14 @@ def write_sweep_solid(kind: str, path) -> float:
         ]
         surface = occ.addPlaneSurface([occ.addCurveLoop(curves)])
         solid = next(tag for dim, tag in occ.extrude([(2, surface)], 0, 0, 1.0) if dim == 3)
+    elif kind == "loft":  # the circle in four arcs, from -45 degrees, as the square's corners
+        angles = np.pi / 4 * (2 * np.arange(4) - 1)
+        ring = [occ.addPoint(0.5 * np.cos(a), 0.5 * np.sin(a), 0) for a in angles]
+        centre = occ.addPoint(0, 0, 0)
+        circle = occ.addCurveLoop([occ.addCircleArc(ring[k], centre, ring[(k + 1) % 4]) for k in range(4)])
+        corners = [occ.addPoint(0.4 * np.sign(np.cos(a)), 0.4 * np.sign(np.sin(a)), 2) for a in angles]
+        square = occ.addCurveLoop([occ.addLine(corners[k], corners[(k + 1) % 4]) for k in range(4)])
+        solid = next(tag for dim, tag in occ.addThruSections([circle, square], makeSolid=True, makeRuled=True) if dim == 3)
     elif kind == "bend":
         disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
         solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)

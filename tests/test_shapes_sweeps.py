@@ -20,11 +20,11 @@ gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python packag
 
 # about 20 cells across each cap (cylinder: N + 2M; hole: 2M + the hole; fillet: 2M + 2N; n-gons: 2N)
 DIMS = {"cylinder": (10, 5, 6), "hole": (10, 5, 6), "fillet": (7, 3, 6), "pentagon": (10, 1, 6), "wedge": (10, 1, 6)}
-DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6), "wing": (10, 5, 6)}
+DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6), "wing": (10, 5, 6), "loft": (10, 5, 10)}
 FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7, "tube": 10}
-FACES |= {"wing": 4}
+FACES |= {"wing": 4, "loft": 6}
 BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5, "tube": 4}
-BLOCKS |= {"wing": 9}
+BLOCKS |= {"wing": 9, "loft": 5}
 # the NACA 0012's sharp trailing edge: its angle 2 atan(-y'(1)) (thickness 0.12, closed-edge
 # coefficients) bounds the scaled Jacobian of the one cell there: sin of it, 0.2847
 TE_ANGLE = 2 * np.arctan(-0.6 * (0.2969 / 2 - 0.1260 - 2 * 0.3516 + 3 * 0.2843 - 4 * 0.1036))
@@ -120,6 +120,49 @@ def corner_jacobian(X) -> float:
     return worst
 
 
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_the_loft_joins_the_circles_points_to_the_squares_corners(solids, method):
+    """The circle-to-square loft: both caps an O-grid, the ring blocks' corners at the circle's
+    points at -45, 45, 135, 225 degrees (radius 0.5, z = 0) and at the square's corners (0.4, z = 2),
+    joined by straight rulings; mid-way the ring's outer nodes are the average of the caps'."""
+    path, _ = solids["loft"]
+    mesh = meshgen.mesh(str(path), (8, 4, 6), method=method)
+    rings = [X for name, X in zip(mesh.geometry.names, mesh.blocks) if name.startswith("ring")]
+    assert len(rings) == 4 and "core" in mesh.geometry.names
+    bottom = np.array([X[-1, 0, 0] for X in rings])
+    top = np.array([X[-1, 0, -1] for X in rings])
+    angles = np.degrees(np.arctan2(bottom[:, 1], bottom[:, 0]))
+    assert sorted(np.round(np.mod(angles + 45, 360), 6)) == [0.0, 90.0, 180.0, 270.0]
+    assert np.allclose(np.hypot(bottom[:, 0], bottom[:, 1]), 0.5, atol=1e-9) and np.allclose(bottom[:, 2], 0.0, atol=1e-12)
+    assert np.allclose(np.abs(top[:, :2]), 0.4, atol=1e-9) and np.allclose(top[:, 2], 2.0, atol=1e-12)
+    assert np.allclose(np.sign(top[:, :2]), np.sign(bottom[:, :2]))  # each corner over its own circle point
+    middle = np.array([X[-1, :, 3] for X in rings])
+    ends = 0.5 * (np.array([X[-1, :, 0] for X in rings]) + np.array([X[-1, :, -1] for X in rings]))
+    assert np.abs(middle - ends).max() < 1e-12
+
+
+def test_a_cone_frustum_is_a_loft_of_two_circles(tmp_path):
+    """A frustum (radii 0.5 and 0.3, height 2): its side is ruled, so it meshes as a loft; its
+    volume against pi h (r0^2 + r0 r1 + r1^2) / 3, the O-grid's polygons short of it by their
+    chords' sagitta (under 1 %)."""
+    write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
+    mesh = meshgen.mesh(str(tmp_path / "cone.step"), (10, 5, 8), method="tfi")
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    exact = np.pi * 2.0 * (0.25 + 0.15 + 0.09) / 3.0
+    assert sum(enclosed_volume(X) for X in mesh.blocks) == pytest.approx(exact, rel=1e-2)
+    assert any("a loft" in line for line in mesh.notes)
+
+
+def test_the_loft_says_it_is_a_loft(run_cli, solids):
+    path, _ = solids["loft"]
+    result = run_cli("mesh", "-g", path, "--method", "tfi", "--dims", "4", "2", "3", "-o", "l.vtu")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("loft.step:")]
+    assert "a loft: planar, parallel caps, ruled linking faces" in said[0]
+    assert "both cut alike, an O-grid of 5 blocks" in said[1]
+
+
 @pytest.mark.parametrize("kind,dims", [("fillet", (14, 6, 4)), ("tube", (30, 8, 4))])
 def test_ring_caps_stay_unfolded_when_finer(solids, kind, dims):
     """Ring blocks at corners and smooth joints: with the cap's flat sides sliding, the elliptic
@@ -213,8 +256,12 @@ def write_solid(path, make):
 
 
 def test_a_solid_that_is_no_sweep_points_to_topology_files(run_cli, tmp_path):
-    write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
-    refused(run_cli, tmp_path, "cone.step", "3 faces with (", "not of one area", "docs/topologies.md")
+    def bulge(occ):  # a smooth (not ruled) loft through three circles
+        circles = [occ.addCurveLoop([occ.addCircle(0, 0, z, r)]) for z, r in ((0, 0.5), (1, 0.7), (2, 0.3))]
+        occ.addThruSections(circles, makeSolid=True, makeRuled=False)
+
+    write_solid(tmp_path / "bulge.step", bulge)
+    refused(run_cli, tmp_path, "bulge.step", "3 faces with (", "not of one area", "docs/topologies.md")
     write_solid(tmp_path / "ball.step", lambda occ: occ.addSphere(0, 0, 0, 1.0))
     refused(run_cli, tmp_path, "ball.step", "1 faces with (", "docs/topologies.md")
 

@@ -31,6 +31,11 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   six blocks around a core of two (``_wedge_blocks``); the elliptic method keeps the TFI mesh
   (``keep_tfi``: Winslow smoothing turns the corner's sliver cells inside out).
 
+A loft (``sweep_read``: planar parallel caps whose outlines pair curve by curve on ruled linking
+faces, a circle to a square) cuts both caps alike (O-grids, or midpoint subdivision of two loops
+of corners); each block is the straight blend of its two cap maps, so its outer faces are the
+rulings, which lie on the linking faces.
+
 Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
 """
@@ -379,26 +384,18 @@ def _folded(blocks) -> list[str]:
     return folded
 
 
-def sweep_module(path) -> types.ModuleType:
-    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
-    (path, size, modification time). GeometryError (one line) when the solid is no sweep
-    this meshes."""
-    path = Path(path)
-    key = _key(path)
-    if key in _MODULES:
-        return _MODULES[key]
-    found = _read(path)
-    summary = f"{path}: the solid has {found['summary']}"
-    if found["kind"] == "six":
-        raise GeometryError(f"{summary}: one block, not a sweep")
-    if found["kind"] != "sweep":
-        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
+def _cut_cap(path: Path, found: dict, summary: str):
+    """The first cap's blocks by the scheme its loop takes (module docstring), and the second cap's
+    for a loft: (blocks, second cap's blocks or None, block sides on CAD faces, interfaces, what
+    was done, the --dims meaning, per block the --dims axes it counts, elliptic options, lines)."""
     names = found["names"]
-    loop = found["curves"]
+    loft = found["kind"] == "loft"
+    loop = found["loops"][0] if loft else found["curves"]
     curves = [_spline(c["fractions"], c["points"]) for c in loop]
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
-    first, second = found["caps"]
+    first = found["caps"][0]
+    second_blocks = None
     options, lines_extra, fixed = {}, (), True
     holes = found.get("holes", [])
     hole_sharp = [not c["smooth"] for c in holes[0]] if holes else []
@@ -410,7 +407,28 @@ def sweep_module(path) -> types.ModuleType:
             f"around a smooth hole of 1, 2 or 4 curves, or loops of as many sharp corners, are cut into blocks yet: "
             f"{TOPOLOGY_HINT}"
         )
-    if holes:
+    if loft:  # both caps cut alike: an O-grid each, or midpoint subdivision if both have only corners
+        other = found["loops"][1]
+        cut = _ogrid_blocks if len(loop) in (1, 2, 4) else _midpoint_blocks
+        if cut is _midpoint_blocks and not (all(sharp) and not any(c["smooth"] for c in other)):
+            raise GeometryError(
+                f"{summary}; a loft whose caps are no O-grid's (1, 2 or 4 curves) nor all corners: {TOPOLOGY_HINT}"
+            )
+        blocks, sides_of, interfaces = cut(curves, faces)
+        second_blocks = cut([_spline(c["fractions"], c["points"]) for c in other], faces)[0]
+        how = (
+            f"lofted to cap {names[found['caps'][1]]}: both cut alike, "
+            + (
+                "an O-grid of 5 blocks (core, ring0..ring3)"
+                if cut is _ogrid_blocks
+                else f"midpoint subdivision into {len(loop)} blocks"
+            )
+            + ", the block corners on the outlines joined by the linking faces' rulings"
+        )
+        meaning = "N M A: cells along a quarter of each cap's boundary (and across the core), across the ring, from cap to cap"
+        counts = {name: ((1, 0, 2) if name.startswith("ring") else (0, 0, 2)) for name in blocks}
+        fixed = False
+    elif holes:
         hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
         blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]], both_smooth)
         if both_smooth:
@@ -463,13 +481,37 @@ def sweep_module(path) -> types.ModuleType:
             f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
             "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
         )
-    folded = _folded(blocks)
+    return blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra
+
+
+def sweep_module(path) -> types.ModuleType:
+    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
+    (path, size, modification time). GeometryError (one line) when the solid is no sweep
+    this meshes."""
+    path = Path(path)
+    key = _key(path)
+    if key in _MODULES:
+        return _MODULES[key]
+    found = _read(path)
+    summary = f"{path}: the solid has {found['summary']}"
+    if found["kind"] == "six":
+        raise GeometryError(f"{summary}: one block, not a sweep")
+    if found["kind"] not in ("sweep", "loft"):
+        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
+    names, loft = found["names"], found["kind"] == "loft"
+    first, second = found["caps"]
+    blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra = _cut_cap(path, found, summary)
+    folded = _folded(blocks) + (_folded(second_blocks) if loft else [])
     if folded:
         raise GeometryError(
             f"{summary}; its cap {names[first]} ({how}) folds in block(s) {', '.join(folded)} (a concave cap?): {TOPOLOGY_HINT}"
         )
-    origin, frame, motion = found["origin"], found["frame"], found["motion"]
-    if motion["kind"] == "translation":
+    origin, frame = found["origin"], found["frame"]
+    motion = {"kind": "loft", "gap": found["gap"]} if loft else found["motion"]
+    if loft:
+        path_words = "a loft: planar, parallel caps, ruled linking faces"
+        cap_words = "planar, parallel, each linking face ruled between a curve of each"
+    elif motion["kind"] == "translation":
         path_words = f"a straight sweep along ({', '.join(f'{v:.6g}' for v in motion['vector'])})"
         cap_words = "planar, parallel, one shape"
     else:
@@ -478,7 +520,7 @@ def sweep_module(path) -> types.ModuleType:
             f"({', '.join(f'{v:.6g}' for v in motion['point'])}) along ({', '.join(f'{v:.6g}' for v in motion['axis'])})"
         )
         cap_words = "planar, one shape turned onto the other"
-    if motion["kind"] != "translation" and not options.get("keep_tfi"):
+    if motion["kind"] == "rotation" and not options.get("keep_tfi"):
         options = {"slide": False}
         lines_extra = (
             f"{path.name}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
@@ -495,7 +537,8 @@ def sweep_module(path) -> types.ModuleType:
     lines = (
         f"{path.name}: {found['summary']}: {path_words}; "
         f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both; "
-        f"the outline carried along lies on the linking faces to {motion['gap']:.1e} of the part's size",
+        f"{'the rulings lie' if loft else 'the outline carried along lies'} on the linking faces to "
+        f"{motion['gap']:.1e} of the part's size",
         f"{path.name}: cap {names[first]}: {how}",
         f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
         *lines_extra,
@@ -527,6 +570,9 @@ def sweep_module(path) -> types.ModuleType:
         """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
         points = np.asarray(points, dtype=float)
         xy = _coons(blocks[block], points[:, 0], points[:, 1])
+        if loft:  # along the rulings: the straight lines between the caps' maps
+            far = found["origins"][1] + _coons(second_blocks[block], points[:, 0], points[:, 1]) @ frame
+            return (1.0 - points[:, 2:]) * (origin + xy @ frame) + points[:, 2:] * far
         return moved(motion, origin + xy @ frame, points[:, 2])
 
     def notes(block_set):
