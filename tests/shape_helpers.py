@@ -359,3 +359,20 @@ def write_sweep_solid(kind: str, path) -> float:
     elif previous:
         gmsh.model.setCurrent(previous)
     return volume
+
+
+def prism_distance(path, nodes) -> float:
+    """Largest distance of ``nodes`` (N, 3) from the triangulated prism in ``path`` (its caps at
+    the z extremes, its outline the bottom cap's vertices in angle order): min of the distance
+    from the outline's segments in xy and from the nearer cap plane."""
+    import trimesh
+
+    V = trimesh.load(path).vertices
+    low, high = V[:, 2].min(), V[:, 2].max()
+    ring = V[np.abs(V[:, 2] - low) < 1e-9][:, :2]
+    ring = ring[np.hypot(ring[:, 0], ring[:, 1]) > 1e-9]
+    ring = ring[np.argsort(np.arctan2(ring[:, 1], ring[:, 0]))]
+    a, b, p = ring, np.roll(ring, -1, axis=0), nodes[:, None, :2]
+    t = np.clip(((p - a) * (b - a)).sum(-1) / ((b - a) ** 2).sum(-1), 0.0, 1.0)
+    across = np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=2).min(axis=1)
+    return float(np.minimum(across, np.minimum(abs(nodes[:, 2] - low), abs(nodes[:, 2] - high))).max())

@@ -10,7 +10,7 @@ import itertools
 import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam
-from shape_helpers import SWEEP_SOLIDS, enclosed_volume, write_sweep_solid
+from shape_helpers import SWEEP_SOLIDS, enclosed_volume, prism_distance, write_sweep_solid
 
 import meshgen
 from meshgen.geometry import cube
@@ -299,12 +299,43 @@ def test_a_concave_cap_that_would_fold_is_refused(run_cli, tmp_path):
     )
 
 
-def test_a_triangulated_cylinder_points_to_the_cad_route(run_cli, tmp_path):
-    """An STL cylinder (three sharp-edge patches: two caps and the side) is refused, the line
-    pointing to the CAD file and topology routes; nothing is written."""
+def test_a_triangulated_cone_points_to_the_cad_route(run_cli, tmp_path):
+    """An STL cone (two sharp-edge patches: no two planar caps) is refused, the line pointing to
+    the CAD file and topology routes; nothing is written."""
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    trimesh.creation.cone(radius=0.5, height=2.0, sections=64).export(tmp_path / "cone.stl")
+    refused(run_cli, tmp_path, "cone.stl", "splits into 2 patch(es)", "from their CAD file", "docs/topologies.md")
+
+
+@pytest.mark.parametrize("sections,blocks", [(64, 5), (6, 6)])
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_a_triangulated_prism_meshes_on_its_facets(tmp_path, sections, blocks, method):
+    """STL prisms by trimesh (a cylinder of 64 sections: an O-grid; a hexagonal prism: 6 blocks
+    round its centroid), nodes on the facets (to the STL's float32 rounding), volume against
+    trimesh's within 1 %, patches the sharp-edge split's."""
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    path = tmp_path / f"prism{sections}.stl"
+    trimesh.creation.cylinder(radius=0.5, height=2.0, sections=sections).export(path)
+    mesh = meshgen.mesh(str(path), (10, 5, 8), method=method)
+    assert len(mesh.blocks) == blocks
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    nodes = patch_nodes(mesh)
+    assert sorted(nodes) == [f"patch{k + 1}" for k in range(3 if sections == 64 else 8)]
+    assert prism_distance(path, np.concatenate(list(nodes.values()))) < 1e-6 * np.sqrt(1 + 1 + 4)
+    volume = trimesh.load(path).volume
+    assert sum(enclosed_volume(X) for X in mesh.blocks) == pytest.approx(volume, rel=1e-2)
+
+
+@needs_openfoam
+def test_a_triangulated_cylinder_passes_checkmesh(tmp_path):
     trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
     trimesh.creation.cylinder(radius=0.5, height=2.0, sections=64).export(tmp_path / "cylinder.stl")
-    refused(run_cli, tmp_path, "cylinder.stl", "splits into 3 patch(es)", "from its CAD file", "docs/topologies.md")
+    mesh = meshgen.mesh(str(tmp_path / "cylinder.stl"), (10, 5, 8), method="tfi")
+    mesh.write(tmp_path / "case", "openfoam", quality=False)
+    checked = check_mesh(tmp_path / "case")
+    assert checked["ok"], checked["log"][-2000:]
+    assert sorted(checked["patches"]) == ["patch1", "patch2", "patch3"]
 
 
 def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):

@@ -49,9 +49,10 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.geometry.shapes.assemble import CAD_FORMATS, content_hash, default_patch_type
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
+from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
 __all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
 
@@ -77,26 +78,32 @@ def _key(path: Path) -> tuple:
 def _read(path: Path) -> dict:
     key = _key(path)
     if key not in _READ:
-        _READ[key] = cad_sweep(path, content_hash([path], {}))
+        triangulated = path.suffix.lower() in TRIANGULATED_FORMATS
+        _READ[key] = read_surface_sweep(path) if triangulated else cad_sweep(path, content_hash([path], {}))
     return _READ[key]
 
 
 def is_sweep_file(spec) -> bool:
     """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
-    then meshed as a block set, or refused with a pointer to topology files)."""
-    if not isinstance(spec, (str, Path)) or Path(str(spec)).suffix.lower() not in CAD_FORMATS:
+    then meshed as a block set, or refused with a pointer to topology files), or a triangulated
+    surface that is a straight sweep (``sweep_stl``)."""
+    suffix = Path(str(spec)).suffix.lower() if isinstance(spec, (str, Path)) else ""
+    if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         return False
     path = Path(str(spec))
     if not path.is_file():
         return False
-    try:
-        return _read(path)["kind"] != "six"
+    try:  # a triangulated surface only when a sweep: else its own reader says what it is
+        return _read(path)["kind"] == "sweep" if suffix in TRIANGULATED_FORMATS else _read(path)["kind"] != "six"
     except GeometryError:
         return False  # the single-block reader reports what is wrong with the file
 
 
-def _spline(fractions: np.ndarray, points: np.ndarray):
-    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline), t in [0, 1]."""
+def _spline(fractions: np.ndarray, points: np.ndarray, linear: bool = False):
+    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline; ``linear``: the
+    polyline, a triangulated outline's own edges), t in [0, 1]."""
+    if linear:
+        return lambda t: np.stack([np.interp(np.asarray(t, dtype=float), fractions, p) for p in points.T], axis=1)
     from scipy.interpolate import CubicSpline
 
     spline = CubicSpline(fractions, points, axis=0)
@@ -391,7 +398,7 @@ def _cut_cap(path: Path, found: dict, summary: str):
     names = found["names"]
     loft = found["kind"] == "loft"
     loop = found["loops"][0] if loft else found["curves"]
-    curves = [_spline(c["fractions"], c["points"]) for c in loop]
+    curves = [_spline(c["fractions"], c["points"], found.get("linear", False)) for c in loop]
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
     first = found["caps"][0]
@@ -415,7 +422,7 @@ def _cut_cap(path: Path, found: dict, summary: str):
                 f"{summary}; a loft whose caps are no O-grid's (1, 2 or 4 curves) nor all corners: {TOPOLOGY_HINT}"
             )
         blocks, sides_of, interfaces = cut(curves, faces)
-        second_blocks = cut([_spline(c["fractions"], c["points"]) for c in other], faces)[0]
+        second_blocks = cut([_spline(c["fractions"], c["points"], found.get("linear", False)) for c in other], faces)[0]
         how = (
             f"lofted to cap {names[found['caps'][1]]}: both cut alike, "
             + (
@@ -429,7 +436,7 @@ def _cut_cap(path: Path, found: dict, summary: str):
         counts = {name: ((1, 0, 2) if name.startswith("ring") else (0, 0, 2)) for name in blocks}
         fixed = False
     elif holes:
-        hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
+        hole = [_spline(c["fractions"], c["points"], found.get("linear", False)) for c in holes[0]]
         blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]], both_smooth)
         if both_smooth:
             how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
