@@ -115,17 +115,24 @@ def _boundary_edges(triangles: np.ndarray) -> np.ndarray:
 
 
 def _loops(edges: np.ndarray) -> list[np.ndarray]:
-    """The closed vertex loops (each (n,), not repeating its start) that the directed ``edges`` chain into."""
-    following = dict(zip(edges[:, 0].tolist(), edges[:, 1].tolist()))
-    loops = []
-    while following:  # one step per outline vertex: a loop over curves' points, as a CAD curve's
-        start = next(iter(following))
-        loop = [start]
-        while following[loop[-1]] != start:
-            loop.append(following.pop(loop[-1]))
-        following.pop(loop[-1])
-        loops.append(np.array(loop))
-    return loops
+    """The closed vertex loops (each (n,), not repeating its start) that the directed ``edges``
+    (E, 2) chain into: each loop cut before its smallest vertex and ranked by pointer doubling."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    ids, local = np.unique(edges, return_inverse=True)
+    local = local.reshape(-1, 2)
+    n = len(ids)
+    following = np.empty(n, dtype=np.int64)
+    following[local[:, 0]] = local[:, 1]
+    _, component = connected_components(coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(n, n)))
+    starts = np.full(component.max() + 1, n)
+    np.minimum.at(starts, component, np.arange(n))
+    last = following == starts[component]  # the vertex before each loop's start ends it
+    jump, rank = np.where(last, np.arange(n), following), np.where(last, 0, 1)
+    for _ in range(int(np.ceil(np.log2(max(n, 2)))) + 1):  # rounds of doubling, not vertices
+        rank, jump = rank + rank[jump], jump[jump]
+    return [ids[np.flatnonzero(component == c)[np.argsort(-rank[component == c])]] for c in range(len(starts))]
 
 
 def _edge_patches(T, labels, cap: int) -> dict:
