@@ -265,7 +265,7 @@ def voxel_surface(cells):
     return vertices, triangles, np.concatenate([normals, normals])
 
 
-SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube")
+SWEEP_SOLIDS = ("cylinder", "hole", "fillet", "pentagon", "wedge", "bend", "bent_pentagon", "tube", "wing", "loft")
 
 
 def write_sweep_solid(kind: str, path) -> float:
@@ -276,8 +276,11 @@ def write_sweep_solid(kind: str, path) -> float:
     1.5 along z), ``wedge`` (gmsh's right-angled wedge 1 x 1, 2 long in z), ``bend`` (a disk of
     radius 0.5 centred 2 from the z axis turned 90 degrees about it) or ``bent_pentagon`` (a regular
     pentagon of circumradius 0.5 centred 2 from the z axis turned 120 degrees about it) or
-    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis). Returns OCC's
-    volume."""
+    ``tube`` (a square tube: a 1 x 1 x 3 box less a 0.4 x 0.4 one along its axis) or ``wing`` (a
+    NACA 0012 section of chord 1 with a sharp trailing edge: two splines through 61 points each,
+    upper and lower, meeting with a vertical tangent at the leading edge; extruded 1 along z) or
+    ``loft`` (a ruled loft, ``addThruSections``, from a circle of radius 0.5 at z = 0, four arcs
+    from -45 degrees, to a 0.8 x 0.8 square at z = 2, its corners at the arcs' ends' angles). Returns OCC's volume."""
     import gmsh
 
     started = not gmsh.isInitialized()
@@ -312,6 +315,27 @@ def write_sweep_solid(kind: str, path) -> float:
         solid = occ.addWedge(0, 0, 0, 1, 1, 2)
     elif kind == "tube":
         solid = occ.cut([(3, occ.addBox(0, 0, 0, 1, 1, 3))], [(3, occ.addBox(0.3, 0.3, 0, 0.4, 0.4, 3))])[0][0][1]
+    elif kind == "wing":
+        x = 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, 61)))[::-1]  # trailing edge to leading edge
+        y = 0.6 * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x**2 + 0.2843 * x**3 - 0.1036 * x**4)
+        upper = [occ.addPoint(a, b, 0) for a, b in zip(x, y)]
+        lower = [upper[-1]] + [occ.addPoint(a, -b, 0) for a, b in zip(x[::-1][1:-1], y[::-1][1:-1])] + [upper[0]]
+        down = np.zeros((61, 3))  # the tangents: none but a vertical one at the leading edge
+        down[-1, 1] = -1.0
+        curves = [
+            occ.addSpline(upper, tangents=down.ravel().tolist()),
+            occ.addSpline(lower, tangents=down[::-1].ravel().tolist()),
+        ]
+        surface = occ.addPlaneSurface([occ.addCurveLoop(curves)])
+        solid = next(tag for dim, tag in occ.extrude([(2, surface)], 0, 0, 1.0) if dim == 3)
+    elif kind == "loft":  # the circle in four arcs, from -45 degrees, as the square's corners
+        angles = np.pi / 4 * (2 * np.arange(4) - 1)
+        ring = [occ.addPoint(0.5 * np.cos(a), 0.5 * np.sin(a), 0) for a in angles]
+        centre = occ.addPoint(0, 0, 0)
+        circle = occ.addCurveLoop([occ.addCircleArc(ring[k], centre, ring[(k + 1) % 4]) for k in range(4)])
+        corners = [occ.addPoint(0.4 * np.sign(np.cos(a)), 0.4 * np.sign(np.sin(a)), 2) for a in angles]
+        square = occ.addCurveLoop([occ.addLine(corners[k], corners[(k + 1) % 4]) for k in range(4)])
+        solid = next(tag for dim, tag in occ.addThruSections([circle, square], makeSolid=True, makeRuled=True) if dim == 3)
     elif kind == "bend":
         disk = occ.addDisk(2, 0, 0, 0.5, 0.5, zAxis=[0, 1, 0])
         solid = next(tag for dim, tag in occ.revolve([(2, disk)], 0, 0, 0, 0, 0, 1, np.pi / 2) if dim == 3)
@@ -335,3 +359,20 @@ def write_sweep_solid(kind: str, path) -> float:
     elif previous:
         gmsh.model.setCurrent(previous)
     return volume
+
+
+def prism_distance(path, nodes) -> float:
+    """Largest distance of ``nodes`` (N, 3) from the triangulated prism in ``path`` (its caps at
+    the z extremes, its outline the bottom cap's vertices in angle order): min of the distance
+    from the outline's segments in xy and from the nearer cap plane."""
+    import trimesh
+
+    V = trimesh.load(path).vertices
+    low, high = V[:, 2].min(), V[:, 2].max()
+    ring = V[np.abs(V[:, 2] - low) < 1e-9][:, :2]
+    ring = ring[np.hypot(ring[:, 0], ring[:, 1]) > 1e-9]
+    ring = ring[np.argsort(np.arctan2(ring[:, 1], ring[:, 0]))]
+    a, b, p = ring, np.roll(ring, -1, axis=0), nodes[:, None, :2]
+    t = np.clip(((p - a) * (b - a)).sum(-1) / ((b - a) ** 2).sum(-1), 0.0, 1.0)
+    across = np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=2).min(axis=1)
+    return float(np.minimum(across, np.minimum(abs(nodes[:, 2] - low), abs(nodes[:, 2] - high))).max())

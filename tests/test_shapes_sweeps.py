@@ -10,7 +10,7 @@ import itertools
 import numpy as np
 import pytest
 from openfoam_helpers import check_mesh, needs_openfoam
-from shape_helpers import SWEEP_SOLIDS, enclosed_volume, write_sweep_solid
+from shape_helpers import SWEEP_SOLIDS, enclosed_volume, prism_distance, write_sweep_solid
 
 import meshgen
 from meshgen.geometry import cube
@@ -20,9 +20,15 @@ gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python packag
 
 # about 20 cells across each cap (cylinder: N + 2M; hole: 2M + the hole; fillet: 2M + 2N; n-gons: 2N)
 DIMS = {"cylinder": (10, 5, 6), "hole": (10, 5, 6), "fillet": (7, 3, 6), "pentagon": (10, 1, 6), "wedge": (10, 1, 6)}
-DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6)}
+DIMS |= {"bend": (10, 5, 12), "bent_pentagon": (10, 1, 12), "tube": (20, 6, 6), "wing": (10, 5, 6), "loft": (10, 5, 10)}
 FACES = {"cylinder": 3, "hole": 4, "fillet": 7, "pentagon": 7, "wedge": 5, "bend": 3, "bent_pentagon": 7, "tube": 10}
+FACES |= {"wing": 4, "loft": 6}
 BLOCKS = {"cylinder": 5, "hole": 4, "fillet": 15, "pentagon": 5, "wedge": 3, "bend": 5, "bent_pentagon": 5, "tube": 4}
+BLOCKS |= {"wing": 9, "loft": 5}
+# the NACA 0012's sharp trailing edge: its angle 2 atan(-y'(1)) (thickness 0.12, closed-edge
+# coefficients) bounds the scaled Jacobian of the one cell there: sin of it, 0.2847
+TE_ANGLE = 2 * np.arctan(-0.6 * (0.2969 / 2 - 0.1260 - 2 * 0.3516 + 3 * 0.2843 - 4 * 0.1036))
+SJ_MIN = {kind: 0.4 for kind in SWEEP_SOLIDS} | {"wing": 0.95 * np.sin(TE_ANGLE)}
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +77,7 @@ def test_a_swept_solid_meshes_on_its_cad_faces(solids, kind, method):
     assert len(mesh.blocks) == BLOCKS[kind]
     report = mesh.report()
     assert report["inverted"]["count"] == 0
-    assert report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    assert report["metrics"]["scaled_jacobian"]["min"] >= SJ_MIN[kind]
     faces, sides, length = cad_faces(path)
     nodes = patch_nodes(mesh)
     assert sorted(nodes) == sorted(f"face{k + 1}" for k in range(FACES[kind])) and len(faces) == FACES[kind]
@@ -80,6 +86,81 @@ def test_a_swept_solid_meshes_on_its_cad_faces(solids, kind, method):
     total = sum(enclosed_volume(X) for X in mesh.blocks)
     assert abs(total - volume) < 1e-2 * volume
     gmsh.model.remove()
+
+
+def test_the_wing_holds_its_trailing_edge_in_one_cell(solids):
+    """The NACA 0012 wing: the worst scaled Jacobian is the trailing edge's cell, within 5 % of
+    sin(TE angle) (its edges are chords, not the tangents), everywhere else >= 0.4; the elliptic method keeps
+    the TFI mesh and says why."""
+    path, _ = solids["wing"]
+    mesh = meshgen.mesh(str(path), DIMS["wing"], method="tfi")
+    assert np.sin(TE_ANGLE) == pytest.approx(0.2847, abs=1e-4)
+    assert mesh.report()["metrics"]["scaled_jacobian"]["min"] == pytest.approx(np.sin(TE_ANGLE), rel=0.05)
+    te = mesh.blocks[list(mesh.geometry.names).index("te")]
+    others = [X for name, X in zip(mesh.geometry.names, mesh.blocks) if name != "te"]
+    assert min(corner_jacobian(X) for X in others) >= 0.4 and corner_jacobian(te) < 0.4
+    kept = meshgen.mesh(str(path), DIMS["wing"], method="elliptic")
+    assert all(np.array_equal(a, b) for a, b in zip(kept.blocks, mesh.blocks))
+    assert any("the TFI mesh is kept" in line for line in kept.notes)
+
+
+def corner_jacobian(X) -> float:
+    """The smallest scaled Jacobian over the 8 corners of the hexahedra of the block ``X`` (I, J, K, 3)."""
+    worst = np.inf
+    for corner in itertools.product((0, 1), repeat=3):
+        base = X[tuple(slice(c, X.shape[a] - 1 + c) for a, c in enumerate(corner))]
+        edges = []
+        for axis in range(3):
+            other = tuple(
+                slice(1 - c, X.shape[a] - c) if a == axis else slice(c, X.shape[a] - 1 + c) for a, c in enumerate(corner)
+            )
+            edge = (X[other] - base) * (1 - 2 * corner[axis])  # along the axis, from either end
+            edges.append(edge / np.linalg.norm(edge, axis=-1, keepdims=True))
+        worst = min(worst, float(np.einsum("...i,...i", np.cross(edges[0], edges[1]), edges[2]).min()))
+    return worst
+
+
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_the_loft_joins_the_circles_points_to_the_squares_corners(solids, method):
+    """The circle-to-square loft: both caps an O-grid, the ring blocks' corners at the circle's
+    points at -45, 45, 135, 225 degrees (radius 0.5, z = 0) and at the square's corners (0.4, z = 2),
+    joined by straight rulings; mid-way the ring's outer nodes are the average of the caps'."""
+    path, _ = solids["loft"]
+    mesh = meshgen.mesh(str(path), (8, 4, 6), method=method)
+    rings = [X for name, X in zip(mesh.geometry.names, mesh.blocks) if name.startswith("ring")]
+    assert len(rings) == 4 and "core" in mesh.geometry.names
+    bottom = np.array([X[-1, 0, 0] for X in rings])
+    top = np.array([X[-1, 0, -1] for X in rings])
+    angles = np.degrees(np.arctan2(bottom[:, 1], bottom[:, 0]))
+    assert sorted(np.round(np.mod(angles + 45, 360), 6)) == [0.0, 90.0, 180.0, 270.0]
+    assert np.allclose(np.hypot(bottom[:, 0], bottom[:, 1]), 0.5, atol=1e-9) and np.allclose(bottom[:, 2], 0.0, atol=1e-12)
+    assert np.allclose(np.abs(top[:, :2]), 0.4, atol=1e-9) and np.allclose(top[:, 2], 2.0, atol=1e-12)
+    assert np.allclose(np.sign(top[:, :2]), np.sign(bottom[:, :2]))  # each corner over its own circle point
+    middle = np.array([X[-1, :, 3] for X in rings])
+    ends = 0.5 * (np.array([X[-1, :, 0] for X in rings]) + np.array([X[-1, :, -1] for X in rings]))
+    assert np.abs(middle - ends).max() < 1e-12
+
+
+def test_a_cone_frustum_is_a_loft_of_two_circles(tmp_path):
+    """A frustum (radii 0.5 and 0.3, height 2): its side is ruled, so it meshes as a loft; its
+    volume against pi h (r0^2 + r0 r1 + r1^2) / 3, the O-grid's polygons short of it by their
+    chords' sagitta (under 1 %)."""
+    write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
+    mesh = meshgen.mesh(str(tmp_path / "cone.step"), (10, 5, 8), method="tfi")
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    exact = np.pi * 2.0 * (0.25 + 0.15 + 0.09) / 3.0
+    assert sum(enclosed_volume(X) for X in mesh.blocks) == pytest.approx(exact, rel=1e-2)
+    assert any("a loft" in line for line in mesh.notes)
+
+
+def test_the_loft_says_it_is_a_loft(run_cli, solids):
+    path, _ = solids["loft"]
+    result = run_cli("mesh", "-g", path, "--method", "tfi", "--dims", "4", "2", "3", "-o", "l.vtu")
+    assert result.returncode == 0, result.stderr
+    said = [line for line in result.stdout.splitlines() if line.startswith("loft.step:")]
+    assert "a loft: planar, parallel caps, ruled linking faces" in said[0]
+    assert "both cut alike, an O-grid of 5 blocks" in said[1]
 
 
 @pytest.mark.parametrize("kind,dims", [("fillet", (14, 6, 4)), ("tube", (30, 8, 4))])
@@ -175,8 +256,12 @@ def write_solid(path, make):
 
 
 def test_a_solid_that_is_no_sweep_points_to_topology_files(run_cli, tmp_path):
-    write_solid(tmp_path / "cone.step", lambda occ: occ.addCone(0, 0, 0, 0, 0, 2, 0.5, 0.3))
-    refused(run_cli, tmp_path, "cone.step", "3 faces with (", "not of one area", "docs/topologies.md")
+    def bulge(occ):  # a smooth (not ruled) loft through three circles
+        circles = [occ.addCurveLoop([occ.addCircle(0, 0, z, r)]) for z, r in ((0, 0.5), (1, 0.7), (2, 0.3))]
+        occ.addThruSections(circles, makeSolid=True, makeRuled=False)
+
+    write_solid(tmp_path / "bulge.step", bulge)
+    refused(run_cli, tmp_path, "bulge.step", "3 faces with (", "not of one area", "docs/topologies.md")
     write_solid(tmp_path / "ball.step", lambda occ: occ.addSphere(0, 0, 0, 1.0))
     refused(run_cli, tmp_path, "ball.step", "1 faces with (", "docs/topologies.md")
 
@@ -212,6 +297,45 @@ def test_a_concave_cap_that_would_fold_is_refused(run_cli, tmp_path):
         "folds in block(s) quad",
         "docs/topologies.md",
     )
+
+
+def test_a_triangulated_cone_points_to_the_cad_route(run_cli, tmp_path):
+    """An STL cone (two sharp-edge patches: no two planar caps) is refused, the line pointing to
+    the CAD file and topology routes; nothing is written."""
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    trimesh.creation.cone(radius=0.5, height=2.0, sections=64).export(tmp_path / "cone.stl")
+    refused(run_cli, tmp_path, "cone.stl", "splits into 2 patch(es)", "from their CAD file", "docs/topologies.md")
+
+
+@pytest.mark.parametrize("sections,blocks", [(64, 5), (6, 6)])
+@pytest.mark.parametrize("method", ["tfi", "elliptic"])
+def test_a_triangulated_prism_meshes_on_its_facets(tmp_path, sections, blocks, method):
+    """STL prisms by trimesh (a cylinder of 64 sections: an O-grid; a hexagonal prism: 6 blocks
+    round its centroid), nodes on the facets (to the STL's float32 rounding), volume against
+    trimesh's within 1 %, patches the sharp-edge split's."""
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    path = tmp_path / f"prism{sections}.stl"
+    trimesh.creation.cylinder(radius=0.5, height=2.0, sections=sections).export(path)
+    mesh = meshgen.mesh(str(path), (10, 5, 8), method=method)
+    assert len(mesh.blocks) == blocks
+    report = mesh.report()
+    assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    nodes = patch_nodes(mesh)
+    assert sorted(nodes) == [f"patch{k + 1}" for k in range(3 if sections == 64 else 8)]
+    assert prism_distance(path, np.concatenate(list(nodes.values()))) < 1e-6 * np.sqrt(1 + 1 + 4)
+    volume = trimesh.load(path).volume
+    assert sum(enclosed_volume(X) for X in mesh.blocks) == pytest.approx(volume, rel=1e-2)
+
+
+@needs_openfoam
+def test_a_triangulated_cylinder_passes_checkmesh(tmp_path):
+    trimesh = pytest.importorskip("trimesh", reason="STL files need trimesh")
+    trimesh.creation.cylinder(radius=0.5, height=2.0, sections=64).export(tmp_path / "cylinder.stl")
+    mesh = meshgen.mesh(str(tmp_path / "cylinder.stl"), (10, 5, 8), method="tfi")
+    mesh.write(tmp_path / "case", "openfoam", quality=False)
+    checked = check_mesh(tmp_path / "case")
+    assert checked["ok"], checked["log"][-2000:]
+    assert sorted(checked["patches"]) == ["patch1", "patch2", "patch3"]
 
 
 def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):

@@ -16,7 +16,8 @@ Two optional plugin hooks: ``mesh_elliptic(block_set, tol, max_iter, progress) -
 makes the plugin's ``elliptic`` mesh in place of ``elliptic_blocks`` (the airfoil's: near-wall
 layers marched, the rest solved), and ``notes(block_set) -> [lines]`` adds lines said before the
 work (the airfoil's wall spacing); a dict ``elliptic_options`` is passed on to the elliptic call
-(a swept CAD solid's ``slide_section``).
+(a swept CAD solid's ``slide_section``), except ``keep_tfi`` (true: the elliptic mesh is the TFI
+mesh; the plugin's notes say why).
 """
 
 from __future__ import annotations
@@ -235,7 +236,10 @@ def mesh_block_set(request, spec: str, say, progress) -> Mesh:
                 module = plugin_module(spec, request.dims)[0]
                 elliptic = getattr(module, "mesh_elliptic", None) or elliptic_blocks
                 options = getattr(module, "elliptic_options", {})  # e.g. a swept CAD cap's: slide_section
-                Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback, **options)
+                if options.get("keep_tfi"):  # the plugin's notes say why (a swept cap's sharp trailing edge)
+                    Xs, info = tfi_blocks(block_set), {"solver": "none: the TFI mesh is kept", "converged": True}
+                else:
+                    Xs, info = elliptic(block_set, tol=request.tol, max_iter=request.max_iter, progress=callback, **options)
             timings.append(time.perf_counter() - start)
     if request.first_cell:
         asked = parse_first_cell(request.first_cell, block_set)

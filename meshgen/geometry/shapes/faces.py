@@ -36,6 +36,11 @@ __all__ = [
 ]
 
 FACE_NAMES = cube.face_names(3)
+SWEEP_HINT = (
+    "a straight prism, two planar caps and sides along one direction, is cut into blocks; bends, lofts and other "
+    "sweeps from their CAD file: STEP, IGES or BREP, docs/shapes-from-files.md; else describe its blocks in a "
+    "topology file, docs/topologies.md"
+)
 OPPOSITE = {name: name[:-1] + ("1" if name.endswith("0") else "0") for name in FACE_NAMES}
 
 
@@ -44,7 +49,8 @@ def _check_block(corner_sets: list[set], names, what: str) -> None:
     if len(corner_sets) != 6 or any(c != 4 for c in counts):
         listed = ", ".join(f"{n}: {c}" for n, c in zip(names, counts))
         raise GeometryError(
-            f"{what} splits into {len(corner_sets)} patch(es) with corners ({listed}); a block needs six patches of four corners each"
+            f"{what} splits into {len(corner_sets)} patch(es) with corners ({listed}); a block needs six patches of four "
+            f"corners each ({SWEEP_HINT})"
         )
     everything = set().union(*corner_sets)
     in_patches = {v: sum(v in c for c in corner_sets) for v in everything}

@@ -25,7 +25,16 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
   midpoint-subdivided, so no block has a corner at a smooth joint;
 - a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them; a
-  loop of n sharp corners around a hole of as many (a square tube): a ring of n blocks.
+  loop of n sharp corners around a hole of as many (a square tube): a ring of n blocks;
+- a loop of 1 or 2 curves with one sharp corner (an airfoil's trailing edge): one block ``te``
+  holds the whole corner (a spoke into it would halve its angle in two cells), the rest a ring of
+  six blocks around a core of two (``_wedge_blocks``); the elliptic method keeps the TFI mesh
+  (``keep_tfi``: Winslow smoothing turns the corner's sliver cells inside out).
+
+A loft (``sweep_read``: planar parallel caps whose outlines pair curve by curve on ruled linking
+faces, a circle to a square) cuts both caps alike (O-grids, or midpoint subdivision of two loops
+of corners); each block is the straight blend of its two cap maps, so its outer faces are the
+rulings, which lie on the linking faces.
 
 Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
@@ -40,15 +49,22 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError
-from meshgen.geometry.shapes.assemble import CAD_FORMATS, content_hash, default_patch_type
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
+from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
-__all__ = ["BULGE", "CORE", "is_sweep_file", "sweep_module"]
+__all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
 
 CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
 BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
+WEDGE_ANGLE = np.radians(100.0)  # a sharp-cornered loop's te block: its angles at U and L
+WEDGE_DEPTH = 0.5  # and the rest's core corners: this share of half the distance U to L in
 RING = 0.6  # a ring-and-core cap's core corners: this share of the way from the centroid to the loop's
+WEDGE_ELLIPTIC = (
+    "{name}: elliptic: the TFI mesh is kept (Winslow smoothing pulls the sliver cells at the sharp corner "
+    "inside out: 2628 of the 3600 cells of a NACA 0012 wing at 10 5 6)"
+)
 _READ: dict = {}
 _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
@@ -62,26 +78,32 @@ def _key(path: Path) -> tuple:
 def _read(path: Path) -> dict:
     key = _key(path)
     if key not in _READ:
-        _READ[key] = cad_sweep(path, content_hash([path], {}))
+        triangulated = path.suffix.lower() in TRIANGULATED_FORMATS
+        _READ[key] = read_surface_sweep(path) if triangulated else cad_sweep(path, content_hash([path], {}))
     return _READ[key]
 
 
 def is_sweep_file(spec) -> bool:
     """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
-    then meshed as a block set, or refused with a pointer to topology files)."""
-    if not isinstance(spec, (str, Path)) or Path(str(spec)).suffix.lower() not in CAD_FORMATS:
+    then meshed as a block set, or refused with a pointer to topology files), or a triangulated
+    surface that is a straight sweep (``sweep_stl``)."""
+    suffix = Path(str(spec)).suffix.lower() if isinstance(spec, (str, Path)) else ""
+    if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         return False
     path = Path(str(spec))
     if not path.is_file():
         return False
-    try:
-        return _read(path)["kind"] != "six"
+    try:  # a triangulated surface only when a sweep: else its own reader says what it is
+        return _read(path)["kind"] == "sweep" if suffix in TRIANGULATED_FORMATS else _read(path)["kind"] != "six"
     except GeometryError:
         return False  # the single-block reader reports what is wrong with the file
 
 
-def _spline(fractions: np.ndarray, points: np.ndarray):
-    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline), t in [0, 1]."""
+def _spline(fractions: np.ndarray, points: np.ndarray, linear: bool = False):
+    """The curve t -> (N, 2) through ``points`` at ``fractions`` (cubic spline; ``linear``: the
+    polyline, a triangulated outline's own edges), t in [0, 1]."""
+    if linear:
+        return lambda t: np.stack([np.interp(np.asarray(t, dtype=float), fractions, p) for p in points.T], axis=1)
     from scipy.interpolate import CubicSpline
 
     spline = CubicSpline(fractions, points, axis=0)
@@ -127,12 +149,14 @@ def _midpoint_blocks(curves, faces):
     return blocks, patches, interfaces
 
 
-def _ogrid_blocks(curves, faces):
+def _ogrid_blocks(curves, faces, corners=None):
     """A core and four ring blocks (``ring0`` .. ``ring3`` counterclockwise, xi from the core
-    outwards), the loop cut at four points a quarter of it apart (at the curves' ends)."""
+    outwards), the loop cut at four points a quarter of it apart (at the curves' ends); the core's
+    corners ``corners`` (4, 2), else ``CORE`` of the way from the origin to the cuts."""
     pieces = _quarters(curves)
     outer = [_piece(curves[c], a, b) for c, a, b in pieces]
-    corners = [CORE * w(np.zeros(1))[0] for w in outer]
+    if corners is None:
+        corners = [CORE * w(np.zeros(1))[0] for w in outer]
     core_sides = []
     for k in range(4):
         a, b = corners[k], corners[(k + 1) % 4]
@@ -261,6 +285,99 @@ def _ring_blocks(curves, faces, sharp):
     return blocks, patches, interfaces
 
 
+def _loop_curve(curves, lengths):
+    """The loop as one curve s -> (N, 2), s in [0, 1] by the curves' lengths ``lengths`` from the
+    start of curve 0 (s = 1 is s = 0 again); (the curve, each curve's start s (n + 1,))."""
+    starts = np.concatenate([[0.0], np.cumsum(lengths)]) / float(np.sum(lengths))
+
+    def along(s):
+        s = np.mod(np.asarray(s, dtype=float), 1.0)
+        k = np.clip(np.searchsorted(starts, s, side="right") - 1, 0, len(curves) - 1)
+        out = np.empty((len(s), 2))
+        for j, curve in enumerate(curves):  # one call per CAD curve
+            mask = k == j
+            out[mask] = curve((s[mask] - starts[j]) / (starts[j + 1] - starts[j]))
+        return out
+
+    return along, starts
+
+
+def _wedge_blocks(curves, faces, lengths):
+    """A loop of 1 or 2 curves with one sharp corner T at the start of curve 0 (a trailing edge)
+    and otherwise smooth: one block ``te`` holds the whole corner (T; U and L half way to the nose
+    P either way; Q where lines from U and L at ``WEDGE_ANGLE`` to the loop meet); the rest, a
+    D-shaped loop U P L Q, a ring of six blocks (ring0..ring5: U-P1, P1-P, P-P2, P2-L along the
+    loop, L-Q and Q-U against ``te``) around a core of two quadrilaterals (core0 above, core1
+    below the line from Q's core corner to P's). The ring is ``WEDGE_DEPTH`` of half the distance
+    U to L deep: its core corners lie that far in along the corners' bisectors, P's along the
+    chord P-T; P1 and P2 are the loop's points nearest the core corners half as far off the chord."""
+    along, starts = _loop_curve(curves, lengths)
+    nose = float(starts[1]) if len(curves) == 2 else 0.5
+    s_u, s_l = 0.5 * nose, 0.5 * (1.0 + nose)
+    tangent = {}
+    for s in (s_u, s_l):  # unit tangents, counterclockwise
+        step = np.diff(along(np.array([s - 1e-6, s + 1e-6])), axis=0)[0]
+        tangent[s] = step / np.linalg.norm(step)
+    T, U, P, L = along(np.array([0.0, s_u, nose, s_l]))
+    to_q = [_turned(-tangent[s_u], -WEDGE_ANGLE), _turned(tangent[s_l], WEDGE_ANGLE)]
+    steps = np.linalg.lstsq(np.stack([to_q[0], -to_q[1]], axis=1), L - U, rcond=None)[0]
+    Q = 0.5 * (U + steps[0] * to_q[0] + L + steps[1] * to_q[1])
+    depth = WEDGE_DEPTH * 0.5 * np.linalg.norm(U - L)
+    chord = (T - P) / np.linalg.norm(T - P)
+    up = _turned(chord, np.pi / 2)  # towards U's side
+    core_p = P + depth * chord
+    core_1, core_2 = core_p + 0.5 * depth * up, core_p - 0.5 * depth * up
+    s = np.linspace(0.0, 1.0, 8193)
+    dense = along(s)
+    s_1 = float(s[np.argmin(np.where((s > s_u) & (s < nose), np.linalg.norm(dense - core_1, axis=1), np.inf))])
+    s_2 = float(s[np.argmin(np.where((s > nose) & (s < s_l), np.linalg.norm(dense - core_2, axis=1), np.inf))])
+    core_u = U + depth * _unit(tangent[s_u] + to_q[0])
+    core_l = L + depth * _unit(-tangent[s_l] + to_q[1])
+    core_q = Q - depth * chord
+    cuts = [U, along(np.array([s_1]))[0], P, along(np.array([s_2]))[0], L, Q]
+    corners = [core_u, core_1, core_p, core_2, core_l, core_q]
+    span = [(s_u, s_1), (s_1, nose), (nose, s_2), (s_2, s_l)]
+    outer = [(lambda t, a=a, b=b: along(a + np.asarray(t, dtype=float) * (b - a))) for a, b in span]
+    outer += [_line(L, Q), _line(Q, U)]
+    blocks, patches, interfaces = {}, {}, []
+    for k in range(6):
+        name, after = f"ring{k}", (k + 1) % 6
+        blocks[name] = (
+            _line(corners[k], corners[after]),
+            outer[k],
+            _line(corners[k], cuts[k]),
+            _line(corners[after], cuts[after]),
+        )
+        interfaces.append((name, "eta1", f"ring{after}", "eta0"))
+        if k < 4:
+            patches[name] = {"xi1": faces[0] if k < 2 else faces[-1]}
+    blocks["core0"] = _quad(core_q, core_u, core_1, core_p)
+    blocks["core1"] = _quad(core_p, core_2, core_l, core_q)
+    blocks["te"] = (lambda t: along(1.0 - np.asarray(t, dtype=float) * (1.0 - s_l)), _line(U, Q),
+                    lambda t: along(np.asarray(t, dtype=float) * s_u), _line(L, Q))  # fmt: skip
+    patches["te"] = {"xi0": faces[-1], "eta0": faces[0]}
+    interfaces += [
+        ("core0", "eta0", "ring5", "xi0"), ("core0", "xi1", "ring0", "xi0"), ("core0", "eta1", "ring1", "xi0"),
+        ("core0", "xi0", "core1", "xi0"), ("core1", "eta0", "ring2", "xi0"), ("core1", "xi1", "ring3", "xi0"),
+        ("core1", "eta1", "ring4", "xi0"), ("te", "xi1", "ring5", "xi1"), ("te", "eta1", "ring4", "xi1"),
+    ]  # fmt: skip
+    return blocks, patches, interfaces
+
+
+def _quad(a, b, c, d):
+    """The straight sides of the quadrilateral a (xi, eta = 0, 0), b (1, 0), c (1, 1), d (0, 1)."""
+    return _line(a, d), _line(b, c), _line(a, b), _line(d, c)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _turned(v: np.ndarray, angle: float) -> np.ndarray:
+    """(2,) ``v`` turned counterclockwise by ``angle`` (radians)."""
+    return np.array([np.cos(angle) * v[0] - np.sin(angle) * v[1], np.sin(angle) * v[0] + np.cos(angle) * v[1]])
+
+
 def _folded(blocks) -> list[str]:
     """The blocks whose cap map folds: a cell of its 16 x 16 sample grid with no positive area."""
     t = np.linspace(0.0, 1.0, 17)
@@ -274,26 +391,18 @@ def _folded(blocks) -> list[str]:
     return folded
 
 
-def sweep_module(path) -> types.ModuleType:
-    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
-    (path, size, modification time). GeometryError (one line) when the solid is no sweep
-    this meshes."""
-    path = Path(path)
-    key = _key(path)
-    if key in _MODULES:
-        return _MODULES[key]
-    found = _read(path)
-    summary = f"{path}: the solid has {found['summary']}"
-    if found["kind"] == "six":
-        raise GeometryError(f"{summary}: one block, not a sweep")
-    if found["kind"] != "sweep":
-        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
+def _cut_cap(path: Path, found: dict, summary: str):
+    """The first cap's blocks by the scheme its loop takes (module docstring), and the second cap's
+    for a loft: (blocks, second cap's blocks or None, block sides on CAD faces, interfaces, what
+    was done, the --dims meaning, per block the --dims axes it counts, elliptic options, lines)."""
     names = found["names"]
-    loop = found["curves"]
-    curves = [_spline(c["fractions"], c["points"]) for c in loop]
+    loft = found["kind"] == "loft"
+    loop = found["loops"][0] if loft else found["curves"]
+    curves = [_spline(c["fractions"], c["points"], found.get("linear", False)) for c in loop]
     faces = [c["face"] for c in loop]
     sharp = [not c["smooth"] for c in loop]
-    first, second = found["caps"]
+    first = found["caps"][0]
+    second_blocks = None
     options, lines_extra, fixed = {}, (), True
     holes = found.get("holes", [])
     hole_sharp = [not c["smooth"] for c in holes[0]] if holes else []
@@ -305,8 +414,29 @@ def sweep_module(path) -> types.ModuleType:
             f"around a smooth hole of 1, 2 or 4 curves, or loops of as many sharp corners, are cut into blocks yet: "
             f"{TOPOLOGY_HINT}"
         )
-    if holes:
-        hole = [_spline(c["fractions"], c["points"]) for c in holes[0]]
+    if loft:  # both caps cut alike: an O-grid each, or midpoint subdivision if both have only corners
+        other = found["loops"][1]
+        cut = _ogrid_blocks if len(loop) in (1, 2, 4) else _midpoint_blocks
+        if cut is _midpoint_blocks and not (all(sharp) and not any(c["smooth"] for c in other)):
+            raise GeometryError(
+                f"{summary}; a loft whose caps are no O-grid's (1, 2 or 4 curves) nor all corners: {TOPOLOGY_HINT}"
+            )
+        blocks, sides_of, interfaces = cut(curves, faces)
+        second_blocks = cut([_spline(c["fractions"], c["points"], found.get("linear", False)) for c in other], faces)[0]
+        how = (
+            f"lofted to cap {names[found['caps'][1]]}: both cut alike, "
+            + (
+                "an O-grid of 5 blocks (core, ring0..ring3)"
+                if cut is _ogrid_blocks
+                else f"midpoint subdivision into {len(loop)} blocks"
+            )
+            + ", the block corners on the outlines joined by the linking faces' rulings"
+        )
+        meaning = "N M A: cells along a quarter of each cap's boundary (and across the core), across the ring, from cap to cap"
+        counts = {name: ((1, 0, 2) if name.startswith("ring") else (0, 0, 2)) for name in blocks}
+        fixed = False
+    elif holes:
+        hole = [_spline(c["fractions"], c["points"], found.get("linear", False)) for c in holes[0]]
         blocks, sides_of, interfaces = _annulus_blocks(curves, faces, hole, [c["face"] for c in holes[0]], both_smooth)
         if both_smooth:
             how = "a smooth loop around one smooth hole: a ring of 4 blocks (ring0..ring3) between them"
@@ -322,6 +452,21 @@ def sweep_module(path) -> types.ModuleType:
         meaning = "N M A: cells along a quarter of the cap's boundary (and across the core), across the ring, along the sweep"
         counts = {"core": (0, 0, 2), **{f"ring{k}": (1, 0, 2) for k in range(4)}}
         fixed = False
+    elif len(loop) in (1, 2) and sum(sharp) == 1:
+        turn = sharp.index(True)
+        loop, curves, faces = loop[turn:] + loop[:turn], curves[turn:] + curves[:turn], faces[turn:] + faces[:turn]
+        lengths = [np.linalg.norm(np.diff(c["points"], axis=0), axis=1).sum() for c in loop]
+        blocks, sides_of, interfaces = _wedge_blocks(curves, faces, lengths)
+        how = (
+            f"{len(loop)} curve(s) joining smoothly but at one sharp corner (a trailing edge): one block (te) holds the "
+            "corner, the rest a ring of 6 blocks (ring0..ring5) around a core of 2 (core0, core1)"
+        )
+        meaning = (
+            "N M A: cells along a quarter of the cap's boundary (and across the core and te), across the ring, along the sweep"
+        )
+        counts = {name: ((1, 0, 2) if name.startswith("ring") else (0, 0, 2)) for name in blocks}
+        options = {"keep_tfi": True}
+        lines_extra = (WEDGE_ELLIPTIC.format(name=path.name),)
     elif all(sharp):
         blocks, sides_of, interfaces = _midpoint_blocks(curves, faces)
         how = f"{len(loop)} sharp corners: midpoint subdivision into {len(loop)} blocks (quad0..) around its centroid"
@@ -337,19 +482,43 @@ def sweep_module(path) -> types.ModuleType:
         )
         meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
         counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
-    if fixed:  # ring blocks at sharp corners or smooth joints
+    if fixed and not options:  # ring blocks at sharp corners or smooth joints
         options = {"slide_section": False}
         lines_extra = (
             f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
             "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
         )
-    folded = _folded(blocks)
+    return blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra
+
+
+def sweep_module(path) -> types.ModuleType:
+    """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
+    (path, size, modification time). GeometryError (one line) when the solid is no sweep
+    this meshes."""
+    path = Path(path)
+    key = _key(path)
+    if key in _MODULES:
+        return _MODULES[key]
+    found = _read(path)
+    summary = f"{path}: the solid has {found['summary']}"
+    if found["kind"] == "six":
+        raise GeometryError(f"{summary}: one block, not a sweep")
+    if found["kind"] not in ("sweep", "loft"):
+        raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
+    names, loft = found["names"], found["kind"] == "loft"
+    first, second = found["caps"]
+    blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra = _cut_cap(path, found, summary)
+    folded = _folded(blocks) + (_folded(second_blocks) if loft else [])
     if folded:
         raise GeometryError(
             f"{summary}; its cap {names[first]} ({how}) folds in block(s) {', '.join(folded)} (a concave cap?): {TOPOLOGY_HINT}"
         )
-    origin, frame, motion = found["origin"], found["frame"], found["motion"]
-    if motion["kind"] == "translation":
+    origin, frame = found["origin"], found["frame"]
+    motion = {"kind": "loft", "gap": found["gap"]} if loft else found["motion"]
+    if loft:
+        path_words = "a loft: planar, parallel caps, ruled linking faces"
+        cap_words = "planar, parallel, each linking face ruled between a curve of each"
+    elif motion["kind"] == "translation":
         path_words = f"a straight sweep along ({', '.join(f'{v:.6g}' for v in motion['vector'])})"
         cap_words = "planar, parallel, one shape"
     else:
@@ -358,6 +527,7 @@ def sweep_module(path) -> types.ModuleType:
             f"({', '.join(f'{v:.6g}' for v in motion['point'])}) along ({', '.join(f'{v:.6g}' for v in motion['axis'])})"
         )
         cap_words = "planar, one shape turned onto the other"
+    if motion["kind"] == "rotation" and not options.get("keep_tfi"):
         options = {"slide": False}
         lines_extra = (
             f"{path.name}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
@@ -374,7 +544,8 @@ def sweep_module(path) -> types.ModuleType:
     lines = (
         f"{path.name}: {found['summary']}: {path_words}; "
         f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both; "
-        f"the outline carried along lies on the linking faces to {motion['gap']:.1e} of the part's size",
+        f"{'the rulings lie' if loft else 'the outline carried along lies'} on the linking faces to "
+        f"{motion['gap']:.1e} of the part's size",
         f"{path.name}: cap {names[first]}: {how}",
         f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
         *lines_extra,
@@ -406,6 +577,9 @@ def sweep_module(path) -> types.ModuleType:
         """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
         points = np.asarray(points, dtype=float)
         xy = _coons(blocks[block], points[:, 0], points[:, 1])
+        if loft:  # along the rulings: the straight lines between the caps' maps
+            far = found["origins"][1] + _coons(second_blocks[block], points[:, 0], points[:, 1]) @ frame
+            return (1.0 - points[:, 2:]) * (origin + xy @ frame) + points[:, 2:] * far
         return moved(motion, origin + xy @ frame, points[:, 2])
 
     def notes(block_set):

@@ -18,6 +18,14 @@ outline carried along it (``moved``).
                  (K, 2) in the frame at arc-length fractions ``fractions`` (K,), the index of the
                  linking face it bounds, and whether the loop turns smoothly at its start
     holes        the loops of the first cap's holes (at most one), as ``curves``, counterclockwise too
+
+A "loft" (two planar, parallel caps, maybe of different shapes, whose loops have as many curves,
+the k-th of each bounding the k-th linking face, a ruled one: a circle of four arcs lofted to a
+square: ``_find_loft``) has ``caps``, ``origin``, ``frame`` as above, ``origins`` (each cap's
+centre of area (2, 3)), ``loops`` (per cap its loop, as ``curves`` but about that cap's centre,
+the k-th curves of both on one linking face: a straight line joins their points at equal
+fractions, the ruling) and ``gap`` (how far the rulings came from the faces, relative to the
+solid's size).
 """
 
 from __future__ import annotations
@@ -61,9 +69,15 @@ def read_sweep(path, content_hash: str = "") -> dict:
         "face_tags": tuple(faces),
         "summary": f"{len(faces)} faces with ({', '.join(map(str, sides))}) sides",
     }
-    if len(faces) == 6 and all(n == 4 for n in sides):
-        return {**found, "kind": "six"}
+    if len(faces) == 6 and all(n == 4 for n in sides):  # one block, unless its caps' outlines turn smoothly
+        loft = _find_loft(gmsh, faces, curves_of, size)
+        smooth = loft is not None and any(c["smooth"] for loop in loft["loops"] for c in loop)
+        return {**found, "kind": "loft", **loft} if smooth else {**found, "kind": "six"}
     caps, reason = _find_caps(gmsh, faces, curves_of, size)
+    if caps is None and "not of one area" in reason:
+        loft = _find_loft(gmsh, faces, curves_of, size)
+        if loft is not None:
+            return {**found, "kind": "loft", **loft}
     if caps is None:
         return {**found, "kind": "other", "reason": reason}
     first, second, motion = caps
@@ -224,3 +238,41 @@ def _loop(gmsh, faces, first: int, tags, origin, frame) -> list:
 
 def _curves(gmsh, face: int) -> set:
     return {abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)}
+
+
+def _find_loft(gmsh, faces, curves_of, size):
+    """A loft (module docstring) or None: two planar parallel caps without holes whose loops have as
+    many curves, the k-th of each on one linking face, which the straight lines between their
+    points at equal arc-length fractions (the rulings) lie on."""
+    planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
+    for first, second in itertools.combinations(range(len(faces)), 2):
+        others = [k for k in range(len(faces)) if k not in (first, second)]
+        if not (planar[first] and planar[second]) or curves_of[first] & curves_of[second]:
+            continue
+        if any(len(curves_of[k] & curves_of[first]) != 1 or len(curves_of[k] & curves_of[second]) != 1 for k in others):
+            continue
+        if len(curves_of[first]) != len(others) or len(curves_of[second]) != len(others):
+            continue
+        normals = [_normal(gmsh, faces[k]) for k in (first, second)]
+        if np.linalg.norm(np.cross(*normals)) > 1e-9:
+            continue
+        centres = np.array([gmsh.model.occ.getCenterOfMass(2, faces[k]) for k in (first, second)])
+        normal = normals[0] if normals[0] @ (centres[1] - centres[0]) > 0 else -normals[0]
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
+        frame = np.stack([e1, np.cross(normal, e1)])
+        loops = [_loop(gmsh, faces, k, sorted(curves_of[k]), centres[n], frame) for n, k in enumerate((first, second))]
+        turn = [c["face"] for c in loops[1]].index(loops[0][0]["face"])
+        loops[1] = loops[1][turn:] + loops[1][:turn]
+        if [c["face"] for c in loops[0]] != [c["face"] for c in loops[1]]:
+            continue
+        gaps = []
+        for a, b in zip(*loops):
+            ends = [centres[n] + c["points"][::32] @ frame for n, c in enumerate((a, b))]
+            between = np.concatenate([(1 - t) * ends[0] + t * ends[1] for t in (0.25, 0.5, 0.75)])
+            gaps.append(_distance(gmsh, faces[a["face"]], between))
+        if max(gaps) > TOLERANCE * size:
+            continue
+        return {"caps": (first, second), "origin": centres[0], "origins": centres, "frame": frame, "loops": loops,
+                "gap": max(gaps) / size}  # fmt: skip
+    return None

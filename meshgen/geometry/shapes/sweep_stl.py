@@ -1,0 +1,167 @@
+"""A closed triangulated surface (STL, OBJ, PLY) without patches of its own read as a straight
+sweep: after the sharp-edge patch split (``surface_patches.split_at_sharp_edges``), two planar patches (the caps) that every
+other patch touches, the second the first moved by a translation, and every other triangle
+parallel to it (the outline's prism: a triangulated cylinder or prism).
+
+``read_surface_sweep(path)`` returns what ``sweep_read.read_sweep`` does for a CAD solid (kind
+"six", "sweep" or "other", names, volume, box, caps, motion, origin, frame, curves, holes), each
+curve's points the outline's own vertices (``linear``: joined by straight lines, so points
+interpolated along them lie on the facets); the curves break at the outline's sharp corners
+(turning by more than ``sweep_read.SHARP_DEGREES``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+from meshgen.geometry.shapes.surface_patches import (
+    check_closed,
+    patch_corners,
+    read_surface,
+    split_at_sharp_edges,
+    triangle_normals,
+)
+from meshgen.geometry.shapes.sweep_read import SHARP_DEGREES
+
+__all__ = ["read_surface_sweep"]
+
+PLANAR = 1e-9  # relative to the surface's size: a planar patch's points off its plane
+
+
+def read_surface_sweep(path) -> dict:
+    """The triangulated surface in ``path`` seen as a straight sweep (module docstring)."""
+    path = Path(path)
+    surface = read_surface(path)
+    if (surface.labels >= 0).any():  # patches of its own (named solids): the single-block reader's
+        return {"kind": "other", "reason": "its patches are named in the file", "summary": "named patches"}
+    surface = split_at_sharp_edges(surface)
+    check_closed(surface, str(path))
+    V, T, labels, names = surface.vertices, surface.triangles, surface.labels, surface.names
+    box = np.stack([V.min(axis=0), V.max(axis=0)])
+    size = float(np.linalg.norm(box[1] - box[0]))
+    corners = patch_corners(surface)
+    found = {
+        "names": tuple(names),
+        "volume": abs(float(np.einsum("ij,ij->i", V[T[:, 0]], np.cross(V[T[:, 1]], V[T[:, 2]])).sum()) / 6.0),
+        "box": box,
+        "face_tags": tuple(range(len(names))),
+        "summary": f"{len(names)} patches at its sharp edges with ({', '.join(str(len(c)) for c in corners)}) corners",
+        "linear": True,
+    }
+    if len(names) == 6 and all(len(c) == 4 for c in corners):
+        return {**found, "kind": "six"}
+    normals = triangle_normals(V, T)
+    cross = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
+    areas = 0.5 * np.linalg.norm(cross, axis=1)
+    vertices_of = [np.unique(T[labels == k]) for k in range(len(names))]
+    planes = []
+    for k in range(len(names)):
+        normal = (cross[labels == k]).sum(axis=0)
+        normal = normal / max(np.linalg.norm(normal), 1e-300)
+        centre = (areas[labels == k, None] * V[T[labels == k]].mean(axis=1)).sum(axis=0) / areas[labels == k].sum()
+        flat = np.abs((V[vertices_of[k]] - centre) @ normal).max() <= PLANAR * size
+        planes.append((flat, normal, centre, areas[labels == k].sum()))
+    why = "no two planar patches that every other patch touches"
+    for i, j in itertools.combinations(range(len(names)), 2):
+        if not (planes[i][0] and planes[j][0]) or np.intersect1d(vertices_of[i], vertices_of[j]).size:
+            continue
+        others = [k for k in range(len(names)) if k not in (i, j)]
+        if not all(np.intersect1d(vertices_of[k], vertices_of[c]).size for k in others for c in (i, j)):
+            continue
+        vector = planes[j][2] - planes[i][2]
+        outline = [_boundary_edges(T[labels == c]) for c in (i, j)]
+        ends = [V[np.unique(e)] for e in outline]
+        moved = ends[0] + vector
+        gap = (
+            np.linalg.norm(moved[:, None, :] - ends[1][None, :, :], axis=2).min(axis=1).max()
+            if len(ends[0]) == len(ends[1])
+            else np.inf
+        )
+        side = np.isin(labels, others)
+        along = np.abs(normals[side] @ (vector / np.linalg.norm(vector))).max() if side.any() else 0.0
+        if gap > PLANAR * size or along > 1e-9 or np.linalg.norm(np.cross(planes[i][1], planes[j][1])) > 1e-9:
+            why = f"patches {names[i]} and {names[j]} are planar but not one outline moved along a line"
+            continue
+        loops = _loops(outline[0])
+        if len(loops) > 2:
+            return {
+                **found,
+                "kind": "other",
+                "reason": f"{names[i]} and {names[j]} are caps with more than one hole (not meshed yet)",
+            }
+        normal = planes[i][1] if planes[i][1] @ vector > 0 else -planes[i][1]
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+        e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
+        frame = np.stack([e1, np.cross(normal, e1)])
+        origin = planes[i][2]
+        edge_patch = _edge_patches(T, labels, i)
+        curves = [_curves(V, loop, origin, frame, edge_patch) for loop in loops]
+        curves.sort(key=lambda loop: -abs(_area(np.concatenate([c["points"] for c in loop]))))
+        return {**found, "kind": "sweep", "caps": (i, j), "origin": origin, "frame": frame, "centroid": np.zeros(2),
+                "motion": {"kind": "translation", "vector": vector, "gap": gap / size}, "curves": curves[0],
+                "holes": curves[1:]}  # fmt: skip
+    return {**found, "kind": "other", "reason": why}
+
+
+def _boundary_edges(triangles: np.ndarray) -> np.ndarray:
+    """(E, 2) the edges, as the triangles run them, that only one of ``triangles`` (m, 3) has."""
+    edges = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
+    key = np.sort(edges, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return edges[counts[inverse.ravel()] == 1]
+
+
+def _loops(edges: np.ndarray) -> list[np.ndarray]:
+    """The closed vertex loops (each (n,), not repeating its start) that the directed ``edges``
+    (E, 2) chain into: each loop cut before its smallest vertex and ranked by pointer doubling."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    ids, local = np.unique(edges, return_inverse=True)
+    local = local.reshape(-1, 2)
+    n = len(ids)
+    following = np.empty(n, dtype=np.int64)
+    following[local[:, 0]] = local[:, 1]
+    _, component = connected_components(coo_matrix((np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(n, n)))
+    starts = np.full(component.max() + 1, n)
+    np.minimum.at(starts, component, np.arange(n))
+    last = following == starts[component]  # the vertex before each loop's start ends it
+    jump, rank = np.where(last, np.arange(n), following), np.where(last, 0, 1)
+    for _ in range(int(np.ceil(np.log2(max(n, 2)))) + 1):  # rounds of doubling, not vertices
+        rank, jump = rank + rank[jump], jump[jump]
+    return [ids[np.flatnonzero(component == c)[np.argsort(-rank[component == c])]] for c in range(len(starts))]
+
+
+def _edge_patches(T, labels, cap: int) -> dict:
+    """(a, b) vertex pair of each of the cap's outline edges -> the other patch whose triangle has it."""
+    other = labels != cap
+    edges = np.concatenate([T[other][:, [0, 1]], T[other][:, [1, 2]], T[other][:, [2, 0]]])
+    owners = np.tile(labels[other], 3)
+    return dict(zip(map(tuple, np.sort(edges, axis=1).tolist()), owners.tolist()))
+
+
+def _area(xy: np.ndarray) -> float:
+    return 0.5 * float(np.sum(xy[:, 0] * np.roll(xy[:, 1], -1) - np.roll(xy[:, 0], -1) * xy[:, 1]))
+
+
+def _curves(V, loop, origin, frame, edge_patch) -> list:
+    """One loop of vertex indices as curves (``sweep_read``'s form, counterclockwise in the
+    frame), broken at its sharp corners; one smooth curve if it has none."""
+    xy = (V[loop] - origin) @ frame.T
+    if _area(xy) < 0:
+        loop, xy = loop[::-1], xy[::-1]
+    incoming, outgoing = xy - np.roll(xy, 1, axis=0), np.roll(xy, -1, axis=0) - xy
+    cosine = (incoming * outgoing).sum(axis=1) / (np.linalg.norm(incoming, axis=1) * np.linalg.norm(outgoing, axis=1))
+    sharp = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) > SHARP_DEGREES
+    starts = np.flatnonzero(sharp) if sharp.any() else np.array([0])
+    n, curves = len(loop), []
+    for a, b in zip(starts, np.append(starts[1:], starts[0] + n)):
+        index = np.arange(a, b + 1) % n
+        points = xy[index]
+        length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+        face = edge_patch[tuple(sorted((int(loop[index[0]]), int(loop[index[1]]))))]
+        curves.append({"fractions": length / length[-1], "points": points, "face": int(face), "smooth": not sharp[a]})
+    return curves
