@@ -227,7 +227,13 @@ TARGETS = {
         "x",
         "elliptic pipe 50 50 80 (1.0e6 hexahedra) / semicylinder 100^3 (1.0e6), seconds, one run",
     ),
-    "sweep_worst_scaled_jacobian": (">=", 0.4, "", "swept CAD solids (8 shapes, TFI and elliptic): worst scaled Jacobian"),
+    "sweep_worst_scaled_jacobian": (">=", 0.4, "", "swept CAD solids (the wing aside, TFI and elliptic): worst scaled Jacobian"),
+    "sweep_wing_scaled_jacobian": (
+        ">=",
+        0.27,
+        "",
+        "swept NACA 0012 wing: worst scaled Jacobian (a cell holding the sharp trailing edge cannot exceed sin(16.5 deg) = 0.285)",
+    ),
     "sweep_inverted": ("<=", 0, "", "swept CAD solids: inverted cells, all shapes and methods"),
     "sweep_boundary_distance": ("<=", 1e-6, "of L", "swept CAD solids: largest distance of a patch node from its CAD face"),
     "sweep_volume_error": (
@@ -1357,8 +1363,14 @@ def sweep_rows(data: dict, add) -> None:
         shape, method, row = pick(figures, key=lambda f: f[2][key])
         return row[key], f"{shape} ({method})"
 
-    value, where = worst("scaled_jacobian_min", largest=False)
-    add("swept CAD solids: worst scaled Jacobian", value, "", key="sweep_worst_scaled_jacobian", judged=judged, note=where)
+    wing = [f for f in figures if f[0] == "wing"]
+    figures_without_wing = [f for f in figures if f[0] != "wing"]
+    shape, method, row = min(figures_without_wing, key=lambda f: f[2]["scaled_jacobian_min"])
+    add("swept CAD solids (the wing aside): worst scaled Jacobian", row["scaled_jacobian_min"], "",
+        key="sweep_worst_scaled_jacobian", judged=judged, note=f"{shape} ({method})")  # fmt: skip
+    if wing:
+        add("swept NACA 0012 wing: worst scaled Jacobian", min(f[2]["scaled_jacobian_min"] for f in wing), "",
+            key="sweep_wing_scaled_jacobian", judged=judged, note="the cell at the trailing edge; elliptic keeps the TFI mesh")  # fmt: skip
     add("swept CAD solids: inverted cells", sum(f[2]["inverted"] for f in figures), "", key="sweep_inverted", judged=judged,
         note=f"{len(shapes)} shapes x 2 methods; checkMesh OK on {sum(bool(f[2]['checkmesh_ok']) for f in figures)} of {len(figures)}")  # fmt: skip
     value, where = worst("boundary_distance_max_rel")
