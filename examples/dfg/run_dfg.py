@@ -81,17 +81,25 @@ def set_up(case: Path) -> dict:
         "    inlet { type zeroGradient; }\n    outlet { type fixedValue; value uniform 0; }\n"
         "    walls { type zeroGradient; }\n    cylinder { type zeroGradient; }\n    frontAndBack { type empty; }\n}\n",
     )
+    write_system(case, cofr=(*CENTRE, 0.0), aref=D * depth, residuals=(1e-9, 1e-10), end_time=5000)
+    return {"depth": depth}
+
+
+def write_system(case: Path, cofr, aref: float, residuals, end_time: int) -> None:
+    """constant/ and system/ for laminar simpleFoam (SIMPLEC, linearUpwind) with forceCoeffs on the
+    patch ``cylinder``: reference speed 0.2 m/s, length D, area ``aref`` (m^2), centre ``cofr`` (m);
+    ``residuals``: the initial residuals (p, U) that stop the run before ``end_time`` iterations."""
     write(case / "constant" / "transportProperties", "dictionary", f"transportModel Newtonian;\nnu {NU};\n")
     write(case / "constant" / "turbulenceProperties", "dictionary", "simulationType laminar;\n")
     write(
         case / "system" / "controlDict",
         "dictionary",
-        "application simpleFoam;\nstartFrom startTime;\nstartTime 0;\nstopAt endTime;\nendTime 5000;\ndeltaT 1;\n"
-        "writeControl timeStep;\nwriteInterval 5000;\nwriteFormat ascii;\nwritePrecision 12;\nrunTimeModifiable false;\n"
+        f"application simpleFoam;\nstartFrom startTime;\nstartTime 0;\nstopAt endTime;\nendTime {end_time};\ndeltaT 1;\n"
+        f"writeControl timeStep;\nwriteInterval {end_time};\nwriteFormat ascii;\nwritePrecision 12;\nrunTimeModifiable false;\n"
         "functions\n{\n"
         '    coefficients { type forceCoeffs; libs ("libforces.so"); writeControl timeStep; writeInterval 1;\n'
-        "        patches (cylinder); rho rhoInf; rhoInf 1; liftDir (0 1 0); dragDir (1 0 0); CofR (0.2 0.2 0);\n"
-        f"        pitchAxis (0 0 1); magUInf 0.2; lRef {D}; Aref {D * depth:.17g}; }}\n"
+        "        patches (cylinder); rho rhoInf; rhoInf 1; liftDir (0 1 0); dragDir (1 0 0);\n"
+        f"        CofR ({' '.join(f'{c:.17g}' for c in cofr)}); pitchAxis (0 0 1); magUInf 0.2; lRef {D}; Aref {aref:.17g}; }}\n"
         "}\n",
     )
     write(
@@ -108,10 +116,25 @@ def set_up(case: Path) -> dict:
         "dictionary",
         "solvers\n{\n    p { solver GAMG; smoother GaussSeidel; tolerance 1e-12; relTol 0.01; }\n"
         "    U { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-12; relTol 0.1; }\n}\n"
-        "SIMPLE { consistent yes; nNonOrthogonalCorrectors 1; residualControl { p 1e-9; U 1e-10; } }\n"
+        f"SIMPLE {{ consistent yes; nNonOrthogonalCorrectors 1; residualControl {{ p {residuals[0]:g}; U {residuals[1]:g}; }} }}\n"
         'relaxationFactors { equations { U 0.9; ".*" 0.9; } }\n',
     )
-    return {"depth": depth}
+
+
+def solve(case: Path, env: dict) -> dict:
+    """simpleFoam on ``case``: seconds, iterations, whether the residual controls stopped it, and
+    the forceCoeffs table (a Path)."""
+    start = time.perf_counter()
+    solved = subprocess.run(["simpleFoam", "-case", str(case)], env=env, capture_output=True, text=True)
+    seconds = time.perf_counter() - start
+    if solved.returncode != 0:
+        raise SystemExit(solved.stdout[-3000:] + solved.stderr[-3000:])
+    return {
+        "solver_seconds": seconds,
+        "iterations": len(re.findall(r"^Time = ", solved.stdout, re.M)),
+        "converged": "SIMPLE solution converged" in solved.stdout,
+        "coefficients": next((case / "postProcessing" / "coefficients").glob("*/coefficient*.dat")),
+    }
 
 
 def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bool = False, params=()) -> dict:
@@ -132,13 +155,8 @@ def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bo
         raise SystemExit(meshed.stderr)
     mesh_seconds = time.perf_counter() - start
     set_up(case)
-    start = time.perf_counter()
-    solved = subprocess.run(["simpleFoam", "-case", str(case)], env=env, capture_output=True, text=True)
-    solver_seconds = time.perf_counter() - start
-    if solved.returncode != 0:
-        raise SystemExit(solved.stdout[-3000:] + solved.stderr[-3000:])
-    iterations = len(re.findall(r"^Time = ", solved.stdout, re.M))
-    coefficients = next((case / "postProcessing" / "coefficients").glob("*/coefficient*.dat"))
+    solved = solve(case, env)
+    iterations, solver_seconds, coefficients = solved["iterations"], solved["solver_seconds"], solved["coefficients"]
     forces = last_row(coefficients, ["Cd", "Cl"])
     changes = history(coefficients, ["Cd", "Cl"], 50)
     last_time = max(
@@ -152,7 +170,7 @@ def run(dims, method: str = "elliptic", case: Path = Path("dfg-case"), quiet: bo
         "params": list(params),
         "cells": cells,
         "iterations": iterations,
-        "converged": "SIMPLE solution converged" in solved.stdout,
+        "converged": solved["converged"],
         "drag_change_last_50": changes["Cd"],
         "lift_change_last_50": changes["Cl"],
         "mesh_seconds": mesh_seconds,
