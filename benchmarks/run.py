@@ -259,6 +259,18 @@ TARGETS = {
             ("elliptic", "<=", 0.0, "deg", "elliptic max non-orthogonality minus TFI's (blockMesh's at the same nodes)"),
         )
     },
+    "dfg3d_drag_error": (
+        "abs<=",
+        1.0,
+        "%",
+        "DFG 3D-1Z from a topology file (at most 200,000 cells), simpleFoam: cD against 6.18533",
+    ),
+    "dfg3d_lift_error": (
+        "abs<=",
+        10.0,
+        "%",
+        "DFG 3D-1Z from a topology file (at most 200,000 cells), simpleFoam: cL against 0.009401",
+    ),
     "gpu_elliptic_100_seconds": ("<=", 1.0, "s", "elliptic semicylinder 100^3 by the torch multigrid on the GPU"),
     "gpu_quality_1e9_seconds": ("<=", 60.0, "s", "the seven metrics and their summary of 1e9 hexahedra on one GPU"),
     "gpu_neural_1e9_seconds": (
@@ -738,7 +750,14 @@ def sweeps(quick: bool) -> dict:
 def topology(quick: bool) -> dict:
     import bench_topology
 
-    return bench_topology.run(1 if quick else 3)
+    data = bench_topology.run(1 if quick else 3)
+    if not quick:  # DFG 3D-1Z with simpleFoam on two levels (60,640 and 135,018 cells): minutes
+        sys.path.insert(0, str(REPO / "examples" / "dfg"))
+        import run_dfg3d
+
+        with tempfile.TemporaryDirectory() as folder:
+            data["dfg3d"] = [run_dfg3d.run(r, case=Path(folder) / f"dfg3d-{r}", quiet=True) for r in (1.0, 1.3)]
+    return data
 
 
 def gpu(quick: bool) -> dict:
@@ -1346,6 +1365,8 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
         sweep_rows(sections["sweeps"], add)
     if sections.get("topology"):
         topology_rows(sections["topology"], add)
+        if sections["topology"].get("dfg3d"):
+            dfg3d_rows(sections["topology"]["dfg3d"], add)
     if "gpu" in sections and "skipped" not in sections["gpu"]:
         gpu_rows(sections["gpu"], add)
     return rows
@@ -1413,6 +1434,17 @@ def topology_rows(data: dict, add) -> None:
             key=f"topology_{name}_cells", note=f"{tfi['cells']} cells")  # fmt: skip
         add(f"topology {name} (TFI): seconds / classy_blocks + blockMesh's", tfi["seconds"] / anchor["seconds"], "x",
             key=f"topology_{name}_seconds", note=f"{tfi['seconds']:.1f} s against {anchor['seconds']:.1f} s")  # fmt: skip
+
+
+def dfg3d_rows(levels: list, add) -> None:
+    """DFG 3D-1Z (``examples/dfg/run_dfg3d.py``): drag and lift errors per level, the finest judged."""
+    for number, row in enumerate(levels):
+        finest = number == len(levels) - 1
+        note = f"{row['cells']} cells, {row['iterations']} iterations"
+        add(f"DFG 3D-1Z refine {row['refine']:g}: cD error", 100 * row["drag_error"], "%",
+            key="dfg3d_drag_error" if finest else None, note=f"cD {row['drag']:.5f}; {note}")  # fmt: skip
+        add(f"DFG 3D-1Z refine {row['refine']:g}: cL error", 100 * row["lift_error"], "%",
+            key="dfg3d_lift_error" if finest else None, note=f"cL {row['lift']:.6f}")  # fmt: skip
 
 
 def gpu_rows(data: dict, add) -> None:
