@@ -127,6 +127,7 @@ def run_meshgen_here(arguments: list[str]) -> tuple[int, str]:
 
 
 def run_shell(command: str, folder: Path) -> tuple[int, str]:
+    command = re.sub(r"(?<![\w/.])examples/", f"{REPO}/examples/", command)  # the repository's examples, from the folder
     words = shlex.split(command, comments=True)
     if words and words[0] in TOOLS and shutil.which(words[0]) is None:
         return 0, f"skipped: {words[0]} is not installed"
@@ -137,7 +138,6 @@ def run_shell(command: str, folder: Path) -> tuple[int, str]:
     if Path("/usr/share/openfoam").is_dir():
         environment.setdefault("WM_PROJECT_DIR", "/usr/share/openfoam")  # as the docs tell a user to
     command = re.sub(r"^python ", f"{shlex.quote(sys.executable)} ", command)
-    command = command.replace("examples/", f"{REPO}/examples/")  # the repository's examples, from the folder
     done = subprocess.run(["bash", "-c", command], cwd=folder, env=environment, capture_output=True, text=True)
     return done.returncode, done.stdout + done.stderr
 
