@@ -397,7 +397,12 @@ def loop_step_seconds(preset, geometry, stage, steps, threads, device="cpu") -> 
     torch threads on ``device``, from the history rows' clocks (the first fifth, warm-up, left out;
     on a GPU the rows of a block are read together, so the clock spans whole blocks)."""
     others = {"adam": "lbfgs.steps=0", "lbfgs": "adam.steps=0"}[stage]
-    config = resolve_config(preset, None, ["pretrain.steps=0", f"{stage}.steps={steps}", others, "checkpoint.every=100000"])
+    # a section network (an extruded shape under ``exact``) takes its own step counts, 0 in the
+    # preset: null makes it take these, so the step is timed whatever network the preset trains
+    section = ["adam.section_steps=null", "lbfgs.section_steps=null"]
+    config = resolve_config(
+        preset, None, ["pretrain.steps=0", f"{stage}.steps={steps}", others, "checkpoint.every=100000", *section]
+    )
     keeper = RowKeeper()
     previous = torch.get_num_threads()
     torch.set_num_threads(threads)

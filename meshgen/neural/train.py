@@ -141,11 +141,15 @@ STAGES = tuple(stage.name for stage in STAGE_TABLE)
 
 
 def section_steps(training: Training, name: str) -> int:
-    """The steps of stage ``name`` in a run that trains an extruded shape's section: the stage's
-    ``section_steps`` where the configuration sets it, else its ``steps``."""
+    """The steps of stage ``name`` in a run that trains an extruded shape's section: on the
+    smoothed layout the stage's ``section_steps`` where the configuration sets it (the cap there
+    already solves the lattice equations: design notes §15), else its ``steps``; on the fixed
+    layout always its ``steps`` (that cap is a Coons patch, with everything left to learn)."""
     stage = getattr(training.config, name)
     chosen = getattr(stage, "section_steps", None)
-    return stage.steps if chosen is None else chosen
+    if chosen is None or training.config.boundary_layout != "smoothed":
+        return stage.steps
+    return chosen
 
 
 SECTION_STAGE_TABLE = tuple(
