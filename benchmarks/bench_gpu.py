@@ -135,26 +135,15 @@ def neural_row(cells: int = 1000, device: str = "cuda", planes: int | None = Non
 
 
 def _neural_check(model, geometry, coords, host) -> dict:
-    """The first ``NEURAL_CHECK_PLANES`` cell planes: nodes against the CPU path's block
-    (``meshgen.run.chunked``'s arithmetic, float32 network by numba), metrics of the device's
-    nodes against the numba kernels."""
-    from meshgen.methods.correction import add_correction_terms, correction_terms, snap_to_boundary
-    from meshgen.methods.tfi import face_terms, face_values
-    from meshgen.neural.network_map import map_on_block, model_boundary_errors
+    """The first ``NEURAL_CHECK_PLANES`` cell planes of the device's nodes against the CPU path's
+    (``meshgen.run.chunked.neural_array``: the float32 network by numba, the rest in float64)."""
+    from meshgen.run.chunked import neural_array
 
     planes = NEURAL_CHECK_PLANES + 1
-    block = (slice(0, planes), slice(None), slice(None))
-    values = face_values(geometry.boundary, coords)
-    tfi_terms = face_terms(values, coords) if model["exact_boundary"] else None
-    X = map_on_block(model, coords, block, tfi_terms)
-    errors = model_boundary_errors(model, geometry, coords, values=values)
-    add_correction_terms(correction_terms(errors, coords), coords, X, block)
-    snap_to_boundary(X, values, coords, block)
-    device_nodes = host[:planes]
-    length = float(geometry.characteristic_length)
+    X = neural_array(model, geometry, coords)[0][:planes].compute()
     return {
         "planes": NEURAL_CHECK_PLANES,
-        "max_node_difference_over_length": float(np.abs(device_nodes - X).max() / length),
+        "max_node_difference_over_length": float(np.abs(host[:planes] - X).max() / geometry.characteristic_length),
     }
 
 

@@ -66,12 +66,13 @@ class SlabMesher:
         self.t = [to_device(c) for c in self.coords]  # float64 parametric coordinates
         self.u = [(2.0 * torch.from_numpy(c)).float().to(self.device) - 1.0 for c in self.coords]  # network inputs
         self.layers = [(w.to(self.device), b.to(self.device)) for w, b in network_layers(model)]
-        self.tfi_terms = [(a, s, to_device(D)) for a, s, D in face_terms(values, self.coords)] if self.exact else None
+        terms = face_terms(values, self.coords) if self.exact else None
+        self.tfi_terms = [(a, s, to_device(D)) for a, s, D in terms] if self.exact else None
         self.info = {"corrected": False}
         self.error_terms = None
         self.values = None
         if correct:
-            errors = model_boundary_errors(model, geometry, self.coords, device=self.device.type, values=values)
+            errors = model_boundary_errors(model, geometry, self.coords, self.device.type, values, terms)
             self.info = {"corrected": True, "error_before": error_figures(errors, geometry)}
             corners, rest = correction_terms(errors, self.coords)
             self.error_terms = (to_device(corners), [(a, s, to_device(D)) for a, s, D in rest])

@@ -157,7 +157,7 @@ def neural_array(
     info = {"corrected": False}
     error_terms = None
     if correct_boundary:
-        errors = model_boundary_errors(model, geometry, coords, device=device, values=boundary_values)
+        errors = model_boundary_errors(model, geometry, coords, device=device, values=boundary_values, terms=tfi_terms)
         info = {"corrected": True, "error_before": error_figures(errors, geometry)}
         error_terms = correction_terms(errors, coords)
     shape = tuple(len(c) for c in coords)
