@@ -90,9 +90,14 @@ def bench_solid(kind: str, folder: Path, dims, method: str) -> dict:
     start = time.perf_counter()
     made = mesh(str(path), dims, method=method)
     seconds = time.perf_counter() - start
-    report = made.report()
     distance, length = patch_distance(path, made)
-    total = sum(enclosed_volume(X) for X in made.blocks)
+    return figures(made, dims, distance / length, volume, seconds, folder)
+
+
+def figures(made, dims, distance_rel: float, volume: float, seconds: float, folder: Path) -> dict:
+    """One row: cells, inverted, worst scaled Jacobian and min angle, the boundary distance given
+    (over L), the volume's relative error against ``volume``, checkMesh's verdict, seconds."""
+    report = made.report()
     with tempfile.TemporaryDirectory(dir=folder) as scratch:
         ok = check_mesh_ok(made, Path(scratch))
     return {
@@ -102,8 +107,8 @@ def bench_solid(kind: str, folder: Path, dims, method: str) -> dict:
         "inverted": int(report["inverted"]["count"]),
         "scaled_jacobian_min": float(report["metrics"]["scaled_jacobian"]["min"]),
         "min_angle_min": float(report["metrics"]["min_angle"]["min"]),
-        "boundary_distance_max_rel": distance / length,
-        "volume_rel_error": abs(total - volume) / volume,
+        "boundary_distance_max_rel": distance_rel,
+        "volume_rel_error": abs(sum(enclosed_volume(X) for X in made.blocks) - volume) / volume,
         "checkmesh_ok": ok,
         "seconds": seconds,
     }
@@ -119,26 +124,12 @@ def bench_stl(folder: Path, dims, method: str) -> dict:
     start = time.perf_counter()
     made = mesh(str(path), dims, method=method)
     seconds = time.perf_counter() - start
-    report = made.report()
     nodes = []
     for (block, face_name), _ in made.geometry.patches.items():
         face = cube.face_named(face_name, 3)
         nodes.append(np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3))
-    volume = trimesh.load(path).volume
-    with tempfile.TemporaryDirectory(dir=folder) as scratch:
-        ok = check_mesh_ok(made, Path(scratch))
-    return {
-        "dims": list(dims),
-        "blocks": len(made.blocks),
-        "cells": int(sum(np.prod(np.array(X.shape[:3]) - 1) for X in made.blocks)),
-        "inverted": int(report["inverted"]["count"]),
-        "scaled_jacobian_min": float(report["metrics"]["scaled_jacobian"]["min"]),
-        "min_angle_min": float(report["metrics"]["min_angle"]["min"]),
-        "boundary_distance_max_rel": prism_distance(path, np.concatenate(nodes)) / np.sqrt(6.0),
-        "volume_rel_error": abs(sum(enclosed_volume(X) for X in made.blocks) - volume) / volume,
-        "checkmesh_ok": ok,
-        "seconds": seconds,
-    }
+    distance = prism_distance(path, np.concatenate(nodes)) / np.sqrt(6.0)
+    return figures(made, dims, distance, trimesh.load(path).volume, seconds, folder)
 
 
 def run(quick: bool = False) -> dict:
