@@ -58,9 +58,23 @@ __all__ = [
     "block_stage_table",
     "check_block_keys",
     "describe_blocks",
+    "geometry_record",
     "set_job",
     "write_block_summary",
 ]
+
+
+def geometry_record(block_set, geometry_spec=None) -> dict:
+    """What a block set's checkpoint records of its geometry: name, spec (what ``-g`` named),
+    dim, parameters and block names."""
+    return {
+        "name": block_set.name,
+        "spec": geometry_spec or block_set.name,
+        "dim": block_set.dim,
+        "params": dict(block_set.values),
+        "blocks": list(block_set.names),
+    }
+
 
 SUMMARY_DIMS = 8  # the final summary and the training's block set: 8 per --dims number
 BLOCK_STAGES = ("pretrain", "adam", "lbfgs")
@@ -298,13 +312,7 @@ def set_job(config, block_set: BlockSet, device: torch.device, resume=None, geom
         pde, boundary = _fixed_losses(training, pool, test_points, held_out)
         return {
             "model": describe_blocks(training, block_set.names, extrusion),
-            "geometry": {
-                "name": block_set.name,
-                "spec": geometry_spec or block_set.name,
-                "dim": block_set.dim,
-                "params": dict(block_set.values),
-                "blocks": list(block_set.names),
-            },
+            "geometry": geometry_record(block_set, geometry_spec),
             "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
             "test_loss": {"pde": pde, "boundary": boundary, "total": pde + boundary},
             **({"init": started_from} if started_from is not None else {}),

@@ -24,6 +24,7 @@ import torch
 from meshgen.geometry.blocks import BlockSet, merged_mesh, tfi_blocks
 from meshgen.neural import wall_map
 from meshgen.neural.history import TrainState, state_from_checkpoint
+from meshgen.neural.interface_stages import geometry_record
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import Job, Stage
 from meshgen.neural.steps import TermRunner, Training, lbfgs_optimizer, make_optimizer
@@ -196,13 +197,7 @@ def wall_job(config, block_set: BlockSet, device: torch.device, resume=None, geo
             held_out = float(_misfit(network, *problem.test)) if len(problem.test[0]) else float("nan")
         return {
             "model": describe_wall(training, block_set.names),
-            "geometry": {
-                "name": block_set.name,
-                "spec": geometry_spec or block_set.name,
-                "dim": block_set.dim,
-                "params": dict(block_set.values),
-                "blocks": list(block_set.names),
-            },
+            "geometry": geometry_record(block_set, geometry_spec),
             "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
             "test_loss": {"pde": held_out, "boundary": 0.0, "total": held_out, "fit": held_out},
         }
