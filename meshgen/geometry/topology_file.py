@@ -46,7 +46,7 @@ import numpy as np
 from meshgen.errors import GeometryError, did_you_mean
 from meshgen.geometry.cube import face_named, face_names
 from meshgen.geometry.topology_project import read_surfaces
-from meshgen.geometry.topology_shorthand import expand_joint, expand_pipe
+from meshgen.geometry.topology_shorthand import checked_keys, expand_joint, expand_pipe, topology_error
 from meshgen.run.inputs import MAX_YAML_BYTES, InputError, load_yaml, read_input_text
 
 __all__ = ["EDGE_KINDS", "TOPOLOGY_KEYS", "Topology", "is_topology_file", "read_topology"]
@@ -117,23 +117,9 @@ def is_topology_file(spec) -> bool:
     return _SEEN[key]
 
 
-def _fail(path, text: str):
-    raise GeometryError(f"topology file {path}: {text}")
-
-
-def _keys(path, where: str, value, allowed) -> dict:
-    """``value`` as a mapping whose keys are all in ``allowed`` (the nearest one named otherwise)."""
-    if not isinstance(value, dict):
-        _fail(path, f"{where} must be a mapping (keys: {', '.join(allowed)})")
-    for key in value:
-        if str(key) not in allowed:
-            _fail(path, f"unknown key '{key}' in {where} (keys: {', '.join(allowed)}){did_you_mean(str(key), allowed)}")
-    return value
-
-
 def _number(path, where: str, value, positive=True) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or (positive and value <= 0):
-        _fail(path, f"{where} must be a {'positive ' if positive else ''}number, got {value!r}"[:200])
+        topology_error(path, f"{where} must be a {'positive ' if positive else ''}number, got {value!r}"[:200])
     return float(value)
 
 
@@ -145,7 +131,7 @@ def _points(path, where: str, value, dim: int) -> np.ndarray:
     if array.ndim == 1 and array.size == dim:
         array = array[None]
     if array.ndim != 2 or array.shape[1] != dim or not np.all(np.isfinite(array)) or len(array) == 0:
-        _fail(path, f"{where} must be points of {dim} numbers each")
+        topology_error(path, f"{where} must be points of {dim} numbers each")
     return array
 
 
@@ -165,22 +151,22 @@ def read_topology(path) -> Topology:
         raise GeometryError(
             f"topology file {path} is not plain YAML data{line}: {str(getattr(exc, 'problem', ''))[:80]}"
         ) from None
-    data = _keys(path, "the file", data, TOPOLOGY_KEYS)
+    data = checked_keys(path, "the file", data, TOPOLOGY_KEYS)
     if "joint" in data:
         data = expand_joint(path, data)
     if "pipe" in data:
         data = expand_pipe(path, data)
     for key in ("vertices", "blocks"):
         if key not in data:
-            _fail(path, f"needs '{key}'")
+            topology_error(path, f"needs '{key}'")
     names, raw = _vertices(path, data["vertices"])
     if len(set(names)) != len(names):
-        _fail(path, "two vertices have one name")
+        topology_error(path, "two vertices have one name")
     index = {name: i for i, name in enumerate(names)}
     block_names, blocks, dim, block_projections = _blocks(path, data["blocks"], index)
     points = _points(path, "vertices", raw, dim) if len(raw) else None
     if points is None or len(points) != len(names):
-        _fail(path, f"vertices must be points of {dim} numbers each")
+        topology_error(path, f"vertices must be points of {dim} numbers each")
     stem = re.sub(r"[^A-Za-z0-9_-]", "-", path.stem).lstrip("-_")[:64] or "topology"
     topology = Topology(
         path, str(data.get("name", stem)), str(data.get("description", f"block set of the topology file {path.name}")),
@@ -193,14 +179,14 @@ def read_topology(path) -> Topology:
             corners = _BLOCK_FACES[dim][face]
             _project(topology, f"block '{block_names[block]}' {face}", frozenset(int(blocks[block][c]) for c in corners), name)
     _edges(topology, data.get("edges") or [])
-    _cells(topology, _keys(path, "cells", data.get("cells") or {}, _CELL_KEYS))
-    _grading(topology, _keys(path, "grading", data.get("grading") or {}, _GRADING_KEYS))
+    _cells(topology, checked_keys(path, "cells", data.get("cells") or {}, _CELL_KEYS))
+    _grading(topology, checked_keys(path, "grading", data.get("grading") or {}, _GRADING_KEYS))
     _patches(topology, data.get("patches") or {})
     if "default_patch" in data:
-        default = _keys(path, "default_patch", data["default_patch"], ("name", "type"))
+        default = checked_keys(path, "default_patch", data["default_patch"], ("name", "type"))
         kind = str(default.get("type", "wall"))
         if kind not in _PATCH_TYPES or kind == "cyclic":
-            _fail(path, f"default_patch has type '{kind}' (types: wall, patch, symmetry; a cyclic patch needs its pair)")
+            topology_error(path, f"default_patch has type '{kind}' (types: wall, patch, symmetry; a cyclic patch needs its pair)")
         topology.default_patch = (str(default.get("name", "defaultFaces")), kind)
     return topology
 
@@ -209,50 +195,52 @@ def _vertex(topology: Topology, where: str, value) -> int:
     """The index of the vertex named ``value`` (GeometryError naming the nearest name otherwise)."""
     key, names = str(value), topology.vertex_names
     if key not in names:
-        _fail(topology.path, f"{where} names a missing vertex '{key}'{did_you_mean(key, names)}")
+        topology_error(topology.path, f"{where} names a missing vertex '{key}'{did_you_mean(key, names)}")
     return names.index(key)
 
 
 def _pair(topology: Topology, where: str, value) -> tuple[int, int]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        _fail(topology.path, f"{where} must name two vertices [a, b]")
+        topology_error(topology.path, f"{where} must name two vertices [a, b]")
     i, j = _vertex(topology, where, value[0]), _vertex(topology, where, value[1])
     if i == j:
-        _fail(topology.path, f"{where} names vertex '{topology.vertex_names[i]}' twice")
+        topology_error(topology.path, f"{where} names vertex '{topology.vertex_names[i]}' twice")
     return i, j
 
 
 def _edges(topology: Topology, entries) -> None:
     path, names, dim = topology.path, topology.vertex_names, topology.dim
     if not isinstance(entries, list):
-        _fail(path, "edges must be a list of curved edges")
+        topology_error(path, "edges must be a list of curved edges")
     for number, entry in enumerate(entries):
-        entry = _keys(path, f"edges[{number}]", entry, _EDGE_KEYS)
+        entry = checked_keys(path, f"edges[{number}]", entry, _EDGE_KEYS)
         kinds = [k for k in EDGE_KINDS + ("line",) if k in entry]
         if len(kinds) != 1:
-            _fail(path, f"edges[{number}] needs one of {', '.join(EDGE_KINDS)} (or line with project) naming its two vertices")
+            topology_error(
+                path, f"edges[{number}] needs one of {', '.join(EDGE_KINDS)} (or line with project) naming its two vertices"
+            )
         kind = kinds[0]
         i, j = _pair(topology, f"edges[{number}] ({kind})", entry[kind])
         where = f"edge {kind} {names[i]}-{names[j]}"
         if "project" in entry:
             if (min(i, j), max(i, j)) in topology.edge_projections:
-                _fail(path, f"{where} is given twice")
+                topology_error(path, f"{where} is given twice")
             topology.edge_projections[min(i, j), max(i, j)] = _surface_name(topology, where, entry["project"])
         if kind == "line":
             if "project" not in entry or len(entry) != 2:
-                _fail(path, f"{where}: a line entry only projects a straight edge: {{line: [a, b], project: NAME}}")
+                topology_error(path, f"{where}: a line entry only projects a straight edge: {{line: [a, b], project: NAME}}")
             continue
         if kind == "arc":
             if ("through" in entry) == ("center" in entry):
-                _fail(path, f"{where} needs one of 'through' (a point on the arc) and 'center'")
+                topology_error(path, f"{where} needs one of 'through' (a point on the arc) and 'center'")
             how = "through" if "through" in entry else "center"
             extra = (how, _points(path, f"{where}: {how}", entry[how], dim)[0])
         else:
             if "points" not in entry:
-                _fail(path, f"{where} needs 'points' (the points between its vertices)")
+                topology_error(path, f"{where} needs 'points' (the points between its vertices)")
             extra = ("points", _points(path, f"{where}: points", entry["points"], dim))
         if (i, j) in topology.edges or (j, i) in topology.edges:
-            _fail(path, f"{where} is given twice")
+            topology_error(path, f"{where} is given twice")
         topology.edges[i, j] = (kind, *extra)
 
 
@@ -262,11 +250,11 @@ def _cells(topology: Topology, cells: dict) -> None:
         topology.size = _number(path, "cells: size", cells["size"])
     for number, entry in enumerate(cells.get("counts") or []):
         if not isinstance(entry, (list, tuple)) or len(entry) != 3:
-            _fail(path, f"cells: counts[{number}] must be [a, b, cells]")
+            topology_error(path, f"cells: counts[{number}] must be [a, b, cells]")
         i, j = _pair(topology, f"cells: counts[{number}]", entry[:2])
         n = entry[2]
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            _fail(path, f"cells: counts[{number}] must give a positive whole number of cells, got {n!r}"[:200])
+            topology_error(path, f"cells: counts[{number}] must give a positive whole number of cells, got {n!r}"[:200])
         topology.counts.append((i, j, n))
 
 
@@ -274,48 +262,48 @@ def _grading(topology: Topology, grading: dict) -> None:
     path = topology.path
     for number, entry in enumerate(grading.get("ratios") or []):
         if not isinstance(entry, (list, tuple)) or len(entry) != 3:
-            _fail(path, f"grading: ratios[{number}] must be [a, b, last cell / first cell]")
+            topology_error(path, f"grading: ratios[{number}] must be [a, b, last cell / first cell]")
         i, j = _pair(topology, f"grading: ratios[{number}]", entry[:2])
         topology.ratios.append((i, j, _number(path, f"grading: ratios[{number}]", entry[2])))
     first = grading.get("first_cell") or {}
     if not isinstance(first, dict):
-        _fail(path, "grading: first_cell must map patch names to first-cell heights")
+        topology_error(path, "grading: first_cell must map patch names to first-cell heights")
     topology.first_cell = {str(k): _number(path, f"grading: first_cell of '{k}'", v) for k, v in first.items()}
     if "growth" in grading:
         topology.growth = _number(path, "grading: growth", grading["growth"])
         if topology.growth <= 1.0:
-            _fail(path, f"grading: growth must be above 1, got {topology.growth:g}")
+            topology_error(path, f"grading: growth must be above 1, got {topology.growth:g}")
 
 
 def _patches(topology: Topology, patches) -> None:
     path, dim = topology.path, topology.dim
     corners = 4 if dim == 3 else 2
     if not isinstance(patches, dict):
-        _fail(path, "patches must map patch names to {type: ..., faces: [...]}")
+        topology_error(path, "patches must map patch names to {type: ..., faces: [...]}")
     for name, entry in patches.items():
-        entry = _keys(path, f"patch '{name}'", entry, _PATCH_KEYS)
+        entry = checked_keys(path, f"patch '{name}'", entry, _PATCH_KEYS)
         kind = str(entry.get("type", "wall"))
         if kind not in _PATCH_TYPES:
-            _fail(
+            topology_error(
                 path,
                 f"patch '{name}' has unknown type '{kind}' (types: {', '.join(_PATCH_TYPES)}){did_you_mean(kind, _PATCH_TYPES)}",
             )
         faces = entry.get("faces")
         if not isinstance(faces, list) or not faces:
-            _fail(path, f"patch '{name}' needs 'faces': a list of faces, each {corners} vertices")
+            topology_error(path, f"patch '{name}' needs 'faces': a list of faces, each {corners} vertices")
         listed = []
         for face in faces:
             if not isinstance(face, (list, tuple)) or len(face) != corners:
-                _fail(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
+                topology_error(path, f"patch '{name}': a face of a {dim}D block has {corners} vertices, got {face!r}"[:200])
             listed.append(tuple(_vertex(topology, f"patch '{name}'", v) for v in face))
         topology.patches[str(name)] = (kind, listed)
         if "project" in entry:
             for face in listed:
                 _project(topology, f"patch '{name}'", frozenset(face), entry["project"])
         if kind != "cyclic" and "rotation" in entry:
-            _fail(path, f"patch '{name}': only a cyclic patch has a 'rotation'")
+            topology_error(path, f"patch '{name}': only a cyclic patch has a 'rotation'")
         if (kind == "cyclic") != ("neighbour" in entry):
-            _fail(
+            topology_error(
                 path,
                 f"patch '{name}': "
                 + (
@@ -330,12 +318,12 @@ def _patches(topology: Topology, patches) -> None:
         other = str(patches[name]["neighbour"])
         back = patches.get(other) if other in topology.patches else None
         if other == name or not isinstance(back, dict) or back.get("type") != "cyclic" or str(back.get("neighbour")) != name:
-            _fail(
+            topology_error(
                 path, f"cyclic patch '{name}': its neighbour '{other}' must be another cyclic patch whose neighbour is '{name}'"
             )
         if "rotation" in patches[name]:
             if "rotation" in back:
-                _fail(path, f"cyclic patches '{name}' and '{other}' both give a rotation: give it on one side")
+                topology_error(path, f"cyclic patches '{name}' and '{other}' both give a rotation: give it on one side")
             topology.rotations[name] = _rotation(topology, name, patches[name]["rotation"])
         if (other, name) not in topology.cyclic and (name, other) not in topology.cyclic:
             topology.cyclic.append((name, other) if "rotation" in patches[name] or "rotation" not in back else (other, name))
@@ -345,13 +333,15 @@ def _rotation(topology: Topology, name: str, value) -> tuple:
     """(centre (dim,), unit axis (3,), angle in degrees) of a cyclic patch's ``rotation``."""
     path, dim = topology.path, topology.dim
     where = f"patch '{name}': rotation"
-    value = _keys(path, where, value, ("center", "axis", "angle"))
+    value = checked_keys(path, where, value, ("center", "axis", "angle"))
     if "center" not in value or "angle" not in value or (dim == 3 and "axis" not in value):
-        _fail(path, f"{where} needs center and angle (degrees)" + (" and axis" if dim == 3 else ""))
+        topology_error(path, f"{where} needs center and angle (degrees)" + (" and axis" if dim == 3 else ""))
     centre = _points(path, f"{where}: center", value["center"], dim)[0]
     axis = _points(path, f"{where}: axis", value.get("axis", [0, 0, 1]), 3)[0]
     if not np.linalg.norm(axis) > 0 or (dim == 2 and (axis[0] or axis[1])):
-        _fail(path, f"{where}: axis must be a nonzero vector" + (" along z (a 2D set turns about z)" if dim == 2 else ""))
+        topology_error(
+            path, f"{where}: axis must be a nonzero vector" + (" along z (a 2D set turns about z)" if dim == 2 else "")
+        )
     angle = _number(path, f"{where}: angle", value["angle"], positive=False)
     return tuple(float(v) for v in centre), tuple(float(v) for v in axis / np.linalg.norm(axis)), angle
 
@@ -361,7 +351,9 @@ def _surface_name(topology: Topology, where: str, name) -> str:
     known = list(topology.surfaces)
     if str(name) not in known:
         listed = f" (surfaces: {', '.join(known)})" if known else " (the file declares no surfaces)"
-        _fail(topology.path, f"{where} projects onto an unknown surface '{name}'{listed}{did_you_mean(str(name), known)}")
+        topology_error(
+            topology.path, f"{where} projects onto an unknown surface '{name}'{listed}{did_you_mean(str(name), known)}"
+        )
     return str(name)
 
 
@@ -369,7 +361,7 @@ def _project(topology: Topology, where: str, face: frozenset, name) -> None:
     """Record that ``face`` (its vertex indices) is projected onto the surface ``name``."""
     name = _surface_name(topology, where, name)
     if topology.projections.get(face, name) != name:
-        _fail(topology.path, f"{where}: its face is projected onto '{topology.projections[face]}' and '{name}'")
+        topology_error(topology.path, f"{where}: its face is projected onto '{topology.projections[face]}' and '{name}'")
     topology.projections[face] = name
 
 
@@ -379,40 +371,40 @@ def _vertices(path, value) -> tuple[list, list]:
         return [str(i) for i in range(len(value))], value
     if isinstance(value, dict):
         return [str(k) for k in value], list(value.values())
-    _fail(path, "vertices must be a list of points or a mapping name -> point")
+    topology_error(path, "vertices must be a list of points or a mapping name -> point")
 
 
 def _blocks(path, value, index) -> tuple[list, np.ndarray, int, dict]:
     """(block names, vertex indices (B, 4 or 8), dim, {block: {face name: surface name}}) of ``blocks``."""
     if not isinstance(value, list) or not value:
-        _fail(path, "blocks must be a list of blocks (3D: 8 vertices each, 2D: 4)")
+        topology_error(path, "blocks must be a list of blocks (3D: 8 vertices each, 2D: 4)")
     names, rows, projections = [], [], {}
     for number, entry in enumerate(value):
         if isinstance(entry, dict):
-            entry = _keys(path, f"blocks[{number}]", entry, ("name", "vertices", "project"))
+            entry = checked_keys(path, f"blocks[{number}]", entry, ("name", "vertices", "project"))
             name, vertices = str(entry.get("name", f"b{number}")), entry.get("vertices")
             if "project" in entry:
                 allowed = face_names(3 if isinstance(vertices, list) and len(vertices) == 8 else 2)
                 projections[number] = {
-                    str(k): v for k, v in _keys(path, f"block '{name}' project", entry["project"], allowed).items()
+                    str(k): v for k, v in checked_keys(path, f"block '{name}' project", entry["project"], allowed).items()
                 }
         else:
             name, vertices = f"b{number}", entry
         if not isinstance(vertices, list) or len(vertices) not in (4, 8):
-            _fail(path, f"block '{name}' needs 8 vertices (3D, blockMesh order) or 4 (2D), got {vertices!r}"[:200])
+            topology_error(path, f"block '{name}' needs 8 vertices (3D, blockMesh order) or 4 (2D), got {vertices!r}"[:200])
         row = []
         for v in vertices:
             if str(v) not in index:
-                _fail(path, f"block '{name}' names a missing vertex '{v}'{did_you_mean(str(v), list(index))}")
+                topology_error(path, f"block '{name}' names a missing vertex '{v}'{did_you_mean(str(v), list(index))}")
             row.append(index[str(v)])
         if len(set(row)) != len(row):
-            _fail(path, f"block '{name}' names a vertex twice")
+            topology_error(path, f"block '{name}' names a vertex twice")
         if name in names:
-            _fail(path, f"two blocks are named '{name}'")
+            topology_error(path, f"two blocks are named '{name}'")
         names.append(name)
         rows.append(row)
     if len({len(r) for r in rows}) != 1:
-        _fail(path, "blocks mix 8 vertices (3D) and 4 (2D)")
+        topology_error(path, "blocks mix 8 vertices (3D) and 4 (2D)")
     return names, np.array(rows, dtype=int), 3 if len(rows[0]) == 8 else 2, projections
 
 

@@ -29,7 +29,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError, did_you_mean
 
-__all__ = ["JOINT_KEYS", "PIPE_KEYS", "expand_joint", "expand_pipe"]
+__all__ = ["checked_keys", "expand_joint", "expand_pipe", "JOINT_KEYS", "PIPE_KEYS", "topology_error"]
 
 JOINT_KEYS = ("center", "radius", "arms", "wall", "core", "cells", "grading", "normal")
 PIPE_KEYS = ("start", "end", "bend", "length", "wall", "core", "cells", "grading")
@@ -44,8 +44,9 @@ _OWN = {("br", "tr"): (-45.0, 45.0), ("tr", "t"): (45.0, 90.0), ("b", "br"): (-9
 _SAMPLES = 15  # points inside each mitre ellipse arc (its spline)
 
 
-def _fail(path, text: str):
-    """``path``: the file and its shorthand's key ("f.yaml: joint")."""
+def topology_error(path, text: str):
+    """Raise the one-line error of topology file ``path`` (or "f.yaml: joint": the file and its
+    shorthand's key)."""
     raise GeometryError(f"topology file {path}: {text}")
 
 
@@ -55,24 +56,25 @@ def _vector(path, where, value, dim=3) -> np.ndarray:
     except (TypeError, ValueError):
         array = np.zeros(0)
     if array.shape != (dim,) or not np.all(np.isfinite(array)):
-        _fail(path, f"{where} must be {dim} numbers")
+        topology_error(path, f"{where} must be {dim} numbers")
     return array
 
 
 def _positive(path, where, value, whole=False):
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
-        _fail(path, f"{where} must be a positive number, got {value!r}"[:160])
+        topology_error(path, f"{where} must be a positive number, got {value!r}"[:160])
     if whole and (not isinstance(value, int) or value < 1):
-        _fail(path, f"{where} must be a positive whole number, got {value!r}"[:160])
+        topology_error(path, f"{where} must be a positive whole number, got {value!r}"[:160])
     return value
 
 
-def _keys(path, where, value, allowed) -> dict:
+def checked_keys(path, where: str, value, allowed) -> dict:
+    """``value`` as a mapping whose keys are all in ``allowed`` (the nearest one named otherwise)."""
     if not isinstance(value, dict):
-        _fail(path, f"{where} must be a mapping (keys: {', '.join(allowed)})")
+        topology_error(path, f"{where} must be a mapping (keys: {', '.join(allowed)})")
     for key in value:
         if str(key) not in allowed:
-            _fail(path, f"unknown key '{key}' in {where} (keys: {', '.join(allowed)}){did_you_mean(str(key), allowed)}")
+            topology_error(path, f"unknown key '{key}' in {where} (keys: {', '.join(allowed)}){did_you_mean(str(key), allowed)}")
     return value
 
 
@@ -82,20 +84,20 @@ def expand_joint(path, data: dict) -> dict:
     line) for a bad entry: arms not in one plane, two arms in one direction, an arm shorter than
     its mitre."""
     path = f"{path}: joint"
-    joint = _keys(path, "the entry", data["joint"], JOINT_KEYS)
+    joint = checked_keys(path, "the entry", data["joint"], JOINT_KEYS)
     for key in ("center", "radius", "arms"):
         if key not in joint:
-            _fail(path, f"needs '{key}'")
+            topology_error(path, f"needs '{key}'")
     center = _vector(path, "center", joint["center"])
     radius = float(_positive(path, "radius", joint["radius"]))
     core = float(_positive(path, "core", joint.get("core", 0.5)))
     if core >= np.sqrt(0.5):
-        _fail(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
+        topology_error(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
     ends, patches = _arms(path, joint["arms"])
     directions = np.array([e - center for e in ends])
     lengths = np.linalg.norm(directions, axis=1)
     if np.any(lengths <= 1e-12 * radius):
-        _fail(path, "an arm's end is at the center")
+        topology_error(path, "an arm's end is at the center")
     directions /= lengths[:, None]
     normal = _normal(path, joint, directions)
     # Arms counterclockwise about the normal from the first arm's direction.
@@ -105,11 +107,11 @@ def expand_joint(path, data: dict) -> dict:
     order = np.argsort(angles, kind="stable")
     gaps = np.diff(np.append(angles[order], 2 * np.pi))
     if np.any(gaps < 1e-6):
-        _fail(path, "two arms point the same way")
+        topology_error(path, "two arms point the same way")
     if np.any(gaps > np.pi + 1e-9):
-        _fail(path, "the arms leave a gap of more than 180 degrees between two of them: the mitre would fold back")
-    cells = _keys(path, "cells", joint.get("cells") or {}, ("core", "radial", "along"))
-    grading = _keys(path, "grading", joint.get("grading") or {}, ("radial", "along"))
+        topology_error(path, "the arms leave a gap of more than 180 degrees between two of them: the mitre would fold back")
+    cells = checked_keys(path, "cells", joint.get("cells") or {}, ("core", "radial", "along"))
+    grading = checked_keys(path, "grading", joint.get("grading") or {}, ("radial", "along"))
     counts = {
         k: _positive(path, f"cells: {k}", cells.get(k, d), whole=True) for k, d in (("core", 8), ("radial", 5), ("along", 10))
     }
@@ -128,7 +130,7 @@ def expand_joint(path, data: dict) -> dict:
                  -1: _mitre_slope(normal, d, angles[arm] - angles[previous], -1)}  # fmt: skip
         reach = max(abs(slope[+1]), abs(slope[-1])) * radius * np.sqrt(2.0)
         if lengths[arm] <= reach * (1 + 1e-9):
-            _fail(
+            topology_error(
                 path,
                 f"arm {arm} ({patches[arm]}) is shorter than its mitre ({lengths[arm]:.4g} <= {reach:.4g}): move its end out",
             )
@@ -189,10 +191,10 @@ def expand_joint(path, data: dict) -> dict:
 def _arms(path, arms) -> tuple[list, list]:
     """(end centres (3,), end patch names) of the ``arms`` list."""
     if not isinstance(arms, list) or len(arms) < 2:
-        _fail(path, "arms must list at least two arms, each {end: [x, y, z], patch: name}")
+        topology_error(path, "arms must list at least two arms, each {end: [x, y, z], patch: name}")
     ends, patches = [], []
     for number, arm in enumerate(arms):
-        arm = _keys(path, f"arms[{number}]", arm, _ARM_KEYS)
+        arm = checked_keys(path, f"arms[{number}]", arm, _ARM_KEYS)
         ends.append(_vector(path, f"arms[{number}]: end", arm.get("end")))
         patches.append(str(arm.get("patch", f"end{number}")))
     return ends, patches
@@ -217,10 +219,10 @@ def _normal(path, joint: dict, directions: np.ndarray) -> np.ndarray:
         normal = max(crosses, key=np.linalg.norm)
     size = np.linalg.norm(normal)
     if size < 1e-9:
-        _fail(path, "the arms are on one line: give 'normal', the joint's axis")
+        topology_error(path, "the arms are on one line: give 'normal', the joint's axis")
     normal = normal / size
     if np.any(np.abs(directions @ normal) > 1e-9):
-        _fail(path, "the arms' axes are not in one plane with the center (all must be normal to 'normal')")
+        topology_error(path, "the arms' axes are not in one plane with the center (all must be normal to 'normal')")
     return normal
 
 
@@ -250,33 +252,33 @@ def expand_pipe(path, data: dict) -> dict:
     end section, straight (``length``) or bent about an axis (``bend``: center, axis, angle in
     degrees), its radius changing linearly; vertices ``a.k0`` .. ``b.w3`` (a: start, b: end)."""
     path = f"{path}: pipe"
-    pipe = _keys(path, "the entry", data["pipe"], PIPE_KEYS)
-    start = _keys(path, "start", pipe.get("start"), ("center", "normal", "radius", "patch"))
-    end = _keys(path, "end", pipe.get("end") or {}, ("radius", "patch"))
+    pipe = checked_keys(path, "the entry", data["pipe"], PIPE_KEYS)
+    start = checked_keys(path, "start", pipe.get("start"), ("center", "normal", "radius", "patch"))
+    end = checked_keys(path, "end", pipe.get("end") or {}, ("radius", "patch"))
     if ("bend" in pipe) == ("length" in pipe):
-        _fail(path, "needs one of 'bend' ({center, axis, angle}) and 'length' (a straight pipe)")
+        topology_error(path, "needs one of 'bend' ({center, axis, angle}) and 'length' (a straight pipe)")
     center = _vector(path, "start: center", start.get("center"))
     normal = _vector(path, "start: normal", start.get("normal"))
     if np.linalg.norm(normal) < 1e-12:
-        _fail(path, "start: normal must not be zero")
+        topology_error(path, "start: normal must not be zero")
     normal = normal / np.linalg.norm(normal)
     radii = (float(_positive(path, "start: radius", start.get("radius"))), 0.0)
     radii = (radii[0], float(_positive(path, "end: radius", end.get("radius", radii[0]))))
     core = float(_positive(path, "core", pipe.get("core", 0.4)))
     if core >= np.sqrt(0.5):
-        _fail(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
+        topology_error(path, f"core must be below 0.707 (the core's corners inside the pipe), got {core:g}")
     if "bend" in pipe:
-        bend = _keys(path, "bend", pipe["bend"], ("center", "axis", "angle"))
+        bend = checked_keys(path, "bend", pipe["bend"], ("center", "axis", "angle"))
         pivot, axis = _vector(path, "bend: center", bend.get("center")), _vector(path, "bend: axis", bend.get("axis"))
         angle = bend.get("angle")
         if isinstance(angle, bool) or not isinstance(angle, (int, float)) or not 0 < abs(angle) < 360:
-            _fail(path, f"bend: angle must be a number of degrees between -360 and 360, not 0, got {angle!r}"[:160])
+            topology_error(path, f"bend: angle must be a number of degrees between -360 and 360, not 0, got {angle!r}"[:160])
         axis = axis / max(np.linalg.norm(axis), 1e-300)
         arm = center - pivot - ((center - pivot) @ axis) * axis  # from the bend's axis to the start centre
         if abs(normal @ axis) > 1e-9 or abs(normal @ arm) > 1e-9 * max(np.linalg.norm(arm), 1.0):
-            _fail(path, "start: normal must be tangent to the bend (normal to its axis and to the line from its center)")
+            topology_error(path, "start: normal must be tangent to the bend (normal to its axis and to the line from its center)")
         if np.linalg.norm(arm) <= max(radii) * (1 + 1e-9):
-            _fail(
+            topology_error(
                 path,
                 f"bend: its axis is within the pipe's radius of the start centre ({np.linalg.norm(arm):.4g}): the sections would fold",
             )
@@ -318,8 +320,8 @@ def expand_pipe(path, data: dict) -> dict:
     for face in faces:
         bottom, top = [f"a.{p}" for p in face], [f"b.{p}" for p in face]
         blocks.append((bottom[::-1] + top[::-1]) if _left_handed(vertices, bottom, top) else bottom + top)
-    cells = _keys(path, "cells", pipe.get("cells") or {}, ("tangential", "radial", "along"))
-    grading = _keys(path, "grading", pipe.get("grading") or {}, ("radial", "along"))
+    cells = checked_keys(path, "cells", pipe.get("cells") or {}, ("tangential", "radial", "along"))
+    grading = checked_keys(path, "grading", pipe.get("grading") or {}, ("radial", "along"))
     counts = {
         k: _positive(path, f"cells: {k}", cells.get(k, d), whole=True)
         for k, d in (("tangential", 10), ("radial", 5), ("along", 10))
