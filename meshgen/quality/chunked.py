@@ -389,16 +389,7 @@ def chunked_report(source, geometry=None, client=None, progress=None, block_node
         raise MeshgenError(
             f"nothing to evaluate: all {counts['cells']} cells are degenerate (zero-length edges or non-finite coordinates)"
         )
-    summaries = {}
-    for name in METRICS:
-        part = merged[name]
-        summaries[name] = {
-            "mean": part["sum"] / part["count"],
-            "min": part["min"],
-            "max": part["max"],
-            "p01": sketches.quantile(part["sketch"], 0.01, part["min"], part["max"]),
-            "p99": sketches.quantile(part["sketch"], 0.99, part["min"], part["max"]),
-        }
+    summaries = {name: sketches.part_figures(merged[name]) for name in METRICS}
     info = {"dim": dim, "nonfinite_nodes": nonfinite}
     if geometry is not None:
         info["boundary_deviation"] = deviation_figures(

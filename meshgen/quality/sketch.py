@@ -31,6 +31,7 @@ __all__ = [
     "order_statistic",
     "quantile",
     "sketch_of",
+    "part_figures",
 ]
 
 RELATIVE_ACCURACY = 1e-4
@@ -129,3 +130,15 @@ def quantile(sketch: QuantileSketch, q: float, low: float | None = None, high: f
     if high is not None:
         value = min(value, high)
     return float(value)
+
+
+def part_figures(part: dict) -> dict:
+    """The report's figures of a metric from its merged block summary (``count``, ``sum``, ``min``,
+    ``max``, ``sketch``): mean, min, max, and p01 and p99 from the sketch."""
+    return {
+        "mean": part["sum"] / part["count"],
+        "min": part["min"],
+        "max": part["max"],
+        "p01": quantile(part["sketch"], 0.01, part["min"], part["max"]),
+        "p99": quantile(part["sketch"], 0.99, part["min"], part["max"]),
+    }

@@ -382,17 +382,8 @@ def summarise_hex_torch(node_slabs, tolerance: float, chunk_cells: int = CHUNK_C
 def report_summaries(summary: dict) -> dict:
     """{metric: {mean, min, max, p01, p99}} of a summary (``summarise_hex_torch``) as
     ``meshgen.quality.chunked.chunked_report`` makes them (p01, p99 from the sketch)."""
-    figures = {}
-    for name in METRICS:
-        part = summary["metrics"].get(name)
-        if part is None:
-            figures[name] = dict.fromkeys(("mean", "min", "max", "p01", "p99"))
-            continue
-        figures[name] = {
-            "mean": part["sum"] / part["count"],
-            "min": part["min"],
-            "max": part["max"],
-            "p01": sketches.quantile(part["sketch"], 0.01, part["min"], part["max"]),
-            "p99": sketches.quantile(part["sketch"], 0.99, part["min"], part["max"]),
-        }
-    return figures
+    parts = {name: summary["metrics"].get(name) for name in METRICS}
+    return {
+        name: sketches.part_figures(part) if part is not None else dict.fromkeys(("mean", "min", "max", "p01", "p99"))
+        for name, part in parts.items()
+    }
