@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["files_in", "full_disk_temporaries"]
 
 
@@ -38,3 +40,29 @@ def full_disk_temporaries(monkeypatch, target_name: str) -> list[Path]:
 
     monkeypatch.setattr(atomic, "temporary_path", planted)
     return made
+
+
+def vtk_quality(points, cells, measure):
+    """VTK's ``vtkMeshQuality`` (Verdict) ``measure`` (a setter name) per cell of hexahedra (8
+    corners) or quadrilaterals (4) given as points and VTK-ordered connectivity; skipped without vtk."""
+    import pytest
+
+    vtk = pytest.importorskip("vtk")
+    from vtk.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+
+    vtk_points = vtk.vtkPoints()
+    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True))
+    grid = vtk.vtkUnstructuredGrid()
+    grid.SetPoints(vtk_points)
+    connectivity = vtk.vtkCellArray()
+    offsets = np.arange(0, cells.size + 1, cells.shape[1])
+    connectivity.SetData(
+        numpy_to_vtk(offsets, deep=True, array_type=vtk.VTK_ID_TYPE),
+        numpy_to_vtk(cells.ravel().copy(), deep=True, array_type=vtk.VTK_ID_TYPE),
+    )
+    grid.SetCells(vtk.VTK_HEXAHEDRON if cells.shape[1] == 8 else vtk.VTK_QUAD, connectivity)
+    quality = vtk.vtkMeshQuality()
+    quality.SetInputData(grid)
+    getattr(quality, measure)()
+    quality.Update()
+    return vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality"))

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import vtk_quality
 
 from meshgen.geometry.grid import cell_connectivity, flat_points
 from meshgen.methods.tfi import tfi
@@ -151,28 +152,6 @@ def test_degenerate_and_non_finite_cells_are_inverted_and_never_nan_in_summaries
 
 # ---------------------------------------------------------------------------------------------
 # VTK's vtkMeshQuality (Verdict)
-
-
-def vtk_quality(points, cells, measure):
-    vtk = pytest.importorskip("vtk")
-    from vtk.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-
-    vtk_points = vtk.vtkPoints()
-    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True))
-    grid = vtk.vtkUnstructuredGrid()
-    grid.SetPoints(vtk_points)
-    connectivity = vtk.vtkCellArray()
-    offsets = np.arange(0, cells.size + 1, cells.shape[1])
-    connectivity.SetData(
-        numpy_to_vtk(offsets, deep=True, array_type=vtk.VTK_ID_TYPE),
-        numpy_to_vtk(cells.ravel().copy(), deep=True, array_type=vtk.VTK_ID_TYPE),
-    )
-    grid.SetCells(vtk.VTK_HEXAHEDRON if cells.shape[1] == 8 else vtk.VTK_QUAD, connectivity)
-    quality = vtk.vtkMeshQuality()
-    quality.SetInputData(grid)
-    getattr(quality, measure)()
-    quality.Update()
-    return vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality"))
 
 
 @pytest.mark.parametrize("sigma", [0.05, 0.2, 0.3])

@@ -7,6 +7,8 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from helpers import vtk_quality  # noqa: E402
+
 from meshgen.geometry.grid import cell_connectivity, flat_points  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.quality import sketch as sketches  # noqa: E402
@@ -104,28 +106,6 @@ def test_runs_of_planes_do_not_change_a_bit():
     runs, run_mask = structured_hex_torch(T, 1e-12, chunk_cells=30)
     assert torch.equal(mask, run_mask) and torch.equal(whole.isnan(), runs.isnan())
     assert torch.equal(torch.nan_to_num(whole), torch.nan_to_num(runs))
-
-
-def vtk_quality(points, cells, measure):
-    vtk = pytest.importorskip("vtk")
-    from vtk.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-
-    vtk_points = vtk.vtkPoints()
-    vtk_points.SetData(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True))
-    grid = vtk.vtkUnstructuredGrid()
-    grid.SetPoints(vtk_points)
-    connectivity = vtk.vtkCellArray()
-    offsets = np.arange(0, cells.size + 1, cells.shape[1])
-    connectivity.SetData(
-        numpy_to_vtk(offsets, deep=True, array_type=vtk.VTK_ID_TYPE),
-        numpy_to_vtk(cells.ravel().copy(), deep=True, array_type=vtk.VTK_ID_TYPE),
-    )
-    grid.SetCells(vtk.VTK_HEXAHEDRON, connectivity)
-    quality = vtk.vtkMeshQuality()
-    quality.SetInputData(grid)
-    getattr(quality, measure)()
-    quality.Update()
-    return vtk_to_numpy(quality.GetOutput().GetCellData().GetArray("Quality"))
 
 
 @pytest.mark.parametrize("X", [perturbed((8, 7, 6), 0.25, seed=11), sheared_shell((8, 7, 6))], ids=["perturbed", "sheared"])
