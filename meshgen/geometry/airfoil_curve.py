@@ -88,16 +88,20 @@ def _partial_arcs(section: Section, interval: np.ndarray, t: np.ndarray) -> np.n
     return section.knot_arcs[interval] + 0.5 * (t - a) * (speed @ _GAUSS_W)
 
 
-def analytic_section(name: str, shape, le_parameter: float, *, derivative=None, samples: int = 201) -> Section:
+def analytic_section(name: str, shape, le_parameter: float, *, derivative=None, samples: int = 201, breaks=()) -> Section:
     """A section from an exact formula ``shape`` (t (m,) -> (m, 2), t in [0, 1], lower trailing
     edge to upper); ``derivative`` dp/dt, or the complex-step derivative Im p(t + ih) / h of
-    ``shape`` (exact to rounding; ``shape`` must then accept complex t)."""
+    ``shape`` (exact to rounding; ``shape`` must then accept complex t). ``breaks``: parameters
+    where the formula's curvature jumps (a NACA camber line's junction), made knots of the
+    arc-length table, whose quadrature then never straddles one (the arc lengths, and the nodes,
+    move smoothly as a section parameter moves the junction)."""
     if derivative is None:
 
         def derivative(t, step=1e-30):
             return np.imag(shape(np.asarray(t, dtype=float) + 1j * step)) / step
 
-    knots = np.linspace(0.0, 1.0, ANALYTIC_INTERVALS + 1)
+    knots = np.unique(np.concatenate([np.linspace(0.0, 1.0, ANALYTIC_INTERVALS + 1), np.asarray(breaks, dtype=float)]))
+    knots = knots[np.concatenate([[True], np.diff(knots) > 1e-9])]  # a break on a knot is that knot
     points = shape(np.linspace(0.0, 1.0, samples))
     return Section(name, shape, derivative, knots, _arc_table(derivative, knots), float(le_parameter), points, True)
 

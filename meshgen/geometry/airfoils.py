@@ -36,8 +36,14 @@ __all__ = [
     "NACA_5_REFLEX",
     "NACA_5_STANDARD",
     "TMR_0012",
+    "MAX_CAMBER",
+    "MAX_THICKNESS",
+    "CAMBER_POSITIONS",
+    "camber_breaks",
     "data_section",
     "load_section",
+    "naca4_camber",
+    "naca4_section",
     "naca_camber",
     "naca_constants",
     "naca_section",
@@ -51,6 +57,9 @@ __all__ = [
 MIN_SURFACE_POINTS = 3  # per surface, leading and trailing edge included (5 points in all)
 LE_TOL = 1e-4  # Lednicer surfaces' leading-edge points may differ by this fraction of chord
 MAX_TE_GAP = 0.05  # the widest blunt trailing edge, as a fraction of chord
+MAX_THICKNESS = 0.4  # naca4_section's thickest section (chords)
+MAX_CAMBER = 0.095  # its largest camber (chords): the 4-digit designations' 9 %
+CAMBER_POSITIONS = (0.1, 0.9)  # where its camber may peak (chords)
 
 # Thickness y_t(x) = scale (a0 sqrt(x) + a1 x + a2 x^2 + a3 x^3 + a4 x^4).
 NACA_THICKNESS = (0.2969, -0.1260, -0.3516, 0.2843, -0.1015)
@@ -99,18 +108,25 @@ def naca_constants(designation: str) -> dict:
     return {**found, "m": m, "k1": k1 * lift / 2.0, "k2_k1": ratio[0] if ratio else 0.0, "reflex": bool(reflex)}
 
 
+def naca4_camber(m: float, p: float, x) -> tuple[np.ndarray, np.ndarray]:
+    """The 4-digit camber line of maximum camber ``m`` (chords) at ``p`` (chords, 0 < p < 1), and
+    its slope, at chord stations ``x`` (m,): two parabolas meeting at p (any real m, p: a family's)."""
+    x = np.asarray(x)
+    x = x.astype(complex if np.iscomplexobj(x) else float)  # complex: for complex-step derivatives
+    if m == 0:
+        return np.zeros_like(x), np.zeros_like(x)
+    front = x.real < p
+    yc = np.where(front, m / p**2 * (2 * p * x - x**2), m / (1 - p) ** 2 * (1 - 2 * p + 2 * p * x - x**2))
+    return yc, np.where(front, 2 * m / p**2 * (p - x), 2 * m / (1 - p) ** 2 * (p - x))
+
+
 def naca_camber(designation: str, x) -> tuple[np.ndarray, np.ndarray]:
     """The camber line y_c(x) and its slope dy_c/dx at chord stations ``x`` (m,) in [0, 1]."""
     c = naca_constants(designation)
     x = np.asarray(x)
     x = x.astype(complex if np.iscomplexobj(x) else float)  # complex: for complex-step derivatives
     if len(c["digits"]) == 4:
-        m, p = c["m"], c["p"]
-        if m == 0:
-            return np.zeros_like(x), np.zeros_like(x)
-        front = x.real < p
-        yc = np.where(front, m / p**2 * (2 * p * x - x**2), m / (1 - p) ** 2 * (1 - 2 * p + 2 * p * x - x**2))
-        return yc, np.where(front, 2 * m / p**2 * (p - x), 2 * m / (1 - p) ** 2 * (p - x))
+        return naca4_camber(c["m"], c["p"], x)
     m, k1, r = c["m"], c["k1"], c["k2_k1"]
     front = x.real < m
     if not c["reflex"]:
@@ -149,6 +165,13 @@ def thickness_shape(scale: float, coefficients, camber=None):
     return shape
 
 
+def camber_breaks(x: float) -> tuple[float, float]:
+    """The curve parameters (lower, upper) of chordwise station ``x`` in (0, 1), where a camber
+    line's two pieces meet (module docstring: x = sin^2(theta / 2), theta = pi (2t - 1))."""
+    theta = 2.0 * np.arcsin(np.sqrt(x))
+    return 0.5 * (1.0 - theta / np.pi), 0.5 * (1.0 + theta / np.pi)
+
+
 def naca_section(designation: str, *, closed_te: bool = False) -> Section:
     """The analytic NACA 4- or 5-digit section (chord 1), with the classic open trailing edge or,
     ``closed_te``, the closed one (a4 = -0.1036)."""
@@ -160,7 +183,32 @@ def naca_section(designation: str, *, closed_te: bool = False) -> Section:
         return naca_camber(c["digits"], x)
 
     shape = thickness_shape(5.0 * c["thickness"], coefficients, camber if cambered else None)
-    return analytic_section(f"NACA {c['digits']}" + (" (closed trailing edge)" if closed_te else ""), shape, 0.5)
+    junction = c["p"] if len(c["digits"]) == 4 else c["m"]  # where the camber line's pieces meet
+    breaks = camber_breaks(junction) if cambered else ()
+    return analytic_section(f"NACA {c['digits']}" + (" (closed trailing edge)" if closed_te else ""), shape, 0.5, breaks=breaks)
+
+
+def naca4_section(camber: float, position: float, thickness: float, *, closed_te: bool = True) -> Section:
+    """The NACA 4-digit section of continuous parameters (chord 1): maximum camber ``camber`` at
+    ``position`` (chords), ``thickness`` (chords), closed trailing edge by default (a4 = -0.1036).
+    ParameterError (one line, naming the parameter) for a section that is not one."""
+    if not 0.0 < thickness <= MAX_THICKNESS:
+        raise ParameterError(
+            "thickness", f"{{name}} {thickness:g}: a section's thickness must lie in (0, {MAX_THICKNESS:g}] chord"
+        )
+    if not 0.0 <= camber <= MAX_CAMBER:
+        raise ParameterError("camber", f"{{name}} {camber:g}: the camber must lie in [0, {MAX_CAMBER:g}] chord")
+    if not CAMBER_POSITIONS[0] <= position <= CAMBER_POSITIONS[1]:
+        low, high = CAMBER_POSITIONS
+        raise ParameterError("camber_position", f"{{name}} {position:g}: the camber's peak must lie at {low:g} to {high:g} chord")
+    coefficients = NACA_THICKNESS[:4] + ((NACA_CLOSED_A4,) if closed_te else NACA_THICKNESS[4:])
+
+    def camber_line(x):
+        return naca4_camber(camber, position, x)
+
+    shape = thickness_shape(5.0 * thickness, coefficients, camber_line if camber > 0 else None)
+    name = f"NACA 4-digit m={camber:g} p={position:g} t={thickness:g}" + (" (closed trailing edge)" if closed_te else "")
+    return analytic_section(name, shape, 0.5, breaks=camber_breaks(position) if camber > 0 else ())
 
 
 def tmr0012_section() -> Section:
