@@ -408,9 +408,26 @@ def unify_interfaces(block_set: BlockSet, Xs, tolerance: float = GAP_TOLERANCE) 
         X[...] = values[ids]
 
 
+_NUMBERINGS = {}  # (dim, node shapes, interfaces) -> global_numbering's result: a set meshed again reuses it
+
+
 def global_numbering(block_set: BlockSet) -> tuple[list[np.ndarray], int]:
-    """Global node numbers (interface nodes merged): one int64 array of each block's node shape,
-    and the number of unique nodes. Numbers follow the blocks' order, each block in C order."""
+    """Global node numbers (interface nodes merged): one int64 array of each block's node shape
+    (read-only: shared by the sets of the same shapes and interfaces), and the number of unique
+    nodes. Numbers follow the blocks' order, each block in C order."""
+    key = (block_set.dim, tuple(block_set.node_shapes), block_set.interfaces)
+    if key not in _NUMBERINGS:
+        if len(_NUMBERINGS) > 8:
+            _NUMBERINGS.clear()
+        numbering, count = _numbering(block_set)
+        for ids in numbering:
+            ids.setflags(write=False)
+        _NUMBERINGS[key] = (numbering, count)
+    numbering, count = _NUMBERINGS[key]
+    return list(numbering), count
+
+
+def _numbering(block_set: BlockSet) -> tuple[list[np.ndarray], int]:
     shapes = block_set.node_shapes
     offsets = np.cumsum([0] + [int(np.prod(s)) for s in shapes])
     label = np.arange(offsets[-1])

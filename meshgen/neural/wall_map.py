@@ -2,9 +2,10 @@
 O-grids, ``geometries/airfoil.py``) with the wall-normal distances applied analytically.
 
 A plugin declares it with the hooks of ``HOOKS``: ``wall_layout(values) -> {"distance": D,
-"closed": bool, "blend_distance": d0}``, ``wall_teacher(block_set)`` (the mesh to learn, per block)
-and ``wall_finish(block_set, Xs, check)`` (what the plugin makes of a learned mesh: the airfoil
-blends it beyond a chord into straight lines to its far-field nodes, as its elliptic mesh). Its
+"closed": bool, "blend_distance": d0}``, ``wall_teacher(block_set)`` (the mesh to learn, per block:
+the airfoil's marched layers) and ``wall_finish(block_set, Xs, check)`` (what the plugin makes of a
+learned mesh, and of the teacher: its elliptic mesh, ``elliptic_reference``; the airfoil blends it
+beyond a chord into straight lines to its far-field nodes). Its
 blocks lie in a row along xi (block b's xi1 face is block b+1's xi0; ``closed``: the last's xi1 is
 the first's xi0), eta runs from the wall (or a cut) at eta0 to the far field at eta1, and a node at
 parametric eta lies at the wall-normal distance d = eta D (``meshgen.geometry.wall_spacing``).
@@ -34,6 +35,7 @@ from meshgen.errors import GeometryError
 from meshgen.geometry.blocks import BlockSet, check_handedness
 from meshgen.geometry.plugins import plugin_module
 from meshgen.neural.checkpoint_data import CheckpointError
+from meshgen.neural.wall_family import check_member_values, member_layers, member_tables
 
 __all__ = [
     "BLEND_DISTANCE",
@@ -42,11 +44,14 @@ __all__ = [
     "WallFrame",
     "assemble",
     "check_wall_model",
+    "elliptic_reference",
     "forward",
+    "forward_grid",
     "forward_with",
     "is_wall_model",
     "network_inputs",
     "network_layers",
+    "onto_end_patches",
     "wall_frame",
     "neural_wall_blocks",
     "wall_hooks",
@@ -157,7 +162,7 @@ def check_wall_model(model: dict) -> None:
     """CheckpointError (one line) unless ``model`` is a well-formed wall-layer model: its layers fit
     its widths and inputs, its numbers are finite, its tables one increasing xi list per block."""
     try:
-        inputs = 3 if model["scales"]["closed"] else 2
+        inputs = (3 if model["scales"]["closed"] else 2) + len(model.get("family", {}).get("ranges", {}))
         sizes = [inputs, *[int(w) for w in model["widths"]], 2]
         layers = network_layers(model)
         for index, ((weight, bias), fan_in, fan_out) in enumerate(zip(layers, sizes[:-1], sizes[1:])):
@@ -169,6 +174,18 @@ def check_wall_model(model: dict) -> None:
         if len(tables) != len(model["blocks"]) or any(len(t) < 2 or np.any(np.diff(t) <= 0) for t in tables):
             raise ValueError("the xi tables are not one increasing list per block")
         scales = [float(model["scales"][k]) for k in ("first_height", "distance", "blend_distance")]
+        if "family" in model:
+            family = model["family"]
+            ends = np.asarray([family["ranges"][n] for n in family["ranges"]], dtype=float).reshape(-1, 2)
+            if not (len(ends) and np.isfinite(ends).all() and np.all(ends[:, 0] < ends[:, 1])):
+                raise ValueError("the family's ranges are not finite increasing pairs")
+            base = {str(k): float(v) for k, v in family["base"].items()}  # numbers, or the file is damaged
+            if (
+                not all(n in base for n in family["ranges"])
+                or len(family["train_dims"]) != 2
+                or not isinstance(family["free"], list)
+            ):
+                raise ValueError("the family's base member, free parameters or --dims are missing")
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise CheckpointError(f"the checkpoint's wall-layer model is damaged ({exc})") from None
     finite = all(np.isfinite(w).all() and np.isfinite(b).all() for w, b in layers) and np.isfinite(scales).all()
@@ -190,6 +207,27 @@ def forward_with(layers: list, inputs: np.ndarray, dtype) -> np.ndarray:
     return hidden @ weight.T + bias
 
 
+def forward_grid(layers: list, q: np.ndarray, d: np.ndarray, scales: dict) -> np.ndarray:
+    """:func:`forward` on the tensor grid of ``q`` (n,) and ``d`` (m + 1,), float32: (n, m + 1, 2),
+    the values of ``forward(layers, network_inputs(q, d, scales))``. The first layer is separable on
+    a tensor grid (its input is a q part plus a tau part), so its product is one broadcast sum of an
+    (n, h) and an (m + 1, h) array; the others run in place."""
+    grid = network_inputs(q[:1], d, scales)[:, -1:]  # 2 tau - 1 (m + 1, 1)
+    along = network_inputs(q, d[:1], scales)[:, :-1]  # the q inputs (n, 1 or 2)
+    weight, bias = layers[0]
+    weight = weight.astype(np.float32)
+    hidden = (along.astype(np.float32) @ weight[:, :-1].T)[:, None, :] + (grid.astype(np.float32) @ weight[:, -1:].T + bias)[None]
+    hidden = np.tanh(hidden, out=hidden).reshape(len(q) * len(d), -1)
+    for weight, bias in layers[1:-1]:
+        hidden = hidden @ weight.T
+        hidden += bias
+        np.tanh(hidden, out=hidden)
+    weight, bias = layers[-1]
+    out = hidden @ weight.T
+    out += bias
+    return out.reshape(len(q), len(d), 2)
+
+
 def wall_nodes(model: dict, block_set: BlockSet, layout: dict) -> list[np.ndarray]:
     """Every block's nodes (n_b, m + 1, 2) float64 from the wall-layer ``model`` (not yet conforming).
     GeometryError when the block set is not the row the model was trained on."""
@@ -198,13 +236,26 @@ def wall_nodes(model: dict, block_set: BlockSet, layout: dict) -> list[np.ndarra
             f"geometry '{block_set.name}': the model's row of blocks ({', '.join(model['blocks'])}, "
             f"{'closed' if model['scales']['closed'] else 'open'}) is not this one"
         )
-    frame = wall_frame(block_set, layout, model["tables"])
-    layers, scales = network_layers(model), model["scales"]
+    layers, tables, scales = network_layers(model), model["tables"], model["scales"]
+    if "family" in model:  # a family's: the member's inputs folded into the first bias, its own tables
+        check_member_values(model["family"], block_set.values)
+        layers = member_layers(layers, model["family"], block_set.values)
+        tables = member_tables(model["family"], block_set)
+    frame = wall_frame(block_set, layout, tables)
     Xs = []
     for wall, normal, q in zip(frame.walls, frame.normals, frame.q):
-        N = forward(layers, network_inputs(q, frame.d, scales)).reshape(len(q), len(frame.d), 2)
+        N = forward_grid(layers, q, frame.d, scales)
         Xs.append(assemble(wall, normal, frame.d, N, scales["blend_distance"]))
     return Xs
+
+
+def elliptic_reference(block_set: BlockSet) -> list[np.ndarray]:
+    """The plugin's elliptic mesh made of its teacher (``wall_finish`` of ``wall_teacher``, not
+    checked): what a wall-layer model is measured against, per block (n_b, m + 1, 2)."""
+    hooks = wall_hooks(block_set)
+    Xs = hooks.wall_teacher(block_set)
+    onto_end_patches(block_set, Xs)
+    return hooks.wall_finish(block_set, Xs, check=False)
 
 
 def neural_wall_blocks(block_set: BlockSet, model: dict, check: bool = True):
@@ -216,7 +267,7 @@ def neural_wall_blocks(block_set: BlockSet, model: dict, check: bool = True):
     if hooks is None:
         raise GeometryError(f"geometry '{block_set.name}' declares no wall layout: a wall-layer model cannot mesh it")
     Xs = wall_nodes(model, block_set, dict(hooks.wall_layout(block_set.values)))
-    moved = _onto_end_patches(block_set, Xs)
+    moved = onto_end_patches(block_set, Xs)
     Xs = hooks.wall_finish(block_set, Xs, check=check)
     if check:
         check_handedness(block_set, Xs)
@@ -229,7 +280,7 @@ def neural_wall_blocks(block_set: BlockSet, model: dict, check: bool = True):
     }
 
 
-def _onto_end_patches(block_set: BlockSet, Xs: list[np.ndarray]) -> float:
+def onto_end_patches(block_set: BlockSet, Xs: list[np.ndarray]) -> float:
     """Put the nodes of patch faces at xi ends (the C-grid's outlet) on their boundary map, in place,
     the move blended linearly in xi over the block. Returns the largest move."""
     moved = 0.0

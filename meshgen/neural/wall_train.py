@@ -1,12 +1,12 @@
 """Training a wall-layer model (``meshgen.neural.wall_map``): one network for a row of blocks round a
-wall, fitted to the plugin's mesh (``wall_teacher``: the airfoil's elliptic mesh, marched and
-blended) at the training's --dims, through the stage runner (``meshgen.neural.stages.run_stages``)
+wall, fitted to the plugin's mesh (``wall_teacher``: the airfoil's marched layers, which its
+``wall_finish`` blends into its elliptic mesh) at the training's --dims, through the stage runner (``meshgen.neural.stages.run_stages``)
 as every other run.
 
 The fit is least squares on the network's vectors N, weighted by phi^2 (phi the network's share of
 the grid lines' direction): the weighted misfit is that of the directions (X - w) / d themselves.
 The three stages of the configuration take it as: ``pretrain`` L-BFGS on ``pretrain.points``
-nodes, ``adam`` on ``points.interior`` nodes drawn each step, ``lbfgs`` on ``points.interior +
+nodes, ``adam`` on ``points.interior`` nodes drawn each step (with replacement), ``lbfgs`` on ``points.interior +
 points.boundary`` nodes drawn once (float64 with ``lbfgs.float64``). A tenth of the nodes, drawn
 once, is held out (``test_loss``). The targets are computed in float64 from the teacher's nodes
 ((X - w) / d at d = 1e-6 next to coordinates of 100); they are O(1), so the network trains in
@@ -28,6 +28,7 @@ from meshgen.neural.interface_stages import geometry_record
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import Job, Stage
 from meshgen.neural.steps import TermRunner, Training, lbfgs_optimizer, make_optimizer
+from meshgen.neural.wall_family_train import describe_family, family_rows, validate_family
 from meshgen.quality import quality_report, write_json
 
 __all__ = ["HELD_OUT", "WallNetwork", "WallProblem", "describe_wall", "wall_job", "wall_problem", "write_wall_summary"]
@@ -65,19 +66,27 @@ class WallProblem:
     dim: int = 2
 
 
-def wall_problem(block_set: BlockSet, device: torch.device, seed: int) -> WallProblem:
-    """The fit of ``block_set`` (its plugin's ``wall_layout`` and ``wall_teacher`` at its --dims)."""
-    hooks = wall_map.wall_hooks(block_set)
-    layout = dict(hooks.wall_layout(block_set.values))
-    near = hooks.wall_teacher(block_set)
-    frame = wall_map.wall_frame(block_set, layout)
-    d, h = frame.d[1:], float(frame.d[1])
-    scales = {
-        "first_height": h,
-        "distance": float(frame.distance),
-        "closed": bool(frame.closed),
+def wall_scales(block_set: BlockSet) -> dict:
+    """The scales of the network's inputs and of the blend (``wall_map``): the training's first
+    cell, the far field's distance, a ring or a row, d0; from the plugin's ``wall_layout``."""
+    layout = dict(wall_map.wall_hooks(block_set).wall_layout(block_set.values))
+    d = np.asarray(block_set.coords[0][1], dtype=float) * float(layout["distance"])
+    return {
+        "first_height": float(d[1]),
+        "distance": float(layout["distance"]),
+        "closed": bool(layout["closed"]),
         "blend_distance": float(layout.get("blend_distance", wall_map.BLEND_DISTANCE)),
     }
+
+
+def wall_rows(block_set: BlockSet, scales: dict, extra=()) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fit's rows of ``block_set`` (its plugin's ``wall_teacher`` at its --dims): inputs (k, 2|3
+    + len(extra)), with the constant ``extra`` inputs (a family member's) appended; targets N (k, 2);
+    weights phi^2 (k,); nodes of negligible weight left out. float64."""
+    hooks = wall_map.wall_hooks(block_set)
+    near = hooks.wall_teacher(block_set)
+    frame = wall_map.wall_frame(block_set, dict(hooks.wall_layout(block_set.values)))
+    d = frame.d[1:]
     phi = wall_map.blend(d, scales["blend_distance"])
     inputs, targets, weights = [], [], []
     for X, wall, normal, q in zip(near, frame.walls, frame.normals, frame.q):
@@ -87,16 +96,28 @@ def wall_problem(block_set: BlockSet, device: torch.device, seed: int) -> WallPr
         targets.append(N.reshape(-1, 2))
         weights.append(np.broadcast_to(phi**2, u.shape[:2]).reshape(-1))
     inputs, targets, weights = np.concatenate(inputs), np.concatenate(targets), np.concatenate(weights)
+    if len(extra):
+        inputs = np.concatenate([inputs, np.broadcast_to(np.asarray(extra, dtype=float), (len(inputs), len(extra)))], axis=1)
     keep = weights > _LEAST_WEIGHT
-    inputs, targets, weights = inputs[keep], targets[keep], weights[keep]
+    return inputs[keep], targets[keep], weights[keep]
+
+
+def problem_of_rows(rows: tuple, scales: dict, tables: list, device: torch.device, seed: int) -> WallProblem:
+    """The fit of ``rows`` (inputs, targets, weights), a ``HELD_OUT`` share of them held out."""
+    inputs, targets, weights = rows
     held = np.random.default_rng(seed).random(len(inputs)) < HELD_OUT
 
     def tensors(mask):
         return tuple(torch.tensor(a[mask], dtype=torch.float32, device=device) for a in (inputs, targets, weights))
 
-    train, test = tensors(~held), tensors(held)
+    return WallProblem(*tensors(~held), tensors(held), scales, tables, device)
+
+
+def wall_problem(block_set: BlockSet, device: torch.device, seed: int) -> WallProblem:
+    """The fit of ``block_set`` (its plugin's ``wall_layout`` and ``wall_teacher`` at its --dims)."""
+    scales = wall_scales(block_set)
     tables = [[float(x) for x in coords[0]] for coords in block_set.coords]
-    return WallProblem(*train, test, scales, tables, device)
+    return problem_of_rows(wall_rows(block_set, scales), scales, tables, device, seed)
 
 
 def _misfit(network, inputs, targets, weights) -> torch.Tensor:
@@ -119,12 +140,20 @@ def _lbfgs_step(training: Training, optimizer, points) -> dict:
 
 
 def _subset(problem: WallProblem, count: int, generator: torch.Generator) -> tuple:
+    """``count`` distinct rows drawn at random (all of them when there are fewer)."""
     pick = torch.randperm(len(problem.inputs), generator=generator)[: min(count, len(problem.inputs))].to(problem.device)
     return problem.inputs[pick], problem.targets[pick], problem.weights[pick]
 
 
+def _draw(problem: WallProblem, count: int, generator: torch.Generator) -> tuple:
+    """``count`` rows drawn at random with replacement: an Adam step's (a family holds millions of
+    rows, whose permutation would cost more than the step)."""
+    pick = torch.randint(len(problem.inputs), (count,), generator=generator).to(problem.device)
+    return problem.inputs[pick], problem.targets[pick], problem.weights[pick]
+
+
 def _adam_step(training: Training, optimizer, scheduler) -> dict:
-    points = _subset(training.problem, training.config.points.interior, training.generator)
+    points = _draw(training.problem, training.config.points.interior, training.generator)
     optimizer.zero_grad(set_to_none=True)
     loss = _misfit(training.network, *points)
     loss.backward()
@@ -159,10 +188,12 @@ def _stage_table() -> tuple:
     )
 
 
-def describe_wall(training: Training, names) -> dict:
-    """The plain-data description of a wall-layer model (``meshgen.neural.wall_map``'s layout)."""
+def describe_wall(training: Training, names, family: dict | None = None) -> dict:
+    """The plain-data description of a wall-layer model (``meshgen.neural.wall_map``'s layout);
+    ``family``: a family's ``model["family"]`` (``meshgen.neural.wall_family``)."""
     problem = training.problem
     return {
+        **({} if family is None else {"family": family}),
         "kind": wall_map.KIND,
         "dim": 2,
         "widths": [int(w) for w in training.config.model.widths],
@@ -175,12 +206,26 @@ def describe_wall(training: Training, names) -> dict:
     }
 
 
-def wall_job(config, block_set: BlockSet, device: torch.device, resume=None, geometry_spec=None) -> Job:
+def wall_job(config, block_set: BlockSet, device: torch.device, resume=None, geometry_spec=None, ranges=None, dims=None) -> Job:
     """The run (``meshgen.neural.stages.Job``) of a wall-layer model of ``block_set`` (its plugin
-    defines ``meshgen.neural.wall_map.HOOKS``), or its continuation (``resume``)."""
-    problem = wall_problem(block_set, device, config.seed)
+    defines ``meshgen.neural.wall_map.HOOKS``), or its continuation (``resume``). ``ranges`` (name ->
+    (lo, hi)): a family about the middle member ``block_set``, its members meshed at ``dims``
+    (``meshgen.neural.wall_family_train``); a resumed family takes both from its checkpoint."""
+    family = None
+    if resume is not None and "family" in resume["model"]:
+        family = resume["model"]["family"]
+        ranges, dims = {n: tuple(r) for n, r in family["ranges"].items()}, tuple(family["train_dims"])
+    if ranges:
+        family = family or describe_family(block_set, ranges, dims)
+        scales = wall_scales(block_set)
+        rows = family_rows(block_set, ranges, dims, scales, config.points.members, config.seed, wall_rows)
+        tables = [[float(x) for x in coords[0]] for coords in block_set.coords]
+        problem = problem_of_rows(rows, scales, tables, device, config.seed)
+    else:
+        problem = wall_problem(block_set, device, config.seed)
     torch.manual_seed(config.seed)
-    network = WallNetwork(3 if problem.scales["closed"] else 2, list(config.model.widths)).to(device)
+    inputs = (3 if problem.scales["closed"] else 2) + (len(ranges) if ranges else 0)
+    network = WallNetwork(inputs, list(config.model.widths)).to(device)
     weights = UncertaintyWeights(1.0, 1.0, learned=False).to(device)  # one term: nothing to weigh
     generator = torch.Generator().manual_seed(config.seed)
     state = TrainState("pretrain")
@@ -196,13 +241,15 @@ def wall_job(config, block_set: BlockSet, device: torch.device, resume=None, geo
         with torch.no_grad():
             held_out = float(_misfit(network, *problem.test)) if len(problem.test[0]) else float("nan")
         return {
-            "model": describe_wall(training, block_set.names),
+            "model": describe_wall(training, block_set.names, family),
             "geometry": geometry_record(block_set, geometry_spec),
             "reweighting": {k: v.detach().cpu() for k, v in weights.state_dict().items()},
             "test_loss": {"pde": held_out, "boundary": 0.0, "total": held_out, "fit": held_out},
         }
 
     def summary(checkpoint, run_dir):
+        if family is not None:
+            return write_family_summary(checkpoint, block_set, run_dir)
         return write_wall_summary(checkpoint, block_set, run_dir)
 
     return Job(training, state, _stage_table(), describe_run, summary)
@@ -216,15 +263,27 @@ def write_wall_summary(checkpoint: dict, block_set: BlockSet, run_dir) -> dict:
         points, cells, _ = merged_mesh(block_set, Xs)
         return quality_report((points, cells))
 
-    hooks = wall_map.wall_hooks(block_set)
     neural, _ = wall_map.neural_wall_blocks(block_set, checkpoint["model"], check=False)  # inverted cells reported
     dims = [sum(len(c[0]) - 1 for c in block_set.coords), len(block_set.coords[0][1]) - 1]
     summary = {
         "dims": dims,
         "network": report(neural),
         "corrected": report(neural),
-        "elliptic": report(hooks.wall_teacher(block_set)),
+        "elliptic": report(wall_map.elliptic_reference(block_set)),
         "tfi": report(tfi_blocks(block_set)),
+        "test_loss": checkpoint["test_loss"],
+        "step": checkpoint["step"],
+        "training_seconds": checkpoint["elapsed_seconds"],
+    }
+    write_json(Path(run_dir) / "summary.json", summary)
+    return summary
+
+
+def write_family_summary(checkpoint: dict, block_set: BlockSet, run_dir) -> dict:
+    """A family's check (``meshgen.neural.wall_family_train.validate_family``: a grid of members,
+    the corners included, meshed by the model and by the elliptic method); ``summary.json``."""
+    summary = {
+        "family": validate_family(checkpoint["model"], block_set.name),
         "test_loss": checkpoint["test_loss"],
         "step": checkpoint["step"],
         "training_seconds": checkpoint["elapsed_seconds"],
