@@ -122,6 +122,7 @@ SECTIONS = [
     "blocks_neural",
     "blocks",
     "airfoil",
+    "airfoil_family",
     "sweeps",
     "topology",
     "gpu",
@@ -279,6 +280,32 @@ TARGETS = {
         "s",
         "1e9 hexahedra of the bundled network made, corrected and quality-checked on one GPU, writing excluded",
     ),
+    "airfoil_family_inverted": (
+        "<=",
+        0,
+        "cells",
+        "airfoil family: inverted cells over the held-out members (5^3 grid and 20 drawn)",
+    ),
+    "airfoil_family_first_cell_error": (
+        "<=",
+        0.03,
+        "",
+        "airfoil family: largest |first-cell height / asked - 1|, every wall node",
+    ),
+    "airfoil_family_wall_angle_degrees": (
+        "<=",
+        3.0,
+        "deg",
+        "airfoil family: largest angle of a first grid line off the wall normal",
+    ),
+    "airfoil_family_min_angle_below_elliptic": (
+        "<=",
+        1.0,
+        "deg",
+        "airfoil family: largest (member's elliptic mean min angle - its neural one) over the held-out members",
+    ),
+    "airfoil_family_mesh_seconds": ("<=", 0.05, "s", "airfoil family: a member's 57,344-cell mesh (network and finish), 2 cores"),
+    "airfoil_family_training_seconds": ("<=", 1800.0, "s", "airfoil family: training the bundled model, 2 cores"),
     "airfoil_neural_mesh_seconds": ("<=", 0.1, "s", "airfoil C-grid 448 x 128 by a trained model (network and finish), 2 cores"),
     "airfoil_neural_min_angle_below_elliptic": (
         "<=",
@@ -739,6 +766,12 @@ def airfoil(quick: bool) -> dict:
     import bench_airfoil
 
     return bench_airfoil.run(quick)
+
+
+def airfoil_family(quick: bool) -> dict:
+    import bench_airfoil_family
+
+    return bench_airfoil_family.run(quick)
 
 
 def sweeps(quick: bool) -> dict:
@@ -1361,6 +1394,8 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 note=f"CL {solved['CL']:.4f} (x Prandtl-Glauert {solved['CL_prandtl_glauert']:.4f}); {note}")  # fmt: skip
             add("NACA 0012 alpha 10: CD - 0.0125", solved["CD"] - 0.0125, "", key="airfoil_cd_alpha_10",
                 note=f"CD {solved['CD']:.5f}; {'converged' if solved['converged'] else 'NOT converged'}")  # fmt: skip
+    if sections.get("airfoil_family"):
+        family_rows(sections["airfoil_family"], add)
     if sections.get("sweeps"):
         sweep_rows(sections["sweeps"], add)
     if sections.get("topology"):
@@ -1370,6 +1405,26 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
     if "gpu" in sections and "skipped" not in sections["gpu"]:
         gpu_rows(sections["gpu"], add)
     return rows
+
+
+def family_rows(data: dict, add) -> None:
+    """The airfoil family's rows (``bench_airfoil_family``)."""
+    held, speed, trained = data["held_out"], data["speed"], data["training"]
+    grid = f"{held['grid_points']}^3 grid and {held['drawn']} drawn"
+    full = held["grid_points"] == 5 and held["drawn"] == 20  # the targets' members (--quick: fewer, not judged)
+    add(f"airfoil family, {held['members']} held-out members ({grid}): inverted cells", held["inverted"], "cells",
+        key="airfoil_family_inverted", judged=full, note=", ".join(str(m) for m in held["members_with_inverted"][:3]))  # fmt: skip
+    add("airfoil family: first-cell height error, every wall node", held["first_cell_error"], "",
+        key="airfoil_family_first_cell_error", judged=full)  # fmt: skip
+    add("airfoil family: first grid line off the wall normal", held["wall_angle_degrees"], "deg",
+        key="airfoil_family_wall_angle_degrees", judged=full)  # fmt: skip
+    worst = ", ".join(f"{k} {v:.3g}" for k, v in held["worst_member"].items())
+    add("airfoil family: worst member's elliptic mean min angle - neural's", held["worst_below_elliptic"], "deg",
+        key="airfoil_family_min_angle_below_elliptic", judged=full, note=worst)  # fmt: skip
+    add(f"airfoil family: a member's {speed['cells']}-cell mesh (median of {len(speed['runs_seconds'])})", speed["seconds"], "s",
+        key="airfoil_family_mesh_seconds", note=f"elliptic {speed['elliptic_seconds']:.2f} s, {speed['elliptic_over_network']:.0f}x")  # fmt: skip
+    add("airfoil family: training (the model's own clock)", trained["seconds"], "s", key="airfoil_family_training_seconds",
+        note=f"{data['checkpoint']}, {data['model_bytes'] // 1000} kB, {trained['steps']} steps")  # fmt: skip
 
 
 def sweep_rows(data: dict, add) -> None:
@@ -1623,6 +1678,7 @@ def main(argv=None) -> int:
         "blocks_neural": lambda: blocks_neural(args.quick),
         "blocks": lambda: blocks(args.quick),
         "airfoil": lambda: airfoil(args.quick),
+        "airfoil_family": lambda: airfoil_family(args.quick),
         "sweeps": lambda: sweeps(args.quick),
         "topology": lambda: topology(args.quick),
         "gpu": lambda: gpu(args.quick),

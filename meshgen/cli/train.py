@@ -158,6 +158,9 @@ def train(
     if run.family is not None:
         _family_report(run, result)
         return
+    if "family" in summary:
+        _wall_family_report(run, result)
+        return
     dims = " ".join(str(n) for n in summary["dims"])
     size = " x ".join(str(n) for n in summary["dims"])
     losses = (
@@ -209,3 +212,33 @@ def _family_report(run, result) -> None:
     member = " ".join(f"--param {name}={value:g}" for name, value in family.middle().items())
     dims = " ".join(["30"] * family.base.dim)
     echo(f"Mesh a member with: meshgen mesh --checkpoint {result.checkpoint_path} {member} --dims {dims} -o mesh.vtu")
+
+
+def _wall_family_report(run, result) -> None:
+    """What a finished family of sections round a wall prints (``meshgen.neural.wall_family``): the
+    check of its grid of members against their elliptic meshes, the failing ones named."""
+    check, family = result.summary["family"], result.checkpoint["model"]["family"]
+    ranges = {n: tuple(r) for n, r in family["ranges"].items()}
+    echo(
+        f"Trained {run.geometry.name} over {', '.join(f'{n}={lo:g}:{hi:g}' for n, (lo, hi) in ranges.items())} for {result.step} steps in {result.seconds:.1f} s "
+        f"(held-out misfit of the grid lines' directions {result.test_loss['fit']:.3g})"
+    )
+    size, grid = " x ".join(str(n) for n in check["dims"]), " x ".join([str(check["points"])] * len(ranges))
+    echo(
+        f"Checked {len(check['members'])} members ({grid}, the corners included) at {size}: worst mean min angle "
+        f"{check['worst_gap']:.2f} deg below the member's elliptic mesh, "
+        f"{sum(m['inverted'] for m in check['members'])} inverted cells; a member's mesh in {check['seconds'] * 1e3:.0f} ms"
+    )
+    for member in check["failed"]:
+        at = ", ".join(f"{k}={v:g}" for k, v in member["params"].items())
+        echo(
+            f"  FAILED member {at}: {member['inverted']} inverted cells, mean min angle {member['mean_min_angle']:.2f} deg "
+            f"(elliptic {member['elliptic_mean_min_angle']:.2f})"
+        )
+    echo(f"Run folder: {run.run_dir}")
+    echo(f"Checkpoint: {result.checkpoint_path}")
+    member = " ".join(f"--param {n}={0.5 * (lo + hi):g}" for n, (lo, hi) in ranges.items())
+    dims = " ".join(str(n) for n in check["dims"])
+    echo(
+        f"Mesh a member with: meshgen mesh -g {run.geometry.name} --method neural --checkpoint {result.checkpoint_path} {member} --dims {dims} -o mesh.vtu"
+    )

@@ -90,6 +90,9 @@ class PointsConfig:
     # imply (an extruded shape: its extrusion); off the lattice it is not (design notes §18). With the
     # fixed layout the lattice is only a grid of spacing 1/64
     lattice: bool = False
+    # a family of wall-layer sections (--vary on the airfoil, meshgen.neural.wall_family): members
+    # drawn (Latin hypercube) whose elliptic meshes the network fits, besides the 2^k corners and the middle
+    members: int = 40
 
 
 @dataclass
@@ -175,6 +178,7 @@ BOUNDS = {
     "points.boundary": (1, 10**7),
     "points.grid_min_scale": (0.0, 1.0),
     "points.boundary_pool": (0, 10**4),
+    "points.members": (0, 10**4),
     "pretrain.steps": (0, 10**7),
     "pretrain.lr": (0.0, 1e3),
     "pretrain.points": (1, 10**7),

@@ -83,6 +83,7 @@ FAMILY_UNUSED_KEYS = {
     "points.boundary": _NO_BOUNDARY_LOSS,
     "points.boundary_pool": _NO_BOUNDARY_LOSS,
     "points.lattice": "a family's members each have a layout of their own: no one lattice to train on",
+    "points.members": "a Winslow family draws new members every step (points.members counts a wall-layer family's)",
     "pretrain.steps": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "pretrain.lr": "a family starts from every member's TFI (N = 0) and has no TFI fit",
     "pretrain.points": "a family starts from every member's TFI (N = 0) and has no TFI fit",

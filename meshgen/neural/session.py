@@ -29,6 +29,8 @@ from meshgen.neural.device import inference_device
 from meshgen.neural.inference import check_start_model, is_block_model
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
+from meshgen.neural.wall_family_train import check_family_ranges
+from meshgen.neural.wall_map import HOOKS
 from meshgen.run.limits import check_training_memory
 
 __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
@@ -62,6 +64,8 @@ class Run:
     force: bool = False  # --force: overwrite a run folder of another geometry or configuration
     block_set: object | None = None  # meshgen.geometry.blocks.BlockSet when the geometry declares blocks (one network per block)
     init: dict | None = None  # --init: {"path", "checkpoint"}, the trained weights a new block-set run starts from
+    wall_ranges: dict | None = None  # --vary on a plugin round a wall: the family's ranges (meshgen.neural.wall_family)
+    train_dims: tuple | None = None  # the --dims the block set was made with (a wall family meshes its members so)
 
 
 def is_run_folder(path: Path) -> bool:
@@ -127,7 +131,7 @@ def prepare_run(
     ``init``: a block set's checkpoint whose weights a new run starts from (``check_init``).
     """
 
-    checkpoint = resume_path = family = None
+    checkpoint = resume_path = family = wall_ranges = None
     _refuse_init_with(init, resume, vary)
     if resume is not None and vary:
         raise ConfigError("--vary does not apply with --resume: the checkpoint sets the ranges")
@@ -180,18 +184,17 @@ def prepare_run(
 
             family = family_from_checkpoint(checkpoint)
     else:
-        config = resolve_config(preset or ("family" if vary else "default"), config_file, overrides, steps, seed)
         geometry = geometry or "semicylinder"
         blocks = is_multiblock(geometry)
+        walled = blocks and _round_a_wall(geometry)
+        default_preset = ("wall-family" if walled else "family") if vary else "default"
+        config = resolve_config(preset or default_preset, config_file, overrides, steps, seed)
+        if vary and walled:
+            wall_ranges = _wall_ranges(geometry, params, vary)
+            params = [*params, *(f"{n}={0.5 * (lo + hi)!r}" for n, (lo, hi) in wall_ranges.items())]  # the middle member
         geometry_object = load_geometry(geometry, parse_params(params), check=not blocks)
-        if vary and blocks:
-            raise ConfigError(f"--vary trains a family of one-block shapes; '{geometry_object.name}' is made of several blocks")
-        _refuse_block_only_keys(config, blocks, geometry_object.name)
-        if blocks:  # keys a block set cannot use are refused, not ignored
-            from meshgen.neural.interface_stages import check_block_keys
-
-            check_block_keys(config, f"block set '{geometry_object.name}'")
-        if vary:
+        _refuse_unused_keys(config, geometry_object.name, blocks, bool(vary), walled)
+        if vary and not walled:
             _refuse_family_keys(config, preset, overrides)
             family = _family(config, geometry_object, _geometry_spec(geometry), params, vary)
     if config.dim is not None and config.dim != geometry_object.dim:
@@ -216,11 +219,63 @@ def prepare_run(
         # A plugin whose blocks need more cells than the default (the airfoil's wall spacing) names its own.
         dims = getattr(plugin_module(geometry)[0], "train_dims", (SUMMARY_DIMS,) * geometry_object.dim)
         block_set = load_block_set(geometry, geometry_object.values, tuple(dims))
+        if wall_ranges is not None:  # every corner a valid section of one topology, before the run folder exists
+            check_family_ranges(block_set.name, block_set.values, wall_ranges, tuple(dims))
     started = None if init is None else {"path": str(init), "checkpoint": check_init(init, config, geometry_object, block_set)}
     return Run(
         config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,
-        block_set, started,
+        block_set, started, wall_ranges, None if block_set is None else tuple(dims),
     )  # fmt: skip
+
+
+def _round_a_wall(geometry) -> bool:
+    """Whether the block-set plugin ``geometry`` has wall-layer models (``meshgen.neural.wall_map.HOOKS``)."""
+    module = plugin_module(geometry)[0]
+    return all(callable(getattr(module, hook, None)) for hook in HOOKS)
+
+
+def _wall_ranges(geometry, params, vary) -> dict:
+    """The checked ranges of a wall family: parameters of the plugin, neither fixed by --param nor
+    free (the wall spacing's, which every member sets at will)."""
+    from meshgen.neural.family import parse_vary
+
+    ranges, module = parse_vary(vary), plugin_module(geometry)[0]
+    known, free, fixed = dict(getattr(module, "params", {})), set(getattr(module, "wall_free", ())), parse_params(params)
+    for name in ranges:
+        if name not in known:
+            raise ConfigError(
+                f"--vary {name}: geometry '{module.name}' has no parameter {name!r} (its parameters: {', '.join(known)})"
+            )
+        if name in fixed:
+            raise ConfigError(f"--param {name} and --vary {name}: a parameter is either fixed or varied")
+        if name in free:
+            raise ConfigError(f"--vary {name}: every member sets {name} at will (--param {name}=...), so it is not varied")
+    return ranges
+
+
+WALL_FAMILY_KEYS = ("points.members",)  # what only a wall family reads
+
+
+def _refuse_wall_family_keys(config, wall_family: bool) -> None:
+    unused = keys_off_default(config, WALL_FAMILY_KEYS) if not wall_family else {}
+    if unused:
+        shown = ", ".join(f"{k}={v}" for k, v in unused.items())
+        raise ConfigError(f"{shown} applies to a family of sections round a wall (--vary on the airfoil) only")
+
+
+def _refuse_unused_keys(config, name: str, blocks: bool, vary: bool, walled: bool) -> None:
+    """ConfigError for a family of several blocks that are not sections round a wall, and for keys
+    the run would not read (``BLOCK_ONLY_KEYS``, ``WALL_FAMILY_KEYS``, a block set's own refusals)."""
+    if vary and blocks and not walled:
+        raise ConfigError(
+            f"--vary trains a family of one-block shapes or of sections round a wall; '{name}' is made of several blocks"
+        )
+    _refuse_wall_family_keys(config, vary and walled)
+    _refuse_block_only_keys(config, blocks, name)
+    if blocks:  # keys a block set cannot use are refused, not ignored
+        from meshgen.neural.interface_stages import check_block_keys
+
+        check_block_keys(config, f"block set '{name}'")
 
 
 BLOCK_ONLY_KEYS = ("method.tfi_anchor",)  # keys only a block set uses: refused away from their default for one shape
@@ -326,7 +381,11 @@ def _trainer(run: Run):
     from meshgen.neural.train import train
 
     subject = run.block_set if run.block_set is not None else run.geometry
-    return train, subject, {"geometry_spec": run.geometry_spec, "init": run.init}
+    return (
+        train,
+        subject,
+        {"geometry_spec": run.geometry_spec, "init": run.init, "ranges": run.wall_ranges, "dims": run.train_dims},
+    )
 
 
 def run_training(run: Run, quiet: bool = False):

@@ -169,21 +169,25 @@ def train(
     geometry_spec: str | None = None,
     summary: bool = True,
     init: dict | None = None,
+    ranges: dict | None = None,
+    dims: tuple | None = None,
 ) -> TrainResult:
     """Train (or, with ``resume`` = a loaded checkpoint, continue training) the networks of
-    ``subject``: a Geometry (a set of one block, one network: :func:`one_block_job`) or a
-    ``meshgen.geometry.blocks.BlockSet`` of several blocks (one network per block, with interface
-    terms: ``meshgen.neural.interface_stages.set_job``).
+        ``subject``: a Geometry (a set of one block, one network: :func:`one_block_job`) or a
+        ``meshgen.geometry.blocks.BlockSet`` of several blocks (one network per block, with interface
+        terms: ``meshgen.neural.interface_stages.set_job``).
 
-    ``run_dir``: existing folder for ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and
-    ``summary.json``. ``reporter``: an object with ``stage(name, done, total)``,
-    ``update(row, done, total)`` and ``message(text)`` (see ``meshgen.neural.progress``), or None.
-    ``stop``: a callable polled before each step; when it returns True the state is saved and the
-    run returns with ``interrupted=True``. ``geometry_spec``: how to load the geometry again (its
-    name or plugin path; default its name). ``summary``: mesh the geometry at the end and write the
-    quality summary. ``init`` ({"path", "checkpoint"}, ``meshgen train --init``): a block set's new
-    run starting from a checkpoint's weights. On a CPU with two or more torch threads, the two
-    terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
+        ``run_dir``: existing folder for ``checkpoint.pt``, ``config.yaml``, ``history.csv`` and
+        ``summary.json``. ``reporter``: an object with ``stage(name, done, total)``,
+        ``update(row, done, total)`` and ``message(text)`` (see ``meshgen.neural.progress``), or None.
+        ``stop``: a callable polled before each step; when it returns True the state is saved and the
+        run returns with ``interrupted=True``. ``geometry_spec``: how to load the geometry again (its
+        name or plugin path; default its name). ``summary``: mesh the geometry at the end and write the
+        quality summary. ``init`` ({"path", "checkpoint"}, ``meshgen train --init``): a block set's new
+        run starting from a checkpoint's weights. ``ranges`` (name -> (lo, hi)): a block set round a wall
+    trains the family about it (``meshgen.neural.wall_family``), its members meshed at ``dims`` (the
+    --dims the block set was made with). On a CPU with two or more torch threads, the two
+        terms of a step run side by side (``meshgen.neural.steps.TermRunner``), torch single-threaded meanwhile.
     """
     run_dir = Path(run_dir)
     if isinstance(subject, BlockSet) and wall_hooks(subject) is not None:
@@ -191,7 +195,9 @@ def train(
             raise MeshgenError(
                 f"--init is not available for '{subject.name}': its model is a wall-layer network (meshgen.neural.wall_map)"
             )
-        job = wall_job(config, subject, torch.device(device), resume, geometry_spec)
+        job = wall_job(config, subject, torch.device(device), resume, geometry_spec, ranges, dims)
+    elif ranges:
+        raise MeshgenError(f"--vary on '{subject.name}': its networks take no parameters as inputs")
     elif isinstance(subject, BlockSet):
         job = set_job(config, subject, torch.device(device), resume, geometry_spec, init)
     elif init is not None:

@@ -38,9 +38,11 @@ from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
 from meshgen.geometry.plugins import Geometry, is_airfoil_file, load_geometry, plugin_module
 from meshgen.methods.elliptic import elliptic_blocks
+from meshgen.neural.checkpoint_data import read_plain_checkpoint
 from meshgen.neural.device import inference_device
 from meshgen.neural.inference import is_block_model, neural_blocks
-from meshgen.neural.models import TrainedModel, find_model
+from meshgen.neural.models import MODELS_DIR, TrainedModel, display_path, find_model, load_model
+from meshgen.neural.wall_family import check_member_values, is_wall_family, member_values
 from meshgen.quality import (
     cell_metrics,
     cell_metrics_unstructured,
@@ -206,6 +208,14 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
     try:
         if isinstance(checkpoint, TrainedModel):
             model = checkpoint
+        elif checkpoint is not None and _is_wall_family(checkpoint):  # the member's parameters are checked when meshing
+            model = load_model(checkpoint)
+            if model.geometry_entry["name"] != block_set_name:
+                raise MeshgenError(
+                    f"checkpoint {checkpoint} was trained on '{model.geometry_entry['name']}', not on '{block_set_name}'"
+                )
+            family, defaults = model.checkpoint["model"]["family"], load_geometry(block_set_name, check=False).defaults
+            check_member_values(family, member_values(family, defaults, params), f" of {display_path(Path(checkpoint))}")
         else:
             model = find_model(
                 checkpoint, geometry_name=block_set_name, params=params, default_geometry=block_set_name, warn=warn
@@ -213,10 +223,34 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
     except MeshgenError:
         if fallback and checkpoint is None:
             return None
-        raise
+        family = _bundled_family(block_set_name, params) if checkpoint is None else None
+        if family is None:
+            raise
+        return family
     if not is_block_model(model.checkpoint["model"]):
         raise ParameterError("checkpoint", f"{{name}} {model.path} holds a one-block model, not one of '{block_set_name}'")
     return model
+
+
+def _bundled_family(name: str, params: dict):
+    """The bundled family of sections round a wall of geometry ``name`` (``meshgen/_models/families/NAME``)
+    when ``params`` (the --param values over the geometry's defaults) pick one of its members, else None: what ``--method
+    neural`` meshes with when no run of the geometry has those parameters."""
+    path = MODELS_DIR / "families" / name / "checkpoint.pt"
+    if not path.is_file():
+        return None
+    model = load_model(path, source="bundled")
+    family = model.checkpoint["model"]["family"]
+    try:
+        check_member_values(family, member_values(family, load_geometry(name, check=False).defaults, params))
+    except MeshgenError:
+        return None
+    return model
+
+
+def _is_wall_family(path) -> bool:
+    """Whether the checkpoint at ``path`` holds a family of sections round a wall (``meshgen.neural.wall_family``)."""
+    return is_wall_family(read_plain_checkpoint(path).get("model"))
 
 
 def mesh_block_set(request, spec: str, say, progress) -> Mesh:
@@ -318,7 +352,10 @@ def _check(request, spec: str, say):
             )
         else:
             method = "neural"
-            params = {**dict(model.geometry_entry["params"]), **params}  # the geometry it was trained on
+            if "family" in model.checkpoint["model"]:  # a family of sections: the member asked for
+                params = member_values(model.checkpoint["model"]["family"], load_geometry(spec, check=False).defaults, params)
+            else:
+                params = {**dict(model.geometry_entry["params"]), **params}  # the geometry it was trained on
             notes.append(f"model: {model.describe()}")
     if method == "tfi" or (method == "neural" and not (request.polish and request.correct is not False)):
         for name in ("tol", "max_iter"):

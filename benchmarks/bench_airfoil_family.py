@@ -1,0 +1,182 @@
+"""One network for a family of airfoil sections (``meshgen.neural.wall_family``): the NACA 4-digit
+C-grids of camber 0..0.04 at 0.2..0.6 chord, thickness 0.08..0.18, at y+ 1, Re 6e6.
+
+    python benchmarks/bench_airfoil_family.py [--quick] [--checkpoint FILE | --train] [--json FILE]
+
+The model is the bundled one (``meshgen/_models/families/airfoil``), a CHECKPOINT, or (``--train``)
+one trained now with the README's command (timed: the training row).
+
+``held_out``: members of a grid of 5 values per parameter (the corners included; 3 with
+``--quick``) and 20 drawn at random (seeded; 4 with ``--quick``), none of them a member the
+network was fitted to but the corners and the middle. Each is meshed at 448 x 128 (57,344 cells) by
+the model (inverted cells counted, not refused) and by the elliptic method: inverted cells, the
+largest |first-cell height / asked - 1| and the largest angle of a first grid line off the wall
+normal at every wall node of the section (its trailing edge excepted), and the mean minimum angle
+below the member's elliptic mesh's. Targets: 0 inverted, 3 %, 3 deg, 1 deg.
+``speed``: 5 members (drawn, distinct) meshed by the model (``neural_wall_blocks``: the network and
+the finish; the member's block set made before, untimed), and by the elliptic method: medians and
+their ratio. Target: at most 0.05 s.
+``training``: the model's training time (the run's own clock); with ``--train`` the wall time of
+the command too. Target: at most 30 min on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+DIMS = (448, 128)
+RANGES = {"camber": (0.0, 0.04), "camber_position": (0.2, 0.6), "thickness": (0.08, 0.18)}
+BUNDLED = REPO / "meshgen" / "_models" / "families" / "airfoil" / "checkpoint.pt"
+TRAIN = ["train", "-g", "airfoil", *[f"--vary={n}={lo:g}:{hi:g}" for n, (lo, hi) in RANGES.items()]]
+
+
+def members(points: int, drawn: int, seed: int = 0) -> list[dict]:
+    """The grid of ``points`` values per parameter (corners included) and ``drawn`` random members."""
+    import itertools
+
+    axes = [[(n, float(v)) for v in np.linspace(lo, hi, points)] for n, (lo, hi) in RANGES.items()]
+    grid = [dict(m) for m in itertools.product(*axes)]
+    rng = np.random.default_rng(seed)
+    return grid + [{n: float(lo + rng.random() * (hi - lo)) for n, (lo, hi) in RANGES.items()} for _ in range(drawn)]
+
+
+def wall_lines(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First-cell heights (n,) and first grid lines' angles off the wall normal (n - 2,), degrees,
+    at the wall nodes of a block whose eta0 face is the wall (the normal from the wall nodes' own
+    central differences; the ends, the trailing edge, left out of the angles)."""
+    wall, step = X[:, 0], X[:, 1] - X[:, 0]
+    tangent = wall[2:] - wall[:-2]
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    height = np.linalg.norm(step, axis=1)
+    angle = np.degrees(np.arccos(np.clip((step[1:-1] * normal).sum(1) / height[1:-1], -1.0, 1.0)))
+    return height, angle
+
+
+def held_out(model: dict, points: int, drawn: int) -> dict:
+    from meshgen.geometry.blocks import load_block_set, merged_mesh
+    from meshgen.geometry.plugins import plugin_module
+    from meshgen.neural.wall_map import elliptic_reference, neural_wall_blocks
+    from meshgen.quality import quality_report
+
+    module = plugin_module("airfoil")[0]
+    rows = []
+    for member in members(points, drawn):
+        block_set = load_block_set("airfoil", {**model["family"]["base"], **member}, DIMS)
+        asked = module.first_height(block_set.values)[0]
+        neural, _ = neural_wall_blocks(block_set, model, check=False)
+        elliptic = elliptic_reference(block_set)
+        report = quality_report(merged_mesh(block_set, neural)[:2])
+        reference = quality_report(merged_mesh(block_set, elliptic)[:2])["metrics"]["min_angle"]["mean"]
+        height, angle = wall_lines(neural[block_set.names.index("section")])
+        rows.append({
+            "params": member,
+            "inverted": int(report["inverted"]["count"]),
+            "first_cell_error": float(np.abs(height / asked - 1.0).max()),
+            "wall_angle_degrees": float(angle.max()),
+            "mean_min_angle": float(report["metrics"]["min_angle"]["mean"]),
+            "elliptic_mean_min_angle": float(reference),
+            "below_elliptic": float(reference - report["metrics"]["min_angle"]["mean"]),
+        })  # fmt: skip
+    worst = max(rows, key=lambda r: r["below_elliptic"])
+    result = {
+        "members": len(rows),
+        "grid_points": points,
+        "drawn": drawn,
+        "inverted": sum(r["inverted"] for r in rows),
+        "members_with_inverted": [r["params"] for r in rows if r["inverted"]],
+        "first_cell_error": max(r["first_cell_error"] for r in rows),
+        "wall_angle_degrees": max(r["wall_angle_degrees"] for r in rows),
+        "worst_below_elliptic": worst["below_elliptic"],
+        "worst_member": worst["params"],
+        "rows": rows,
+    }
+    print(f"{len(rows)} held-out members at {DIMS[0]} x {DIMS[1]}: {result['inverted']} inverted cells, first-cell error "
+          f"{result['first_cell_error']:.2e}, wall angle {result['wall_angle_degrees']:.3f} deg, worst mean min angle "
+          f"{result['worst_below_elliptic']:.2f} deg below the elliptic mesh's ({worst['params']})", flush=True)  # fmt: skip
+    return result
+
+
+def speed(model: dict, count: int = 5) -> dict:
+    from meshgen.geometry.blocks import load_block_set
+    from meshgen.neural.wall_map import neural_wall_blocks, wall_hooks
+
+    network, elliptic = [], []
+    neural_wall_blocks(load_block_set("airfoil", {**model["family"]["base"]}, DIMS), model)  # imports and first calls
+    for member in members(0, count, seed=1):
+        block_set = load_block_set("airfoil", {**model["family"]["base"], **member}, DIMS)
+        start = time.perf_counter()
+        neural_wall_blocks(block_set, model)
+        network.append(time.perf_counter() - start)
+        start = time.perf_counter()
+        wall_hooks(block_set).mesh_elliptic(block_set)
+        elliptic.append(time.perf_counter() - start)
+    row = {
+        "cells": DIMS[0] * DIMS[1],
+        "seconds": statistics.median(network),
+        "runs_seconds": network,
+        "elliptic_seconds": statistics.median(elliptic),
+    }
+    row["elliptic_over_network"] = row["elliptic_seconds"] / row["seconds"]
+    print(f"a member's mesh, {row['cells']} cells: {row['seconds'] * 1e3:.1f} ms (median of {count} members; elliptic "
+          f"{row['elliptic_seconds']:.2f} s, {row['elliptic_over_network']:.0f}x)", flush=True)  # fmt: skip
+    return row
+
+
+def train_now(folder: Path) -> tuple[Path, float]:
+    checkpoint = folder / "run" / "checkpoint.pt"
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "meshgen", *TRAIN, "--out", str(checkpoint.parent), "-q"], check=True,
+                   capture_output=True, env={**os.environ, "PYTHONPATH": str(REPO)})  # fmt: skip
+    return checkpoint, time.perf_counter() - start
+
+
+def run(quick: bool, checkpoint=None, train: bool = False) -> dict:
+    from meshgen.neural.checkpoint_data import read_plain_checkpoint
+
+    with tempfile.TemporaryDirectory() as folder:
+        wall = None
+        if train:
+            checkpoint, wall = train_now(Path(folder))
+        path = Path(checkpoint or BUNDLED)
+        loaded = read_plain_checkpoint(path)
+        model = loaded["model"]
+        result = {
+            "checkpoint": str(path.relative_to(REPO) if path.is_relative_to(REPO) else path),
+            "model_bytes": path.stat().st_size,
+            "training": {"seconds": float(loaded["elapsed_seconds"]), "steps": int(loaded["step"]), "wall_seconds": wall},
+            "ranges": model["family"]["ranges"],
+        }
+    print(f"model {result['checkpoint']} ({result['model_bytes'] // 1000} kB): trained {result['training']['seconds']:.0f} s, "
+          f"{result['training']['steps']} steps", flush=True)  # fmt: skip
+    result["held_out"] = held_out(model, 3 if quick else 5, 4 if quick else 20)
+    result["speed"] = speed(model)
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="a 3-point grid and 4 drawn members")
+    parser.add_argument("--checkpoint", help="a family checkpoint (default: the bundled one)")
+    parser.add_argument("--train", action="store_true", help="train the family now with the README's command (minutes)")
+    parser.add_argument("--json", help="write the results here")
+    args = parser.parse_args()
+    result = run(args.quick, args.checkpoint, args.train)
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
