@@ -41,6 +41,7 @@ def is_wall_family(model) -> bool:
 
 
 def range_text(ranges: dict) -> str:
+    """``"name=lo:hi, ..."``: the ranges as ``--vary`` writes them."""
     return ", ".join(f"{name}={lo:g}:{hi:g}" for name, (lo, hi) in ranges.items())
 
 
@@ -85,7 +86,7 @@ def member_layers(layers: list, family: dict, values: dict, dtype=np.float32) ->
     (weight, bias), rest = layers[0], layers[1:]
     weight64, q = weight.astype(np.float64), normalised(family, values)
     folded = [(weight64[:, :-k], bias.astype(np.float64) + weight64[:, -k:] @ q)]
-    return [(w.astype(dtype), b.astype(dtype)) for w, b in folded + [(w, b) for w, b in rest]]
+    return [(w.astype(dtype), b.astype(dtype)) for w, b in folded + list(rest)]
 
 
 def member_tables(family: dict, block_set) -> list:

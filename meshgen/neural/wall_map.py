@@ -102,10 +102,11 @@ def wall_frame(block_set: BlockSet, layout: dict, tables=None) -> WallFrame:
     for b, (geometry, coords) in enumerate(zip(block_set.geometries, block_set.coords)):
         xi = np.asarray(coords[0], dtype=float)
         lo, hi = np.clip(xi - _STEP, 0.0, 1.0), np.clip(xi + _STEP, 0.0, 1.0)
-        points = np.concatenate([xi, lo, hi])  # one call of the boundary map for the wall and its tangents
-        images = geometry.boundary(np.stack([points, np.zeros_like(points)], axis=1)).reshape(3, len(xi), 2)
-        walls.append(images[0])
-        tangent = images[2] - images[1]
+        # the wall alone (a plugin that caches its wall nodes finds them again in its finish), then the tangents
+        walls.append(geometry.boundary(np.stack([xi, np.zeros_like(xi)], axis=1)))
+        sides = np.concatenate([lo, hi])
+        images = geometry.boundary(np.stack([sides, np.zeros_like(sides)], axis=1)).reshape(2, len(xi), 2)
+        tangent = images[1] - images[0]
         normals.append(_unit(np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)))  # (xi, eta) right-handed: eta to the left
         table = xi if tables is None else np.asarray(tables[b], dtype=float)
         q.append((b + np.interp(xi, table, np.linspace(0.0, 1.0, len(table)))) / count)
