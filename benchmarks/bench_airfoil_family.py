@@ -18,6 +18,11 @@ the finish; the member's block set made before, untimed), and by the elliptic me
 their ratio. Target: at most 0.05 s.
 ``training``: the model's training time (the run's own clock); with ``--train`` the wall time of
 the command too. Target: at most 30 min on 2 cores.
+``solver`` (a full run only: about 20 minutes per member on 2 cores, the two meshes solved side by
+side): NACA 0012, 2412 and 4415 (closed trailing edges) at SOLVER_DIMS, meshed by the model and by
+the elliptic method as OpenFOAM cases, each solved by ``examples/naca0012/run_naca0012.py``
+(simpleFoam, Spalart-Allmaras, Re 6e6, alpha 10, at most ``SOLVER_ITERATIONS``): CL and CD of the
+network's mesh against the elliptic mesh's. Targets: within 0.5 % and 2 %.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -39,6 +45,13 @@ sys.path.insert(0, str(REPO))
 DIMS = (448, 128)
 RANGES = {"camber": (0.0, 0.04), "camber_position": (0.2, 0.6), "thickness": (0.08, 0.18)}
 BUNDLED = REPO / "meshgen" / "_models" / "families" / "airfoil" / "checkpoint.pt"
+SOLVER_MEMBERS = {
+    "0012": {"thickness": 0.12},
+    "2412": {"thickness": 0.12, "camber": 0.02},
+    "4415": {"thickness": 0.15, "camber": 0.04},
+}
+SOLVER_DIMS = (224, 128)
+SOLVER_ITERATIONS = 4000
 TRAIN = ["train", "-g", "airfoil", *[f"--vary={n}={lo:g}:{hi:g}" for n, (lo, hi) in RANGES.items()]]
 
 
@@ -135,6 +148,38 @@ def speed(model: dict, count: int = 5) -> dict:
     return row
 
 
+def solver(checkpoint: Path, iterations: int = SOLVER_ITERATIONS, members=SOLVER_MEMBERS) -> dict:
+    """CL and CD of each member's neural and elliptic meshes (simpleFoam, side by side)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import meshgen
+
+    sys.path.insert(0, str(REPO / "examples" / "naca0012"))
+    from run_naca0012 import run as solve
+
+    rows = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for name, member in members.items():
+            cases = {}
+            for method in ("neural", "elliptic"):
+                cases[method] = Path(folder) / f"{name}-{method}"
+                model = str(checkpoint) if method == "neural" else None
+                made = meshgen.mesh("airfoil", SOLVER_DIMS, method=method, params=member, model=model)
+                made.write(cases[method], "openfoam", quality=False)
+            with ThreadPoolExecutor(2) as pool:  # each simpleFoam a process of its own
+                done = dict(zip(cases, pool.map(lambda c: solve(10.0, 0, c, iterations, quiet=True, mesh=False), cases.values())))
+            row = {m: {k: done[m][k] for k in ("CL", "CD", "iterations", "converged", "change_last_window")} for m in done}
+            row["cl_difference"] = done["neural"]["CL"] / done["elliptic"]["CL"] - 1.0
+            row["cd_difference"] = done["neural"]["CD"] / done["elliptic"]["CD"] - 1.0
+            rows[name] = row
+            print(f"NACA {name} at alpha 10, {SOLVER_DIMS[0]} x {SOLVER_DIMS[1]}: CL {done['neural']['CL']:.5f} (neural) vs "
+                  f"{done['elliptic']['CL']:.5f}, CD {done['neural']['CD']:.6f} vs {done['elliptic']['CD']:.6f} "
+                  f"({100 * row['cl_difference']:+.3f} %, {100 * row['cd_difference']:+.3f} %)", flush=True)  # fmt: skip
+    return {"dims": list(SOLVER_DIMS), "iterations": iterations, "members": rows,
+            "cl_difference": max(abs(r["cl_difference"]) for r in rows.values()),
+            "cd_difference": max(abs(r["cd_difference"]) for r in rows.values())}  # fmt: skip
+
+
 def train_now(folder: Path) -> tuple[Path, float]:
     checkpoint = folder / "run" / "checkpoint.pt"
     start = time.perf_counter()
@@ -143,10 +188,10 @@ def train_now(folder: Path) -> tuple[Path, float]:
     return checkpoint, time.perf_counter() - start
 
 
-def run(quick: bool, checkpoint=None, train: bool = False) -> dict:
+def run(quick: bool, checkpoint=None, train: bool = False, solver_iterations: int | None = None) -> dict:
     from meshgen.neural.checkpoint_data import read_plain_checkpoint
 
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as folder:  # a model trained now lives here until the rows are made
         wall = None
         if train:
             checkpoint, wall = train_now(Path(folder))
@@ -159,11 +204,20 @@ def run(quick: bool, checkpoint=None, train: bool = False) -> dict:
             "training": {"seconds": float(loaded["elapsed_seconds"]), "steps": int(loaded["step"]), "wall_seconds": wall},
             "ranges": model["family"]["ranges"],
         }
-    print(f"model {result['checkpoint']} ({result['model_bytes'] // 1000} kB): trained {result['training']['seconds']:.0f} s, "
-          f"{result['training']['steps']} steps", flush=True)  # fmt: skip
-    result["held_out"] = held_out(model, 3 if quick else 5, 4 if quick else 20)
-    result["speed"] = speed(model)
+        print(f"model {result['checkpoint']} ({result['model_bytes'] // 1000} kB): trained "
+              f"{result['training']['seconds']:.0f} s, {result['training']['steps']} steps", flush=True)  # fmt: skip
+        result["held_out"] = held_out(model, 3 if quick else 5, 4 if quick else 20)
+        result["speed"] = speed(model)
+        if not quick and shutil.which("simpleFoam", path=_foam_path()):
+            result["solver"] = solver(path, solver_iterations or SOLVER_ITERATIONS)
     return result
+
+
+def _foam_path() -> str:
+    sys.path.insert(0, str(REPO / "examples"))
+    from foam_case import foam_environment
+
+    return foam_environment().get("PATH", "")
 
 
 def main() -> None:
@@ -171,9 +225,10 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="a 3-point grid and 4 drawn members")
     parser.add_argument("--checkpoint", help="a family checkpoint (default: the bundled one)")
     parser.add_argument("--train", action="store_true", help="train the family now with the README's command (minutes)")
+    parser.add_argument("--solver-iterations", type=int, help=f"simpleFoam's cap (default {SOLVER_ITERATIONS})")
     parser.add_argument("--json", help="write the results here")
     args = parser.parse_args()
-    result = run(args.quick, args.checkpoint, args.train)
+    result = run(args.quick, args.checkpoint, args.train, args.solver_iterations)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
 

@@ -306,6 +306,13 @@ TARGETS = {
     ),
     "airfoil_family_mesh_seconds": ("<=", 0.05, "s", "airfoil family: a member's 57,344-cell mesh (network and finish), 2 cores"),
     "airfoil_family_training_seconds": ("<=", 1800.0, "s", "airfoil family: training the bundled model, 2 cores"),
+    "airfoil_family_cl_difference": (
+        "<=",
+        0.5,
+        "%",
+        "airfoil family: |CL on the neural mesh / CL on the elliptic mesh - 1|, simpleFoam SA alpha 10, NACA 0012, 2412, 4415",
+    ),
+    "airfoil_family_cd_difference": ("<=", 2.0, "%", "airfoil family: the same of CD"),
     "airfoil_neural_mesh_seconds": ("<=", 0.1, "s", "airfoil C-grid 448 x 128 by a trained model (network and finish), 2 cores"),
     "airfoil_neural_min_angle_below_elliptic": (
         "<=",
@@ -1423,6 +1430,13 @@ def family_rows(data: dict, add) -> None:
         key="airfoil_family_min_angle_below_elliptic", judged=full, note=worst)  # fmt: skip
     add(f"airfoil family: a member's {speed['cells']}-cell mesh (median of {len(speed['runs_seconds'])})", speed["seconds"], "s",
         key="airfoil_family_mesh_seconds", note=f"elliptic {speed['elliptic_seconds']:.2f} s, {speed['elliptic_over_network']:.0f}x")  # fmt: skip
+    solved = data.get("solver")
+    if solved:  # a full run with OpenFOAM
+        iterations = f"{solved['iterations']} iterations at most, {' x '.join(map(str, solved['dims']))}"
+        add("airfoil family: simpleFoam CL, neural vs elliptic mesh (worst of 3 members)", 100 * solved["cl_difference"], "%",
+            key="airfoil_family_cl_difference", note=iterations)  # fmt: skip
+        add("airfoil family: simpleFoam CD, neural vs elliptic mesh (worst of 3 members)", 100 * solved["cd_difference"], "%",
+            key="airfoil_family_cd_difference", note=iterations)  # fmt: skip
     add("airfoil family: training (the model's own clock)", trained["seconds"], "s", key="airfoil_family_training_seconds",
         note=f"{data['checkpoint']}, {data['model_bytes'] // 1000} kB, {trained['steps']} steps")  # fmt: skip
 
