@@ -9,10 +9,10 @@ one trained now with the README's command (timed: the training row).
 ``held_out``: members of a grid of 5 values per parameter (the corners included; 3 with
 ``--quick``) and 20 drawn at random (seeded; 4 with ``--quick``), none of them a member the
 network was fitted to but the corners and the middle. Each is meshed at 448 x 128 (57,344 cells) by
-the model (inverted cells counted, not refused) and by the elliptic method: inverted cells, the
-largest |first-cell height / asked - 1| and the largest angle of a first grid line off the wall
-normal at every wall node of the section (its trailing edge excepted), and the mean minimum angle
-below the member's elliptic mesh's. Targets: 0 inverted, 3 %, 3 deg, 1 deg.
+the model and by the elliptic method (``meshgen.neural.wall_family_train.member_check``): inverted
+cells, the largest |first-cell height / asked - 1| and the largest angle of a first grid line off
+the wall normal at every wall node (``bench_airfoil.wall_figures``, its trailing edge excepted),
+and the mean minimum angle below the member's elliptic mesh's. Targets: 0 inverted, 3 %, 3 deg, 1 deg.
 ``speed``: 5 members (drawn, distinct) meshed by the model (``neural_wall_blocks``: the network and
 the finish; the member's block set made before, untimed), and by the elliptic method: medians and
 their ratio. Target: at most 0.05 s.
@@ -65,43 +65,27 @@ def members(points: int, drawn: int, seed: int = 0) -> list[dict]:
     return grid + [{n: float(lo + rng.random() * (hi - lo)) for n, (lo, hi) in RANGES.items()} for _ in range(drawn)]
 
 
-def wall_lines(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First-cell heights (n,) and first grid lines' angles off the wall normal (n - 2,), degrees,
-    at the wall nodes of a block whose eta0 face is the wall (the normal from the wall nodes' own
-    central differences; the ends, the trailing edge, left out of the angles)."""
-    wall, step = X[:, 0], X[:, 1] - X[:, 0]
-    tangent = wall[2:] - wall[:-2]
-    normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    height = np.linalg.norm(step, axis=1)
-    angle = np.degrees(np.arccos(np.clip((step[1:-1] * normal).sum(1) / height[1:-1], -1.0, 1.0)))
-    return height, angle
-
-
 def held_out(model: dict, points: int, drawn: int) -> dict:
-    from meshgen.geometry.blocks import load_block_set, merged_mesh
-    from meshgen.geometry.plugins import plugin_module
-    from meshgen.neural.wall_map import elliptic_reference, neural_wall_blocks
-    from meshgen.quality import quality_report
+    from types import SimpleNamespace
 
-    module = plugin_module("airfoil")[0]
+    from bench_airfoil import wall_figures
+
+    from meshgen.geometry.blocks import load_block_set
+    from meshgen.neural.wall_family_train import member_check
+
     rows = []
     for member in members(points, drawn):
         block_set = load_block_set("airfoil", {**model["family"]["base"], **member}, DIMS)
-        asked = module.first_height(block_set.values)[0]
-        neural, _ = neural_wall_blocks(block_set, model, check=False)
-        elliptic = elliptic_reference(block_set)
-        report = quality_report(merged_mesh(block_set, neural)[:2])
-        reference = quality_report(merged_mesh(block_set, elliptic)[:2])["metrics"]["min_angle"]["mean"]
-        height, angle = wall_lines(neural[block_set.names.index("section")])
+        neural, check = member_check(model, block_set)
+        wall = wall_figures(SimpleNamespace(geometry=block_set, blocks=neural))  # y+ 1 at Re 6e6: the family's
         rows.append({
             "params": member,
-            "inverted": int(report["inverted"]["count"]),
-            "first_cell_error": float(np.abs(height / asked - 1.0).max()),
-            "wall_angle_degrees": float(angle.max()),
-            "mean_min_angle": float(report["metrics"]["min_angle"]["mean"]),
-            "elliptic_mean_min_angle": float(reference),
-            "below_elliptic": float(reference - report["metrics"]["min_angle"]["mean"]),
+            "inverted": check["inverted"],
+            "first_cell_error": wall["first_cell_error"],
+            "wall_angle_degrees": wall["worst_wall_angle_degrees"],
+            "mean_min_angle": check["mean_min_angle"],
+            "elliptic_mean_min_angle": check["elliptic_mean_min_angle"],
+            "below_elliptic": check["gap"],
         })  # fmt: skip
     worst = max(rows, key=lambda r: r["below_elliptic"])
     result = {

@@ -594,7 +594,7 @@ def wall_teacher(block_set):
     a network that reproduced them exactly would give the elliptic mesh itself. (Learning the
     finished mesh instead blends it twice, and its far field, where the lines are straight and a
     direction error moves a node by the distance times the error, folds more: 396 inverted cells
-    in 7 held-out members of a family against 142 for the same training on the marched layers.)"""
+    in 7 held-out members of a family against 142 for the same training on the marched layers, by hand.)"""
     setup = _setup(_key(block_set.values))
     marched, offsets = _marched(setup, block_set)
     return [marched[o : o + len(c[0])] for o, c in zip(offsets, block_set.coords)]

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
 import subprocess
@@ -26,6 +25,7 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(1, str(REPO / "scripts"))  # bundle_model: what every bundled model records
 COMMAND = ["train", "-g", "airfoil", "--vary", "camber=0:0.04", "--vary", "camber_position=0.2:0.6",
            "--vary", "thickness=0.08:0.18"]  # fmt: skip
 
@@ -35,11 +35,10 @@ def main() -> None:
     parser.add_argument("--from", dest="run", help="a finished run folder of the command (else one is trained now)")
     args = parser.parse_args()
 
-    import torch
+    from bundle_model import bundle
 
-    from meshgen import __version__
-    from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
-    from meshgen.neural.models import MODELS_DIR, load_model
+    from meshgen.neural.checkpoint import load_checkpoint
+    from meshgen.neural.models import MODELS_DIR
 
     folder = MODELS_DIR / "families" / "airfoil"
     folder.mkdir(parents=True, exist_ok=True)
@@ -54,24 +53,12 @@ def main() -> None:
         summary = json.loads((run / "summary.json").read_text())
     if checkpoint.get("stage") != "done":
         raise SystemExit(f"{run} holds an unfinished run")
-    checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}
-    save_checkpoint(folder / "checkpoint.pt", checkpoint)
-    model = load_model(folder / "checkpoint.pt", source="bundled")
+    _, saved = bundle(checkpoint, folder, wall)
     record = {
         "command": "meshgen " + " ".join(COMMAND) + " --out <run folder> -q",
         "configuration": checkpoint["config"],
-        "post_processing": "optimizer and scheduler state removed (needed only to resume training); saved with meshgen.neural.checkpoint.save_checkpoint",
-        "meshgen_version": __version__,
-        "torch_version": torch.__version__,
-        "date": datetime.date.today().isoformat(),
-        "training_seconds": checkpoint["elapsed_seconds"],
-        "training_wall_seconds": wall,
-        "steps": checkpoint["step"],
-        "widths": list(checkpoint["model"]["widths"]),
+        **saved,
         "family": {k: checkpoint["model"]["family"][k] for k in ("ranges", "train_dims", "free")},
-        "test_loss": checkpoint["test_loss"],
-        "sha256": model.sha256(),
-        "bytes": (folder / "checkpoint.pt").stat().st_size,
         "made_by": "python scripts/bundle_family.py " + " ".join(sys.argv[1:]),
         "check": summary["family"],
     }

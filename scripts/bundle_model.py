@@ -100,12 +100,9 @@ def main():
     if args.measure_only:
         return measure_only(args.geometry)
 
-    import torch
-
-    from meshgen import __version__
     from meshgen.geometry.plugins import load_geometry
-    from meshgen.neural.checkpoint import load_checkpoint, save_checkpoint
-    from meshgen.neural.models import MODELS_DIR, load_model
+    from meshgen.neural.checkpoint import load_checkpoint
+    from meshgen.neural.models import MODELS_DIR
 
     folder = MODELS_DIR / args.geometry
     folder.mkdir(parents=True, exist_ok=True)
@@ -133,9 +130,7 @@ def main():
         )
         wall = time.perf_counter() - started
         checkpoint = load_checkpoint(Path(run_dir) / "checkpoint.pt")
-    checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}
-    save_checkpoint(folder / "checkpoint.pt", checkpoint)
-    model = load_model(folder / "checkpoint.pt", source="bundled")
+    model, saved = bundle(checkpoint, folder, wall)
     geometry = load_geometry(args.geometry)
 
     record = {
@@ -145,6 +140,29 @@ def main():
         "settings": list(args.overrides),
         "command": " ".join(command).replace("RUN", "<run folder>"),
         "seed": args.seed,
+        **saved,
+        "exact_boundary": bool(checkpoint["model"]["exact_boundary"]),
+        "made_by": "python scripts/bundle_model.py " + " ".join(sys.argv[1:]),
+        "quality": quality(model, geometry),
+    }
+    write_record(folder, record)
+
+
+def bundle(checkpoint: dict, folder: Path, wall) -> tuple:
+    """Save ``checkpoint`` as ``folder/checkpoint.pt`` less its optimiser and scheduler state (only
+    a resumed run needs them, and the L-BFGS history is most of the file); returns the bundled
+    ``TrainedModel`` and the part of ``model.json`` every bundled model records (``wall``: the
+    training command's wall seconds, or None)."""
+    import torch
+
+    from meshgen import __version__
+    from meshgen.neural.checkpoint import save_checkpoint
+    from meshgen.neural.models import load_model
+
+    checkpoint["optimizer"], checkpoint["scheduler"] = {}, {}
+    save_checkpoint(folder / "checkpoint.pt", checkpoint)
+    model = load_model(folder / "checkpoint.pt", source="bundled")
+    return model, {
         "post_processing": "optimizer and scheduler state removed (needed only to resume training); saved with meshgen.neural.checkpoint.save_checkpoint",
         "meshgen_version": __version__,
         "torch_version": torch.__version__,
@@ -153,14 +171,10 @@ def main():
         "training_wall_seconds": wall,
         "steps": checkpoint["step"],
         "widths": list(checkpoint["model"]["widths"]),
-        "exact_boundary": bool(checkpoint["model"]["exact_boundary"]),
         "test_loss": checkpoint["test_loss"],
         "sha256": model.sha256(),
         "bytes": (folder / "checkpoint.pt").stat().st_size,
-        "made_by": "python scripts/bundle_model.py " + " ".join(sys.argv[1:]),
-        "quality": quality(model, geometry),
     }
-    write_record(folder, record)
 
 
 def quality(model, geometry) -> dict:

@@ -30,7 +30,7 @@ from meshgen.neural.inference import check_start_model, is_block_model
 from meshgen.neural.progress import reporter_for
 from meshgen.neural.run_folder import check_run_folder, claim_run_folder, stop_signals
 from meshgen.neural.wall_family_train import check_family_ranges
-from meshgen.neural.wall_map import HOOKS
+from meshgen.neural.wall_map import has_wall_hooks
 from meshgen.run.limits import check_training_memory
 
 __all__ = ["RUN_FILES", "RESUMABLE_KEYS", "Run", "is_run_folder", "choose_run_dir", "prepare_run", "run_training"]
@@ -186,7 +186,7 @@ def prepare_run(
     else:
         geometry = geometry or "semicylinder"
         blocks = is_multiblock(geometry)
-        walled = blocks and _round_a_wall(geometry)
+        walled = blocks and has_wall_hooks(plugin_module(geometry)[0])
         default_preset = ("wall-family" if walled else "family") if vary else "default"
         config = resolve_config(preset or default_preset, config_file, overrides, steps, seed)
         if vary and walled:
@@ -226,12 +226,6 @@ def prepare_run(
         config, geometry_object, _geometry_spec(geometry), run_dir, device, checkpoint, resume_path, family, fresh_name, force,
         block_set, started, wall_ranges, None if block_set is None else tuple(dims),
     )  # fmt: skip
-
-
-def _round_a_wall(geometry) -> bool:
-    """Whether the block-set plugin ``geometry`` has wall-layer models (``meshgen.neural.wall_map.HOOKS``)."""
-    module = plugin_module(geometry)[0]
-    return all(callable(getattr(module, hook, None)) for hook in HOOKS)
 
 
 def _wall_ranges(geometry, params, vary) -> dict:

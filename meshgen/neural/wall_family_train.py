@@ -31,6 +31,7 @@ __all__ = [
     "describe_family",
     "family_members",
     "family_rows",
+    "member_check",
     "validate_family",
 ]
 
@@ -105,6 +106,26 @@ def describe_family(block_set: BlockSet, ranges: dict, dims) -> dict:
     }
 
 
+def member_check(model: dict, block_set: BlockSet) -> tuple[list, dict]:
+    """The member ``block_set`` meshed by the family ``model`` (not checked: inverted cells
+    counted) and by the elliptic method: (the network's node arrays, {"inverted", "mean_min_angle",
+    "elliptic_mean_min_angle", "gap": elliptic - network, "seconds": the network's mesh})."""
+    start = time.perf_counter()
+    neural, _ = wall_map.neural_wall_blocks(block_set, model, check=False)
+    seconds = time.perf_counter() - start
+    report = quality_report(merged_mesh(block_set, neural)[:2])
+    angle = float(report["metrics"]["min_angle"]["mean"])
+    elliptic = wall_map.elliptic_reference(block_set)
+    reference = float(quality_report(merged_mesh(block_set, elliptic)[:2])["metrics"]["min_angle"]["mean"])
+    return neural, {
+        "inverted": int(report["inverted"]["count"]),
+        "mean_min_angle": angle,
+        "elliptic_mean_min_angle": reference,
+        "gap": reference - angle,
+        "seconds": seconds,
+    }
+
+
 def validate_family(model: dict, name: str, points: int = VALIDATION_POINTS) -> dict:
     """The grid of ``points`` values per varied parameter (the corners included), each member
     meshed at the family's ``train_dims`` by the model (not checked: inverted cells counted) and by
@@ -116,20 +137,9 @@ def validate_family(model: dict, name: str, points: int = VALIDATION_POINTS) -> 
     rows, times = [], []
     for member in (dict(m) for m in itertools.product(*axes)):
         block_set = load_block_set(name, {**family["base"], **member}, tuple(family["train_dims"]))
-        start = time.perf_counter()
-        neural, _ = wall_map.neural_wall_blocks(block_set, model, check=False)
-        times.append(time.perf_counter() - start)
-        elliptic = wall_map.elliptic_reference(block_set)
-        report = quality_report(merged_mesh(block_set, neural)[:2])
-        angle = report["metrics"]["min_angle"]["mean"]
-        reference = quality_report(merged_mesh(block_set, elliptic)[:2])["metrics"]["min_angle"]["mean"]
-        rows.append({
-            "params": member,
-            "inverted": int(report["inverted"]["count"]),
-            "mean_min_angle": float(angle),
-            "elliptic_mean_min_angle": float(reference),
-            "gap": float(reference - angle),
-        })  # fmt: skip
+        _, row = member_check(model, block_set)
+        times.append(row.pop("seconds"))
+        rows.append({"params": member, **row})
     failed = [r for r in rows if r["inverted"] or r["gap"] > ANGLE_TOLERANCE]
     return {
         "points": points,

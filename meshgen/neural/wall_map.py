@@ -48,6 +48,7 @@ __all__ = [
     "forward",
     "forward_grid",
     "forward_with",
+    "has_wall_hooks",
     "is_wall_model",
     "network_inputs",
     "network_layers",
@@ -72,7 +73,12 @@ def wall_hooks(block_set: BlockSet):
         module = plugin_module(block_set.name)[0]
     except GeometryError:  # not a plugin of that name (a geometry given by a path that is gone)
         return None
-    return module if all(callable(getattr(module, hook, None)) for hook in HOOKS) else None
+    return module if has_wall_hooks(module) else None
+
+
+def has_wall_hooks(module) -> bool:
+    """Whether a plugin ``module`` defines every hook of ``HOOKS`` (it has wall-layer models)."""
+    return all(callable(getattr(module, hook, None)) for hook in HOOKS)
 
 
 @dataclass
