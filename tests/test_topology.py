@@ -207,10 +207,11 @@ def test_cli_meshes_a_topology_without_dims_and_refines(run_cli, tmp_path):
 
 
 @pytest.mark.slow
-def test_cylinder_example_is_valid_and_passes_checkmesh(run_cli, tmp_path):
+@pytest.mark.parametrize("name", ["cylinder-2d.yaml", "cylinder-3d.yaml"])  # 3D: its wall projected onto a cylinder
+def test_cylinder_example_is_valid_and_passes_checkmesh(run_cli, tmp_path, name):
     from openfoam_helpers import check_mesh, missing_reason
 
-    example = str(EXAMPLES / "cylinder-2d.yaml")
+    example = str(EXAMPLES / name)
     result = run_cli("mesh", "-g", example, "--method", "elliptic", "--format", "openfoam", "-o", "case")
     assert result.returncode == 0, result.stderr
     assert "inverted cells: 0 (0.00%)" in result.stdout

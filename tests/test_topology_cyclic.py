@@ -113,6 +113,15 @@ def test_3d_box_with_two_pairs_one_over_two_block_faces(run_cli, tmp_path):
     assert report["ok"], report["log"][-2000:]
 
 
+def assert_one_line_error(tmp_path, text: str, old: str, new: str, words: str) -> None:
+    """The topology ``text`` with ``old`` made ``new`` is refused in one line holding ``words``."""
+    assert old in text
+    (tmp_path / "bad.yaml").write_text(text.replace(old, new))
+    with pytest.raises(GeometryError) as info:
+        load_block_set(str(tmp_path / "bad.yaml"), None, (1, 1))
+    assert words in str(info.value) and "\n" not in str(info.value)
+
+
 @pytest.mark.parametrize(
     ("old", "new", "words"),
     [
@@ -126,12 +135,7 @@ def test_3d_box_with_two_pairs_one_over_two_block_faces(run_cli, tmp_path):
 def test_bad_pairs_are_one_line(tmp_path, old, new, words):
     """Moving the outlet's top vertex up 0.25 moves its centre up 0.125: the translation between the
     centres leaves each of its vertices 0.125 off."""
-    text = example_text()
-    assert old in text
-    (tmp_path / "bad.yaml").write_text(text.replace(old, new))
-    with pytest.raises(GeometryError) as info:
-        load_block_set(str(tmp_path / "bad.yaml"), None, (1, 1))
-    assert words in str(info.value) and "\n" not in str(info.value)
+    assert_one_line_error(tmp_path, example_text(), old, new, words)
 
 
 def test_sides_whose_nodes_differ_name_the_pair_and_the_largest_mismatch(run_cli, tmp_path):
@@ -282,11 +286,7 @@ def test_rotational_pair_matches_after_elliptic_and_in_openfoam(run_cli, tmp_pat
     ],
 )  # fmt: skip
 def test_bad_rotations_are_one_line(tmp_path, old, new, words):
-    assert old in RING
-    (tmp_path / "bad.yaml").write_text(RING.replace(old, new))
-    with pytest.raises(GeometryError) as info:
-        load_block_set(str(tmp_path / "bad.yaml"), None, (1, 1))
-    assert words in str(info.value) and "\n" not in str(info.value)
+    assert_one_line_error(tmp_path, RING, old, new, words)
 
 
 def test_cgns_refuses_a_rotational_pair_before_meshing(run_cli, tmp_path):

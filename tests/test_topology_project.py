@@ -246,20 +246,6 @@ def test_cli_bad_projection_exits_2_writing_nothing(run_cli, tmp_path):
     assert not list(tmp_path.glob("x.*"))
 
 
-@pytest.mark.slow
-def test_cylinder_3d_example_passes_checkmesh(run_cli, tmp_path):
-    from openfoam_helpers import check_mesh, missing_reason
-
-    example = str(EXAMPLES / "cylinder-3d.yaml")
-    result = run_cli("mesh", "-g", example, "--method", "elliptic", "--format", "openfoam", "-o", "case")
-    assert result.returncode == 0, result.stderr
-    assert "inverted cells: 0 (0.00%)" in result.stdout
-    if missing_reason() is not None:
-        pytest.skip(missing_reason())
-    report = check_mesh(tmp_path / "case")
-    assert report["ok"], report["log"][-2000:]
-
-
 QUARTER = """surfaces: {{pipe: {surface}}}
 vertices: {{a: [0.5, 0, 0.5], b: [1, 0, 0.5], c: [1, 1, 0.5], m: [0.35, 0.35, 0.5], d: [0, 1, 0.5], e: [0, 0.5, 0.5],
   A: [0.5, 0, 1.5], B: [1, 0, 1.5], C: [1, 1, 1.5], M: [0.35, 0.35, 1.5], D: [0, 1, 1.5], E: [0, 0.5, 1.5]}}
