@@ -7,10 +7,12 @@ from scipy.integrate import quad
 
 from meshgen.errors import GeometryError, ParameterError
 from meshgen.geometry.airfoil_curve import (
+    analytic_section,
     chord_length,
     chordwise_distribution,
     leading_edge_arc,
     normals_at,
+    parameters_at,
     points_at,
     tangents_at,
     trailing_edge,
@@ -19,6 +21,7 @@ from meshgen.geometry.airfoil_curve import (
 from meshgen.geometry.airfoils import (
     data_section,
     load_section,
+    naca4_section,
     naca_camber,
     naca_constants,
     naca_section,
@@ -212,6 +215,41 @@ def test_arc_length_against_a_fine_polyline(name):
     assert section.length == pytest.approx(polyline, rel=1e-9)
     s_le = leading_edge_arc(section)
     np.testing.assert_allclose(points_at(section, [s_le])[0], [0, 0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "section",
+    [naca4_section(0.04, 0.3, 0.12), naca_section("23012"), naca_section("23112"), tmr0012_section()],
+    ids=lambda section: section.name,
+)
+def test_analytic_derivatives_are_the_complex_step_of_the_shape(section):
+    """The sections' chain-rule derivative against the complex step of their own shape, which is
+    exact to rounding (the same section made without a derivative uses it)."""
+    t = np.linspace(0.0, 1.0, 20001)
+    reference = analytic_section("complex step", section.shape, 0.5).derivative(t)
+    np.testing.assert_allclose(section.derivative(t), reference, rtol=0, atol=1e-13 * np.abs(reference).max())
+
+
+@pytest.mark.parametrize("name", ["2412", "tmr0012"])
+def test_arc_lengths_invert_to_their_parameters_at_the_trailing_edges(name):
+    """Where the sine parameter's speed vanishes (s ~ t^2 at the trailing edges) too: the arc
+    length from 0 to each found t, by adaptive quadrature, is the asked one."""
+    section = load_section(name)
+    length = section.length
+    s = np.concatenate(
+        [[1e-9, 1e-7, 1e-5, 1e-3], np.linspace(0.01, length - 0.01, 7), length - np.array([1e-3, 1e-5, 1e-7, 1e-9])]
+    )
+    t = parameters_at(section, s)
+
+    def speed(u):
+        return float(np.linalg.norm(section.derivative(np.array([u]))[0]))
+
+    knots = section.knots
+    pieces = [quad(speed, a, b, epsabs=1e-16, epsrel=1e-14)[0] for a, b in zip(knots[:-1], knots[1:])]
+    at_knots = np.concatenate([[0.0], np.cumsum(pieces)])
+    start = np.searchsorted(knots, t, side="right") - 1
+    found = [at_knots[k] + quad(speed, knots[k], u, epsabs=1e-16, epsrel=1e-14)[0] for k, u in zip(start, t)]
+    np.testing.assert_allclose(found, s, rtol=0, atol=1e-13 * length)
 
 
 def test_tangents_and_normals():

@@ -53,7 +53,7 @@ ANALYTIC_INTERVALS = 512  # parameter intervals of an analytic section's arc-len
 class Section:
     """An airfoil section curve (see the module docstring). ``shape`` maps t (m,) to points (m, 2);
     ``derivative`` to dp/dt (m, 2); ``knots`` (k+1,) are the parameter breakpoints of the
-    arc-length table ``knot_arcs`` (k+1,); ``points`` (n, 2) are the defining data points (or a
+    arc-length table ``knot_arcs`` (k+1,), ``knot_speeds`` (k+1,) |p'| there; ``points`` (n, 2) are the defining data points (or a
     sample of an analytic section), lower trailing edge -> leading edge -> upper trailing edge."""
 
     name: str
@@ -64,6 +64,7 @@ class Section:
     le_parameter: float
     points: np.ndarray
     analytic: bool
+    knot_speeds: np.ndarray  # |p'(t)| at the knots (k+1,): the initial guess of parameters_at
 
     @property
     def length(self) -> float:
@@ -78,6 +79,10 @@ def _arc_table(derivative, knots: np.ndarray) -> np.ndarray:
     speed = np.linalg.norm(derivative(t.ravel()), axis=1).reshape(t.shape)
     pieces = 0.5 * (b - a) * (speed @ _GAUSS_W)
     return np.concatenate([[0.0], np.cumsum(pieces)])
+
+
+def _speeds(derivative, knots: np.ndarray) -> np.ndarray:
+    return np.linalg.norm(derivative(knots), axis=1)
 
 
 def _partial_arcs(section: Section, interval: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -103,7 +108,8 @@ def analytic_section(name: str, shape, le_parameter: float, *, derivative=None, 
     knots = np.unique(np.concatenate([np.linspace(0.0, 1.0, ANALYTIC_INTERVALS + 1), np.asarray(breaks, dtype=float)]))
     knots = knots[np.concatenate([[True], np.diff(knots) > 1e-9])]  # a break on a knot is that knot
     points = shape(np.linspace(0.0, 1.0, samples))
-    return Section(name, shape, derivative, knots, _arc_table(derivative, knots), float(le_parameter), points, True)
+    arcs, speeds = _arc_table(derivative, knots), _speeds(derivative, knots)
+    return Section(name, shape, derivative, knots, arcs, float(le_parameter), points, True, speeds)
 
 
 def spline_section(name: str, points, le_index: int) -> Section:
@@ -121,7 +127,8 @@ def spline_section(name: str, points, le_index: int) -> Section:
     knots[-1] = 1.0
     spline = CubicSpline(knots, points, axis=0)
     slope = spline.derivative()
-    return Section(name, spline, slope, knots, _arc_table(slope, knots), float(knots[le_index]), points, False)
+    arcs, speeds = _arc_table(slope, knots), _speeds(slope, knots)
+    return Section(name, spline, slope, knots, arcs, float(knots[le_index]), points, False, speeds)
 
 
 def parameters_at(section: Section, s) -> np.ndarray:
@@ -133,8 +140,7 @@ def parameters_at(section: Section, s) -> np.ndarray:
     s = np.clip(s, 0.0, length)
     interval = np.clip(np.searchsorted(section.knot_arcs, s, side="right") - 1, 0, len(section.knots) - 2)
     a, b = section.knots[interval], section.knots[interval + 1]
-    sa, sb = section.knot_arcs[interval], section.knot_arcs[interval + 1]
-    t = a + (b - a) * (s - sa) / np.where(sb > sa, sb - sa, 1.0)
+    t = a + (b - a) * _first_guess(section, interval, s)
     for _ in range(30):
         error = _partial_arcs(section, interval, t) - s
         speed = np.linalg.norm(section.derivative(t), axis=1)
@@ -143,6 +149,22 @@ def parameters_at(section: Section, s) -> np.ndarray:
         if np.all(np.abs(error) <= 1e-14 * max(length, 1.0)):
             break
     return t
+
+
+def _first_guess(section: Section, interval: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The fraction u (m,) of its knot interval where arc length ``s`` lies, on the quadratic s(u)
+    through the interval's ends with the slope of its slower end: exact where the speed vanishes
+    there (a trailing edge of the sine parameter, s ~ u^2), within O(h^3) elsewhere, so Newton's
+    method starts close."""
+    sa, sb = section.knot_arcs[interval], section.knot_arcs[interval + 1]
+    h = section.knots[interval + 1] - section.knots[interval]
+    va, vb = section.knot_speeds[interval] * h, section.knot_speeds[interval + 1] * h
+    span = sb - sa
+    start = va <= vb  # the model's slope is the slower end's
+    slope, rise = np.where(start, va, vb), np.where(start, s - sa, sb - s)  # rise: from that end
+    root = np.sqrt(np.maximum(slope * slope + 4.0 * (span - slope) * rise, 0.0))
+    u = 2.0 * rise / np.where(slope + root > 0, slope + root, 1.0)
+    return np.clip(np.where(start, u, 1.0 - u), 0.0, 1.0)
 
 
 def points_at(section: Section, s) -> np.ndarray:

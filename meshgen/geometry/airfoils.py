@@ -50,6 +50,7 @@ __all__ = [
     "naca_thickness",
     "parse_section_text",
     "read_section",
+    "thickness_derivative",
     "thickness_shape",
     "tmr0012_section",
 ]
@@ -108,20 +109,22 @@ def naca_constants(designation: str) -> dict:
     return {**found, "m": m, "k1": k1 * lift / 2.0, "k2_k1": ratio[0] if ratio else 0.0, "reflex": bool(reflex)}
 
 
-def naca4_camber(m: float, p: float, x) -> tuple[np.ndarray, np.ndarray]:
-    """The 4-digit camber line of maximum camber ``m`` (chords) at ``p`` (chords, 0 < p < 1), and
-    its slope, at chord stations ``x`` (m,): two parabolas meeting at p (any real m, p: a family's)."""
+def naca4_camber(m: float, p: float, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 4-digit camber line of maximum camber ``m`` (chords) at ``p`` (chords, 0 < p < 1), its
+    slope and the slope's derivative, at chord stations ``x`` (m,): two parabolas meeting at p (any
+    real m, p: a family's)."""
     x = np.asarray(x)
     x = x.astype(complex if np.iscomplexobj(x) else float)  # complex: for complex-step derivatives
     if m == 0:
-        return np.zeros_like(x), np.zeros_like(x)
+        return np.zeros_like(x), np.zeros_like(x), np.zeros_like(x)
     front = x.real < p
-    yc = np.where(front, m / p**2 * (2 * p * x - x**2), m / (1 - p) ** 2 * (1 - 2 * p + 2 * p * x - x**2))
-    return yc, np.where(front, 2 * m / p**2 * (p - x), 2 * m / (1 - p) ** 2 * (p - x))
+    scale = np.where(front, m / p**2, m / (1 - p) ** 2)
+    yc = np.where(front, scale * (2 * p * x - x**2), scale * (1 - 2 * p + 2 * p * x - x**2))
+    return yc, 2 * scale * (p - x), -2 * scale
 
 
-def naca_camber(designation: str, x) -> tuple[np.ndarray, np.ndarray]:
-    """The camber line y_c(x) and its slope dy_c/dx at chord stations ``x`` (m,) in [0, 1]."""
+def naca_camber(designation: str, x) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The camber line y_c(x), its slope dy_c/dx and d^2y_c/dx^2 at chord stations ``x`` (m,) in [0, 1]."""
     c = naca_constants(designation)
     x = np.asarray(x)
     x = x.astype(complex if np.iscomplexobj(x) else float)  # complex: for complex-step derivatives
@@ -131,10 +134,11 @@ def naca_camber(designation: str, x) -> tuple[np.ndarray, np.ndarray]:
     front = x.real < m
     if not c["reflex"]:
         yc = np.where(front, k1 / 6 * (x**3 - 3 * m * x**2 + m**2 * (3 - m) * x), k1 * m**3 / 6 * (1 - x))
-        return yc, np.where(front, k1 / 6 * (3 * x**2 - 6 * m * x + m**2 * (3 - m)), -k1 * m**3 / 6)
-    cube = np.where(front, 1.0, r) * (x - m) ** 3
-    yc = k1 / 6 * (cube - r * (1 - m) ** 3 * x - m**3 * x + m**3)
-    return yc, k1 / 6 * (3 * np.where(front, 1.0, r) * (x - m) ** 2 - r * (1 - m) ** 3 - m**3)
+        slope = np.where(front, k1 / 6 * (3 * x**2 - 6 * m * x + m**2 * (3 - m)), -k1 * m**3 / 6)
+        return yc, slope, np.where(front, k1 * (x - m), 0.0)
+    factor = np.where(front, 1.0, r)
+    yc = k1 / 6 * (factor * (x - m) ** 3 - r * (1 - m) ** 3 * x - m**3 * x + m**3)
+    return yc, k1 / 6 * (3 * factor * (x - m) ** 2 - r * (1 - m) ** 3 - m**3), k1 * factor * (x - m)
 
 
 def naca_thickness(x, thickness: float, closed_te: bool = False) -> np.ndarray:
@@ -158,11 +162,36 @@ def thickness_shape(scale: float, coefficients, camber=None):
         half = scale * (a0 * root + np.sign(theta.real) * x * (a1 + x * (a2 + x * (a3 + x * a4))))
         if camber is None:
             return np.stack([x, half], axis=1)
-        yc, slope = camber(x)
+        yc, slope = camber(x)[:2]
         phi = np.arctan(slope)
         return np.stack([x - half * np.sin(phi), yc + half * np.cos(phi)], axis=1)
 
     return shape
+
+
+def thickness_derivative(scale: float, coefficients, camber=None):
+    """The derivative dp/dt (m, 2) of ``thickness_shape(scale, coefficients, camber)`` at t (m,),
+    by the chain rule (``camber`` x -> (y_c, dy_c/dx, d^2y_c/dx^2)); real t only (about three times
+    faster than the complex step, which the tests check it against)."""
+    a0, a1, a2, a3, a4 = coefficients
+
+    def derivative(t):
+        theta = np.pi * (2.0 * np.asarray(t, dtype=float) - 1.0)
+        root, droot = np.sin(0.5 * theta), np.pi * np.cos(0.5 * theta)
+        x = root**2
+        dx = 2.0 * root * droot
+        sign = np.sign(theta)
+        half = scale * (a0 * root + sign * x * (a1 + x * (a2 + x * (a3 + x * a4))))
+        dhalf = scale * (a0 * droot + sign * (a1 + x * (2 * a2 + x * (3 * a3 + x * 4 * a4))) * dx)
+        if camber is None:
+            return np.stack([dx, dhalf], axis=1)
+        _, slope, curvature = camber(x)
+        phi = np.arctan(slope)
+        dphi = curvature / (1.0 + slope * slope) * dx
+        sin, cos = np.sin(phi), np.cos(phi)
+        return np.stack([dx - dhalf * sin - half * cos * dphi, slope * dx + dhalf * cos - half * sin * dphi], axis=1)
+
+    return derivative
 
 
 def camber_breaks(x: float) -> tuple[float, float]:
@@ -182,10 +211,11 @@ def naca_section(designation: str, *, closed_te: bool = False) -> Section:
     def camber(x):
         return naca_camber(c["digits"], x)
 
-    shape = thickness_shape(5.0 * c["thickness"], coefficients, camber if cambered else None)
+    parts = (5.0 * c["thickness"], coefficients, camber if cambered else None)
     junction = c["p"] if len(c["digits"]) == 4 else c["m"]  # where the camber line's pieces meet
     breaks = camber_breaks(junction) if cambered else ()
-    return analytic_section(f"NACA {c['digits']}" + (" (closed trailing edge)" if closed_te else ""), shape, 0.5, breaks=breaks)
+    name = f"NACA {c['digits']}" + (" (closed trailing edge)" if closed_te else "")
+    return analytic_section(name, thickness_shape(*parts), 0.5, derivative=thickness_derivative(*parts), breaks=breaks)
 
 
 def naca4_section(camber: float, position: float, thickness: float, *, closed_te: bool = True) -> Section:
@@ -206,15 +236,16 @@ def naca4_section(camber: float, position: float, thickness: float, *, closed_te
     def camber_line(x):
         return naca4_camber(camber, position, x)
 
-    shape = thickness_shape(5.0 * thickness, coefficients, camber_line if camber > 0 else None)
+    parts = (5.0 * thickness, coefficients, camber_line if camber > 0 else None)
     name = f"NACA 4-digit m={camber:g} p={position:g} t={thickness:g}" + (" (closed trailing edge)" if closed_te else "")
-    return analytic_section(name, shape, 0.5, breaks=camber_breaks(position) if camber > 0 else ())
+    breaks = camber_breaks(position) if camber > 0 else ()
+    return analytic_section(name, thickness_shape(*parts), 0.5, derivative=thickness_derivative(*parts), breaks=breaks)
 
 
 def tmr0012_section() -> Section:
     """The NASA TMR NACA 0012: y = +-0.594689181 (0.298222773 sqrt(x) - 0.127125232 x - 0.357907906
     x^2 + 0.291984971 x^3 - 0.105174606 x^4), 0 <= x <= 1, sharp trailing edge (y(1) = 0 to rounding)."""
-    return analytic_section("TMR NACA 0012", thickness_shape(*TMR_0012), 0.5)
+    return analytic_section("TMR NACA 0012", thickness_shape(*TMR_0012), 0.5, derivative=thickness_derivative(*TMR_0012))
 
 
 def _rows(text: str, source: str) -> tuple[str, list[tuple[int, float, float]], list[int]]:
