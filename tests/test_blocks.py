@@ -6,7 +6,14 @@ import pytest
 from blocks_helpers import cell_measures, size_ratios
 
 from meshgen.errors import GeometryError
-from meshgen.geometry.blocks import global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.blocks import (
+    global_numbering,
+    interface_gaps,
+    load_block_set,
+    merged_mesh,
+    tfi_blocks,
+    unify_interfaces,
+)
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.quality import quality_report
@@ -34,6 +41,30 @@ def test_pipe_quality_does_not_degrade(dims, method):
     assert across <= 1.3
     if method == "elliptic":
         assert across <= inside
+
+
+@pytest.mark.parametrize("name, dims", [("pipe", (6, 3, 2)), ("dfg-cylinder-3d", (8, 4, 3))])
+def test_unify_interfaces_gives_every_shared_node_its_first_holders_value(name, dims):
+    """Against the plain rule written out: every node takes the value of the first block (in block
+    order) that holds it; nodes on no interface do not move; arrays of any memory layout."""
+    block_set = load_block_set(name, None, dims)
+    rng = np.random.default_rng(1)
+    noise = 1e-3 * 1e-9 * block_set.length  # within the gap tolerance
+    Xs = [X + noise * rng.standard_normal(X.shape) for X in tfi_blocks(block_set)]
+    Xs[1] = np.asfortranarray(Xs[1])  # a copy made by reshape would leave it unchanged
+    before = [X.copy() for X in Xs]
+    numbering, count = global_numbering(block_set)
+    first = np.full((count, block_set.dim), np.nan)
+    for X, ids in zip(reversed(before), reversed(numbering)):  # later blocks first: the first holder writes last
+        first[ids.reshape(-1)] = X.reshape(-1, block_set.dim)
+    unify_interfaces(block_set, Xs)
+    holders = np.bincount(np.concatenate([ids.reshape(-1) for ids in numbering]), minlength=count)
+    for X, old, ids in zip(Xs, before, numbering):
+        np.testing.assert_array_equal(X, first[ids])
+        alone = holders[ids] == 1
+        np.testing.assert_array_equal(X[alone], old[alone])
+    assert all(gap == 0.0 for gap in interface_gaps(block_set, Xs))
+    assert max(np.abs(X - old).max() for X, old in zip(Xs, before)) > 0  # shared nodes did move
 
 
 def test_pipe_elliptic_is_smoother_than_tfi_and_on_the_wall():

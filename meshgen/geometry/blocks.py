@@ -400,12 +400,34 @@ def unify_interfaces(block_set: BlockSet, Xs, tolerance: float = GAP_TOLERANCE) 
                 f"{_said(block_set, interface.a, interface.face_a, interface.b, interface.face_b)} do not coincide "
                 f"(largest gap {gap:.3g})"
             )
-    numbering, count = global_numbering(block_set)
-    values = np.empty((count, block_set.dim))
-    for X, ids in zip(reversed(Xs), reversed(numbering)):  # the first block holding a node gives its value
-        values[ids.reshape(-1)] = X.reshape(-1, block_set.dim)
-    for X, ids in zip(Xs, numbering):
-        X[...] = values[ids]
+    for b, a, target, source in _interface_copies(block_set):  # only the shared nodes move
+        Xs[b][target] = Xs[a][source]
+
+
+_COPIES = {}  # global_numbering's key -> _interface_copies' result
+
+
+def _interface_copies(block_set: BlockSet) -> list[tuple]:
+    """What ``unify_interfaces`` copies: (b, a, nodes of b, nodes of a), the node index tuples of
+    block b's nodes whose first holder (in block order, ``global_numbering``) is block a's node."""
+    key = (block_set.dim, tuple(block_set.node_shapes), block_set.interfaces)
+    if key not in _COPIES:
+        if len(_COPIES) > 8:
+            _COPIES.clear()
+        numbering, _ = global_numbering(block_set)
+        sizes = [ids.size for ids in numbering]
+        owner = np.repeat(np.arange(len(numbering)), sizes)  # the block of each position in block order
+        local = np.concatenate([np.arange(size) for size in sizes])
+        flat = np.concatenate([ids.reshape(-1) for ids in numbering])
+        first = np.unique(flat, return_index=True)[1][flat]  # the first holder's position, per position
+        shared = np.flatnonzero(first != np.arange(len(flat)))
+        copies = []
+        for b, a in np.unique(np.stack([owner[shared], owner[first[shared]]], axis=1), axis=0):
+            moved = shared[(owner[shared] == b) & (owner[first[shared]] == a)]
+            target = np.unravel_index(local[moved], numbering[b].shape)
+            copies.append((int(b), int(a), target, np.unravel_index(local[first[moved]], numbering[a].shape)))
+        _COPIES[key] = copies
+    return _COPIES[key]
 
 
 _NUMBERINGS = {}  # (dim, node shapes, interfaces) -> global_numbering's result: a set meshed again reuses it
