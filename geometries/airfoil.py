@@ -625,9 +625,9 @@ def _blend(block_set, near, check=True):
     curve = np.concatenate([walls[0], walls[1][1:], walls[2][1:]])
     weight = blend_weight(block_set.values, d)[None, :, None]
     offsets = np.cumsum([0, sizes[0] - 1, sizes[1] - 1])
-    lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far_field(setup, block_set.coords) - curve)[:, None]
-    lines = _turned(setup, lines)
-    Xs = [(1.0 - weight) * X + weight * lines[o : o + size] for X, o, size in zip(near, offsets, sizes)]
+    curve, far = _turned(setup, curve), _turned(setup, far_field(setup, block_set.coords))  # turning is affine
+    lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far - curve)[:, None]
+    Xs = [X + weight * (lines[o : o + size] - X) for X, o, size in zip(near, offsets, sizes)]
     Xs = [respaced_lines(X, d, weight[0, :, 0]) for X in Xs]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)

@@ -143,17 +143,22 @@ def respaced_lines(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarr
     minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
     ratio stays the designed one where the blend bends or stretches the lines."""
     n, nodes = X.shape[0], X.shape[1]
-    arc = np.concatenate([np.zeros((n, 1)), np.cumsum(np.linalg.norm(np.diff(X, axis=1), axis=-1), axis=1)], axis=1)
+    steps = np.diff(X, axis=1)
+    arc = np.zeros((n, nodes))
+    np.cumsum(np.hypot(steps[..., 0], steps[..., 1]), axis=1, out=arc[:, 1:])
     target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
     target[:, -1] = arc[:, -1]
-    lifted = arc + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
-    wanted = target + 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]
-    segment = np.clip(np.searchsorted(lifted.ravel(), wanted.ravel(), side="right") - 1, 0, n * nodes - 2)
+    lift = 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
+    lifted, wanted = (arc + lift).ravel(), (target + lift).ravel()
+    segment = np.clip(np.searchsorted(lifted, wanted, side="right") - 1, 0, n * nodes - 2)
     segment = np.minimum(segment, (np.arange(n)[:, None] * nodes + nodes - 2).repeat(nodes, axis=1).ravel())
-    flat, lifted = X.reshape(-1, 2), lifted.ravel()
-    step = lifted[segment + 1] - lifted[segment]
-    fraction = np.where(step > 0, (wanted.ravel() - lifted[segment]) / np.where(step > 0, step, 1.0), 0.0)
-    out = flat[segment] + fraction[:, None] * (flat[segment + 1] - flat[segment])
-    out = out.reshape(X.shape)
+    low = lifted.take(segment)
+    step = lifted.take(segment + 1) - low
+    fraction = np.where(step > 0, (wanted - low) / np.where(step > 0, step, 1.0), 0.0)
+    out = np.empty(X.shape)
+    for axis in range(2):  # 1D gathers (take) per coordinate: faster than gathering rows
+        values = np.ascontiguousarray(X[..., axis]).ravel()
+        start = values.take(segment)
+        out[..., axis] = (start + fraction * (values.take(segment + 1) - start)).reshape(n, nodes)
     out[:, 0], out[:, -1] = X[:, 0], X[:, -1]
     return out

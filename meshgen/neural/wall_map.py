@@ -145,9 +145,12 @@ def blend(d: np.ndarray, d0: float) -> np.ndarray:
 def assemble(wall: np.ndarray, normal: np.ndarray, d: np.ndarray, N: np.ndarray, d0: float) -> np.ndarray:
     """Nodes (n, m + 1, 2) float64 from the wall (n, 2), normals (n, 2), distances (m + 1,) and the
     network's vectors N (n, m + 1, 2): w + d ((1 - phi) n + phi N), phi = ``blend(d, d0)``."""
-    phi = blend(d, d0)[None, :, None]
-    direction = (1.0 - phi) * normal[:, None, :] + phi * N.astype(np.float64)
-    return wall[:, None, :] + d[None, :, None] * direction
+    phi = blend(d, d0)
+    out = N.astype(np.float64)
+    out *= (d * phi)[None, :, None]
+    out += (d * (1.0 - phi))[None, :, None] * normal[:, None, :]
+    out += wall[:, None, :]
+    return out
 
 
 def is_wall_model(model) -> bool:
