@@ -181,6 +181,22 @@ def test_a_member_outside_the_ranges_or_with_another_fixed_parameter_is_one_line
         assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "a.vtu").exists()
 
 
+def test_the_bundled_family_names_its_ranges_for_a_member_outside_them(run_cli, tmp_path):
+    """Without a checkpoint: a member of the bundled family's sections outside its ranges is refused
+    with the ranges and a training command that holds it; another section (sharp=1) is not the
+    family's business: no trained model for it."""
+    for params, message in (
+        (["thickness=0.3"], "thickness=0.3 is outside the trained range 0.08..0.18 of the bundled family"),
+        (["thickness=0.3"], "--vary thickness=0.08:0.3`) or pick --method elliptic"),
+        (["thickness=0.12", "camber=0.05"], "--vary camber=0:0.05 --vary camber_position=0.2:0.6 --vary thickness=0.08:0.18"),
+        (["sharp=1"], "no trained model for airfoil with sharp=1"),
+    ):
+        args = [a for p in params for a in ("--param", p)]
+        done = run_cli("mesh", "-g", "airfoil", "--method", "neural", *args, "--dims", "224", "128", "-o", "a.vtu")
+        assert done.returncode == 2 and message in done.stderr, done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "a.vtu").exists()
+
+
 def test_a_damaged_family_is_refused(family_checkpoint, tmp_path):
     checkpoint = load_checkpoint(family_checkpoint[0])
     checkpoint["model"]["family"]["ranges"]["thickness"] = [0.14, 0.10]

@@ -226,6 +226,8 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
         family = _bundled_family(block_set_name, params) if checkpoint is None else None
         if family is None:
             raise
+        if isinstance(family, MeshgenError):
+            raise family from None
         return family
     if not is_block_model(model.checkpoint["model"]):
         raise ParameterError("checkpoint", f"{{name}} {model.path} holds a one-block model, not one of '{block_set_name}'")
@@ -234,17 +236,26 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
 
 def _bundled_family(name: str, params: dict):
     """The bundled family of sections round a wall of geometry ``name`` (``meshgen/_models/families/NAME``)
-    when ``params`` (the --param values over the geometry's defaults) pick one of its members, else None: what ``--method
-    neural`` meshes with when no run of the geometry has those parameters."""
+    when ``params`` (the --param values over the geometry's defaults) pick one of its members: what
+    ``--method neural`` meshes with when no run of the geometry has those parameters. A MeshgenError
+    (to raise) naming the ranges when they pick a section of the family outside them; None when
+    there is no such family or the section is not one of it (another ``naca``, ``sharp``, ...)."""
     path = MODELS_DIR / "families" / name / "checkpoint.pt"
     if not path.is_file():
         return None
     model = load_model(path, source="bundled")
     family = model.checkpoint["model"]["family"]
-    try:
-        check_member_values(family, member_values(family, load_geometry(name, check=False).defaults, params))
+    values = member_values(family, load_geometry(name, check=False).defaults, params)
+    try:  # the family's fixed parameters, the varied ones at the family's base
+        check_member_values(family, {**values, **{n: float(family["base"][n]) for n in family["ranges"]}})
     except MeshgenError:
         return None
+    try:
+        check_member_values(family, values, " of the bundled family")
+    except MeshgenError as exc:
+        wider = {n: (min(lo, float(values[n])), max(hi, float(values[n]))) for n, (lo, hi) in family["ranges"].items()}
+        varied = " ".join(f"--vary {n}={lo:g}:{hi:g}" for n, (lo, hi) in wider.items())
+        return MeshgenError(f"{exc}; train a family that holds it (`meshgen train -g {name} {varied}`) or pick --method elliptic")
     return model
 
 
