@@ -8,6 +8,7 @@ themselves, and the continuous 4-digit section against the designation's own for
 
 import json
 
+import meshio
 import numpy as np
 import pytest
 from mesh_checks import corner_jacobians
@@ -195,6 +196,18 @@ def test_the_bundled_family_names_its_ranges_for_a_member_outside_them(run_cli, 
         done = run_cli("mesh", "-g", "airfoil", "--method", "neural", *args, "--dims", "224", "128", "-o", "a.vtu")
         assert done.returncode == 2 and message in done.stderr, done.stderr
         assert len(done.stderr.strip().splitlines()) == 1 and not (tmp_path / "a.vtu").exists()
+
+
+def test_yplus_with_a_checkpoint_and_no_geometry_meshes_the_checkpoints_geometry(run_cli, tmp_path):
+    """--yplus is checked against the geometry the --checkpoint was trained on (the one the command
+    meshes without -g), not the default semicylinder: the smallest edge of the mesh is the asked first cell."""
+    done = run_cli("mesh", "--method", "neural", "--checkpoint", str(BUNDLED), "--param", "thickness=0.12",
+                   "--yplus", "2", "--dims", "224", "128", "-o", "a.vtu")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    mesh = meshio.read(tmp_path / "a.vtu")
+    quads = mesh.points[mesh.cells_dict["quad"]][..., :2]
+    edges = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=-1)
+    assert edges.min() == pytest.approx(first_cell_height(2.0, 6e6).height, rel=0.03)
 
 
 def test_a_damaged_family_is_refused(family_checkpoint, tmp_path):

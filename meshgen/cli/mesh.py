@@ -9,11 +9,12 @@ import click
 from meshgen.cli._options import DimsCommand, block_nodes_option, dims_option, geometry_options
 from meshgen.cli._progress import progress_display
 from meshgen.cli._text import echo
-from meshgen.errors import GeometryError, did_you_mean
+from meshgen.errors import GeometryError, MeshgenError, did_you_mean
 from meshgen.formats import format_for
 from meshgen.geometry.plugins import parse_params, plugin_module
 from meshgen.geometry.topology import TOPOLOGY_DIMS_MEANING, topology_dims
 from meshgen.methods.registry import METHODS
+from meshgen.neural.checkpoint_data import read_plain_checkpoint
 from meshgen.quality import summary_lines
 from meshgen.run.request import MeshRequest, carry_out
 
@@ -219,7 +220,12 @@ def mesh(
     request = MeshRequest(
         dims,
         geometry if geometry_given or checkpoint is None else None,
-        _wall_options(parse_params(params), geometry, yplus=yplus, reynolds=reynolds),
+        _wall_options(
+            parse_params(params),
+            geometry if geometry_given else _trained_on(checkpoint, geometry),
+            yplus=yplus,
+            reynolds=reynolds,
+        ),
         method,
         checkpoint=checkpoint,
         tol=tol,
@@ -323,6 +329,17 @@ def _print_result(made, output_format, quiet):
         echo("patches: " + ", ".join(f"{p.name} ({p.type}: {' '.join(p.faces)})" for p in made.patches))
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
         echo(line)
+
+
+def _trained_on(checkpoint, default: str) -> str:
+    """The geometry spec a --checkpoint was trained on (what the mesh command meshes without -g),
+    else ``default`` (no checkpoint, or one the request will refuse with its own message)."""
+    if checkpoint is None:
+        return default
+    try:
+        return str(read_plain_checkpoint(checkpoint)["geometry"]["spec"])
+    except (MeshgenError, KeyError, TypeError):
+        return default
 
 
 def _wall_options(values: dict, geometry: str, **given) -> dict:
