@@ -40,6 +40,7 @@ __all__ = ["CadBlock", "closest_on_face", "gmsh_model", "quiet_stdout", "read_ca
 
 ARC_SAMPLES = 2001  # parameter samples per curve for its arc length
 SIDE_SAMPLES = 513  # arc-length samples per face side for its (u, v) trace
+SEW_TOLERANCES = (1e-6, 1e-5, 1e-4)  # an IGES file's faces sewn at these, relative to its size, in turn
 
 
 def _gmsh():
@@ -60,10 +61,32 @@ def gmsh_model(path: Path, model: str):
         gmsh.model.setCurrent(model)
         return gmsh
     gmsh.model.add(model)
+    if path.suffix.lower() not in (".iges", ".igs"):
+        _import(gmsh, path, {})
+        return gmsh
     # An IGES file keeps no topology: sew its faces along shared edges and make a solid of the
-    # closed shell (not for STEP and BREP, whose solids sewing would dissolve).
-    iges = path.suffix.lower() in (".iges", ".igs")
-    options = {"Geometry.OCCSewFaces": 1.0, "Geometry.OCCMakeSolids": 1.0} if iges else {}
+    # closed shell (not for STEP and BREP, whose solids sewing would dissolve). OCC rebuilds an
+    # edge from the face's parameter-space curve when it cannot use the 3D one (a full circle on a
+    # surface of revolution: a B-spline within 1e-5 of it), which the neighbour's exact edge meets
+    # only that closely: no solid at gmsh's tolerance, so sew again at SEW_TOLERANCES (relative
+    # to the part's size) until one closes (``sweep_read`` puts such edges' points back on both faces).
+    sew = {"Geometry.OCCSewFaces": 1.0, "Geometry.OCCMakeSolids": 1.0}
+    _import(gmsh, path, sew)
+    if gmsh.model.getEntities(3) or not gmsh.model.getEntities(2):
+        return gmsh
+    box = np.array(gmsh.model.getBoundingBox(-1, -1)).reshape(2, 3)
+    size = float(np.linalg.norm(box[1] - box[0]))
+    for tolerance in SEW_TOLERANCES:
+        gmsh.model.remove()
+        gmsh.model.add(model)
+        _import(gmsh, path, {**sew, "Geometry.Tolerance": tolerance * size})
+        if gmsh.model.getEntities(3):
+            break
+    return gmsh
+
+
+def _import(gmsh, path: Path, options: dict) -> None:
+    """Read ``path`` into the current (empty) model, the gmsh ``options`` set meanwhile."""
     previous = {name: gmsh.option.getNumber(name) for name in options}
     try:
         for name, value in options.items():
@@ -78,7 +101,6 @@ def gmsh_model(path: Path, model: str):
     finally:
         for name, value in previous.items():
             gmsh.option.setNumber(name, value)
-    return gmsh
 
 
 def closest_on_face(path, face: int, points: np.ndarray) -> np.ndarray:

@@ -44,12 +44,16 @@ CURVE_SAMPLES = 1025  # points per cap curve sent to meshgen (a cubic spline thr
 DENSE_SAMPLES = 8001  # parameter samples per curve for its arc length
 SHARP_DEGREES = 20.0  # the loop turns by more than this at a corner; less: a smooth joint
 TOLERANCE = 1e-7  # relative to the solid's size: the caps' and the extrusion's agreement
+SNAP = TOLERANCE  # a curve's points further than this (relative) off a face it bounds are put on both
+_POINTS: dict = {}  # (model, curve, count) -> _curve_points's answer, for one read_sweep
+SNAP_ROUNDS = 3  # projections onto each face in turn (one is exact where the faces meet at right angles)
 
 
 def read_sweep(path, content_hash: str = "") -> dict:
     """The solid of the CAD file ``path`` seen as a straight sweep (module docstring)."""
     path = Path(path)
     gmsh = gmsh_model(path, f"meshgen-{content_hash[:16]}")
+    _POINTS.clear()
     volumes = gmsh.model.getEntities(3)
     if len(volumes) != 1:
         raise GeometryError(f"{path} holds {len(volumes)} solids; a sweep is one solid")
@@ -122,7 +126,7 @@ def _find_caps(gmsh, faces, curves_of, size):
     """((first, second, motion), "") for the first pair of faces that are caps of a sweep by a
     rigid motion (a translation or a rotation: ``moved``), else (None, why no pair is)."""
     planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
-    areas = [gmsh.model.occ.getMass(2, face) for face in faces]
+    mass = {}  # face index -> (area, centre): planar faces', as needed
     why = "no two planar faces that every other face touches"
     for i, j in itertools.combinations(range(len(faces)), 2):
         if not (planar[i] and planar[j]) or curves_of[i] & curves_of[j]:
@@ -130,12 +134,15 @@ def _find_caps(gmsh, faces, curves_of, size):
         others = [k for k in range(len(faces)) if k not in (i, j)]
         if not all(curves_of[k] & curves_of[i] and curves_of[k] & curves_of[j] for k in others):
             continue
+        for k in (i, j):
+            mass[k] = mass[k] if k in mass else _plane_mass(gmsh, faces, k)
+        areas = {k: mass[k][0] for k in (i, j)}
         if abs(areas[i] - areas[j]) > 1e-6 * max(areas[i], areas[j]):
             why = f"faces {i + 1} and {j + 1} could be caps but are not of one area"
             continue
         if len(gmsh.model.occ.getCurveLoops(faces[i])[0]) > 2:
             return None, f"faces {i + 1} and {j + 1} are caps with more than one hole (not meshed yet)"
-        centres = [np.array(gmsh.model.occ.getCenterOfMass(2, faces[k])) for k in (i, j)]
+        centres = [mass[k][1] for k in (i, j)]
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
         why = f"faces {i + 1} and {j + 1} are planar but not one shape moved along a line or turned about an axis"
         for motion in _motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
@@ -151,6 +158,38 @@ def _find_caps(gmsh, faces, curves_of, size):
                 return (i, j, {**motion, "gap": max(gaps) / size}), ""
             why = f"faces {i + 1} and {j + 1} are caps of a sweep along another path (a twist, a helix, a spline)"
     return None, why
+
+
+def _plane_mass(gmsh, faces, k: int):
+    """(area, centre of area (3,)) of the planar face ``faces[k]`` from its boundary loops' points
+    (``_loop``: on the faces they bound), by the polygon formulas at every point and at every
+    other one, extrapolated (Richardson: the polygon's error goes as the spacing squared). OCC's
+    own mass of an IGES face whose edge OCC rebuilt (``_on_faces``) is that edge's, off by up to
+    1e-4 of it, too far to match two caps."""
+    normal = _normal(gmsh, faces[k])
+    helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
+    frame = np.stack([e1, np.cross(normal, e1)])
+    origin = np.array(gmsh.model.occ.getCenterOfMass(2, faces[k]))
+    moments = []  # per loop, (area, area times centre (2,)) at every point and at every other one
+    for tags in gmsh.model.occ.getCurveLoops(faces[k])[1]:
+        loop = _loop(gmsh, faces, k, sorted({abs(int(t)) for t in tags}), origin, frame)
+        moments.append([_polygon_moments(np.concatenate([c["points"][::step] for c in loop])) for step in (1, 2)])
+    moments.sort(key=lambda m: -m[0][0])  # the outer loop first, the holes (counterclockwise too) after
+    area, first = [], []
+    for n in (0, 1):
+        area.append(moments[0][n][0] - sum(hole[n][0] for hole in moments[1:]))
+        first.append(moments[0][n][1] - sum((hole[n][1] for hole in moments[1:]), np.zeros(2)))
+    a = (4.0 * area[0] - area[1]) / 3.0
+    centre = (4.0 * first[0] - first[1]) / 3.0 / a
+    return a, origin + centre @ frame
+
+
+def _polygon_moments(xy: np.ndarray):
+    """(area, area times centroid (2,)) of the closed polygon ``xy`` (N, 2), counterclockwise."""
+    following = np.roll(xy, -1, axis=0)
+    cross = xy[:, 0] * following[:, 1] - following[:, 0] * xy[:, 1]
+    return 0.5 * float(cross.sum()), ((xy + following) * cross[:, None]).sum(axis=0) / 6.0
 
 
 def _normal(gmsh, face: int) -> np.ndarray:
@@ -171,32 +210,61 @@ def _outline_distance(gmsh, curves, points: np.ndarray) -> float:
     nearest = np.full(len(points), np.inf)
     for curve in curves:
         closest = np.array(gmsh.model.getClosestPoint(1, curve, points.ravel().tolist())[0]).reshape(-1, 3)
-        nearest = np.minimum(nearest, np.linalg.norm(closest - points, axis=1))
+        nearest = np.minimum(nearest, np.linalg.norm(_on_faces(gmsh, curve, closest) - points, axis=1))
     return float(nearest.max())
 
 
 def _curve_points(gmsh, curve: int, count: int):
-    """(arc-length fractions (count,), points (count, 3)) of a CAD curve from its start."""
+    """(arc-length fractions (count,), points (count, 3)) of a CAD curve from its start, the
+    points on both faces it bounds (``_on_faces``); kept per model, curve and count."""
+    key = (gmsh.model.getCurrent(), curve, count)
+    if key not in _POINTS:
+        _POINTS[key] = _sampled(gmsh, curve, count)
+    return _POINTS[key]
+
+
+def _sampled(gmsh, curve: int, count: int):
     low, high = (float(b[0]) for b in gmsh.model.getParametrizationBounds(1, curve))
     t = np.linspace(low, high, DENSE_SAMPLES)
     dense = np.array(gmsh.model.getValue(1, curve, t.tolist())).reshape(-1, 3)
     length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
     at = np.interp(np.linspace(0.0, length[-1], count), length, t)
     points = np.array(gmsh.model.getValue(1, curve, at.tolist())).reshape(-1, 3)
-    return np.interp(at, t, length) / length[-1], points
+    return np.interp(at, t, length) / length[-1], _on_faces(gmsh, curve, points)
+
+
+def _on_faces(gmsh, curve: int, points: np.ndarray) -> np.ndarray:
+    """``points`` (N, 3) of a CAD curve moved onto the intersection of the faces it bounds
+    (projected onto each in turn, ``SNAP_ROUNDS`` times) when they lie off them by more than
+    ``SNAP`` of the part's size: an IGES file's edge rebuilt by OCC from a face's parameter-space
+    curve (a B-spline within 1e-5 of a circle) and sewn to its neighbour's exact one at that
+    tolerance; on an exact edge (STEP) nothing moves."""
+    faces = sorted({abs(int(tag)) for tag in gmsh.model.getAdjacencies(1, curve)[0]})
+    box = np.array(gmsh.model.getBoundingBox(-1, -1)).reshape(2, 3)
+    size = float(np.linalg.norm(box[1] - box[0]))
+    probe = points[:: max(1, len(points) // 16)]  # an exact edge (STEP) costs 16 projections per face
+    for face in faces:
+        probe = np.array(gmsh.model.getClosestPoint(2, face, probe.ravel().tolist())[0]).reshape(-1, 3)
+    if np.linalg.norm(probe - points[:: max(1, len(points) // 16)], axis=1).max(initial=0.0) <= SNAP * size:
+        return points
+    snapped = points
+    for _ in range(SNAP_ROUNDS):
+        for face in faces:
+            snapped = np.array(gmsh.model.getClosestPoint(2, face, snapped.ravel().tolist())[0]).reshape(-1, 3)
+    return snapped
 
 
 def _cap_loop(gmsh, faces, first: int, motion) -> dict:
     """The first cap's frame, centroid, boundary loop and holes' loops (module docstring)."""
     normal = _normal(gmsh, faces[first])
-    centre = np.array(gmsh.model.occ.getCenterOfMass(2, faces[first]))
+    centre = _plane_mass(gmsh, faces, first)[1]
     velocity = moved(motion, centre[None], 1e-3)[0] - centre  # the sweep's direction at the cap
     normal = normal if normal @ velocity > 0 else -normal
     helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
     e1 = np.cross(helper, normal)
     e1 /= np.linalg.norm(e1)
     frame = np.stack([e1, np.cross(normal, e1)])
-    origin = np.array(gmsh.model.occ.getCenterOfMass(2, faces[first]))
+    origin = centre
     loops = []
     for tags in gmsh.model.occ.getCurveLoops(faces[first])[1]:
         loops.append(_loop(gmsh, faces, first, sorted({abs(int(t)) for t in tags}), origin, frame))
@@ -256,7 +324,7 @@ def _find_loft(gmsh, faces, curves_of, size):
         normals = [_normal(gmsh, faces[k]) for k in (first, second)]
         if np.linalg.norm(np.cross(*normals)) > 1e-9:
             continue
-        centres = np.array([gmsh.model.occ.getCenterOfMass(2, faces[k]) for k in (first, second)])
+        centres = np.array([_plane_mass(gmsh, faces, k)[1] for k in (first, second)])
         normal = normals[0] if normals[0] @ (centres[1] - centres[0]) > 0 else -normals[0]
         helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
         e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
