@@ -355,3 +355,65 @@ def test_six_faced_solids_stay_one_block(tmp_path):
     corners = X[[0, -1]][:, [0, -1]][:, :, [0, -1]].reshape(-1, 3)
     expected = np.array(list(itertools.product((0, 1), (0, 2), (0, 3))), dtype=float)
     assert sorted(map(tuple, np.round(corners, 12))) == sorted(map(tuple, expected))
+
+
+@pytest.fixture(scope="module")
+def iges_solids(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("iges")
+    return {kind: folder / f"{kind}.igs" for kind in SWEEP_SOLIDS if write_sweep_solid(kind, folder / f"{kind}.igs")}
+
+
+def decisions(mesh, name):
+    """The mesh's note lines on how the cap is cut and which patches it has, the file's name out
+    (not the first: the motion's numbers and the gap, to rounding)."""
+    return [line.replace(name, "") for line in mesh.notes if line.startswith(name) and "of the part's size" not in line]
+
+
+@pytest.mark.parametrize("kind", SWEEP_SOLIDS)
+def test_an_iges_sweep_meshes_as_its_step(solids, iges_solids, kind):
+    """IGES keeps no topology: its faces are sewn (a full circle's edge, rebuilt by OCC as a
+    B-spline within 1e-5, at a larger tolerance) and its edges' points put back on both faces.
+    The mesh: the STEP file's decisions, cell count and worst scaled Jacobian, each patch on the
+    STEP file's (exact) face of its number, the volume within 1 % of OCC's."""
+    step, volume = solids[kind]
+    mesh = meshgen.mesh(str(iges_solids[kind]), DIMS[kind], method="tfi")
+    reference = meshgen.mesh(str(step), DIMS[kind], method="tfi")
+    assert len(mesh.blocks) == BLOCKS[kind]
+    assert decisions(mesh, f"{kind}.igs") == decisions(reference, f"{kind}.step")
+    report, expected = mesh.report(), reference.report()
+    assert report["inverted"]["count"] == 0 and report["cells"] == expected["cells"]
+    worst = report["metrics"]["scaled_jacobian"]["min"]
+    assert worst >= SJ_MIN[kind] and worst == pytest.approx(expected["metrics"]["scaled_jacobian"]["min"], abs=1e-6)
+    faces, _, length = cad_faces(step)
+    nodes = patch_nodes(mesh)
+    assert sorted(nodes) == sorted(f"face{k + 1}" for k in range(FACES[kind]))
+    for k, face in enumerate(faces):
+        assert distance_to_face(step, face, nodes[f"face{k + 1}"]) < 1e-6 * length, f"face{k + 1}"
+    gmsh.model.remove()
+    total = sum(enclosed_volume(X) for X in mesh.blocks)
+    assert abs(total - volume) < 1e-2 * volume
+    assert total == pytest.approx(sum(enclosed_volume(X) for X in reference.blocks), rel=1e-5)
+
+
+@needs_openfoam
+@pytest.mark.parametrize("kind", ["cylinder", "hole"])
+def test_an_iges_cylinder_passes_checkmesh(iges_solids, tmp_path, kind):
+    """The solids whose circles OCC rebuilds from the IGES file's parameter-space curves."""
+    mesh = meshgen.mesh(str(iges_solids[kind]), DIMS[kind], method="tfi")
+    mesh.write(tmp_path / "case", "openfoam", quality=False)
+    checked = check_mesh(tmp_path / "case")
+    assert checked["ok"], checked["log"][-2000:]
+    assert sorted(checked["patches"]) == sorted(f"face{k + 1}" for k in range(FACES[kind]))
+
+
+def test_an_iges_file_that_does_not_close_is_refused(run_cli, tmp_path):
+    """Five faces of a box (one left out): no tolerance sews them into a solid; one line says so."""
+
+    def make(occ):
+        box = occ.addBox(0, 0, 0, 1, 2, 3)
+        faces = occ.getEntities(2)
+        occ.remove([(3, box)])
+        occ.remove(faces[-1:], recursive=True)
+
+    write_solid(tmp_path / "open.igs", make)
+    refused(run_cli, tmp_path, "open.igs", "its 5 face(s) do not sew into a closed solid", "open surface")

@@ -159,6 +159,11 @@ def _solid_faces(gmsh, path: Path) -> tuple[list[int], float]:
     if volumes:
         faces = [abs(tag) for dim, tag in gmsh.model.getBoundary(volumes, oriented=False) if dim == 2]
         volume = gmsh.model.occ.getMass(3, volumes[0][1])
+    elif surfaces and path.suffix.lower() in (".iges", ".igs"):
+        raise GeometryError(
+            f"{path}: its {len(surfaces)} face(s) do not sew into a closed solid (gaps wider than "
+            f"{SEW_TOLERANCES[-1]:g} of its size, or an open surface)"
+        )
     elif surfaces:
         faces, volume = surfaces, float("nan")
     else:
