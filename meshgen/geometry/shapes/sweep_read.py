@@ -46,6 +46,7 @@ SHARP_DEGREES = 20.0  # the loop turns by more than this at a corner; less: a sm
 TOLERANCE = 1e-7  # relative to the solid's size: the caps' and the extrusion's agreement
 SNAP = TOLERANCE  # a curve's points further than this (relative) off a face it bounds are put on both
 _POINTS: dict = {}  # (model, curve, count) -> _curve_points's answer, for one read_sweep
+MASS_AGREE = 1e-9  # a planar face's OCC area and centre are kept within this (relative) of its outline's
 SNAP_ROUNDS = 3  # projections onto each face in turn (one is exact where the faces meet at right angles)
 
 
@@ -165,7 +166,7 @@ def _plane_mass(gmsh, faces, k: int):
     (``_loop``: on the faces they bound), by the polygon formulas at every point and at every
     other one, extrapolated (Richardson: the polygon's error goes as the spacing squared). OCC's
     own mass of an IGES face whose edge OCC rebuilt (``_on_faces``) is that edge's, off by up to
-    1e-4 of it, too far to match two caps."""
+    1e-4 of it, too far to match two caps: OCC's unless they differ by more than ``MASS_AGREE``."""
     normal = _normal(gmsh, faces[k])
     helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
     e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
@@ -181,8 +182,12 @@ def _plane_mass(gmsh, faces, k: int):
         area.append(moments[0][n][0] - sum(hole[n][0] for hole in moments[1:]))
         first.append(moments[0][n][1] - sum((hole[n][1] for hole in moments[1:]), np.zeros(2)))
     a = (4.0 * area[0] - area[1]) / 3.0
-    centre = (4.0 * first[0] - first[1]) / 3.0 / a
-    return a, origin + centre @ frame
+    centre = origin + (4.0 * first[0] - first[1]) / 3.0 / a @ frame
+    occ = gmsh.model.occ.getMass(2, faces[k])
+    scale = np.sqrt(abs(a))
+    if abs(occ - a) <= MASS_AGREE * abs(a) and np.linalg.norm(origin - centre) <= MASS_AGREE * scale:
+        return occ, origin  # OCC's, where its edges are exact (STEP)
+    return a, centre
 
 
 def _polygon_moments(xy: np.ndarray):
