@@ -22,8 +22,8 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
   cells, ``slide_section`` off); on a bend every boundary node stays.
 
 - a loop that mixes sharp corners and smooth joints (a filleted edge): a ring of two blocks per
-  curve (its halves) around a core polygon (corners ``RING`` of the way to the curves' ends)
-  midpoint-subdivided, so no block has a corner at a smooth joint;
+  curve (its halves) around a core polygon, the loop offset inwards (``sweep_ring``), midpoint-
+  subdivided, so no block has a corner at a smooth joint;
 - a smooth loop around one smooth hole (a pipe's wall): a ring of four blocks between them; a
   loop of n sharp corners around a hole of as many (a square tube): a ring of n blocks;
 - a loop of 1 or 2 curves with one sharp corner (an airfoil's trailing edge): one block ``te``
@@ -52,6 +52,7 @@ from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
+from meshgen.geometry.shapes.sweep_ring import coons, ring_blocks
 from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
 __all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
@@ -60,7 +61,6 @@ CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way t
 BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
 WEDGE_ANGLE = np.radians(100.0)  # a sharp-cornered loop's te block: its angles at U and L
 WEDGE_DEPTH = 0.5  # and the rest's core corners: this share of half the distance U to L in
-RING = 0.6  # a ring-and-core cap's core corners: this share of the way from the centroid to the loop's
 WEDGE_ELLIPTIC = (
     "{name}: elliptic: the TFI mesh is kept (Winslow smoothing pulls the sliver cells at the sharp corner "
     "inside out: 2628 of the 3600 cells of a NACA 0012 wing at 10 5 6)"
@@ -116,18 +116,6 @@ def _line(a: np.ndarray, b: np.ndarray):
 
 def _piece(curve, start: float, stop: float):
     return lambda t: curve(start + np.asarray(t, dtype=float) * (stop - start))
-
-
-def _coons(sides, xi: np.ndarray, eta: np.ndarray) -> np.ndarray:
-    """(N, 2) the Coons patch of ``sides`` (left xi=0 and right xi=1 along eta, bottom eta=0 and
-    top eta=1 along xi; callables t (N,) -> (N, 2)) at (xi, eta)."""
-    left, right, bottom, top = sides
-    b0, b1, t0, t1 = bottom(np.zeros(1))[0], bottom(np.ones(1))[0], top(np.zeros(1))[0], top(np.ones(1))[0]
-    x, e = xi[:, None], eta[:, None]
-    return (
-        (1 - x) * left(eta) + x * right(eta) + (1 - e) * bottom(xi) + e * top(xi)
-        - ((1 - x) * (1 - e) * b0 + x * (1 - e) * b1 + (1 - x) * e * t0 + x * e * t1)
-    )  # fmt: skip
 
 
 def _midpoint_blocks(curves, faces):
@@ -233,58 +221,6 @@ def _annulus_blocks(curves, faces, hole, hole_faces, smooth: bool):
     return blocks, patches, interfaces
 
 
-def _ring_blocks(curves, faces, sharp):
-    """A ring of two blocks per curve (``a<k>``, ``b<k>``: its halves; xi from the core outwards)
-    around a core polygon, midpoint-subdivided into ``quad<k>``; the core's corners joined to the
-    curves' ends by spokes (at a sharp corner towards the centroid, the core's corner ``RING`` of
-    the way; at a smooth joint along the inward normal, as deep), so every block corner on the
-    cap's boundary is a CAD vertex or a curve's midpoint, and a smooth joint is split at right
-    angles."""
-    n, centre = len(curves), np.zeros(2)
-    vertex = [curve(np.zeros(1))[0] for curve in curves]
-    middle = [curve(np.array([0.5]))[0] for curve in curves]
-    inner = []
-    for k in range(n):  # a corner's spoke runs to the centroid; a smooth joint's along the inward normal
-        if sharp[k]:
-            inner.append(RING * vertex[k])
-        else:
-            tangent = curves[k](np.array([1e-3]))[0] - vertex[k]
-            normal = np.array([-tangent[1], tangent[0]]) / np.linalg.norm(tangent)
-            inner.append(vertex[k] + (1.0 - RING) * np.linalg.norm(vertex[k]) * normal)
-    joint = [0.5 * (inner[k] + inner[(k + 1) % n]) for k in range(n)]
-    blocks, patches, interfaces = {}, {}, []
-    for k in range(n):
-        after = (k + 1) % n
-        blocks[f"a{k}"] = (
-            _line(inner[k], joint[k]),
-            _piece(curves[k], 0.0, 0.5),
-            _line(inner[k], vertex[k]),
-            _line(joint[k], middle[k]),
-        )
-        blocks[f"b{k}"] = (
-            _line(joint[k], inner[after]),
-            _piece(curves[k], 0.5, 1.0),
-            _line(joint[k], middle[k]),
-            _line(inner[after], vertex[after]),
-        )
-        blocks[f"quad{k}"] = (
-            _line(centre, joint[k]),
-            _line(joint[k - 1], inner[k]),
-            _line(centre, joint[k - 1]),
-            _line(joint[k], inner[k]),
-        )
-        patches[f"a{k}"] = {"xi1": faces[k]}
-        patches[f"b{k}"] = {"xi1": faces[k]}
-        interfaces += [
-            (f"a{k}", "eta1", f"b{k}", "eta0"),
-            (f"b{k}", "eta1", f"a{after}", "eta0"),
-            (f"quad{k}", "xi1", f"b{(k - 1) % n}", "xi0"),
-            (f"quad{k}", "eta1", f"a{k}", "xi0"),
-            (f"quad{k}", "eta0", f"quad{(k - 1) % n}", "xi0"),
-        ]
-    return blocks, patches, interfaces
-
-
 def _loop_curve(curves, lengths):
     """The loop as one curve s -> (N, 2), s in [0, 1] by the curves' lengths ``lengths`` from the
     start of curve 0 (s = 1 is s = 0 again); (the curve, each curve's start s (n + 1,))."""
@@ -384,7 +320,7 @@ def _folded(blocks) -> list[str]:
     xi, eta = (a.ravel() for a in np.meshgrid(t, t, indexing="ij"))
     folded = []
     for name, sides in blocks.items():
-        p = _coons(sides, xi, eta).reshape(17, 17, 2)
+        p = coons(sides, xi, eta).reshape(17, 17, 2)
         d1, d2 = p[1:, 1:] - p[:-1, :-1], p[:-1, 1:] - p[1:, :-1]  # the cells' diagonals
         if not (d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0] > 0).all():
             folded.append(name)
@@ -474,7 +410,7 @@ def _cut_cap(path: Path, found: dict, summary: str):
         counts = {name: (0, 0, 2) for name in blocks}
         fixed = False
     else:
-        blocks, sides_of, interfaces = _ring_blocks(curves, faces, sharp)
+        blocks, sides_of, interfaces = ring_blocks(curves, faces, sharp)
         turns = sum(not s for s in sharp)
         how = (
             f"{len(loop)} curves, {len(loop) - turns} sharp corners and {turns} smooth joint(s): a ring of "
@@ -576,9 +512,9 @@ def sweep_module(path) -> types.ModuleType:
     def boundary(block, points):
         """(N, 3) points of the unit cube -> (N, 3) points of block ``block``."""
         points = np.asarray(points, dtype=float)
-        xy = _coons(blocks[block], points[:, 0], points[:, 1])
+        xy = coons(blocks[block], points[:, 0], points[:, 1])
         if loft:  # along the rulings: the straight lines between the caps' maps
-            far = found["origins"][1] + _coons(second_blocks[block], points[:, 0], points[:, 1]) @ frame
+            far = found["origins"][1] + coons(second_blocks[block], points[:, 0], points[:, 1]) @ frame
             return (1.0 - points[:, 2:]) * (origin + xy @ frame) + points[:, 2:] * far
         return moved(motion, origin + xy @ frame, points[:, 2])
 
