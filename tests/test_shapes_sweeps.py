@@ -449,7 +449,7 @@ def test_elongated_filleted_boxes_mesh_unfolded(tmp_path, size, share):
     path = tmp_path / "box.step"
     volume = write_filleted_box(path, size, share * min(size[:2]))
     mesh = meshgen.mesh(str(path), (6, 2, 2), method="tfi")
-    assert len(mesh.blocks) == 15 and any("a ring of 10 blocks" in line for line in mesh.notes)
+    assert len(mesh.blocks) == 15 and any("a ring of 10 blocks" in line and "offset inwards" in line for line in mesh.notes)
     report = mesh.report()
     assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
     faces, _, length = cad_faces(path)
@@ -460,3 +460,6 @@ def test_elongated_filleted_boxes_mesh_unfolded(tmp_path, size, share):
     caps = [name for name in nodes if np.ptp(nodes[name][:, 2]) < 1e-12]
     assert sorted(np.round(nodes[name][0, 2], 12) for name in caps) == [0.0, size[2]]  # the faces across the fillet
     assert abs(sum(enclosed_volume(X) for X in mesh.blocks) - volume) < 1e-2 * volume
+    kept = meshgen.mesh(str(path), (6, 2, 2), method="elliptic")  # Winslow folds the offset core's cells
+    assert all(np.array_equal(a, b) for a, b in zip(kept.blocks, mesh.blocks))
+    assert any("the TFI mesh is kept" in line for line in kept.notes)

@@ -65,6 +65,10 @@ WEDGE_ELLIPTIC = (
     "{name}: elliptic: the TFI mesh is kept (Winslow smoothing pulls the sliver cells at the sharp corner "
     "inside out: 2628 of the 3600 cells of a NACA 0012 wing at 10 5 6)"
 )
+OFFSET_ELLIPTIC = (
+    "{name}: elliptic: the TFI mesh is kept (Winslow smoothing of an offset ring-and-core cap folds cells: "
+    "1224 of the 1820 of a 3 x 1 filleted box at 7 3 4)"
+)
 _READ: dict = {}
 _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
@@ -410,14 +414,18 @@ def _cut_cap(path: Path, found: dict, summary: str):
         counts = {name: (0, 0, 2) for name in blocks}
         fixed = False
     else:
-        blocks, sides_of, interfaces = ring_blocks(curves, faces, sharp)
+        blocks, sides_of, interfaces, offset = ring_blocks(curves, faces, sharp)
         turns = sum(not s for s in sharp)
         how = (
             f"{len(loop)} curves, {len(loop) - turns} sharp corners and {turns} smooth joint(s): a ring of "
             f"{2 * len(loop)} blocks (a0, b0, ..: two per curve) around a core cut into {len(loop)} (quad0..)"
+            + (", the loop offset inwards for the core (an elongated cap or a large fillet)" if offset else "")
         )
         meaning = "N M A: cells along half a curve of the cap (and across the core's blocks), across the ring, along the sweep"
         counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
+        if offset:
+            options = {"keep_tfi": True}
+            lines_extra = (OFFSET_ELLIPTIC.format(name=path.name),)
     if fixed and not options:  # ring blocks at sharp corners or smooth joints
         options = {"slide_section": False}
         lines_extra = (

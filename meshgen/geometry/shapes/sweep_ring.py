@@ -2,7 +2,8 @@
 edge: a rectangle with a rounded corner) cut into a ring of two blocks per curve around a core
 (``sweep_blocks``).
 
-The core is the loop offset inwards: each curve's end (a CAD vertex) is joined by a straight
+The centroid construction (``ring_blocks``) is kept where it is good (a square cap); else the
+core is the loop offset inwards: each curve's end (a CAD vertex) is joined by a straight
 spoke to a core corner along the bisector of the loop's two inward normals there (a sharp
 corner's bisector, a smooth joint's normal), at the depth that puts the corner ``1 - RING`` of
 the way from the loop to the centroid's nearest boundary point away from both of the loop's
@@ -18,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["RING", "SHARES", "SPOKE", "coons", "ring_blocks", "ring_corners", "worst_corner"]
+__all__ = ["PLAIN", "RING", "SHARES", "SPOKE", "coons", "ring_blocks", "ring_corners", "worst_corner"]
 
-RING = 0.6  # the core's corners: this share of the way from the centroid to its nearest boundary point stays inside
+RING = 0.6  # the centroid construction's core corners: this share of the way to the loop's (the offset: 1 - of a depth)
 SPOKE = 0.6  # and a spoke runs at most this share of the way to where it meets a neighbouring one
 SHARES = (0.15, 0.85)  # a core side meets its curve's midpoint spoke within these shares of it
 PLAIN = 0.6  # the centroid construction is kept where no cell corner of its cap map is sharper (sine)
@@ -127,17 +128,25 @@ def _assemble(halves, vertex, inner, middle, centre, shares):
 
 def ring_blocks(curves, faces, sharp):
     """A ring of two blocks per curve (``a<k>``, ``b<k>``: its halves; xi from the core outwards)
-    around the core polygon (``ring_corners``), cut into ``quad<k>`` meeting at one point, so every
-    block corner on the loop is a CAD vertex or a curve's midpoint. That point (first the
-    centroid, the origin) and where the spokes to the curves' midpoints meet the core's sides
-    (first where the curves' normals there cross them) are moved to maximise ``worst_corner``
-    (Nelder-Mead): on an elongated cap the quadrilaterals at its ends would otherwise be slivers
-    (sides 18 degrees apart at the centroid of a 3 x 1 cap). (blocks, sides on CAD faces, interfaces)."""
+    around a core polygon cut into ``quad<k>`` meeting at one point, so every block corner on the
+    loop is a CAD vertex or a curve's midpoint. First the centroid construction (corners ``RING``
+    of the way from the centroid to the loop's sharp corners, as deep along the normal at smooth
+    joints, the quadrilaterals meeting at the centroid), kept where its worst cell corner's sine
+    is at least ``PLAIN`` (a square cap: the elliptic method smooths it better); else the offset
+    core (``ring_corners``) whose meeting point (first the centroid) and the points where the
+    spokes to the curves' midpoints meet its sides (first where the curves' normals cross them)
+    are moved to maximise ``worst_corner`` (Nelder-Mead): on an elongated cap the quadrilaterals
+    at its ends are otherwise slivers (sides 18 degrees apart at the centroid of a 3 x 1 cap).
+    (blocks, sides on CAD faces, interfaces, whether the core is the offset one)."""
     from scipy.optimize import minimize
 
     n = len(curves)
     vertex, _, inner = ring_corners(curves)
     middle = np.array([curve(np.array([0.5]))[0] for curve in curves])
+    halves = [(_piece(curve, 0.0, 0.5), _piece(curve, 0.5, 1.0)) for curve in curves]
+    plain = _assemble(halves, vertex, _centroid_corners(curves, vertex, sharp), middle, np.zeros(2), np.full(n, 0.5))
+    if worst_corner(plain) >= PLAIN:
+        return plain, *_patches(faces), False
     normal = _left(_unit(np.array([curve(np.array([0.5 + _STEP]))[0] for curve in curves]) - middle))
     shares = np.full(n, 0.5)
     for k in range(n):  # where the normal at curve k's midpoint crosses the side inner[k] -> inner[k + 1]
@@ -145,10 +154,6 @@ def ring_blocks(curves, faces, sharp):
         if abs(np.linalg.det(matrix)) > 1e-12:
             shares[k] = np.clip(np.linalg.solve(matrix, middle[k] - inner[k])[0], *SHARES)
     scale = float(np.linalg.norm(vertex, axis=1).max())
-    halves = [(_piece(curve, 0.0, 0.5), _piece(curve, 0.5, 1.0)) for curve in curves]
-    plain = _assemble(halves, vertex, _centroid_corners(curves, vertex, sharp), middle, np.zeros(2), np.full(n, 0.5))
-    if worst_corner(plain) >= PLAIN:  # the first construction, kept where it is good (the elliptic smooths it better)
-        return plain, *_patches(faces)
 
     def blocks_of(x):
         return _assemble(halves, vertex, inner, middle, scale * x[:2], np.clip(x[2:], *SHARES))
@@ -157,7 +162,7 @@ def ring_blocks(curves, faces, sharp):
     options = {"maxfev": 60 * (n + 2), "xatol": 1e-3, "fatol": 1e-4}
     best = minimize(lambda x: -worst_corner(blocks_of(x), 4), start, method="Nelder-Mead", options=options)
     blocks = blocks_of(best.x if best.fun < -worst_corner(blocks_of(start), 4) else start)
-    return blocks, *_patches(faces)
+    return blocks, *_patches(faces), True
 
 
 def _centroid_corners(curves, vertex, sharp):
