@@ -2,6 +2,7 @@
 their vertices, interfaces from shared faces, counts along chains of parallel edges, curved edges,
 and the one-line errors of bad files."""
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -195,7 +196,7 @@ def test_cli_bad_topology_exits_2_writing_nothing(run_cli, tmp_path):
     assert not list(tmp_path.glob("x.*"))
 
 
-def test_cli_meshes_a_topology_without_dims_and_refines(run_cli, tmp_path):
+def test_cli_meshes_a_topology_without_dims_and_refines(run_cli, run_cli_process, tmp_path):
     write(tmp_path, GOOD_2D, "two.yaml")
     result = run_cli("mesh", "-g", "two.yaml", "--method", "elliptic", "-o", "two.cgns", "-q")
     assert result.returncode == 0, result.stderr
@@ -204,6 +205,14 @@ def test_cli_meshes_a_topology_without_dims_and_refines(run_cli, tmp_path):
     assert "2 blocks, 32 cells" in refined.stdout  # 2 x (2 x 2) cells at size 0.5, refined twice per axis
     missing = run_cli("mesh", "-g", "pipe", "-o", "p.cgns")
     assert missing.returncode == 2 and "--dims" in missing.stderr
+    # the mesh records the topology file, not a name no lookup finds: evaluate (a new process, where
+    # the file was not given) asks for -g FILE, and with it measures the boundary deviation
+    alone = run_cli_process("evaluate", "two.cgns")
+    assert alone.returncode == 0 and "recorded block set is the file two.yaml" in alone.stderr, alone.stderr
+    given = run_cli("evaluate", "two.cgns", "-g", "two.yaml", "--json", "two.json")
+    assert given.returncode == 0, given.stderr
+    deviation = json.loads((tmp_path / "two.json").read_text())["boundary_deviation"]
+    assert deviation["max"] < 1e-12
 
 
 @pytest.mark.slow

@@ -393,7 +393,7 @@ def _geometry_for(path, geometry, params, metadata, n_cells):
             return measured_block_set(spec, _recorded_params(metadata), _recorded_block_dims(metadata)), source, notes
         except UntrustedGeometry:
             notes.append(
-                f"recorded block set is the plugin file {excerpt(metadata['block_set'])}, which a file cannot make meshgen run: "
+                f"recorded block set is the file {excerpt(metadata['block_set'])}, which a mesh file cannot make meshgen read or run: "
                 "no boundary deviation (pass -g PATH to use it)"
             )
         except GeometryError as exc:

@@ -37,6 +37,7 @@ from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
 from meshgen.geometry.plugins import Geometry, is_airfoil_file, load_geometry, plugin_module
+from meshgen.geometry.topology_file import is_topology_file
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.checkpoint_data import read_plain_checkpoint
 from meshgen.neural.device import inference_device
@@ -112,7 +113,7 @@ class Mesh:
         if self.blocks is not None:
             recorded["block_set"] = recorded.pop("geometry")
             source = self.geometry.geometries[0].source
-            if is_airfoil_file(source):  # named "airfoil" as the built-in is: the file names its section
+            if is_airfoil_file(source) or is_topology_file(source):  # the file, not a name no lookup finds
                 recorded["block_set"] = source
             recorded["block_dims"] = recorded.pop("dims")
             recorded["blocks"] = {
