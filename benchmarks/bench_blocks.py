@@ -45,7 +45,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples" / "dfg"))
 
-from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks  # noqa: E402
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import load_block_set, tfi_blocks  # noqa: E402
 from meshgen.methods.elliptic import elliptic_blocks  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 

@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import meshgen  # noqa: E402
-from meshgen.geometry.blocks import interface_gaps, merged_mesh  # noqa: E402
+from meshgen.geometry.block_nodes import interface_gaps, merged_mesh  # noqa: E402
 from meshgen.neural.checkpoint import load_checkpoint  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 

@@ -615,7 +615,7 @@ def _blend(block_set, near, check=True):
     nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes slid along each line
     to the designed distances (``meshgen.methods.clustering.respaced_lines``), interface nodes made identical. GeometryError when a
     cell is inverted (``check``)."""
-    from meshgen.geometry.blocks import unify_interfaces
+    from meshgen.geometry.block_nodes import unify_interfaces
     from meshgen.methods.hyperbolic import cell_areas
 
     setup = _setup(_key(block_set.values))

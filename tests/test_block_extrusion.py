@@ -11,7 +11,8 @@ from neural_helpers import tiny_config
 
 import meshgen
 from meshgen.errors import MeshgenError
-from meshgen.geometry.blocks import face_index, load_block_set, tfi_blocks
+from meshgen.geometry.block_nodes import face_index
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.neural.checkpoint import load_checkpoint

@@ -6,14 +6,8 @@ import pytest
 from blocks_helpers import cell_measures, size_ratios
 
 from meshgen.errors import GeometryError
-from meshgen.geometry.blocks import (
-    global_numbering,
-    interface_gaps,
-    load_block_set,
-    merged_mesh,
-    tfi_blocks,
-    unify_interfaces,
-)
+from meshgen.geometry.block_nodes import global_numbering, interface_gaps, merged_mesh, unify_interfaces
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.elliptic import elliptic_blocks
 from meshgen.quality import quality_report

@@ -11,7 +11,8 @@ from neural_helpers import TINY, tiny_config
 import meshgen
 from meshgen.errors import MeshgenError
 from meshgen.formats.multiblock import read_zones
-from meshgen.geometry.blocks import face_index, load_block_set
+from meshgen.geometry.block_nodes import face_index
+from meshgen.geometry.blocks import load_block_set
 from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.train import train

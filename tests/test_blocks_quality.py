@@ -12,7 +12,8 @@ from openfoam_helpers import needs_openfoam, run_tool
 
 import meshgen
 from meshgen.formats.multiblock import patch_faces, write_blocks
-from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.plugins import load_geometry
 from meshgen.methods.tfi import tfi

@@ -11,7 +11,8 @@ import pytest
 import meshgen
 from meshgen.errors import ParameterError
 from meshgen.formats.multiblock import read_zones
-from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
 from meshgen.run.request import MeshRequest, carry_out
 
 N, M, A = 4, 2, 3  # pipe --dims: cells around a quarter, across the wall layer, along the axis

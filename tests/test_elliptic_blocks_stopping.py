@@ -5,7 +5,8 @@ merged unstructured mesh, an independent path (cells' corner lists, not the bloc
 import numpy as np
 import pytest
 
-from meshgen.geometry.blocks import global_numbering, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import global_numbering, merged_mesh
+from meshgen.geometry.blocks import load_block_set, tfi_blocks
 from meshgen.methods.sliding import local_cell_sizes
 
 # Corner pairs of the edges of a quadrilateral and of a hexahedron (VTK corner order).

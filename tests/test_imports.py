@@ -70,6 +70,7 @@ LAYERS = [
     ],
     [
         "meshgen.methods.clustering",
+        "meshgen.geometry.block_nodes",
         "meshgen.methods.tfi",
         "meshgen.methods.winslow",
         "meshgen.methods.winslow_compiled",

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from meshgen.errors import GeometryError
-from meshgen.geometry.blocks import block_spec, global_numbering, interface_gaps, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import global_numbering, interface_gaps, merged_mesh
+from meshgen.geometry.blocks import block_spec, load_block_set, tfi_blocks
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "topologies"
 HEX = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]

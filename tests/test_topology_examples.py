@@ -122,7 +122,7 @@ def min_corner_jacobian(X: np.ndarray) -> float:
 
 
 def test_tapered_elbow_caps_do_not_slide_and_elliptic_does_not_fold():
-    from meshgen.geometry.blocks import global_numbering
+    from meshgen.geometry.block_nodes import global_numbering
     from meshgen.methods.elliptic import elliptic_blocks
     from meshgen.methods.sliding import planar_sliding
 

@@ -11,7 +11,8 @@ import pytest
 
 from meshgen.errors import GeometryError
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import block_patches, interface_gaps, load_block_set, tfi_blocks
+from meshgen.geometry.block_nodes import interface_gaps
+from meshgen.geometry.blocks import block_patches, load_block_set, tfi_blocks
 from meshgen.methods.tfi import tfi
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "topologies"

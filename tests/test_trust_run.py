@@ -205,7 +205,8 @@ def test_a_block_set_case_never_writes_through_a_planted_link(run_cli, tmp_path)
     result = run_cli("mesh", "-g", "pipe", "--dims", 4, 4, 3, "-m", "tfi", "--format", "openfoam", "-o", "case", "-q")
     assert result.returncode == 0, result.stderr
     assert not os.path.lexists(tmp_path / "created") and (tmp_path / "case" / "system" / "controlDict").is_symlink()
-    from meshgen.geometry.blocks import load_block_set, merged_mesh, tfi_blocks
+    from meshgen.geometry.block_nodes import merged_mesh
+    from meshgen.geometry.blocks import load_block_set, tfi_blocks
 
     block_set = load_block_set("pipe", {}, (4, 4, 3))
     points = (tmp_path / "case" / "constant" / "polyMesh" / "points").read_text()

@@ -27,15 +27,8 @@ from meshgen.formats._vtm import write_blocks_vtm
 from meshgen.formats._vtu import write_cells as write_vtu_cells
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import (
-    BlockSet,
-    Interface,
-    block_patches,
-    connectivity_records,
-    face_index,
-    global_numbering,
-    merged_mesh,
-)
+from meshgen.geometry.block_nodes import face_index, global_numbering, merged_mesh
+from meshgen.geometry.blocks import BlockSet, Interface, block_patches, connectivity_records
 from meshgen.geometry.cyclic import CYCLIC, matching_order, pair_map
 from meshgen.geometry.cyclic import TOLERANCE as CYCLIC_TOLERANCE
 from meshgen.geometry.grid import cell_connectivity

@@ -32,8 +32,8 @@ import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry import cube
+from meshgen.geometry.block_nodes import interface_text, unify_interfaces
 from meshgen.geometry.cyclic import CYCLIC, check_cyclic
-from meshgen.geometry.grid import cell_connectivity
 from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
 from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
 from meshgen.geometry.shapes.loader import is_shape_file
@@ -49,19 +49,12 @@ __all__ = [
     "check_interfaces",
     "connectivity_records",
     "describe",
-    "face_index",
-    "global_numbering",
-    "interface_gaps",
     "inverse_transform",
     "is_multiblock",
     "load_block_set",
     "measured_block_set",
-    "merged_mesh",
     "tfi_blocks",
-    "unify_interfaces",
 ]
-
-GAP_TOLERANCE = 1e-9  # largest gap between interface nodes, relative to the block set's size
 
 
 @dataclass(frozen=True)
@@ -292,9 +285,9 @@ def _check_faces(block_set: BlockSet, declared) -> None:
             if key in owner:
                 raise GeometryError(
                     f"geometry '{block_set.name}': face {face.name} of block '{block_set.names[block]}' is claimed by two "
-                    f"interfaces ({owner[key]} and {_said(block_set, a, fa, b, fb)})"
+                    f"interfaces ({owner[key]} and {interface_text(block_set, a, fa, b, fb)})"
                 )
-            owner[key] = _said(block_set, a, fa, b, fb)
+            owner[key] = interface_text(block_set, a, fa, b, fb)
             if key in block_set.patches:
                 raise GeometryError(
                     f"geometry '{block_set.name}': face {face.name} of block '{block_set.names[block]}' is on the interface "
@@ -306,10 +299,6 @@ def _check_faces(block_set: BlockSet, declared) -> None:
                 raise GeometryError(
                     f"geometry '{block_set.name}': face {face.name} of block '{name}' is neither a patch nor on an interface"
                 )
-
-
-def _said(block_set, a, fa, b, fb) -> str:
-    return f"{block_set.names[a]}.{fa.name} = {block_set.names[b]}.{fb.name}"
 
 
 def _corner_points(face: cube.Face) -> np.ndarray:
@@ -345,25 +334,6 @@ def _derive_transform(block_set: BlockSet, a, fa: cube.Face, b, fb: cube.Face) -
     return best
 
 
-def face_index(block_set: BlockSet, interface: Interface) -> tuple[np.ndarray, np.ndarray]:
-    """Flat (C-order) node indices of the interface's nodes in block a and, in the same order, in
-    block b: shape (face nodes,) each."""
-    shape_a, shape_b = block_set.node_shapes[interface.a], block_set.node_shapes[interface.b]
-    fa, fb, T = interface.face_a, interface.face_b, interface.transform
-    grids = np.meshgrid(*[np.arange(shape_a[axis]) for axis in fa.tangent_axes], indexing="ij")
-    index_a = [None] * block_set.dim
-    for axis, grid in zip(fa.tangent_axes, grids):
-        index_a[axis] = grid.reshape(-1)
-    index_a[fa.axis] = np.full(grids[0].size, (shape_a[fa.axis] - 1) * fa.side)
-    index_b = [None] * block_set.dim
-    for axis in fa.tangent_axes:
-        target, sign = abs(T[axis]) - 1, int(np.sign(T[axis]))
-        begin = 0 if sign > 0 else shape_b[target] - 1
-        index_b[target] = begin + sign * index_a[axis]
-    index_b[fb.axis] = np.full(grids[0].size, (shape_b[fb.axis] - 1) * fb.side)
-    return np.ravel_multi_index(index_a, shape_a), np.ravel_multi_index(index_b, shape_b)
-
-
 def check_interfaces(block_set: BlockSet) -> None:
     """Node counts that match along every interface under its Transform (GeometryError naming the
     interface otherwise)."""
@@ -373,115 +343,9 @@ def check_interfaces(block_set: BlockSet) -> None:
             target = abs(interface.transform[axis]) - 1
             if shapes[interface.a][axis] != shapes[interface.b][target]:
                 raise GeometryError(
-                    f"geometry '{block_set.name}': interface {_said(block_set, interface.a, interface.face_a, interface.b, interface.face_b)}"
+                    f"geometry '{block_set.name}': interface {interface_text(block_set, interface.a, interface.face_a, interface.b, interface.face_b)}"
                     f" has {shapes[interface.a][axis] - 1} cells on one side and {shapes[interface.b][target] - 1} on the other"
                 )
-
-
-def interface_gaps(block_set: BlockSet, Xs) -> list[float]:
-    """Largest distance between matching interface nodes, per interface."""
-    gaps = []
-    for interface in block_set.interfaces:
-        index_a, index_b = face_index(block_set, interface)
-        points_a = Xs[interface.a].reshape(-1, block_set.dim)[index_a]
-        points_b = Xs[interface.b].reshape(-1, block_set.dim)[index_b]
-        gaps.append(float(np.max(np.linalg.norm(points_a - points_b, axis=1))))
-    return gaps
-
-
-def unify_interfaces(block_set: BlockSet, Xs, tolerance: float = GAP_TOLERANCE) -> None:
-    """Check that interface nodes coincide (GeometryError with the blocks, faces and largest gap
-    otherwise) and make them identical: each block b takes block a's values (in place), in
-    interface order, so a node shared by several blocks ends with one value everywhere."""
-    for interface, gap in zip(block_set.interfaces, interface_gaps(block_set, Xs)):
-        if gap > tolerance * block_set.length:
-            raise GeometryError(
-                f"geometry '{block_set.name}': the faces of interface "
-                f"{_said(block_set, interface.a, interface.face_a, interface.b, interface.face_b)} do not coincide "
-                f"(largest gap {gap:.3g})"
-            )
-    for b, a, target, source in _interface_copies(block_set):  # only the shared nodes move
-        Xs[b][target] = Xs[a][source]
-
-
-_COPIES = {}  # global_numbering's key -> _interface_copies' result
-
-
-def _interface_copies(block_set: BlockSet) -> list[tuple]:
-    """What ``unify_interfaces`` copies: (b, a, nodes of b, nodes of a), the node index tuples of
-    block b's nodes whose first holder (in block order, ``global_numbering``) is block a's node."""
-    key = (block_set.dim, tuple(block_set.node_shapes), block_set.interfaces)
-    if key not in _COPIES:
-        if len(_COPIES) > 8:
-            _COPIES.clear()
-        numbering, _ = global_numbering(block_set)
-        sizes = [ids.size for ids in numbering]
-        owner = np.repeat(np.arange(len(numbering)), sizes)  # the block of each position in block order
-        local = np.concatenate([np.arange(size) for size in sizes])
-        flat = np.concatenate([ids.reshape(-1) for ids in numbering])
-        first = np.unique(flat, return_index=True)[1][flat]  # the first holder's position, per position
-        shared = np.flatnonzero(first != np.arange(len(flat)))
-        copies = []
-        for b, a in np.unique(np.stack([owner[shared], owner[first[shared]]], axis=1), axis=0):
-            moved = shared[(owner[shared] == b) & (owner[first[shared]] == a)]
-            target = np.unravel_index(local[moved], numbering[b].shape)
-            copies.append((int(b), int(a), target, np.unravel_index(local[first[moved]], numbering[a].shape)))
-        _COPIES[key] = copies
-    return _COPIES[key]
-
-
-_NUMBERINGS = {}  # (dim, node shapes, interfaces) -> global_numbering's result: a set meshed again reuses it
-
-
-def global_numbering(block_set: BlockSet) -> tuple[list[np.ndarray], int]:
-    """Global node numbers (interface nodes merged): one int64 array of each block's node shape
-    (read-only: shared by the sets of the same shapes and interfaces), and the number of unique
-    nodes. Numbers follow the blocks' order, each block in C order."""
-    key = (block_set.dim, tuple(block_set.node_shapes), block_set.interfaces)
-    if key not in _NUMBERINGS:
-        if len(_NUMBERINGS) > 8:
-            _NUMBERINGS.clear()
-        numbering, count = _numbering(block_set)
-        for ids in numbering:
-            ids.setflags(write=False)
-        _NUMBERINGS[key] = (numbering, count)
-    numbering, count = _NUMBERINGS[key]
-    return list(numbering), count
-
-
-def _numbering(block_set: BlockSet) -> tuple[list[np.ndarray], int]:
-    shapes = block_set.node_shapes
-    offsets = np.cumsum([0] + [int(np.prod(s)) for s in shapes])
-    label = np.arange(offsets[-1])
-    pairs = [(offsets[i.a] + ia, offsets[i.b] + ib) for i in block_set.interfaces for ia, ib in [face_index(block_set, i)]]
-    if pairs:
-        left = np.concatenate([p[0] for p in pairs])
-        right = np.concatenate([p[1] for p in pairs])
-        while True:  # each node ends labelled with the smallest number of the nodes it is glued to
-            joined = label.copy()
-            np.minimum.at(joined, left, label[right])
-            np.minimum.at(joined, right, label[left])
-            joined = joined[joined]
-            if np.array_equal(joined, label):
-                break
-            label = joined
-    unique, numbers = np.unique(label, return_inverse=True)
-    return [numbers[offsets[i] : offsets[i + 1]].reshape(shape) for i, shape in enumerate(shapes)], len(unique)
-
-
-def merged_mesh(block_set: BlockSet, Xs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The block meshes as one unstructured mesh: (points (N, dim), cells (M, 8 or 4) in VTK
-    corner order, block index of each cell (M,)). Cells follow the blocks' order."""
-
-    numbering, count = global_numbering(block_set)
-    points = np.empty((count, block_set.dim))
-    cells, owner = [], []
-    for index, (X, ids) in enumerate(zip(Xs, numbering)):
-        points[ids.reshape(-1)] = X.reshape(-1, block_set.dim)
-        local = cell_connectivity(X.shape[:-1])
-        cells.append(ids.reshape(-1)[local])
-        owner.append(np.full(len(local), index))
-    return points, np.concatenate(cells), np.concatenate(owner)
 
 
 def _face_range(shape, face: cube.Face) -> np.ndarray:

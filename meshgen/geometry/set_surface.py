@@ -8,7 +8,8 @@ import dataclasses
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, global_numbering, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import global_numbering, merged_mesh
+from meshgen.geometry.blocks import BlockSet, tfi_blocks
 from meshgen.geometry.surface import check_surface_path, grid_triangles
 from meshgen.run.atomic import atomic_write
 

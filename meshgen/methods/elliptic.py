@@ -19,7 +19,8 @@ import warnings
 import numpy as np
 
 from meshgen.errors import MeshgenWarning, ParameterError
-from meshgen.geometry.blocks import global_numbering, tfi_blocks
+from meshgen.geometry.block_nodes import global_numbering
+from meshgen.geometry.blocks import tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of, sweep_frame
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
 from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, Level, jacobi_residual, solve_winslow, uses_kernels

@@ -27,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, global_numbering, inverse_transform
+from meshgen.geometry.block_nodes import global_numbering
+from meshgen.geometry.blocks import BlockSet, inverse_transform
 from meshgen.methods.sliding import Rule
 
 __all__ = [

@@ -36,7 +36,7 @@ import itertools
 
 import numpy as np
 
-from meshgen.geometry.blocks import global_numbering
+from meshgen.geometry.block_nodes import global_numbering
 from meshgen.methods.anderson import ANDERSON_DEPTH, AndersonMixing
 from meshgen.methods.interfaces import (
     Halo,

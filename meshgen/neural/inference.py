@@ -14,7 +14,7 @@ the geometry's boundary map; a node on one flat patch only (a pipe's inlet) take
 projected onto the patch's plane (it slides in the plane, as in the elliptic mesh). Each block is
 then corrected to those face positions, X + C[target - X] with the blending of
 ``meshgen.methods.correction.add_boundary_correction``, so that the faces are the targets to
-round-off; interface nodes are finally made bit-identical (``meshgen.geometry.blocks.unify_interfaces``).
+round-off; interface nodes are finally made bit-identical (``meshgen.geometry.block_nodes.unify_interfaces``).
 
 A model of an extruded block set (``meshgen.geometry.extrusion``; its ``model["extruded"]`` holds the
 extrusion it was trained for) holds the section's 2D networks: the section's mesh is made as above
@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import BlockSet, check_handedness, global_numbering, interface_gaps, unify_interfaces
+from meshgen.geometry.block_nodes import global_numbering, interface_gaps, unify_interfaces
+from meshgen.geometry.blocks import BlockSet, check_handedness
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of
 from meshgen.methods.correction import add_boundary_correction
 from meshgen.methods.tfi import boundary_faces

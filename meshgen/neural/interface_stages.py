@@ -17,7 +17,8 @@ from pathlib import Path
 
 import torch
 
-from meshgen.geometry.blocks import BlockSet, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import BlockSet, tfi_blocks
 from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.config import ConfigError, keys_off_default
 from meshgen.neural.history import TrainState, state_from_checkpoint

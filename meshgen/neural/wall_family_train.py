@@ -19,7 +19,8 @@ import time
 import numpy as np
 
 from meshgen.errors import GeometryError, MeshgenError
-from meshgen.geometry.blocks import BlockSet, load_block_set, merged_mesh
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import BlockSet, load_block_set
 from meshgen.geometry.plugins import plugin_module
 from meshgen.neural import wall_family, wall_map
 from meshgen.quality import quality_report

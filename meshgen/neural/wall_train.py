@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from meshgen.geometry.blocks import BlockSet, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import BlockSet, tfi_blocks
 from meshgen.neural import wall_map
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.interface_stages import geometry_record

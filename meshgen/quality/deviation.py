@@ -27,7 +27,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from meshgen.geometry import cube
-from meshgen.geometry.blocks import global_numbering
+from meshgen.geometry.block_nodes import global_numbering
 from meshgen.geometry.cube import faces as cube_faces
 from meshgen.geometry.layout import unsmoothed
 

@@ -33,7 +33,8 @@ import numpy as np
 from meshgen import __version__
 from meshgen.errors import FormatError, MeshgenError, ParameterError
 from meshgen.formats.multiblock import check_block_output, write_blocks
-from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, merged_mesh, tfi_blocks
+from meshgen.geometry.block_nodes import merged_mesh
+from meshgen.geometry.blocks import BlockSet, block_spec, load_block_set, tfi_blocks
 from meshgen.geometry.grading import first_cell_heights, graded_block_set, parse_first_cell, parse_wall_clusters
 from meshgen.geometry.patches import Patch, as_records, geometry_patches
 from meshgen.geometry.plugins import Geometry, is_airfoil_file, load_geometry, plugin_module
