@@ -222,7 +222,8 @@ def mesh(
         geometry if geometry_given or checkpoint is None else None,
         _wall_options(
             parse_params(params),
-            geometry if geometry_given else _trained_on(checkpoint, geometry),
+            geometry,
+            None if geometry_given else checkpoint,
             yplus=yplus,
             reynolds=reynolds,
         ),
@@ -342,12 +343,15 @@ def _trained_on(checkpoint, default: str) -> str:
         return default
 
 
-def _wall_options(values: dict, geometry: str, **given) -> dict:
+def _wall_options(values: dict, geometry: str, checkpoint, **given) -> dict:
     """``values`` (the --param values) with --yplus / --reynolds added as the parameters of the same
-    names; a geometry without such a parameter, or the same one given as --param too, is refused."""
+    names; a geometry without such a parameter, or the same one given as --param too, is refused.
+    ``checkpoint``: the --checkpoint when no -g was given (its geometry is the one meshed; read only
+    when --yplus or --reynolds is)."""
     given = {key: value for key, value in given.items() if value is not None}
     if not given:
         return values
+    geometry = _trained_on(checkpoint, geometry)
     names = getattr(plugin_module(geometry)[0], "params", {})
     for key in given:
         if key not in names:

@@ -228,8 +228,6 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
         family = _bundled_family(block_set_name, params) if checkpoint is None else None
         if family is None:
             raise
-        if isinstance(family, MeshgenError):
-            raise family from None
         return family
     if not is_block_model(model.checkpoint["model"]):
         raise ParameterError("checkpoint", f"{{name}} {model.path} holds a one-block model, not one of '{block_set_name}'")
@@ -239,9 +237,9 @@ def _block_model(request, block_set_name: str, params: dict, fallback: bool, war
 def _bundled_family(name: str, params: dict):
     """The bundled family of sections round a wall of geometry ``name`` (``meshgen/_models/families/NAME``)
     when ``params`` (the --param values over the geometry's defaults) pick one of its members: what
-    ``--method neural`` meshes with when no run of the geometry has those parameters. A MeshgenError
-    (to raise) naming the ranges when they pick a section of the family outside them; None when
-    there is no such family or the section is not one of it (another ``naca``, ``sharp``, ...)."""
+    ``--method neural`` meshes with when no run of the geometry has those parameters. MeshgenError
+    naming the ranges when they pick a section of the family outside them; None when there is no
+    such family or the section is not one of it (another ``naca``, ``sharp``, ...)."""
     path = MODELS_DIR / "families" / name / "checkpoint.pt"
     if not path.is_file():
         return None
@@ -257,7 +255,9 @@ def _bundled_family(name: str, params: dict):
     except MeshgenError as exc:
         wider = {n: (min(lo, float(values[n])), max(hi, float(values[n]))) for n, (lo, hi) in family["ranges"].items()}
         varied = " ".join(f"--vary {n}={lo:g}:{hi:g}" for n, (lo, hi) in wider.items())
-        return MeshgenError(f"{exc}; train a family that holds it (`meshgen train -g {name} {varied}`) or pick --method elliptic")
+        raise MeshgenError(
+            f"{exc}; train a family that holds it (`meshgen train -g {name} {varied}`) or pick --method elliptic"
+        ) from None
     return model
 
 
