@@ -98,6 +98,8 @@ LAYERS = [
         "meshgen.methods.multigrid_torch",
         "meshgen.methods.sliding",
         "meshgen.methods.interfaces",
+        "meshgen.methods.face_angles",
+        "meshgen.methods.face_angles_compiled",
         "meshgen.geometry.airfoil_curve",
         "meshgen.geometry.airfoils",
     ],

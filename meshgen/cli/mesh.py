@@ -287,6 +287,15 @@ def _print_block_result(made, quiet):
             f"{info['sweeps']} sweeps, final update {info['final_update']:.2e} of the local cell size "
             f"({'converged' if info['converged'] else 'not converged'})"
         )
+    polished = info.get("orthogonality")
+    if polished:
+        (internal, boundary), start = polished["after"], polished["start"]
+        echo(
+            f"orthogonality polish: largest non-orthogonality {polished['before'][0]:.1f} -> {internal:.1f} deg "
+            f"(boundary faces {polished['before'][1]:.1f} -> {boundary:.1f}; the start mesh's {start[0]:.1f} and "
+            f"{start[1]:.1f}), {polished['moved']} nodes moved"
+            + ("" if polished["kept"] else ": not kept, it did not lower both")
+        )
     echo(f"wrote {made.output}")
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
         echo(line)

@@ -23,6 +23,7 @@ from meshgen.geometry.block_nodes import global_numbering
 from meshgen.geometry.blocks import tfi_blocks
 from meshgen.geometry.extrusion import extrude, extrusion_of, section_of, sweep_frame
 from meshgen.geometry.layout import DEFAULT_LAYOUT, relax_faces, with_layout
+from meshgen.methods.face_angles import polish_block_set
 from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, Level, jacobi_residual, solve_winslow, uses_kernels
 from meshgen.methods.multigrid_set import solve_set
 from meshgen.methods.orthogonal import inner_block, parse_walls, straighten_first_layer
@@ -239,6 +240,7 @@ def elliptic_blocks(
     initial=None,
     as_extrusion: bool = True,
     slide_section: bool = True,
+    orthogonality: bool = True,
 ):
     """Winslow mesh of the block set ``block_set`` (``meshgen.geometry.blocks.BlockSet``): (list of
     node arrays, one per block, interface nodes identical in every block; info dict as
@@ -260,19 +262,25 @@ def elliptic_blocks(
     its TFI with its flat caps sliding is solved as its 2D section and extruded, the fixed point
     of its 3D equations (design notes §20); off, the 3D equations are solved. ``slide_section``
     (default on): that section's flat sides slide too; off, its boundary nodes stay (a swept CAD
-    cap whose straight side joins an arc smoothly: sliding would carry nodes past the joint)."""
+    cap whose straight side joins an arc smoothly: sliding would carry nodes past the joint).
+    ``orthogonality`` (default on): where the Winslow mesh is less orthogonal than its start (its
+    largest checkMesh non-orthogonality of internal or of boundary faces is larger), its interior
+    nodes are polished (``meshgen.methods.face_angles.polish_block_set``; ``info["orthogonality"]``)."""
     tol = DEFAULT_TOL if tol is None else tol
     max_cycles = MAX_CYCLES if max_iter is None else max_iter
     start = time.perf_counter()
     extrusion = extrusion_of(block_set) if as_extrusion and slide and initial is None and block_set.dim == 3 else None
     if extrusion is not None:
         section = section_of(block_set, extrusion)
-        planes, info = elliptic_blocks(section, tol=tol, max_iter=max_iter, progress=progress, slide=slide_section)
+        planes, info = elliptic_blocks(
+            section, tol=tol, max_iter=max_iter, progress=progress, slide=slide_section, orthogonality=orthogonality
+        )
         Xs = extrude(extrusion, planes, block_set.coords[0][2])
         solver = info.get("solver", "the one-block solve")
         info = {**info, "solver": f"the 2D section's elliptic mesh, extruded ({solver})", "extruded": True}
         return Xs, {**info, "seconds": time.perf_counter() - start}
     Xs = tfi_blocks(block_set) if initial is None else [np.array(X, dtype=float) for X in initial]
+    start_mesh = [X.copy() for X in Xs] if orthogonality else None
     if min(min(shape) for shape in block_set.node_shapes) < 3:
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     numbering, count = global_numbering(block_set)
@@ -281,9 +289,12 @@ def elliptic_blocks(
         X, info = solve_winslow(
             Xs[0], block_set.coords[0], tol=tol, max_iter=max_cycles, length=block_set.length, progress=progress
         )
-        return [X], {**info, "sweeps": info["iterations"], "seconds": time.perf_counter() - start}
+        Xs, polished = polish_block_set(block_set, [X], start_mesh) if orthogonality else ([X], None)
+        info = {**info, "sweeps": info["iterations"], "orthogonality": polished}
+        return Xs, {**info, "seconds": time.perf_counter() - start}
     values, cycles, update, levels = solve_set(block_set, Xs, tol, max_cycles, slide, progress)
     Xs = [values[ids] for ids in numbering]
+    Xs, polished = polish_block_set(block_set, Xs, start_mesh) if orthogonality else (Xs, None)
     info = {
         "solver": "nonlinear multigrid over the block set (FAS V(2,2) cycles on every block, halo layers at the "
         "interfaces, sliding nodes and junctions relaxed on every level, Anderson mixing)",
@@ -295,6 +306,7 @@ def elliptic_blocks(
         "converged": bool(update < tol),
         "seconds": time.perf_counter() - start,
         "levels": levels,
+        "orthogonality": polished,
     }
     if not info["converged"]:
         info["warnings"] = [
