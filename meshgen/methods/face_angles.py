@@ -24,7 +24,6 @@ import numpy as np
 
 from meshgen.geometry import cube
 from meshgen.geometry.block_nodes import global_numbering, merged_mesh
-from meshgen.methods.face_angles_compiled import backward, corner_jacobians, corner_jacobians_backward, forward
 
 __all__ = [
     "FLOOR",
@@ -58,6 +57,14 @@ FIRST_STEP = 0.1  # the first L-BFGS step moves the node with the steepest gradi
 TOLERANCE = 1e-9  # L-BFGS stops at this penalty: every face within about 0.1 degrees of its threshold
 STALL, STALL_WINDOW = 0.01, 10  # or when STALL_WINDOW steps lowered the penalty by less than this fraction
 TINY = 1e-300
+
+
+def _compiled():
+    """``meshgen.methods.face_angles_compiled``, imported on first use: numba stays out of a process
+    that polishes nothing (the quality worker forks only while numba is not loaded)."""
+    from meshgen.methods import face_angles_compiled
+
+    return face_angles_compiled
 
 
 class Faces:
@@ -105,12 +112,12 @@ def _pairs(Sf, C, c, faces: Faces):
 def _orientation(X: np.ndarray) -> float:
     """+1 when the cells ``X`` (M, 8, 3) are right-handed in their corner order (their total
     volume positive), else -1."""
-    return 1.0 if float(forward(X, 1.0)[2].sum()) >= 0 else -1.0
+    return 1.0 if float(_compiled().forward(X, 1.0)[2].sum()) >= 0 else -1.0
 
 
 def _cosines(X: np.ndarray, orientation: float, faces: Faces):
     """(cosines of the faces (internal, then boundary), the cells' ``forward`` geometry)."""
-    geometry = forward(X, orientation)
+    geometry = _compiled().forward(X, orientation)
     S, d = _pairs(*geometry[:2], geometry[3], faces)
     return np.einsum("ij,ij->i", S, d) / np.maximum(_norm(S) * _norm(d), TINY), geometry
 
@@ -129,7 +136,7 @@ def face_cosines(points: np.ndarray, cells: np.ndarray, faces: Faces | None = No
 def _cosine_gradient(X: np.ndarray, orientation: float, faces: Faces, gcos: np.ndarray, geometry=None) -> np.ndarray:
     """d(sum of gcos * cos)/dX (M, 8, 3) over the ``faces`` (internal, then boundary) of the
     hexahedra with corners ``X`` (M, 8, 3); ``geometry``: their ``forward`` when the caller has it."""
-    Sf, C, _, c = forward(X, orientation) if geometry is None else geometry
+    Sf, C, _, c = _compiled().forward(X, orientation) if geometry is None else geometry
     S, d = _pairs(Sf, C, c, faces)
     nS, nd = _norm(S), _norm(d)
     cos = np.einsum("ij,ij->i", S, d) / np.maximum(nS * nd, TINY)
@@ -146,7 +153,7 @@ def _cosine_gradient(X: np.ndarray, orientation: float, faces: Faces, gcos: np.n
             - np.bincount(faces.owner, gd[:n, k], len(C))
             - np.bincount(faces.cell, gd[n:, k], len(C))
         )
-    return backward(X, orientation, gSf, gc, gC)
+    return _compiled().backward(X, orientation, gSf, gc, gC)
 
 
 def _node_sizes(points: np.ndarray, cells: np.ndarray, edges) -> np.ndarray:
@@ -304,14 +311,17 @@ def reduce_non_orthogonality(
     work = points3.copy()
     best = {"value": np.inf, "x": np.zeros(origin.size)}
     # a corner's scaled Jacobian below its own start value and the mesh's smallest is penalised
-    floor = np.minimum(orientation * corner_jacobians(points3[sub_cells]), orientation * corner_jacobians(points3[cells3]).min())
+    floor = np.minimum(
+        orientation * _compiled().corner_jacobians(points3[sub_cells]),
+        orientation * _compiled().corner_jacobians(points3[cells3]).min(),
+    )
 
     def penalty(x: np.ndarray):
         for copy in copies:
             work[copy, :dim] = origin + size * x.reshape(-1, dim)
         X = work[sub_cells]
         cos, geometry = _cosines(X, orientation, sub_faces)
-        jacobian = orientation * corner_jacobians(X)
+        jacobian = orientation * _compiled().corner_jacobians(X)
         if not np.all(jacobian > 0):
             return np.inf, np.zeros_like(x)  # a corner folded: the line search steps back
         excess = np.maximum(0.0, sub_limit - cos) / scale
@@ -320,7 +330,7 @@ def reduce_non_orthogonality(
         value = faces_value + float(np.sum(shear**POWER))
         best["faces"] = faces_value
         gX = _cosine_gradient(X, orientation, sub_faces, -POWER * excess ** (POWER - 1) / scale, geometry)
-        gX += corner_jacobians_backward(X, -orientation * POWER * shear ** (POWER - 1) / SHEAR_SCALE)
+        gX += _compiled().corner_jacobians_backward(X, -orientation * POWER * shear ** (POWER - 1) / SHEAR_SCALE)
         gradient = np.zeros((len(work), dim))
         for k in range(dim):
             gradient[:, k] = np.bincount(sub_cells.reshape(-1), gX[..., k].reshape(-1), len(work))
