@@ -9,7 +9,7 @@ first grid line with the wall normal (trailing edge excepted), the largest wall-
 ratio against the cap 1.15, inverted cells; then OpenFOAM's checkMesh on the written case (max
 non-orthogonality, max skewness, max aspect ratio, the failed checks: a y+ 1 grid fails the aspect
 ratio check by construction, its threshold being 1000).
-``simpleFoam`` (full run only, about an hour on 2 cores): ``examples/naca0012/run_naca0012.py``
+``simpleFoam`` (full run only, about 10 minutes on one core): ``examples/naca0012/run_naca0012.py``
 at alpha 10 on that mesh: CL, CD, the wall's y+, against TMR's (CFL3D: CL 1.0909, CD 0.01231 at
 M 0.15; simpleFoam is incompressible: CL x 1.0114 by Prandtl-Glauert is printed beside it).
 Targets: CL within [1.075, 1.100], CD within [0.0120, 0.0130], y+ at most 1.5 on average and 5
