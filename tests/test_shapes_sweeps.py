@@ -463,3 +463,19 @@ def test_elongated_filleted_boxes_mesh_unfolded(tmp_path, size, share):
     kept = meshgen.mesh(str(path), (6, 2, 2), method="elliptic")  # Winslow folds the offset core's cells
     assert all(np.array_equal(a, b) for a, b in zip(kept.blocks, mesh.blocks))
     assert any("the TFI mesh is kept" in line for line in kept.notes)
+
+
+# the offset core's search once depended on the cap's orientation (a 3 x 1 cap 0.59, the same cap
+# turned 0.44) and left 4:1 caps at 0.31: the first simplex's steps along the meeting point were
+# 2.5e-4 of the cap; now 0.1, and a second search from the first one's best
+@pytest.mark.parametrize("long_side,share,least", [(3, 0.1, 0.6), (3, 0.4, 0.6), (4, 0.4, 0.45)])
+def test_an_elongated_cap_meshes_alike_turned(tmp_path, long_side, share, least):
+    worst = []
+    for size in ((long_side, 1, 0.5), (1, long_side, 0.5)):
+        path = tmp_path / f"box-{size[0]}-{size[1]}.step"
+        write_filleted_box(path, size, share)
+        report = meshgen.mesh(str(path), (6, 2, 2), method="tfi").report()
+        gmsh.model.remove()
+        assert report["inverted"]["count"] == 0
+        worst.append(report["metrics"]["scaled_jacobian"]["min"])
+    assert min(worst) >= least and abs(worst[0] - worst[1]) < 0.02

@@ -25,6 +25,8 @@ RING = 0.6  # the centroid construction's core corners: this share of the way to
 SPOKE = 0.6  # and a spoke runs at most this share of the way to where it meets a neighbouring one
 SHARES = (0.15, 0.85)  # a core side meets its curve's midpoint spoke within these shares of it
 PLAIN = 0.6  # the centroid construction is kept where no cell corner of its cap map is sharper (sine)
+SEARCHES = 2  # Nelder-Mead searches of the offset core, each from the last one's best
+SIMPLEX = 0.1  # their first simplex's steps: the meeting point in the cap's size, the shares
 _STEP = 1e-4  # a curve's tangent at its ends: the chord over this share of it
 
 
@@ -159,9 +161,14 @@ def ring_blocks(curves, faces, sharp):
         return _assemble(halves, vertex, inner, middle, scale * x[:2], np.clip(x[2:], *SHARES))
 
     start = np.concatenate([np.zeros(2), shares])
-    options = {"maxfev": 60 * (n + 2), "xatol": 1e-3, "fatol": 1e-4}
-    best = minimize(lambda x: -worst_corner(blocks_of(x), 4), start, method="Nelder-Mead", options=options)
-    blocks = blocks_of(best.x if best.fun < -worst_corner(blocks_of(start), 4) else start)
+    x, value = start, -worst_corner(blocks_of(start), 4)
+    for _ in range(SEARCHES):  # each search from the last one's best, with a fresh simplex of SIMPLEX steps
+        simplex = np.vstack([x, x + SIMPLEX * np.eye(len(x))])
+        options = {"maxfev": 60 * (n + 2), "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": simplex}
+        found = minimize(lambda y: -worst_corner(blocks_of(y), 4), x, method="Nelder-Mead", options=options)
+        if found.fun < value:
+            x, value = found.x, float(found.fun)
+    blocks = blocks_of(x)
     return blocks, *_patches(faces), True
 
 
