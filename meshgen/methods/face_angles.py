@@ -373,7 +373,7 @@ def polish_block_set(block_set, Xs: list, start: list) -> tuple[list, dict | Non
     its nodes off the boundary (block interiors and interfaces) move to bring every face under
     ``POLISH_TARGET`` times the start's largest angle of its kind, or ``FLOOR``, whichever is
     larger (``reduce_non_orthogonality``); the result is kept where neither largest angle grew.
-    Returns (node arrays, None when nothing was to do, else the figures: ``start``, ``before``,
+    Returns (node arrays, None when nothing was to do (no face over the thresholds), else the figures: ``start``, ``before``,
     ``after`` (internal, boundary) degrees, ``moved``, ``iterations``, ``kept``)."""
     points, cells, _ = merged_mesh(block_set, Xs)
     before, reference = largest_angles(points, cells), largest_angles(*merged_mesh(block_set, start)[:2])
@@ -382,6 +382,8 @@ def polish_block_set(block_set, Xs: list, start: list) -> tuple[list, dict | Non
     on_boundary = boundary_nodes(block_set)
     thresholds = tuple(max(FLOOR, POLISH_TARGET * angle) for angle in reference)
     moved, info = reduce_non_orthogonality(points, cells, np.flatnonzero(~on_boundary), thresholds)
+    if not info["moved"]:  # no face over the thresholds (10 degrees at least)
+        return Xs, None
     figures = {"start": reference, "before": before, "moved": info["moved"], "iterations": info["iterations"]}
     if info["after"][0] > before[0] or info["after"][1] > before[1]:
         return Xs, {**figures, "after": before, "kept": False}
