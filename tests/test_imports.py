@@ -100,6 +100,7 @@ LAYERS = [
         "meshgen.methods.interfaces",
         "meshgen.methods.face_angles",
         "meshgen.methods.face_angles_compiled",
+        "meshgen.methods.surface_sliding",
         "meshgen.geometry.airfoil_curve",
         "meshgen.geometry.airfoils",
     ],

@@ -284,3 +284,44 @@ def test_cad_face_projection_is_the_cylinder(tmp_path):
     np.testing.assert_allclose(walls["cad"], walls["exact"], atol=1e-9)
     with pytest.raises(GeometryError, match="has no face 99"):
         load_block_set(write(tmp_path, QUARTER.format(surface="{file: rod.step, face: 99}"), "bad.yaml"), None, (1, 1, 1))
+
+
+def _wall_line_angles(blocks, Xs) -> np.ndarray:
+    """Degrees between each wall node's first grid line and the sphere's normal there."""
+    angles = []
+    for X, patches in zip(Xs, block_patches(blocks)):
+        for face in (cube.face_named(f, 3) for p in patches if p.name == "wall" for f in p.faces):
+            inner = list(face.node_index)
+            inner[face.axis] = -2 if face.side else 1
+            wall, line = X[face.node_index].reshape(-1, 3), X[tuple(inner)].reshape(-1, 3) - X[face.node_index].reshape(-1, 3)
+            cos = np.abs(np.einsum("ij,ij->i", wall, line)) / np.linalg.norm(wall, axis=1) / np.linalg.norm(line, axis=1)
+            angles.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    return np.concatenate(angles)
+
+
+def test_a_sliding_wall_stays_on_its_surface_with_its_grid_lines_square(tmp_path):
+    from meshgen.methods.elliptic import elliptic_blocks
+
+    text = sphere_in_box(SPHERE, cells=6)
+    fixed = load_block_set(write(tmp_path, text, "fixed.yaml"), None, (1, 1, 1))
+    sliding = load_block_set(
+        write(tmp_path, text.replace("project: ball", "project: ball, slide: true"), "slide.yaml"), None, (1, 1, 1)
+    )
+    assert not fixed.surfaces and len(sliding.surfaces) == 6
+    stay, _ = elliptic_blocks(fixed, orthogonality=False)
+    slid, info = elliptic_blocks(sliding, orthogonality=False)
+    assert info["surface_rounds"] >= 1
+    radius = np.linalg.norm(wall_nodes(sliding, slid, "wall"), axis=1)
+    assert np.max(np.abs(radius - INNER)) <= 1e-12  # on the sphere, moved along it
+    moved = np.abs(wall_nodes(sliding, slid, "wall") - wall_nodes(fixed, stay, "wall")).max()
+    assert moved > 1e-3 * INNER
+    # the grid lines leave the sphere closer to its normal than where the wall nodes stay put
+    assert _wall_line_angles(sliding, slid).mean() < 0.5 * _wall_line_angles(fixed, stay).mean()
+
+
+@pytest.mark.parametrize("entry", ["project: ball, slide: 1", "slide: true"])
+def test_slide_is_true_or_false_on_a_projected_patch(tmp_path, entry):
+    text = sphere_in_box(SPHERE).replace("project: ball", entry)
+    with pytest.raises(GeometryError, match="'slide' is true or false, on a patch with 'project'") as error:
+        load_block_set(write(tmp_path, text), None, (1, 1, 1))
+    assert "\n" not in str(error.value)

@@ -76,7 +76,9 @@ class BlockSet:
     ``geometries``: one ``Geometry`` per block; ``coords``: per block, the parametric node
     coordinates per axis; ``patches``: (block index, face name) -> (patch name, type) for every
     face that is not on an interface; ``cyclic``: (patch, neighbour patch, separation (dim,)[,
-    rotation]) of its cyclic pairs (``meshgen.geometry.cyclic``)."""
+    rotation]) of its cyclic pairs (``meshgen.geometry.cyclic``); ``surfaces``: (block index, face
+    name) -> the closest-point map (N, dim) -> (N, dim) of the surface whose nodes slide on it in the
+    elliptic solve (a topology file's ``slide: true`` on a projected patch)."""
 
     name: str
     dim: int
@@ -90,6 +92,7 @@ class BlockSet:
     dims_meaning: str = ""
     length: float = 1.0
     cyclic: tuple = ()
+    surfaces: dict = field(default_factory=dict)
 
     @property
     def node_shapes(self) -> list[tuple[int, ...]]:
@@ -204,9 +207,10 @@ def load_block_set(spec: str, params: dict | None = None, dims=None) -> BlockSet
         declared.append(
             (names.index(block_a), _face(face_a, dim, base.name), names.index(block_b), _face(face_b, dim, base.name))
         )
+    surfaces = {(names.index(block), face): project for (block, face), project in getattr(module, "face_surfaces", {}).items()}
     block_set = BlockSet(
         base.name, dim, base.description, dict(base.values), names, tuple(geometries), block_coords, (), patches,
-        getattr(module, "dims_meaning", ""), length, cyclic,
+        getattr(module, "dims_meaning", ""), length, cyclic, surfaces,
     )  # fmt: skip
     _check_faces(block_set, declared)
     interfaces = tuple(Interface(a, fa, b, fb, _derive_transform(block_set, a, fa, b, fb)) for a, fa, b, fb in declared)

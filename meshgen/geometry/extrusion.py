@@ -168,7 +168,8 @@ def _section_map(geometry: Geometry, extrusion: Extrusion):
 
 def section_of(block_set: BlockSet, extrusion: Extrusion) -> BlockSet:
     """The 2D block set of the extruded ``block_set``'s section (its zeta = 0 cap in the frame's
-    coordinates): the same blocks, interfaces and side patches, each block's first two axes."""
+    coordinates): the same blocks, interfaces, side patches and sliding side faces, each block's
+    first two axes."""
     geometries = tuple(section_geometry(g, extrusion) for g in block_set.geometries)
     interfaces = tuple(
         Interface(i.a, cube.face_named(i.face_a.name, 2), i.b, cube.face_named(i.face_b.name, 2), tuple(i.transform[:2]))
@@ -177,10 +178,25 @@ def section_of(block_set: BlockSet, extrusion: Extrusion) -> BlockSet:
     patches = {key: value for key, value in block_set.patches.items() if not key[1].startswith("zeta")}
     sample = np.concatenate([g.boundary(cube.face_samples(2, 17)) for g in geometries])
     length = float(np.linalg.norm(sample.max(axis=0) - sample.min(axis=0)))
+    maps = {project: _section_projection(project, extrusion) for project in block_set.surfaces.values()}
+    surfaces = {key: maps[project] for key, project in block_set.surfaces.items() if not key[1].startswith("zeta")}
     return BlockSet(
         f"{block_set.name} (section)", 2, block_set.description, dict(block_set.values), block_set.names, geometries,
-        tuple(coords[:2] for coords in block_set.coords), interfaces, patches, block_set.dims_meaning, length,
+        tuple(coords[:2] for coords in block_set.coords), interfaces, patches, block_set.dims_meaning, length, (),
+        surfaces,
     )  # fmt: skip
+
+
+def _section_projection(project, extrusion: Extrusion):
+    """A surface's closest-point map in the section's frame coordinates (N, 2) -> (N, 2): the
+    surface of a side face of an extrusion is swept along it, so the closest point of a point in
+    the cap's plane lies in that plane."""
+
+    def section(points):
+        images = project(extrusion.origin + np.asarray(points, dtype=float) @ extrusion.frame)
+        return (images - extrusion.origin) @ extrusion.frame.T
+
+    return section
 
 
 def extrude(extrusion: Extrusion, sections, zeta: np.ndarray) -> list[np.ndarray]:

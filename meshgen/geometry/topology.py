@@ -537,6 +537,12 @@ def topology_module(path) -> types.ModuleType:
         patches.setdefault(block_names[block], {})[face] = entry
     module.block_patches = patches
     module.cyclic = cyclic_pairs(topology)
+    module.face_surfaces = {  # projected faces whose nodes slide on their surface (``slide: true``)
+        (name, face.name): topology.surfaces[topology.projections[key]].project
+        for name, row in zip(block_names, topology.blocks)
+        for face in cube.faces(dim)
+        if (key := frozenset(int(row[c]) for c in _face_corners(face))) in topology.sliding
+    }
     module.topology = topology
     size = float(np.linalg.norm(np.ptp(topology.points, axis=0)))
 

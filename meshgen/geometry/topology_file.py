@@ -28,6 +28,7 @@
     surfaces:                            # optional: surfaces that faces are projected onto
       wall: {cylinder: {axis: [0, 0, 1], point: [0, 0, 0], radius: 0.5}}
     # project: wall   in a patch (its faces), a block ({xi0: wall}: faces by name) or an edge entry
+    # slide: true     beside a patch's project: its nodes slide on the surface in the elliptic solve
 
 ``read_topology`` parses and checks it (one-line GeometryError per problem); ``is_topology_file``
 tells a topology file from the YAML geometry file of ``meshgen.geometry.shapes``.
@@ -57,7 +58,7 @@ EDGE_KINDS = ("arc", "polyline", "spline")
 _EDGE_KEYS = EDGE_KINDS + ("line", "through", "center", "points", "project")
 _CELL_KEYS = ("size", "counts")
 _GRADING_KEYS = ("ratios", "first_cell", "growth")
-_PATCH_KEYS = ("type", "faces", "neighbour", "rotation", "project")
+_PATCH_KEYS = ("type", "faces", "neighbour", "rotation", "project", "slide")
 _PATCH_TYPES = ("wall", "patch", "symmetry", "cyclic")
 _MARK = re.compile(r"^(vertices|blocks|joint|pipe)\s*:", re.MULTILINE)
 _SEEN: dict = {}
@@ -70,8 +71,8 @@ class Topology:
     r)], first-cell heights {patch: H}, patches {name: (type, [vertex index tuples])}, cyclic pairs
     [(patch, its neighbour)] (each pair once, in the order of the file; a rotating patch first),
     rotations {patch: (centre (dim,), axis (3,), angle in degrees)}, surfaces {name: Surface},
-    projected faces {frozenset of vertex indices: surface name} and projected edges {(i, j), i < j:
-    surface name}."""
+    projected faces {frozenset of vertex indices: surface name}, projected edges {(i, j), i < j:
+    surface name} and the projected faces whose nodes slide (``slide: true``)."""
 
     path: Path
     name: str
@@ -94,6 +95,7 @@ class Topology:
     surfaces: dict = field(default_factory=dict)
     projections: dict = field(default_factory=dict)
     edge_projections: dict = field(default_factory=dict)
+    sliding: set = field(default_factory=set)
 
 
 def is_topology_file(spec) -> bool:
@@ -300,6 +302,11 @@ def _patches(topology: Topology, patches) -> None:
         if "project" in entry:
             for face in listed:
                 _project(topology, f"patch '{name}'", frozenset(face), entry["project"])
+        if "slide" in entry:
+            if not isinstance(entry["slide"], bool) or "project" not in entry:
+                topology_error(path, f"patch '{name}': 'slide' is true or false, on a patch with 'project'")
+            if entry["slide"]:
+                topology.sliding.update(frozenset(face) for face in listed)
         if kind != "cyclic" and "rotation" in entry:
             topology_error(path, f"patch '{name}': only a cyclic patch has a 'rotation'")
         if (kind == "cyclic") != ("neighbour" in entry):

@@ -27,7 +27,8 @@ from meshgen.methods.face_angles import polish_block_set
 from meshgen.methods.multigrid import DEFAULT_MAX_ITER, DEFAULT_TOL, Level, jacobi_residual, solve_winslow, uses_kernels
 from meshgen.methods.multigrid_set import solve_set
 from meshgen.methods.orthogonal import inner_block, parse_walls, straighten_first_layer
-from meshgen.methods.sliding import planar_sliding
+from meshgen.methods.sliding import local_cell_sizes, planar_sliding
+from meshgen.methods.surface_sliding import SURFACE_ROUNDS, SURFACE_TOL, slide_on_surfaces, surface_sliding
 from meshgen.methods.tfi import check_axes, parametric_grid, tfi
 from meshgen.methods.winslow import component_array
 
@@ -285,7 +286,8 @@ def elliptic_blocks(
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     numbering, count = global_numbering(block_set)
     sliding = planar_sliding(block_set, Xs, numbering, count) if slide else None
-    if len(Xs) == 1 and not block_set.interfaces and sliding is None:
+    on_surfaces = surface_sliding(block_set, numbering, count, sliding) if slide else []
+    if len(Xs) == 1 and not block_set.interfaces and sliding is None and not on_surfaces:
         X, info = solve_winslow(
             Xs[0], block_set.coords[0], tol=tol, max_iter=max_cycles, length=block_set.length, progress=progress
         )
@@ -293,6 +295,14 @@ def elliptic_blocks(
         info = {**info, "sweeps": info["iterations"], "orthogonality": polished}
         return Xs, {**info, "seconds": time.perf_counter() - start}
     values, cycles, update, levels = solve_set(block_set, Xs, tol, max_cycles, slide, progress)
+    rounds, sizes = 0, local_cell_sizes(block_set, Xs, numbering, count) if on_surfaces else None
+    while on_surfaces and rounds < SURFACE_ROUNDS:  # nodes on sliding projected faces move on their surface
+        rounds += 1
+        moved = slide_on_surfaces(on_surfaces, values, sizes)
+        values, more, update, levels = solve_set(block_set, [values[ids] for ids in numbering], tol, max_cycles, slide)
+        cycles += more
+        if moved < SURFACE_TOL:
+            break
     Xs = [values[ids] for ids in numbering]
     Xs, polished = polish_block_set(block_set, Xs, start_mesh) if orthogonality else (Xs, None)
     info = {
@@ -306,6 +316,7 @@ def elliptic_blocks(
         "converged": bool(update < tol),
         "seconds": time.perf_counter() - start,
         "levels": levels,
+        "surface_rounds": rounds,
         "orthogonality": polished,
     }
     if not info["converged"]:
