@@ -81,17 +81,18 @@ def _centre(c, Sf, E, p):
 
 
 @njit(**_JIT)
+def _work():
+    """One cell's work arrays: corners F, corner means e, triangle normals n and areas a, face
+    areas A, centre terms q, face centres c, outward area vectors Sf, faces' mean centre E, pyramids p."""
+    return (
+        np.empty((6, 4, 3)), np.empty((6, 3)), np.empty((6, 4, 3)), np.empty((6, 4)), np.empty(6),
+        np.empty((6, 4, 3)), np.empty((6, 3)), np.empty((6, 3)), np.empty(3), np.empty(6),
+    )  # fmt: skip
+
+
+@njit(**_JIT)
 def _forward(X, orientation, corners, outward, Sf_out, c_out, C_out, V_out):
-    F = np.empty((6, 4, 3))
-    e = np.empty((6, 3))
-    n = np.empty((6, 4, 3))
-    a = np.empty((6, 4))
-    A = np.empty(6)
-    q = np.empty((6, 4, 3))
-    c = np.empty((6, 3))
-    Sf = np.empty((6, 3))
-    E = np.empty(3)
-    p = np.empty(6)
+    F, e, n, a, A, q, c, Sf, E, p = _work()
     for cell in range(X.shape[0]):
         _faces(X, cell, orientation, corners, outward, F, e, n, a, A, q, c, Sf)
         C0, C1, C2, V = _centre(c, Sf, E, p)
@@ -103,16 +104,7 @@ def _forward(X, orientation, corners, outward, Sf_out, c_out, C_out, V_out):
 
 @njit(**_JIT)
 def _backward(X, orientation, corners, outward, gSf_in, gc_in, gC_in, gX):
-    F = np.empty((6, 4, 3))
-    e = np.empty((6, 3))
-    n = np.empty((6, 4, 3))
-    a = np.empty((6, 4))
-    A = np.empty(6)
-    q = np.empty((6, 4, 3))
-    c = np.empty((6, 3))
-    Sf = np.empty((6, 3))
-    E = np.empty(3)
-    p = np.empty(6)
+    F, e, n, a, A, q, c, Sf, E, p = _work()
     gSf = np.empty((6, 3))
     gc = np.empty((6, 3))
     gE = np.empty(3)
