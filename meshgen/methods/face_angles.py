@@ -339,6 +339,8 @@ def reduce_non_orthogonality(
         return value, (sum(gradient[copy] for copy in copies) * size).reshape(-1)
 
     start = penalty(np.zeros(origin.size))[0]
+    if not np.isfinite(start):  # a corner folded already: nothing here can be trusted to improve it
+        return points, info
     iterations = _lbfgs(penalty, np.zeros(origin.size), max_iterations, done=lambda: best["faces"] <= TOLERANCE)[1]
     moved = points.copy()
     moved[moving] = origin + size * best["x"].reshape(-1, dim)
