@@ -38,7 +38,7 @@ def _degrees(cos):
 def test_a_sheared_grid_has_the_shear_angle_at_every_internal_face():
     points, cells = _grid(4, shear=0.3)
     internal, boundary = face_angles.face_cosines(points, cells)
-    faces = face_angles.Faces(cells)
+    faces = face_angles.faces_of(cells)
     assert len(internal) == 3 * 3 * 16 and len(boundary) == 6 * 16
     normal_to_z = faces.slot >= 4
     # faces across x and across y: the angle is atan(shear); faces across z stay square
@@ -69,7 +69,7 @@ def test_the_angles_are_checkmeshs_as_quality_merged_measures_them():
 
 def test_the_gradient_is_the_derivative():
     _, points, cells = _perturbed_elbow(seed=2)
-    faces = face_angles.Faces(cells)
+    faces = face_angles.faces_of(cells)
     X = points[cells]
     orientation = face_angles._orientation(X)
     rng = np.random.default_rng(3)

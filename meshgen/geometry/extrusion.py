@@ -182,8 +182,8 @@ def section_of(block_set: BlockSet, extrusion: Extrusion) -> BlockSet:
     surfaces = {key: maps[project] for key, project in block_set.surfaces.items() if not key[1].startswith("zeta")}
     return BlockSet(
         f"{block_set.name} (section)", 2, block_set.description, dict(block_set.values), block_set.names, geometries,
-        tuple(coords[:2] for coords in block_set.coords), interfaces, patches, block_set.dims_meaning, length, (),
-        surfaces,
+        tuple(coords[:2] for coords in block_set.coords), interfaces, patches, block_set.dims_meaning, length,
+        surfaces=surfaces,
     )  # fmt: skip
 
 

@@ -5,13 +5,44 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BLOCK_NODES", "HEX_CORNERS", "QUAD_CORNERS", "block_slices", "cell_connectivity", "flat_points"]
+__all__ = [
+    "BLOCK_NODES",
+    "HEX_CORNERS",
+    "HEX_FACE_LOOPS",
+    "HEX_FACE_OUTWARD",
+    "QUAD_CORNERS",
+    "block_slices",
+    "cell_connectivity",
+    "flat_points",
+]
 
 BLOCK_NODES = 1 << 20  # at most: about 1e6 nodes, 25 MB of float64 coordinates per block
 
 # Corner offsets (di, dj[, dk]) in VTK order: hexahedron (VTK_HEXAHEDRON) and quad (VTK_QUAD).
 HEX_CORNERS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
 QUAD_CORNERS = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+
+
+def _hex_face_loops() -> np.ndarray:
+    """(6, 4): the VTK hexahedron's corners on its faces (axis 0 side 0, axis 0 side 1, axis 1
+    side 0, ...), each as a loop whose right-hand area vector points along +axis (the quality
+    kernels' ``HEX_FACE_CORNERS`` list the same corners unordered, to match faces)."""
+    corner_of = {tuple(int(b) for b in bits): k for k, bits in enumerate(HEX_CORNERS)}
+    rows = []
+    for axis in range(3):
+        first, second = (axis + 1) % 3, (axis + 2) % 3
+        for side in (0, 1):
+            row = []
+            for u, v in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                bits = [0, 0, 0]
+                bits[axis], bits[first], bits[second] = side, u, v
+                row.append(corner_of[tuple(bits)])
+            rows.append(row)
+    return np.array(rows)
+
+
+HEX_FACE_LOOPS = _hex_face_loops()
+HEX_FACE_OUTWARD = np.array([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0])  # a right-handed cell's side 0 faces point against +axis
 
 
 def cell_connectivity(node_shape) -> np.ndarray:

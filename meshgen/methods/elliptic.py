@@ -281,7 +281,7 @@ def elliptic_blocks(
         info = {**info, "solver": f"the 2D section's elliptic mesh, extruded ({solver})", "extruded": True}
         return Xs, {**info, "seconds": time.perf_counter() - start}
     Xs = tfi_blocks(block_set) if initial is None else [np.array(X, dtype=float) for X in initial]
-    start_mesh = [X.copy() for X in Xs] if orthogonality else None
+    start_mesh = Xs  # the solves below make new arrays: the polish's reference needs no copy
     if min(min(shape) for shape in block_set.node_shapes) < 3:
         return Xs, {"sweeps": 0, "converged": True, "note": "a block has one cell across an axis: the TFI mesh is the mesh"}
     numbering, count = global_numbering(block_set)

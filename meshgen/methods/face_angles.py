@@ -20,31 +20,32 @@ faces under it do not count, the worst face counts most.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from meshgen.geometry import cube
 from meshgen.geometry.block_nodes import global_numbering, merged_mesh
+from meshgen.geometry.grid import HEX_FACE_LOOPS
+from meshgen.methods.interfaces import gather
 
 __all__ = [
     "FLOOR",
-    "HEX_FACE_CORNERS",
     "MAX_ITERATIONS",
     "POLISH_TARGET",
     "POWER",
     "RINGS",
     "SHEAR_SCALE",
     "Faces",
+    "as_hexahedra",
     "boundary_nodes",
     "face_cosines",
+    "faces_of",
     "largest_angles",
-    "mesh_faces",
     "polish_block_set",
     "reduce_non_orthogonality",
 ]
 
-# Corners of each face of a VTK hexahedron in the cyclic order whose right-hand area vector points
-# along +axis; faces (axis 0 side 0, axis 0 side 1, axis 1 side 0, ...).
-HEX_FACE_CORNERS = np.array([[0, 3, 7, 4], [1, 2, 6, 5], [0, 4, 5, 1], [3, 7, 6, 2], [0, 1, 2, 3], [4, 5, 6, 7]])
 _HEX_EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7))
 POWER = 4  # the penalty's power: the worst faces dominate
 MAX_ITERATIONS = 100  # L-BFGS iterations at most
@@ -67,35 +68,42 @@ def _compiled():
     return face_angles_compiled
 
 
+@dataclass(frozen=True)
 class Faces:
-    """The faces of hexahedra ``cells`` (M, 8), VTK order: ``owner``, ``slot`` (0-5),
-    ``neighbour`` (F,) for each face two cells share (once, the owner the lower-numbered cell);
-    ``cell``, ``side`` (B,) for each face of one cell only."""
+    """The faces of hexahedra: ``owner``, ``slot`` (0-5), ``neighbour`` (F,) for each face two
+    cells share (once, the owner the lower-numbered cell); ``cell``, ``side`` (B,) for each face of
+    one cell only (``faces_of``)."""
 
-    def __init__(self, cells: np.ndarray):
-        cells = np.asarray(cells, dtype=np.int64)
-        quads = np.sort(cells[:, HEX_FACE_CORNERS].reshape(-1, 4), axis=1)  # (6M, 4): slot = cell * 6 + face
-        _, key, counts = np.unique(quads, axis=0, return_inverse=True, return_counts=True)
-        key = key.reshape(-1)
-        if counts.max(initial=0) > 2:
-            raise ValueError("a face is shared by more than two cells")
-        shared = np.flatnonzero(counts[key] == 2)
-        order = shared[np.argsort(key[shared], kind="stable")]
-        first, second = order[0::2], order[1::2]
-        self.owner, self.slot, self.neighbour = first // 6, first % 6, second // 6
-        alone = np.flatnonzero(counts[key] == 1)
-        self.cell, self.side = alone // 6, alone % 6
+    owner: np.ndarray
+    slot: np.ndarray
+    neighbour: np.ndarray
+    cell: np.ndarray
+    side: np.ndarray
 
     def subset(self, internal: np.ndarray, boundary: np.ndarray, renumber: np.ndarray) -> Faces:
         """The faces ``internal`` and ``boundary`` (indices), cells renumbered by ``renumber``."""
-        part = object.__new__(Faces)
-        part.owner, part.slot, part.neighbour = (
+        return Faces(
             renumber[self.owner[internal]],
             self.slot[internal],
             renumber[self.neighbour[internal]],
+            renumber[self.cell[boundary]],
+            self.side[boundary],
         )
-        part.cell, part.side = renumber[self.cell[boundary]], self.side[boundary]
-        return part
+
+
+def faces_of(cells: np.ndarray) -> Faces:
+    """The ``Faces`` of hexahedra ``cells`` (M, 8), VTK order, matched by their sorted corners."""
+    cells = np.asarray(cells, dtype=np.int64)
+    quads = np.sort(cells[:, HEX_FACE_LOOPS].reshape(-1, 4), axis=1)  # (6M, 4): slot = cell * 6 + face
+    _, key, counts = np.unique(quads, axis=0, return_inverse=True, return_counts=True)
+    key = key.reshape(-1)
+    if counts.max(initial=0) > 2:
+        raise ValueError("a face is shared by more than two cells")
+    shared = np.flatnonzero(counts[key] == 2)
+    order = shared[np.argsort(key[shared], kind="stable")]
+    first, second = order[0::2], order[1::2]
+    alone = np.flatnonzero(counts[key] == 1)
+    return Faces(first // 6, first % 6, second // 6, alone // 6, alone % 6)
 
 
 def _norm(v: np.ndarray) -> np.ndarray:
@@ -123,13 +131,14 @@ def _cosines(X: np.ndarray, orientation: float, faces: Faces):
 
 
 def face_cosines(points: np.ndarray, cells: np.ndarray, faces: Faces | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """cos(non-orthogonality) of the internal faces and of the boundary faces (``Faces(cells)``
+    """cos(non-orthogonality) of the internal faces and of the boundary faces (``faces_of(cells)``
     order; ``faces`` when the caller has them) of hexahedra ``cells`` (M, 8) over ``points``
     (N, 3); checkMesh's angles are their arccos."""
     cells = np.asarray(cells, dtype=np.int64)
-    faces = Faces(cells) if faces is None else faces
-    X = np.asarray(points, dtype=float)[cells]
-    cos = _cosines(X, _orientation(X), faces)[0]
+    faces = faces_of(cells) if faces is None else faces
+    cos, geometry = _cosines(np.asarray(points, dtype=float)[cells], 1.0, faces)
+    # left-handed cells: the area vectors turn, the centres do not (a sign, not a second pass)
+    cos *= 1.0 if float(geometry[2].sum()) >= 0 else -1.0
     return cos[: len(faces.owner)], cos[len(faces.owner) :]
 
 
@@ -192,7 +201,7 @@ def _region(cells: np.ndarray, faces: Faces, over: np.ndarray, free: np.ndarray,
     return np.flatnonzero(moving), np.flatnonzero(used), internal, boundary
 
 
-def mesh_faces(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def as_hexahedra(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hexahedra as they are, or quads (M, 4) over (N, 2) points as one layer of hexahedra one unit
     thick (2N, 3), (M, 8) (checkMesh's view of a 2D mesh)."""
     points, cells = np.asarray(points, dtype=float), np.asarray(cells, dtype=np.int64)
@@ -208,11 +217,12 @@ def _largest(cos: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(cos.min(initial=1.0), -1.0, 1.0))))
 
 
-def largest_angles(points: np.ndarray, cells: np.ndarray) -> tuple[float, float]:
+def largest_angles(points: np.ndarray, cells: np.ndarray, faces: Faces | None = None) -> tuple[float, float]:
     """checkMesh's largest non-orthogonality (degrees) of the internal faces and of the boundary
     faces of hexahedra (M, 8) or quads (M, 4; the front and back of the extruded layer are square
-    to it) over ``points`` (N, 3 or 2)."""
-    internal, boundary = face_cosines(*mesh_faces(points, cells))
+    to it) over ``points`` (N, 3 or 2); ``faces``: those of ``as_hexahedra``'s cells, when the
+    caller has them."""
+    internal, boundary = face_cosines(*as_hexahedra(points, cells), faces)
     return _largest(internal), _largest(boundary)
 
 
@@ -273,6 +283,7 @@ def reduce_non_orthogonality(
     thresholds: tuple[float, float],
     max_iterations: int = MAX_ITERATIONS,
     rings: int = RINGS,
+    faces: Faces | None = None,
 ) -> tuple[np.ndarray, dict]:
     """``points`` (N, dim) with ``free`` nodes (indices) moved to reduce the non-orthogonality of
     the faces of ``cells`` (M, 8) (2D: quads (M, 4), measured extruded) above ``thresholds``
@@ -281,13 +292,14 @@ def reduce_non_orthogonality(
     Jacobian falls below the smaller of its start value and the mesh's smallest adds
     (shortfall / SHEAR_SCALE)^POWER to the penalty. Returns (points, info: ``iterations``,
     ``moved`` nodes, ``before``/``after`` the largest angles (internal, boundary) in degrees,
-    ``penalty_before``/``after``)."""
+    ``penalty_before``/``after``). ``faces``: those of ``as_hexahedra``'s cells, when the caller
+    has them."""
     points = np.asarray(points, dtype=float)
     dim, n_points = points.shape[1], len(points)
     free = np.asarray(free, dtype=np.int64)
-    points3, cells3 = mesh_faces(points, cells)
+    points3, cells3 = as_hexahedra(points, cells)
     free3 = free if dim == 3 else np.concatenate([free, free + n_points])
-    faces = Faces(cells3)
+    faces = faces_of(cells3) if faces is None else faces
     orientation = _orientation(points3[cells3])
     n_internal = len(faces.owner)
     limit = np.cos(np.radians(np.repeat(np.asarray(thresholds, dtype=float), [n_internal, len(faces.cell)])))
@@ -306,7 +318,7 @@ def reduce_non_orthogonality(
     scale = 1.0 - sub_limit
     # variables: each moving node's displacement in units of its shortest edge, so that L-BFGS sees
     # a thin wall cell's nodes and a core cell's alike
-    size = _node_sizes(points3, cells3, _HEX_EDGES if dim == 3 else _HEX_EDGES[:8])[moving][:, None]
+    size = _node_sizes(points3, sub_cells, _HEX_EDGES if dim == 3 else _HEX_EDGES[:8])[moving][:, None]
     origin = points[moving]
     work = points3.copy()
     best = {"value": np.inf, "x": np.zeros(origin.size)}
@@ -348,7 +360,7 @@ def reduce_non_orthogonality(
         **info,
         "iterations": iterations,
         "moved": len(moving),
-        "after": largest_angles(moved, cells),
+        "after": largest_angles(moved, cells, faces),
         "penalty_before": start,
         "penalty_after": float(best["value"]),
     }
@@ -377,16 +389,18 @@ def polish_block_set(block_set, Xs: list, start: list) -> tuple[list, dict | Non
     larger (``reduce_non_orthogonality``); the result is kept where neither largest angle grew.
     Returns (node arrays, None when nothing was to do (no face over the thresholds), else the figures: ``start``, ``before``,
     ``after`` (internal, boundary) degrees, ``moved``, ``iterations``, ``kept``)."""
+    numbering, count = global_numbering(block_set)
     points, cells, _ = merged_mesh(block_set, Xs)
-    before, reference = largest_angles(points, cells), largest_angles(*merged_mesh(block_set, start)[:2])
+    faces = faces_of(as_hexahedra(points, cells)[1])  # one matching for the start, the mesh and the polish
+    before, reference = largest_angles(points, cells, faces), largest_angles(gather(start, numbering, count), cells, faces)
     if before[0] <= reference[0] and before[1] <= reference[1]:
         return Xs, None
-    on_boundary = boundary_nodes(block_set)
     thresholds = tuple(max(FLOOR, POLISH_TARGET * angle) for angle in reference)
-    moved, info = reduce_non_orthogonality(points, cells, np.flatnonzero(~on_boundary), thresholds)
+    free = np.flatnonzero(~boundary_nodes(block_set))
+    moved, info = reduce_non_orthogonality(points, cells, free, thresholds, faces=faces)
     if not info["moved"]:  # no face over the thresholds (10 degrees at least)
         return Xs, None
     figures = {"start": reference, "before": before, "moved": info["moved"], "iterations": info["iterations"]}
     if info["after"][0] > before[0] or info["after"][1] > before[1]:
         return Xs, {**figures, "after": before, "kept": False}
-    return [moved[ids] for ids in global_numbering(block_set)[0]], {**figures, "after": info["after"], "kept": True}
+    return [moved[ids] for ids in numbering], {**figures, "after": info["after"], "kept": True}

@@ -17,11 +17,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from meshgen.geometry.grid import HEX_CORNERS, HEX_FACE_LOOPS, HEX_FACE_OUTWARD
+
 __all__ = ["backward", "corner_jacobians", "corner_jacobians_backward", "forward"]
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
-_CORNERS = np.array([[0, 3, 7, 4], [1, 2, 6, 5], [0, 4, 5, 1], [3, 7, 6, 2], [0, 1, 2, 3], [4, 5, 6, 7]])
-_OUTWARD = np.array([-1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
 _TINY = 1e-300
 
 
@@ -209,7 +209,7 @@ def forward(X: np.ndarray, orientation: float) -> tuple[np.ndarray, np.ndarray, 
     left-handed)."""
     X = np.ascontiguousarray(X, dtype=float)
     Sf, c, C, V = np.empty((len(X), 6, 3)), np.empty((len(X), 6, 3)), np.empty((len(X), 3)), np.empty(len(X))
-    _forward(X, float(orientation), _CORNERS, _OUTWARD, Sf, c, C, V)
+    _forward(X, float(orientation), HEX_FACE_LOOPS, HEX_FACE_OUTWARD, Sf, c, C, V)
     return Sf, C, V, c
 
 
@@ -219,14 +219,14 @@ def backward(X: np.ndarray, orientation: float, gSf: np.ndarray, gc: np.ndarray,
     X = np.ascontiguousarray(X, dtype=float)
     gX = np.zeros_like(X)
     arrays = [np.ascontiguousarray(g, dtype=float) for g in (gSf, gc, gC)]
-    _backward(X, float(orientation), _CORNERS, _OUTWARD, *arrays, gX)
+    _backward(X, float(orientation), HEX_FACE_LOOPS, HEX_FACE_OUTWARD, *arrays, gX)
     return gX
 
 
 def _corner_table():
     """Each VTK hexahedron corner's neighbours along axes 0, 1, 2 and the signs that turn the edges
     to them along +axis."""
-    bits = [(k & 1 ^ (k >> 1) & 1, (k >> 1) & 1, k >> 2) for k in range(8)]
+    bits = [tuple(int(b) for b in row) for row in HEX_CORNERS]
     corner_of = {b: k for k, b in enumerate(bits)}
     neighbours = [[corner_of[tuple(b[d] ^ (d == axis) for d in range(3))] for axis in range(3)] for b in bits]
     return np.array(neighbours), np.array([[1.0 - 2 * b[axis] for axis in range(3)] for b in bits])

@@ -62,14 +62,10 @@ def surface_sliding(block_set, numbering, count: int, planar=None) -> list[tuple
     rules = []
     for which, project in enumerate(projections):
         chosen = [(n[owner[n] == which], i[owner[n] == which]) for w, n, i in pairs if w == which]
-        if not chosen:
-            continue
         nodes_all = np.concatenate([n for n, _ in chosen])
-        inner_all = np.concatenate([i for _, i in chosen])
-        if not len(nodes_all):
-            continue
-        nodes, slot = np.unique(nodes_all, return_inverse=True)
-        rules.append((project, nodes, inner_all, slot.reshape(-1)))
+        if len(nodes_all):
+            nodes, slot = np.unique(nodes_all, return_inverse=True)
+            rules.append((project, nodes, np.concatenate([i for _, i in chosen]), slot.reshape(-1)))
     return rules
 
 
