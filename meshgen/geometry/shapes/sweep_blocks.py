@@ -52,7 +52,7 @@ from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
-from meshgen.geometry.shapes.sweep_ring import coons, ring_blocks
+from meshgen.geometry.shapes.sweep_ring import coons, piece, ring_blocks, segment
 from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
 __all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
@@ -114,14 +114,6 @@ def _spline(fractions: np.ndarray, points: np.ndarray, linear: bool = False):
     return lambda t: spline(np.clip(np.asarray(t, dtype=float), 0.0, 1.0))
 
 
-def _line(a: np.ndarray, b: np.ndarray):
-    return lambda t: a + np.asarray(t, dtype=float)[:, None] * (b - a)
-
-
-def _piece(curve, start: float, stop: float):
-    return lambda t: curve(start + np.asarray(t, dtype=float) * (stop - start))
-
-
 def _midpoint_blocks(curves, faces):
     """n quadrilaterals around the centroid (the frame's origin): block k has the corner at the
     start of curve k, half of curve k - 1 (xi = 1) and half of curve k (eta = 1)."""
@@ -131,10 +123,10 @@ def _midpoint_blocks(curves, faces):
     for k in range(n):
         name = f"quad{k}"
         blocks[name] = (
-            _line(centre, middle[k]),
-            _piece(curves[k - 1], 0.5, 1.0),
-            _line(centre, middle[k - 1]),
-            _piece(curves[k], 0.5, 0.0),
+            segment(centre, middle[k]),
+            piece(curves[k - 1], 0.5, 1.0),
+            segment(centre, middle[k - 1]),
+            piece(curves[k], 0.5, 0.0),
         )
         patches[name] = {"xi1": faces[k - 1], "eta1": faces[k]}
         interfaces.append((name, "eta0", f"quad{(k - 1) % n}", "xi0"))
@@ -146,7 +138,7 @@ def _ogrid_blocks(curves, faces, corners=None):
     outwards), the loop cut at four points a quarter of it apart (at the curves' ends); the core's
     corners ``corners`` (4, 2), else ``CORE`` of the way from the origin to the cuts."""
     pieces = _quarters(curves)
-    outer = [_piece(curves[c], a, b) for c, a, b in pieces]
+    outer = [piece(curves[c], a, b) for c, a, b in pieces]
     if corners is None:
         corners = [CORE * w(np.zeros(1))[0] for w in outer]
     core_sides = []
@@ -162,17 +154,17 @@ def _ogrid_blocks(curves, faces, corners=None):
         core_sides.append(side)
     blocks = {
         "core": (
-            _piece(core_sides[2], 1.0, 0.0),
+            piece(core_sides[2], 1.0, 0.0),
             core_sides[0],
             core_sides[3],
-            _piece(core_sides[1], 1.0, 0.0),
+            piece(core_sides[1], 1.0, 0.0),
         )
     }
     patches, interfaces = {}, []
     for k in range(4):
         name = f"ring{k}"
         start, stop = outer[k](np.zeros(1))[0], outer[k](np.ones(1))[0]
-        blocks[name] = (core_sides[k], outer[k], _line(corners[k], start), _line(corners[(k + 1) % 4], stop))
+        blocks[name] = (core_sides[k], outer[k], segment(corners[k], start), segment(corners[(k + 1) % 4], stop))
         patches[name] = {"xi1": faces[pieces[k][0]]}
         interfaces.append((name, "eta1", f"ring{(k + 1) % 4}", "eta0"))
     interfaces += [("core", face, f"ring{k}", "xi0") for k, face in enumerate(("xi1", "eta1", "xi0", "eta0"))]
@@ -189,7 +181,7 @@ def _sides(curves, smooth: bool):
     """A loop's sides for a ring: (piece, curve index) per quarter of a smooth loop of 1, 2 or 4
     curves, else per curve (a loop of sharp corners)."""
     if smooth:
-        return [(_piece(curves[c], a, b), c) for c, a, b in _quarters(curves)]
+        return [(piece(curves[c], a, b), c) for c, a, b in _quarters(curves)]
     return [(curve, k) for k, curve in enumerate(curves)]
 
 
@@ -219,7 +211,7 @@ def _annulus_blocks(curves, faces, hole, hole_faces, smooth: bool):
     for k in range(n):
         name, (side, curve) = f"ring{k}", inner[k]
         a0, a1 = side(np.zeros(1))[0], side(np.ones(1))[0]
-        blocks[name] = (side, outer[k][0], _line(a0, cuts[k]), _line(a1, cuts[(k + 1) % n]))
+        blocks[name] = (side, outer[k][0], segment(a0, cuts[k]), segment(a1, cuts[(k + 1) % n]))
         patches[name] = {"xi0": hole_faces[curve], "xi1": faces[outer[k][1]]}
         interfaces.append((name, "eta1", f"ring{(k + 1) % n}", "eta0"))
     return blocks, patches, interfaces
@@ -278,23 +270,23 @@ def _wedge_blocks(curves, faces, lengths):
     corners = [core_u, core_1, core_p, core_2, core_l, core_q]
     span = [(s_u, s_1), (s_1, nose), (nose, s_2), (s_2, s_l)]
     outer = [(lambda t, a=a, b=b: along(a + np.asarray(t, dtype=float) * (b - a))) for a, b in span]
-    outer += [_line(L, Q), _line(Q, U)]
+    outer += [segment(L, Q), segment(Q, U)]
     blocks, patches, interfaces = {}, {}, []
     for k in range(6):
         name, after = f"ring{k}", (k + 1) % 6
         blocks[name] = (
-            _line(corners[k], corners[after]),
+            segment(corners[k], corners[after]),
             outer[k],
-            _line(corners[k], cuts[k]),
-            _line(corners[after], cuts[after]),
+            segment(corners[k], cuts[k]),
+            segment(corners[after], cuts[after]),
         )
         interfaces.append((name, "eta1", f"ring{after}", "eta0"))
         if k < 4:
             patches[name] = {"xi1": faces[0] if k < 2 else faces[-1]}
     blocks["core0"] = _quad(core_q, core_u, core_1, core_p)
     blocks["core1"] = _quad(core_p, core_2, core_l, core_q)
-    blocks["te"] = (lambda t: along(1.0 - np.asarray(t, dtype=float) * (1.0 - s_l)), _line(U, Q),
-                    lambda t: along(np.asarray(t, dtype=float) * s_u), _line(L, Q))  # fmt: skip
+    blocks["te"] = (lambda t: along(1.0 - np.asarray(t, dtype=float) * (1.0 - s_l)), segment(U, Q),
+                    lambda t: along(np.asarray(t, dtype=float) * s_u), segment(L, Q))  # fmt: skip
     patches["te"] = {"xi0": faces[-1], "eta0": faces[0]}
     interfaces += [
         ("core0", "eta0", "ring5", "xi0"), ("core0", "xi1", "ring0", "xi0"), ("core0", "eta1", "ring1", "xi0"),
@@ -306,7 +298,7 @@ def _wedge_blocks(curves, faces, lengths):
 
 def _quad(a, b, c, d):
     """The straight sides of the quadrilateral a (xi, eta = 0, 0), b (1, 0), c (1, 1), d (0, 1)."""
-    return _line(a, d), _line(b, c), _line(a, b), _line(d, c)
+    return segment(a, d), segment(b, c), segment(a, b), segment(d, c)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -19,7 +19,20 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PLAIN", "RING", "SHARES", "SPOKE", "coons", "ring_blocks", "ring_corners", "worst_corner"]
+__all__ = [
+    "PLAIN",
+    "RING",
+    "SEARCHES",
+    "SHARES",
+    "SIMPLEX",
+    "SPOKE",
+    "coons",
+    "piece",
+    "ring_blocks",
+    "ring_corners",
+    "segment",
+    "worst_corner",
+]
 
 RING = 0.6  # the centroid construction's core corners: this share of the way to the loop's (the offset: 1 - of a depth)
 SPOKE = 0.6  # and a spoke runs at most this share of the way to where it meets a neighbouring one
@@ -58,11 +71,13 @@ def worst_corner(blocks, cells: int = 8) -> float:
     return worst
 
 
-def _line(a: np.ndarray, b: np.ndarray):
+def segment(a: np.ndarray, b: np.ndarray):
+    """The straight side from point ``a`` to ``b`` (2,) as a curve t (N,) -> (N, 2)."""
     return lambda t: a + np.asarray(t, dtype=float)[:, None] * (b - a)
 
 
-def _piece(curve, start: float, stop: float):
+def piece(curve, start: float, stop: float):
+    """The part of ``curve`` from parameter ``start`` to ``stop``, parametrised on [0, 1]."""
     return lambda t: curve(start + np.asarray(t, dtype=float) * (stop - start))
 
 
@@ -108,22 +123,22 @@ def _assemble(halves, vertex, inner, middle, centre, shares):
     for k in range(n):
         after = (k + 1) % n
         blocks[f"a{k}"] = (
-            _line(inner[k], joint[k]),
+            segment(inner[k], joint[k]),
             halves[k][0],
-            _line(inner[k], vertex[k]),
-            _line(joint[k], middle[k]),
+            segment(inner[k], vertex[k]),
+            segment(joint[k], middle[k]),
         )
         blocks[f"b{k}"] = (
-            _line(joint[k], inner[after]),
+            segment(joint[k], inner[after]),
             halves[k][1],
-            _line(joint[k], middle[k]),
-            _line(inner[after], vertex[after]),
+            segment(joint[k], middle[k]),
+            segment(inner[after], vertex[after]),
         )
         blocks[f"quad{k}"] = (
-            _line(centre, joint[k]),
-            _line(joint[k - 1], inner[k]),
-            _line(centre, joint[k - 1]),
-            _line(joint[k], inner[k]),
+            segment(centre, joint[k]),
+            segment(joint[k - 1], inner[k]),
+            segment(centre, joint[k - 1]),
+            segment(joint[k], inner[k]),
         )
     return blocks
 
@@ -145,7 +160,7 @@ def ring_blocks(curves, faces, sharp):
     n = len(curves)
     vertex, _, inner = ring_corners(curves)
     middle = np.array([curve(np.array([0.5]))[0] for curve in curves])
-    halves = [(_piece(curve, 0.0, 0.5), _piece(curve, 0.5, 1.0)) for curve in curves]
+    halves = [(piece(curve, 0.0, 0.5), piece(curve, 0.5, 1.0)) for curve in curves]
     plain = _assemble(halves, vertex, _centroid_corners(curves, vertex, sharp), middle, np.zeros(2), np.full(n, 0.5))
     if worst_corner(plain) >= PLAIN:
         return plain, *_patches(faces), False
