@@ -325,3 +325,20 @@ def test_slide_is_true_or_false_on_a_projected_patch(tmp_path, entry):
     with pytest.raises(GeometryError, match="'slide' is true or false, on a patch with 'project'") as error:
         load_block_set(write(tmp_path, text), None, (1, 1, 1))
     assert "\n" not in str(error.value)
+
+
+def test_an_extruded_set_slides_its_wall_in_its_section(tmp_path):
+    """cylinder-3d is solved as its 2D section: the surface's map goes to the section's frame."""
+    from meshgen.methods.elliptic import elliptic_blocks
+
+    text = (EXAMPLES / "cylinder-3d.yaml").read_text()
+    sliding = load_block_set(
+        write(tmp_path, text.replace("project: cylinder,", "project: cylinder, slide: true,"), "s.yaml"), None, (1, 1, 1)
+    )
+    fixed = load_block_set(write(tmp_path, text, "f.yaml"), None, (1, 1, 1))
+    slid, info = elliptic_blocks(sliding, orthogonality=False)
+    stay, _ = elliptic_blocks(fixed, orthogonality=False)
+    assert info.get("extruded") and info["surface_rounds"] >= 1
+    wall, kept = wall_nodes(sliding, slid, "cylinder"), wall_nodes(fixed, stay, "cylinder")
+    assert np.max(np.abs(np.linalg.norm(wall[:, :2], axis=1) - 0.05)) <= 1e-14  # on the cylinder
+    assert np.abs(wall - kept).max() > 1e-4 * 0.05  # and moved along it
