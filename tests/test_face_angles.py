@@ -124,3 +124,13 @@ def test_an_elliptic_block_set_is_no_less_orthogonal_than_its_tfi(name):
     after, before = merged_mesh(block_set, polished)[0], merged_mesh(block_set, plain)[0]
     np.testing.assert_array_equal(after[on_boundary], before[on_boundary])
     assert np.abs(after - before).max() > 0
+
+
+def test_the_mesh_command_says_what_the_polish_did(run_cli):
+    result = run_cli(
+        "mesh", "-g", str(TOPOLOGIES / "periodic-channel-2d.yaml"), "--method", "elliptic", "-o", "c.vtu", "--no-quality"
+    )
+    assert result.returncode == 0, result.stderr
+    line = next(line for line in result.stdout.splitlines() if line.startswith("orthogonality polish:"))
+    before, after = (float(v) for v in line.split("non-orthogonality ")[1].split(" deg")[0].split(" -> "))
+    assert after < before and "nodes moved" in line and "not kept" not in line
