@@ -293,8 +293,7 @@ def _print_block_result(made, quiet):
         echo(
             f"orthogonality polish: largest non-orthogonality {polished['before'][0]:.1f} -> {internal:.1f} deg "
             f"(boundary faces {polished['before'][1]:.1f} -> {boundary:.1f}; the start mesh's {start[0]:.1f} and "
-            f"{start[1]:.1f}), {polished['moved']} nodes moved"
-            + ("" if polished["kept"] else ": not kept, a largest angle grew")
+            f"{start[1]:.1f}), {polished['moved']} nodes moved" + ("" if polished["kept"] else ": not kept, a largest angle grew")
         )
     echo(f"wrote {made.output}")
     for line in summary_lines(made.quality_report) if made.quality_report is not None else []:
