@@ -132,7 +132,7 @@ def test_the_loft_joins_the_circles_points_to_the_squares_corners(solids, method
     bottom = np.array([X[-1, 0, 0] for X in rings])
     top = np.array([X[-1, 0, -1] for X in rings])
     angles = np.degrees(np.arctan2(bottom[:, 1], bottom[:, 0]))
-    assert sorted(np.round(np.mod(angles + 45, 360), 6)) == [0.0, 90.0, 180.0, 270.0]
+    assert sorted(np.mod(np.round(angles + 45, 6), 360)) == [0.0, 90.0, 180.0, 270.0]  # round first: -1e-15 mod 360 is 360
     assert np.allclose(np.hypot(bottom[:, 0], bottom[:, 1]), 0.5, atol=1e-9) and np.allclose(bottom[:, 2], 0.0, atol=1e-12)
     assert np.allclose(np.abs(top[:, :2]), 0.4, atol=1e-9) and np.allclose(top[:, 2], 2.0, atol=1e-12)
     assert np.allclose(np.sign(top[:, :2]), np.sign(bottom[:, :2]))  # each corner over its own circle point

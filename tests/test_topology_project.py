@@ -23,7 +23,7 @@ def sphere_in_box(surface: str, project: bool = True, arcs: bool = False, cells:
     """Six blocks between a sphere of radius INNER (its cube's corners on it) and the box |x| <= OUTER."""
     signs = list(itertools.product((-1, 1), repeat=3))
     a = INNER / np.sqrt(3.0)
-    vertices = [list(a * np.array(s)) for s in signs] + [list(OUTER * np.array(s, float)) for s in signs]
+    vertices = [(a * np.array(s)).tolist() for s in signs] + [(OUTER * np.array(s, float)).tolist() for s in signs]
     blocks, walls = [], []
     for axis, side in itertools.product(range(3), (-1, 1)):
         u, v = [d for d in range(3) if d != axis]
