@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
 from meshgen.geometry.grid import HEX_CORNERS, HEX_FACE_LOOPS, HEX_FACE_OUTWARD
 
 __all__ = ["backward", "corner_jacobians", "corner_jacobians_backward", "forward"]

@@ -30,6 +30,8 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 from numba import njit
 
+import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
+
 __all__ = ["defect", "jacobi_step", "lines", "operator", "relax", "threads", "transfer"]
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}

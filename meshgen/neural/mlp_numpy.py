@@ -84,6 +84,8 @@ def dense_kernel():
     from numba import njit
     from numba.core.compiler_lock import global_compiler_lock
 
+    import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
+
     # Raised as meshgen.quality.compiled does: the loop reads 10 rows and writes 8, more overlap
     # checks than LLVM's default limits allow, without which it would not vectorise. It changes
     # what loops may be vectorised, never the arithmetic of one.

@@ -29,12 +29,12 @@ import math
 import os
 
 import llvmlite.binding as llvm
-import numba
 import numpy as np
 from numba import njit, prange, uint64
 
 from meshgen.quality.angles import finish_hex_angles
 from meshgen.quality.pool import map_in_threads, threads
+from meshgen.run.jit import numba
 
 # Dask's worker threads call the kernels at once (the chunked path): numba's workqueue layer aborts
 # on concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those.

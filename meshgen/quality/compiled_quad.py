@@ -17,6 +17,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
 from meshgen.quality import compiled  # noqa: F401  (sets numba's threading layer first)
 from meshgen.quality.angles import finish_hex_angles
 

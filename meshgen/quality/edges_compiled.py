@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
 from meshgen.quality.pool import threads
 
 __all__ = ["shortest_edge_above"]

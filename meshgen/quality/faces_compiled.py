@@ -19,9 +19,10 @@ from __future__ import annotations
 import math
 import os
 
-import numba
 import numpy as np
 from numba import njit, prange
+
+from meshgen.run.jit import numba
 
 # Dask's worker threads may call numba kernels at once: numba's workqueue layer aborts on
 # concurrent calls, TBB and OpenMP do not. Unless the user chose a layer, take one of those (as

@@ -15,6 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
+import meshgen.run.jit  # noqa: F401 - numba with its BLAS probe deferred (design notes §21)
 from meshgen.quality import sketch as sketches
 from meshgen.quality.pool import map_in_threads
 
