@@ -1,7 +1,10 @@
 """Test shapes built by the tests themselves: random four-cornered surface patches, a bent
-rectangular duct written as a multi-solid ASCII STL, a twisted loft exported to STEP by gmsh."""
+rectangular duct written as a multi-solid ASCII STL, a twisted loft exported to STEP by gmsh,
+triangulated bends (a polygon turned about an axis, capped)."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -114,6 +117,80 @@ def write_ascii_stl(path, vertices, triangles, labels=None, names=DUCT_NAMES):
         lines.append(f"endsolid {name}")
         blocks.append("\n".join(lines))
     path.write_text("\n".join(blocks) + "\n")
+    return path
+
+
+def turned_outline(kind: str) -> np.ndarray:
+    """The (x, z) outline (K, 2), counterclockwise, of a triangulated bend's cap in the plane
+    y = 0: ``torus`` a disk of radius 0.5 centred 2 from the z axis (64 sides), ``pentagon`` a
+    regular pentagon of circumradius 0.5 centred there (the CAD ``bent_pentagon``'s)."""
+    count, radius = {"torus": (64, 0.5), "pentagon": (5, 0.5)}[kind]
+    angles = np.pi / 2 + 2 * np.pi * np.arange(count) / count
+    return np.column_stack([2.0 + radius * np.cos(angles), radius * np.sin(angles)])
+
+
+def turned_surface(
+    outline, angle: float, sections: int, lift: float = 0.0, taper: float = 0.0, bump: float = 0.0, offset: float = 0.0, seed=None
+):
+    """A closed triangulated bend: the polygon ``outline`` (K, 2) of (x, z) points in the plane
+    y = 0 turned by ``angle`` radians about the z axis in ``sections`` equal steps (rings of K
+    vertices, each quadrilateral between two rings two triangles), each end capped by a fan from
+    the ring's centroid; triangles turned outward. Bad bends: ``lift`` raises ring k by
+    lift k / sections along z (a helix: the caps are no rotation of each other), ``taper`` scales
+    ring k about its centroid by 1 + taper k / sections, ``bump`` pushes the middle ring's vertices
+    that far from the axis (its triangles leave the surface the outline sweeps). ``offset`` puts
+    the cap in the plane y = offset instead (the axis off the cap's plane: the quadrilaterals
+    between rings are not planar); ``seed``: each quadrilateral cut along either diagonal at
+    random. Returns (vertices (n, 3), triangles (m, 3)), lengths as given."""
+    outline = np.asarray(outline, dtype=float)
+    K, S = len(outline), int(sections)
+    share = np.arange(S + 1) / S
+    centre = outline.mean(axis=0)
+    scaled = centre + (1.0 + taper * share)[:, None, None] * (outline - centre)  # (S + 1, K, 2)
+    x = scaled[..., 0] + bump * (np.arange(S + 1) == S // 2)[:, None]
+    cos, sin = np.cos(angle * share)[:, None], np.sin(angle * share)[:, None]
+    rings = np.stack([x * cos - offset * sin, x * sin + offset * cos, scaled[..., 1] + lift * share[:, None]], axis=-1)
+    vertices = np.concatenate([rings.reshape(-1, 3), rings[[0, -1]].mean(axis=1)])
+    k, i = (a.ravel() for a in np.meshgrid(np.arange(S), np.arange(K), indexing="ij"))
+    a, b = k * K + i, k * K + (i + 1) % K
+    c, d = b + K, a + K
+    ring = np.arange(K)
+    first, last = np.full(K, len(vertices) - 2), np.full(K, len(vertices) - 1)
+    other = np.random.default_rng(seed).random(len(a)) < 0.5 if seed is not None else np.zeros(len(a), dtype=bool)
+    triangles = np.concatenate(
+        [
+            np.where(other[:, None], np.column_stack([a, b, d]), np.column_stack([a, b, c])),
+            np.where(other[:, None], np.column_stack([b, c, d]), np.column_stack([a, c, d])),
+            np.column_stack([first, (ring + 1) % K, ring]),
+            np.column_stack([last, S * K + ring, S * K + (ring + 1) % K]),
+        ]
+    )
+    p, q, r = (vertices[triangles[:, n]] for n in range(3))
+    if np.einsum("ij,ij->i", p, np.cross(q, r)).sum() < 0:
+        triangles = triangles[:, ::-1]
+    return vertices, triangles
+
+
+def surface_volume(vertices, triangles) -> float:
+    """The volume (length^3) a closed, outward-oriented triangulated surface encloses, by the
+    divergence theorem over its triangles."""
+    p, q, r = (vertices[triangles[:, n]] for n in range(3))
+    return float(np.einsum("ij,ij->i", p, np.cross(q, r)).sum() / 6.0)
+
+
+def write_surface(path, vertices, triangles):
+    """The surface written to ``path`` by its extension: ``.stl`` binary (float32, trimesh), ``.obj``
+    (trimesh, 17 digits), ``.ply`` (trimesh, binary float32); ``.ascii.stl`` an exact ASCII STL."""
+    path = Path(path)
+    if path.name.endswith(".ascii.stl"):
+        return write_ascii_stl(path, vertices, triangles)
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, triangles, process=False)
+    if path.suffix == ".obj":
+        path.write_text(trimesh.exchange.obj.export_obj(mesh, digits=17))
+    else:
+        mesh.export(path)
     return path
 
 

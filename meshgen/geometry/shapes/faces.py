@@ -37,9 +37,9 @@ __all__ = [
 
 FACE_NAMES = cube.face_names(3)
 SWEEP_HINT = (
-    "a straight prism, two planar caps and sides along one direction, is cut into blocks; bends, lofts and other "
-    "sweeps from their CAD file: STEP, IGES or BREP, docs/shapes-from-files.md; else describe its blocks in a "
-    "topology file, docs/topologies.md"
+    "a prism or a bend, two planar caps, one the other moved along a line or turned about an axis, the sides the "
+    "outline's sweep, is cut into blocks; lofts and other sweeps from their CAD file: STEP, IGES or BREP, "
+    "docs/shapes-from-files.md; else describe its blocks in a topology file, docs/topologies.md"
 )
 OPPOSITE = {name: name[:-1] + ("1" if name.endswith("0") else "0") for name in FACE_NAMES}
 

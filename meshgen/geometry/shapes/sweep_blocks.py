@@ -15,7 +15,10 @@ a topology file, so ``meshgen mesh -g part.step`` meshes it like ``geometries/pi
 - each block's map is the Coons patch of its four sides in the cap's plane carried a share zeta
   of the way along the motion, so its outer faces are the cap outline's sweep, which is the
   linking faces (``sweep_read`` checks it), and its ends lie on the caps;
-- patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise.
+- patches: one per CAD face (its name, else face1..faceN), wall unless the name says otherwise;
+  a triangulated surface's (``sweep_stl``): its sharp-edge split's patches, the outline its
+  polyline, and on a bend the nodes of each block face on the outline put on the linking facets
+  (``sweep_stl_turn.SideMap``: the facets are chords of the turned outline).
 - ``elliptic_options`` (passed on by ``meshgen.run.meshing``): a straight sweep is solved as its
   cap's 2D mesh, extruded, whose flat sides slide, except in ring blocks at sharp corners or
   smooth joints (a filleted cap, a square tube: sliding carries nodes past the corner and folds
@@ -49,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import GeometryError
+from meshgen.geometry import cube
 from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
@@ -90,7 +94,8 @@ def _read(path: Path) -> dict:
 def is_sweep_file(spec) -> bool:
     """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
     then meshed as a block set, or refused with a pointer to topology files), or a triangulated
-    surface that is a straight sweep (``sweep_stl``)."""
+    surface that is a sweep (``sweep_stl``) or has two planar caps that every other patch touches
+    (refused here, saying why they are no sweep's)."""
     suffix = Path(str(spec)).suffix.lower() if isinstance(spec, (str, Path)) else ""
     if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         return False
@@ -98,7 +103,10 @@ def is_sweep_file(spec) -> bool:
     if not path.is_file():
         return False
     try:  # a triangulated surface only when a sweep: else its own reader says what it is
-        return _read(path)["kind"] == "sweep" if suffix in TRIANGULATED_FORMATS else _read(path)["kind"] != "six"
+        found = _read(path)
+        if suffix in TRIANGULATED_FORMATS:
+            return found["kind"] == "sweep" or bool(found.get("caps_found"))
+        return found["kind"] != "six"
     except GeometryError:
         return False  # the single-block reader reports what is wrong with the file
 
@@ -449,7 +457,7 @@ def sweep_module(path) -> types.ModuleType:
         raise GeometryError(
             f"{summary}; its cap {names[first]} ({how}) folds in block(s) {', '.join(folded)} (a concave cap?): {TOPOLOGY_HINT}"
         )
-    origin, frame = found["origin"], found["frame"]
+    origin, frame, sides = found["origin"], found["frame"], found.get("sides")
     motion = {"kind": "loft", "gap": found["gap"]} if loft else found["motion"]
     if loft:
         path_words = "a loft: planar, parallel caps, ruled linking faces"
@@ -477,13 +485,19 @@ def sweep_module(path) -> types.ModuleType:
         block_patches[name]["zeta1"] = (names[second], kinds[names[second]])
     size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
+    face, plural, faces = (
+        ("patch", "patches", "the sharp-edge split's") if found.get("linear") else ("face", "faces", "one per CAD face")
+    )
     lines = (
         f"{path.name}: {found['summary']}: {path_words}; "
-        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other face touches both; "
-        f"{'the rulings lie' if loft else 'the outline carried along lies'} on the linking faces to "
-        f"{motion['gap']:.1e} of the part's size",
+        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other {face} touches both; "
+        f"{'the rulings lie' if loft else 'the outline carried along lies'} on the linking {plural} to "
+        f"{motion['gap']:.1e} of the part's size"
+        + (f" (their facets' chords within {motion['sag']:.1e} of it)" if "sag" in motion else ""),
         f"{path.name}: cap {names[first]}: {how}",
-        f"{path.name}: patches {', '.join(names)}: one per CAD face (the linking faces on the blocks' outer sides)",
+        f"{path.name}: patches {', '.join(names)}: {faces} (the linking {plural} on the blocks' outer sides"
+        + (", their nodes on the facets" if found.get("linear") else "")
+        + ")",
         *lines_extra,
     )
 
@@ -516,7 +530,13 @@ def sweep_module(path) -> types.ModuleType:
         if loft:  # along the rulings: the straight lines between the caps' maps
             far = found["origins"][1] + coons(second_blocks[block], points[:, 0], points[:, 1]) @ frame
             return (1.0 - points[:, 2:]) * (origin + xy @ frame) + points[:, 2:] * far
-        return moved(motion, origin + xy @ frame, points[:, 2])
+        mapped = moved(motion, origin + xy @ frame, points[:, 2])
+        for face_name, index in sides_of.get(block, {}).items() if sides is not None else ():
+            face = cube.face_named(face_name, 3)  # an outline face of a triangulated bend: on its facets
+            on = points[:, face.axis] == face.side
+            if on.any():
+                mapped[on] = sides.evaluate(index, xy[on], points[on, 2])
+        return mapped
 
     def notes(block_set):
         return list(lines)

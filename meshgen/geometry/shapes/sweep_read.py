@@ -38,7 +38,7 @@ import numpy as np
 from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.cad import gmsh_model
 
-__all__ = ["CURVE_SAMPLES", "SHARP_DEGREES", "moved", "read_sweep"]
+__all__ = ["CURVE_SAMPLES", "SHARP_DEGREES", "cap_motions", "moved", "read_sweep"]
 
 CURVE_SAMPLES = 1025  # points per cap curve sent to meshgen (a cubic spline through them there)
 DENSE_SAMPLES = 8001  # parameter samples per curve for its arc length
@@ -104,10 +104,11 @@ def moved(motion: dict, points: np.ndarray, t) -> np.ndarray:
     return point + v * np.cos(angle) + np.cross(axis, v) * np.sin(angle) + (v @ axis)[:, None] * axis * (1 - np.cos(angle))
 
 
-def _motions(n_i, n_j, c_i, c_j, size):
-    """The rigid motions that could carry a cap (normal ``n_i``, centroid ``c_i``) onto the other:
-    the translation c_j - c_i when the normals are parallel, else rotations about the axis square
-    to both normals through the point that carries c_i to c_j, either way round."""
+def cap_motions(n_i, n_j, c_i, c_j, size, tolerance: float = 1e-9):
+    """The rigid motions that could carry a cap (unit normal ``n_i`` (3,), centroid ``c_i`` (3,))
+    onto the other: the translation c_j - c_i when the normals are parallel, else rotations about
+    the axis square to both normals through the point that carries c_i to c_j (to ``tolerance``
+    of the solid's ``size``), either way round."""
     axis = np.cross(n_i, n_j)
     if np.linalg.norm(axis) < 1e-6:
         return [{"kind": "translation", "vector": c_j - c_i}]
@@ -118,7 +119,7 @@ def _motions(n_i, n_j, c_i, c_j, size):
         cos, sin = np.cos(angle), np.sin(angle)
         rotation = cos * np.eye(3) + sin * np.cross(np.eye(3), axis) + (1 - cos) * np.outer(axis, axis)
         point = np.linalg.lstsq(np.eye(3) - rotation, c_j - rotation @ c_i, rcond=None)[0]
-        if np.linalg.norm((np.eye(3) - rotation) @ point - (c_j - rotation @ c_i)) < 1e-9 * size:
+        if np.linalg.norm((np.eye(3) - rotation) @ point - (c_j - rotation @ c_i)) < tolerance * size:
             found.append({"kind": "rotation", "point": point, "axis": axis, "angle": float(angle)})
     return found
 
@@ -146,7 +147,7 @@ def _find_caps(gmsh, faces, curves_of, size):
         centres = [mass[k][1] for k in (i, j)]
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
         why = f"faces {i + 1} and {j + 1} are planar but not one shape moved along a line or turned about an axis"
-        for motion in _motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
+        for motion in cap_motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
             gaps = [_outline_distance(gmsh, curves_of[j], moved(motion, samples, 1.0))]
             if gaps[0] > TOLERANCE * size:
                 continue

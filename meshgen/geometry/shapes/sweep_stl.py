@@ -1,13 +1,20 @@
-"""A closed triangulated surface (STL, OBJ, PLY) without patches of its own read as a straight
-sweep: after the sharp-edge patch split (``surface_patches.split_at_sharp_edges``), two planar patches (the caps) that every
-other patch touches, the second the first moved by a translation, and every other triangle
-parallel to it (the outline's prism: a triangulated cylinder or prism).
+"""A closed triangulated surface (STL, OBJ, PLY) without patches of its own read as a sweep:
+after the sharp-edge patch split (``surface_patches.split_at_sharp_edges``), two planar patches
+(the caps) that every other patch touches, the second the first carried by a rigid motion
+(``sweep_read.cap_motions``, ``moved``): a translation, every other triangle parallel to it (the
+outline's prism: a triangulated cylinder or prism), or a rotation about an axis, every other
+triangle on the surface the first cap's outline sweeps (a bend: ``sweep_stl_turn``).
 
 ``read_surface_sweep(path)`` returns what ``sweep_read.read_sweep`` does for a CAD solid (kind
 "six", "sweep" or "other", names, volume, box, caps, motion, origin, frame, curves, holes), each
 curve's points the outline's own vertices (``linear``: joined by straight lines, so points
-interpolated along them lie on the facets); the curves break at the outline's sharp corners
-(turning by more than ``sweep_read.SHARP_DEGREES``).
+interpolated along them lie on the facets; its ``vertices`` their indices, ``patches`` the
+linking patches of its edges); the curves break at the outline's sharp corners (turning by more
+than ``sweep_read.SHARP_DEGREES``). A bend also has ``sides`` (``sweep_stl_turn.SideMap``: the
+outline's points turned, on the linking facets) and its motion the chords' largest ``sag``
+(relative to the size). ``caps_found``: two planar patches that every other touches were found
+(a refusal then names what they are not). Caps match to ``PLANAR`` of the size, or to the
+float32 rounding of a file written in float32 (``_rounding``).
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ import itertools
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from meshgen.geometry.shapes.surface_patches import (
     check_closed,
@@ -24,7 +32,8 @@ from meshgen.geometry.shapes.surface_patches import (
     split_at_sharp_edges,
     triangle_normals,
 )
-from meshgen.geometry.shapes.sweep_read import SHARP_DEGREES
+from meshgen.geometry.shapes.sweep_read import SHARP_DEGREES, cap_motions, moved
+from meshgen.geometry.shapes.sweep_stl_turn import positive, turned_sides
 
 __all__ = ["read_surface_sweep"]
 
@@ -57,53 +66,77 @@ def read_surface_sweep(path) -> dict:
     cross = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
     areas = 0.5 * np.linalg.norm(cross, axis=1)
     vertices_of = [np.unique(T[labels == k]) for k in range(len(names))]
+    tolerance = _rounding(V, size)
     planes = []
     for k in range(len(names)):
         normal = (cross[labels == k]).sum(axis=0)
         normal = normal / max(np.linalg.norm(normal), 1e-300)
         centre = (areas[labels == k, None] * V[T[labels == k]].mean(axis=1)).sum(axis=0) / areas[labels == k].sum()
-        flat = np.abs((V[vertices_of[k]] - centre) @ normal).max() <= PLANAR * size
+        flat = np.abs((V[vertices_of[k]] - centre) @ normal).max() <= tolerance
         planes.append((flat, normal, centre, areas[labels == k].sum()))
-    why = "no two planar patches that every other patch touches"
+    why, nearest = "no two planar patches that every other patch touches", np.inf
     for i, j in itertools.combinations(range(len(names)), 2):
         if not (planes[i][0] and planes[j][0]) or np.intersect1d(vertices_of[i], vertices_of[j]).size:
             continue
         others = [k for k in range(len(names)) if k not in (i, j)]
         if not all(np.intersect1d(vertices_of[k], vertices_of[c]).size for k in others for c in (i, j)):
             continue
-        vector = planes[j][2] - planes[i][2]
+        found["caps_found"] = True  # a sweep's refusal now says why, not the single block's
         outline = [_boundary_edges(T[labels == c]) for c in (i, j)]
         ends = [V[np.unique(e)] for e in outline]
-        moved = ends[0] + vector
-        gap = (
-            np.linalg.norm(moved[:, None, :] - ends[1][None, :, :], axis=2).min(axis=1).max()
-            if len(ends[0]) == len(ends[1])
-            else np.inf
-        )
-        side = np.isin(labels, others)
-        along = np.abs(normals[side] @ (vector / np.linalg.norm(vector))).max() if side.any() else 0.0
-        if gap > PLANAR * size or along > 1e-9 or np.linalg.norm(np.cross(planes[i][1], planes[j][1])) > 1e-9:
-            why = f"patches {names[i]} and {names[j]} are planar but not one outline moved along a line"
-            continue
-        loops = _loops(outline[0])
-        if len(loops) > 2:
-            return {
-                **found,
-                "kind": "other",
-                "reason": f"{names[i]} and {names[j]} are caps with more than one hole (not meshed yet)",
-            }
-        normal = planes[i][1] if planes[i][1] @ vector > 0 else -planes[i][1]
-        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-        e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
-        frame = np.stack([e1, np.cross(normal, e1)])
-        origin = planes[i][2]
-        edge_patch = _edge_patches(T, labels, i)
-        curves = [_curves(V, loop, origin, frame, edge_patch) for loop in loops]
-        curves.sort(key=lambda loop: -abs(_area(np.concatenate([c["points"] for c in loop]))))
-        return {**found, "kind": "sweep", "caps": (i, j), "origin": origin, "frame": frame, "centroid": np.zeros(2),
-                "motion": {"kind": "translation", "vector": vector, "gap": gap / size}, "curves": curves[0],
-                "holes": curves[1:]}  # fmt: skip
+        nearest_gap = cKDTree(ends[1])  # the second cap's outline vertices
+        if nearest == np.inf:  # else a turn that came near says why
+            why = f"patches {names[i]} and {names[j]} are planar but not one outline moved along a line or turned about an axis"
+        motions = cap_motions(planes[i][1], planes[j][1], planes[i][2], planes[j][2], size, tolerance / size)
+        for motion in motions:
+            gap = nearest_gap.query(moved(motion, ends[0], 1.0))[0].max() if len(ends[0]) == len(ends[1]) else np.inf
+            if gap > tolerance:
+                continue
+            if motion["kind"] == "translation":
+                vector = motion["vector"]
+                side = np.isin(labels, others)
+                if side.any() and np.abs(normals[side] @ (vector / np.linalg.norm(vector))).max() > 1e-9:
+                    continue
+            else:
+                motion = positive(motion)
+            loops = _loops(outline[0])
+            if len(loops) > 2:
+                return {
+                    **found,
+                    "kind": "other",
+                    "reason": f"{names[i]} and {names[j]} are caps with more than one hole (not meshed yet)",
+                }
+            origin = planes[i][2]
+            velocity = moved(motion, origin[None], 1e-3)[0] - origin  # the sweep's direction at the cap
+            normal = planes[i][1] if planes[i][1] @ velocity > 0 else -planes[i][1]
+            helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+            e1 = np.cross(helper, normal) / np.linalg.norm(np.cross(helper, normal))
+            frame = np.stack([e1, np.cross(normal, e1)])
+            edge_patch = _edge_patches(T, labels, i)
+            curves = [_curves(V, loop, origin, frame, edge_patch) for loop in loops]
+            curves.sort(key=lambda loop: -abs(_area(np.concatenate([c["points"] for c in loop]))))
+            motion = {**motion, "gap": gap / size}
+            sweep = {**found, "kind": "sweep", "caps": (i, j), "origin": origin, "frame": frame, "centroid": np.zeros(2),
+                     "motion": motion, "curves": curves[0], "holes": curves[1:]}  # fmt: skip
+            if motion["kind"] == "translation":
+                return sweep
+            sides, measured = turned_sides(V, T, labels, motion, origin, frame, curves, size, names)
+            if sides is None:  # the turn that comes nearest says why
+                if measured[0] < nearest:
+                    nearest = measured[0]
+                    why = f"patches {names[i]} and {names[j]} are planar caps, one the other turned, but {measured[1]}"
+                continue
+            motion.update(gap=max(gap / size, measured[0]), sag=measured[1])
+            return {**sweep, "sides": sides}
     return {**found, "kind": "other", "reason": why}
+
+
+def _rounding(V: np.ndarray, size: float) -> float:
+    """How far (length) the file's own rounding may have moved a vertex: ``PLANAR`` of the size,
+    or, for float32 coordinates (a binary STL, a PLY), 8 float32 spacings at the largest one."""
+    if np.array_equal(V.astype(np.float32).astype(float), V):
+        return max(PLANAR * size, 8.0 * float(np.spacing(np.float32(np.abs(V).max()))))
+    return PLANAR * size
 
 
 def _boundary_edges(triangles: np.ndarray) -> np.ndarray:
@@ -162,6 +195,7 @@ def _curves(V, loop, origin, frame, edge_patch) -> list:
         index = np.arange(a, b + 1) % n
         points = xy[index]
         length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-        face = edge_patch[tuple(sorted((int(loop[index[0]]), int(loop[index[1]]))))]
-        curves.append({"fractions": length / length[-1], "points": points, "face": int(face), "smooth": not sharp[a]})
+        patches = [edge_patch[(int(p), int(q))] for p, q in np.sort(np.column_stack([loop[index[:-1]], loop[index[1:]]]), axis=1)]
+        curves.append({"fractions": length / length[-1], "points": points, "face": int(patches[0]), "smooth": not sharp[a],
+                       "vertices": loop[index], "patches": set(patches)})  # fmt: skip
     return curves
