@@ -9,8 +9,12 @@ edge filleted, radius 0.3), ``pentagon`` (a regular pentagonal prism), ``wedge``
 prism), ``bend`` (a disk of radius 0.5 turned 90 degrees about an axis 2 away), ``bent_pentagon``
 (a pentagon turned 120 degrees), ``tube`` (a square tube, 1 x 1 less 0.4 x 0.4, 3 long), ``wing``
 (a NACA 0012 section of chord 1, sharp trailing edge, extruded 1), ``loft`` (a ruled loft from a
-circle of radius 0.5 to a 0.8 x 0.8 square 2 above it), and ``stl_cylinder`` (trimesh's cylinder,
-64 sections, as STL: boundary distance from its facets), each at about 20 cells across
+circle of radius 0.5 to a 0.8 x 0.8 square 2 above it), ``stl_cylinder`` (trimesh's cylinder,
+64 sections, as STL: boundary distance from its facets), ``stl_torus`` and ``stl_bent_pentagon``
+(binary STL bends by tests/shape_helpers ``turned_surface``: the ``bend``'s disk as a 64-gon turned
+90 degrees and the ``bent_pentagon`` turned 120 degrees, 24 steps each: boundary distance from
+the facets by VTK's closest point, volume against the divergence theorem over the file's
+triangles), each at about 20 cells across
 its cap (--quick: about 10), by TFI and by the elliptic method (the wing's keeps the TFI mesh). Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
 distance of a patch node from its own CAD face (gmsh's closest point) over the bounding-box
 diagonal L, the mesh volume's relative difference from OCC's, checkMesh's verdict on the OpenFOAM
@@ -132,6 +136,32 @@ def bench_stl(folder: Path, dims, method: str) -> dict:
     return figures(made, dims, distance, trimesh.load(path).volume, seconds, folder)
 
 
+STL_BENDS = {"stl_torus": ("torus", np.pi / 2, "bend"), "stl_bent_pentagon": ("pentagon", 2 * np.pi / 3, "bent_pentagon")}
+
+
+def bench_stl_bend(row: str, folder: Path, dims, method: str) -> dict:
+    """A ``stl_torus`` or ``stl_bent_pentagon`` row (module docstring): the bend written as a
+    binary STL (float32), meshed; boundary distance from the file's triangles (VTK), volume
+    against theirs (divergence theorem)."""
+    import trimesh
+    from shape_helpers import distance_to_triangles, surface_volume, turned_outline, turned_surface, write_surface
+
+    kind, angle, _ = STL_BENDS[row]
+    path = write_surface(folder / f"{row}.stl", *turned_surface(turned_outline(kind), angle, 24))
+    read = trimesh.load(path, process=False, force="mesh")
+    vertices, triangles = np.asarray(read.vertices, dtype=float), np.asarray(read.faces)
+    start = time.perf_counter()
+    made = mesh(str(path), dims, method=method)
+    seconds = time.perf_counter() - start
+    nodes = []
+    for (block, face_name), _ in made.geometry.patches.items():
+        face = cube.face_named(face_name, 3)
+        nodes.append(np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3))
+    length = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+    distance = float(distance_to_triangles(np.concatenate(nodes), vertices, triangles).max()) / length
+    return figures(made, dims, distance, surface_volume(vertices, triangles), seconds, folder)
+
+
 def run(quick: bool = False) -> dict:
     """Rows ``sweep_<solid>`` -> {"tfi": figures, "elliptic": figures} (module docstring); the
     cylinder's also ``pipe_min_angle_min`` (the built-in pipe's, elliptic, same counts)."""
@@ -158,17 +188,21 @@ def run(quick: bool = False) -> dict:
         try:
             import trimesh  # noqa: F401
         except ImportError:
-            print("sweep_stl_cylinder: skipped, trimesh is not installed", flush=True)
+            print("sweep_stl_*: skipped, trimesh is not installed", flush=True)
         else:
-            row = results["sweep_stl_cylinder"] = {}
-            for method in ("tfi", "elliptic"):
-                m = row[method] = bench_stl(Path(folder), dims_of["cylinder"], method)
-                print(
-                    f"sweep_stl_cylinder {method:8s} {m['blocks']:2d} blocks  inverted {m['inverted']}  scaled Jacobian "
-                    f"{m['scaled_jacobian_min']:.3f}  boundary {m['boundary_distance_max_rel']:.1e} L  volume "
-                    f"{m['volume_rel_error']:.1e}  checkMesh {m['checkmesh_ok']}  {m['seconds']:.2f} s",
-                    flush=True,
-                )
+            benches = {"stl_cylinder": lambda method: bench_stl(Path(folder), dims_of["cylinder"], method)}
+            for name, (_, _, like) in STL_BENDS.items():
+                benches[name] = lambda method, name=name, like=like: bench_stl_bend(name, Path(folder), dims_of[like], method)
+            for name, bench in benches.items():
+                row = results[f"sweep_{name}"] = {}
+                for method in ("tfi", "elliptic"):
+                    m = row[method] = bench(method)
+                    print(
+                        f"sweep_{name} {method:8s} {m['blocks']:2d} blocks  inverted {m['inverted']}  scaled Jacobian "
+                        f"{m['scaled_jacobian_min']:.3f}  boundary {m['boundary_distance_max_rel']:.1e} L  volume "
+                        f"{m['volume_rel_error']:.1e}  checkMesh {m['checkmesh_ok']}  {m['seconds']:.2f} s",
+                        flush=True,
+                    )
         pipe = mesh("pipe", dims_of["cylinder"], method="elliptic", params={"radius": 0.5, "length": 2.0})
         angle = float(pipe.report()["metrics"]["min_angle"]["min"])
         results["sweep_cylinder"]["pipe_min_angle_min"] = angle
