@@ -15,11 +15,13 @@ from shape_helpers import (
     surface_volume,
     turned_outline,
     turned_surface,
+    write_ascii_stl,
     write_surface,
 )
 
 import meshgen
 from meshgen.geometry import cube
+from meshgen.geometry.shapes.surface_patches import Surface, split_at_sharp_edges
 from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
 trimesh = pytest.importorskip("trimesh", reason="binary STL, OBJ and PLY files need trimesh")
@@ -129,6 +131,23 @@ def test_a_bend_off_its_axis_with_any_diagonals_stays_on_its_facets(tmp_path, ki
     mesh = meshgen.mesh(str(path), SHAPES[kind][2], method="tfi")
     report = mesh.report()
     assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
+    every = np.concatenate(list(boundary_nodes(mesh).values()))
+    assert distance_to_triangles(every, vertices, triangles).max() < 1e-12 * size(vertices)
+
+
+def test_a_bend_of_named_solids_keeps_their_names(tmp_path):
+    """A multi-solid ASCII STL of the torus (its side ``wall``, its caps ``inlet`` and ``outlet``,
+    where the sharp-edge split puts them): those are the patches, of the types their names give."""
+    angle, sections, dims, _ = SHAPES["torus"]
+    vertices, triangles = turned_surface(turned_outline("torus"), angle, sections)
+    split = split_at_sharp_edges(Surface(vertices, triangles, np.full(len(triangles), -1), ()))
+    side = np.bincount(split.labels).argmax()  # the largest patch: the side
+    caps = [k for k in range(3) if k != side]
+    names = {side: "wall", caps[0]: "inlet", caps[1]: "outlet"}
+    write_ascii_stl(tmp_path / "named.stl", vertices, triangles, split.labels, [names[k] for k in range(3)])
+    mesh = meshgen.mesh(str(tmp_path / "named.stl"), dims, method="tfi")
+    kinds = dict(mesh.geometry.patches.values())
+    assert kinds == {"wall": "wall", "inlet": "patch", "outlet": "patch"}
     every = np.concatenate(list(boundary_nodes(mesh).values()))
     assert distance_to_triangles(every, vertices, triangles).max() < 1e-12 * size(vertices)
 

@@ -486,7 +486,7 @@ def sweep_module(path) -> types.ModuleType:
     size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
     stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
     face, plural, faces = (
-        ("patch", "patches", "the sharp-edge split's") if found.get("linear") else ("face", "faces", "one per CAD face")
+        ("patch", "patches", found["patch_words"]) if found.get("linear") else ("face", "faces", "one per CAD face")
     )
     lines = (
         f"{path.name}: {found['summary']}: {path_words}; "

@@ -1,6 +1,7 @@
-"""A closed triangulated surface (STL, OBJ, PLY) without patches of its own read as a sweep:
-after the sharp-edge patch split (``surface_patches.split_at_sharp_edges``), two planar patches
-(the caps) that every other patch touches, the second the first carried by a rigid motion
+"""A closed triangulated surface (STL, OBJ, PLY) read as a sweep: of its patches (a multi-solid
+ASCII STL's named solids, else the sharp-edge split's, ``surface_patches.split_at_sharp_edges``:
+patch1..patchN), two planar ones (the caps) that every other patch touches, the second the
+first carried by a rigid motion
 (``sweep_read.cap_motions``, ``moved``): a translation, every other triangle parallel to it (the
 outline's prism: a triangulated cylinder or prism), or a rotation about an axis, every other
 triangle on the surface the first cap's outline sweeps (a bend: ``sweep_stl_turn``).
@@ -13,7 +14,8 @@ linking patches of its edges); the curves break at the outline's sharp corners (
 than ``sweep_read.SHARP_DEGREES``). A bend also has ``sides`` (``sweep_stl_turn.SideMap``: the
 outline's points turned, on the linking facets) and its motion the chords' largest ``sag``
 (relative to the size). ``caps_found``: two planar patches that every other touches were found
-(a refusal then names what they are not). Caps match to ``PLANAR`` of the size, or to the
+after the sharp-edge split (a refusal then names what they are not; named solids that are no
+sweep are the single-block reader's to refuse); ``patch_words`` where the patches come from. Caps match to ``PLANAR`` of the size, or to the
 float32 rounding of a file written in float32 (``_rounding``).
 """
 
@@ -44,9 +46,9 @@ def read_surface_sweep(path) -> dict:
     """The triangulated surface in ``path`` seen as a straight sweep (module docstring)."""
     path = Path(path)
     surface = read_surface(path)
-    if (surface.labels >= 0).any():  # patches of its own (named solids): the single-block reader's
-        return {"kind": "other", "reason": "its patches are named in the file", "summary": "named patches"}
-    surface = split_at_sharp_edges(surface)
+    named = bool((surface.labels >= 0).any())  # patches of its own (a multi-solid ASCII STL's solids)
+    if not named:
+        surface = split_at_sharp_edges(surface)
     check_closed(surface, str(path))
     V, T, labels, names = surface.vertices, surface.triangles, surface.labels, surface.names
     box = np.stack([V.min(axis=0), V.max(axis=0)])
@@ -57,8 +59,10 @@ def read_surface_sweep(path) -> dict:
         "volume": abs(float(np.einsum("ij,ij->i", V[T[:, 0]], np.cross(V[T[:, 1]], V[T[:, 2]])).sum()) / 6.0),
         "box": box,
         "face_tags": tuple(range(len(names))),
-        "summary": f"{len(names)} patches at its sharp edges with ({', '.join(str(len(c)) for c in corners)}) corners",
+        "summary": f"{len(names)} {'named patches' if named else 'patches at its sharp edges'} with "
+        f"({', '.join(str(len(c)) for c in corners)}) corners",
         "linear": True,
+        "patch_words": "the file's named solids" if named else "the sharp-edge split's",
     }
     if len(names) == 6 and all(len(c) == 4 for c in corners):
         return {**found, "kind": "six"}
@@ -81,7 +85,7 @@ def read_surface_sweep(path) -> dict:
         others = [k for k in range(len(names)) if k not in (i, j)]
         if not all(np.intersect1d(vertices_of[k], vertices_of[c]).size for k in others for c in (i, j)):
             continue
-        found["caps_found"] = True  # a sweep's refusal now says why, not the single block's
+        found["caps_found"] = not named  # a sweep's refusal then says why, not the single block's
         outline = [_boundary_edges(T[labels == c]) for c in (i, j)]
         ends = [V[np.unique(e)] for e in outline]
         nearest_gap = cKDTree(ends[1])  # the second cap's outline vertices
