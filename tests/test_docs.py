@@ -145,14 +145,25 @@ def run_shell(command: str, folder: Path) -> tuple[int, str]:
 def shape_files(folder: Path) -> None:
     """The files docs/shapes-from-files.md assumes its reader has: a CAD solid ``part.step`` (a
     twisted loft by the OCC kernel of gmsh), swept solids ``cylinder.step`` and ``fillet.step``
-    (a box with one filleted edge) and a multi-solid ASCII STL ``duct.stl`` (a bent duct)."""
+    (a box with one filleted edge), a multi-solid ASCII STL ``duct.stl`` (a bent duct) and a
+    binary STL ``bend.stl`` (a disk turned 90 degrees about an axis)."""
     pytest.importorskip("gmsh")
-    from shape_helpers import duct_surface, write_ascii_stl, write_sweep_solid, write_twisted_loft
+    import numpy as np
+    from shape_helpers import (
+        duct_surface,
+        turned_outline,
+        turned_surface,
+        write_ascii_stl,
+        write_surface,
+        write_sweep_solid,
+        write_twisted_loft,
+    )
 
     write_twisted_loft(folder / "part.step")
     write_sweep_solid("cylinder", folder / "cylinder.step")
     write_sweep_solid("fillet", folder / "fillet.step")
     write_ascii_stl(folder / "duct.stl", *duct_surface())
+    write_surface(folder / "bend.stl", *turned_surface(turned_outline("torus"), np.pi / 2, 24))
 
 
 PAGE_FILES = {"docs/shapes-from-files.md": shape_files}  # files a page names but does not make
