@@ -12,7 +12,7 @@ prism), ``bend`` (a disk of radius 0.5 turned 90 degrees about an axis 2 away), 
 circle of radius 0.5 to a 0.8 x 0.8 square 2 above it), ``stl_cylinder`` (trimesh's cylinder,
 64 sections, as STL: boundary distance from its facets), ``stl_torus`` and ``stl_bent_pentagon``
 (binary STL bends by tests/shape_helpers ``turned_surface``: the ``bend``'s disk as a 64-gon turned
-90 degrees and the ``bent_pentagon`` turned 120 degrees, 24 steps each: boundary distance from
+90 degrees and the ``bent_pentagon`` turned 120 degrees, 25 steps each (the nodes between the rings): boundary distance from
 the facets by VTK's closest point, volume against the divergence theorem over the file's
 triangles), each at about 20 cells across
 its cap (--quick: about 10), by TFI and by the elliptic method (the wing's keeps the TFI mesh). Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
@@ -147,7 +147,7 @@ def bench_stl_bend(row: str, folder: Path, dims, method: str) -> dict:
     from shape_helpers import distance_to_triangles, surface_volume, turned_outline, turned_surface, write_surface
 
     kind, angle, _ = STL_BENDS[row]
-    path = write_surface(folder / f"{row}.stl", *turned_surface(turned_outline(kind), angle, 24))
+    path = write_surface(folder / f"{row}.stl", *turned_surface(turned_outline(kind), angle, 25))
     read = trimesh.load(path, process=False, force="mesh")
     vertices, triangles = np.asarray(read.vertices, dtype=float), np.asarray(read.faces)
     start = time.perf_counter()

@@ -123,49 +123,77 @@ def write_ascii_stl(path, vertices, triangles, labels=None, names=DUCT_NAMES):
 def turned_outline(kind: str) -> np.ndarray:
     """The (x, z) outline (K, 2), counterclockwise, of a triangulated bend's cap in the plane
     y = 0: ``torus`` a disk of radius 0.5 centred 2 from the z axis (64 sides), ``pentagon`` a
-    regular pentagon of circumradius 0.5 centred there (the CAD ``bent_pentagon``'s)."""
-    count, radius = {"torus": (64, 0.5), "pentagon": (5, 0.5)}[kind]
+    regular pentagon of circumradius 0.5 centred there (the CAD ``bent_pentagon``'s), ``hole`` a
+    disk of radius 0.2 centred there (the torus's hole, for a bent pipe's wall)."""
+    count, radius = {"torus": (64, 0.5), "pentagon": (5, 0.5), "hole": (64, 0.2)}[kind]
     angles = np.pi / 2 + 2 * np.pi * np.arange(count) / count
     return np.column_stack([2.0 + radius * np.cos(angles), radius * np.sin(angles)])
 
 
 def turned_surface(
-    outline, angle: float, sections: int, lift: float = 0.0, taper: float = 0.0, bump: float = 0.0, offset: float = 0.0, seed=None
+    outline,
+    angle: float,
+    sections: int,
+    lift: float = 0.0,
+    taper: float = 0.0,
+    bump: float = 0.0,
+    offset: float = 0.0,
+    seed=None,
+    hole=None,
 ):
     """A closed triangulated bend: the polygon ``outline`` (K, 2) of (x, z) points in the plane
     y = 0 turned by ``angle`` radians about the z axis in ``sections`` equal steps (rings of K
     vertices, each quadrilateral between two rings two triangles), each end capped by a fan from
-    the ring's centroid; triangles turned outward. Bad bends: ``lift`` raises ring k by
-    lift k / sections along z (a helix: the caps are no rotation of each other), ``taper`` scales
-    ring k about its centroid by 1 + taper k / sections, ``bump`` pushes the middle ring's vertices
-    that far from the axis (its triangles leave the surface the outline sweeps). ``offset`` puts
-    the cap in the plane y = offset instead (the axis off the cap's plane: the quadrilaterals
-    between rings are not planar); ``seed``: each quadrilateral cut along either diagonal at
-    random. Returns (vertices (n, 3), triangles (m, 3)), lengths as given."""
+    the ring's centroid, or with ``hole`` (K, 2, inside the outline, as many points) by the
+    quadrilaterals between the two loops; triangles turned outward. Bad bends: ``lift`` raises
+    ring k by lift k / sections along z (a helix: the caps are no rotation of each other),
+    ``taper`` scales ring k about the outline's centroid by 1 + taper k / sections, ``bump`` pushes
+    the middle ring's vertices that far from the axis (its triangles leave the surface the
+    outline sweeps). ``offset`` puts the cap in the plane y = offset instead (the axis off the
+    cap's plane: the quadrilaterals between rings are not planar); ``seed``: each quadrilateral
+    cut along either diagonal at random. Returns (vertices (n, 3), triangles (m, 3)), lengths as
+    given."""
     outline = np.asarray(outline, dtype=float)
     K, S = len(outline), int(sections)
     share = np.arange(S + 1) / S
     centre = outline.mean(axis=0)
-    scaled = centre + (1.0 + taper * share)[:, None, None] * (outline - centre)  # (S + 1, K, 2)
-    x = scaled[..., 0] + bump * (np.arange(S + 1) == S // 2)[:, None]
     cos, sin = np.cos(angle * share)[:, None], np.sin(angle * share)[:, None]
-    rings = np.stack([x * cos - offset * sin, x * sin + offset * cos, scaled[..., 1] + lift * share[:, None]], axis=-1)
-    vertices = np.concatenate([rings.reshape(-1, 3), rings[[0, -1]].mean(axis=1)])
+    rng = np.random.default_rng(seed)
+
+    def rings(loop):  # (S + 1, K, 3): the loop turned step by step
+        scaled = centre + (1.0 + taper * share)[:, None, None] * (loop - centre)
+        x = scaled[..., 0] + bump * (np.arange(S + 1) == S // 2)[:, None]
+        return np.stack([x * cos - offset * sin, x * sin + offset * cos, scaled[..., 1] + lift * share[:, None]], axis=-1)
+
     k, i = (a.ravel() for a in np.meshgrid(np.arange(S), np.arange(K), indexing="ij"))
-    a, b = k * K + i, k * K + (i + 1) % K
-    c, d = b + K, a + K
-    ring = np.arange(K)
-    first, last = np.full(K, len(vertices) - 2), np.full(K, len(vertices) - 1)
-    other = np.random.default_rng(seed).random(len(a)) < 0.5 if seed is not None else np.zeros(len(a), dtype=bool)
-    triangles = np.concatenate(
-        [
-            np.where(other[:, None], np.column_stack([a, b, d]), np.column_stack([a, b, c])),
-            np.where(other[:, None], np.column_stack([b, c, d]), np.column_stack([a, c, d])),
-            np.column_stack([first, (ring + 1) % K, ring]),
-            np.column_stack([last, S * K + ring, S * K + (ring + 1) % K]),
-        ]
-    )
-    p, q, r = (vertices[triangles[:, n]] for n in range(3))
+
+    def sides(start):  # the quadrilaterals between rings of the loop whose vertices start at ``start``
+        a, b = start + k * K + i, start + k * K + (i + 1) % K
+        c, d = b + K, a + K
+        other = rng.random(len(a)) < 0.5 if seed is not None else np.zeros(len(a), dtype=bool)
+        return np.concatenate(
+            [
+                np.where(other[:, None], np.column_stack([a, b, d]), np.column_stack([a, b, c])),
+                np.where(other[:, None], np.column_stack([b, c, d]), np.column_stack([a, c, d])),
+            ]
+        )
+
+    ring, n = np.arange(K), (S + 1) * K
+    if hole is None:
+        turned = rings(outline)
+        vertices = np.concatenate([turned.reshape(-1, 3), turned[[0, -1]].mean(axis=1)])
+        first, last = np.full(K, n), np.full(K, n + 1)
+        caps = [np.column_stack([first, (ring + 1) % K, ring]), np.column_stack([last, S * K + ring, S * K + (ring + 1) % K])]
+        triangles = np.concatenate([sides(0), *caps])
+    else:
+        vertices = np.concatenate([rings(outline).reshape(-1, 3), rings(np.asarray(hole, dtype=float)).reshape(-1, 3)])
+        caps = []
+        for step, turn in ((0, False), (S, True)):
+            o0, o1 = step * K + ring, step * K + (ring + 1) % K
+            strip = np.concatenate([np.column_stack([o0, n + o1, o1]), np.column_stack([o0, n + o0, n + o1])])
+            caps.append(strip[:, ::-1] if turn else strip)
+        triangles = np.concatenate([sides(0), sides(n)[:, ::-1], *caps])
+    p, q, r = (vertices[triangles[:, m]] for m in range(3))
     if np.einsum("ij,ij->i", p, np.cross(q, r)).sum() < 0:
         triangles = triangles[:, ::-1]
     return vertices, triangles

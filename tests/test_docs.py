@@ -163,7 +163,7 @@ def shape_files(folder: Path) -> None:
     write_sweep_solid("cylinder", folder / "cylinder.step")
     write_sweep_solid("fillet", folder / "fillet.step")
     write_ascii_stl(folder / "duct.stl", *duct_surface())
-    write_surface(folder / "bend.stl", *turned_surface(turned_outline("torus"), np.pi / 2, 24))
+    write_surface(folder / "bend.stl", *turned_surface(turned_outline("torus"), np.pi / 2, 25))
 
 
 PAGE_FILES = {"docs/shapes-from-files.md": shape_files}  # files a page names but does not make
