@@ -202,3 +202,30 @@ def test_linking_triangles_off_the_swept_surface_are_refused(run_cli, tmp_path):
     assert "leave the surface the cap's outline sweeps turned 90 deg about an axis" in line
     by = float(line.split("(by ")[1].split(" of the part's size")[0])
     assert by == pytest.approx(0.05 / size(vertices), rel=0.05)
+
+
+@pytest.mark.parametrize("kind", ["torus", "pentagon"])
+def test_a_loops_nearest_point_is_the_brute_forces(kind):
+    """``Loop.foot`` (a k-d tree of samples, the edges of the nearest few) against every edge
+    tried: points on the outline, off it by up to a tenth of its size, and at its corners."""
+    from meshgen.geometry.shapes.sweep_stl_turn import Loop
+
+    outline = turned_outline(kind)
+    loop = Loop(outline)
+    rng = np.random.default_rng(7)
+    ends = np.roll(outline, -1, axis=0)
+    edge, share = rng.integers(0, len(outline), 400), rng.random(400)
+    on = outline[edge] + share[:, None] * (ends[edge] - outline[edge])
+    points = np.concatenate([on, on + rng.normal(0.0, 0.05, on.shape), outline])
+    d = ends - outline
+    t = np.clip(((points[:, None, :] - outline) * d).sum(axis=2) / (d * d).sum(axis=1), 0.0, 1.0)
+    gap = np.linalg.norm(points[:, None, :] - (outline + t[..., None] * d), axis=2)
+    lengths = np.linalg.norm(d, axis=1)
+    starts = np.concatenate([[0.0], np.cumsum(lengths)])
+    best = gap.argmin(axis=1)
+    s, distance = loop.foot(points)
+    assert distance == pytest.approx(gap.min(axis=1), abs=1e-14)
+    expected = starts[best] + t[np.arange(len(points)), best] * lengths[best]
+    apart = np.abs(s - expected)
+    assert np.minimum(apart, starts[-1] - apart)[:800].max() < 1e-12  # at the loop's start: 0 or its length
+    assert np.abs(s[:400] - (starts[edge] + share * lengths[edge])).max() < 1e-12

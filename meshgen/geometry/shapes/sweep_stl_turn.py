@@ -5,7 +5,7 @@ surface the first cap's outline sweeps.
 ``turned_sides(...)`` checks the linking triangles and returns a ``SideMap``: each linking
 vertex gets the parameters (s, theta) of the point of the swept surface it lies on (s the arc
 length along its cap loop from the loop's first curve, theta the angle turned), found by turning
-it back onto the first cap's plane; ``SideMap.evaluate`` puts a point of the swept surface, given
+it back onto the first cap's plane (``Loop.foot``: the nearest point of the loop); ``SideMap.evaluate`` puts a point of the swept surface, given
 by its cap-outline point and the share zeta of the turn, on the file's triangle holding those
 parameters (``locate``: a bucket grid, barycentric coordinates clipped), so every node of a block
 face on the outline lies on a facet however the file triangulated the sides. Checked: every
@@ -20,12 +20,12 @@ import numpy as np
 
 from meshgen.geometry.shapes.locate import build_locator
 
-__all__ = ["CHORD_TOLERANCE", "VERTEX_TOLERANCE", "SideMap", "turned_sides"]
+__all__ = ["CHORD_TOLERANCE", "VERTEX_TOLERANCE", "Loop", "SideMap", "turned_sides"]
 
 VERTEX_TOLERANCE = 1e-6  # relative to the part's size: a linking vertex off the swept surface
 CHORD_TOLERANCE = 1e-2  # relative: a linking triangle's centre off it (the facets' chords sag)
 AXIS_CLEARANCE = 1e-3  # relative: the outline's least distance from the axis
-PAIRS = 1 << 21  # (point, polyline edge) pairs per chunk of a projection
+CANDIDATES = 4  # a projection onto a loop tries the edges of this many nearest samples
 
 
 def positive(motion: dict) -> dict:
@@ -43,30 +43,47 @@ def _turned(points: np.ndarray, point, axis, angle) -> np.ndarray:
     return point + v * cos + np.cross(axis, v) * sin + (v @ axis)[:, None] * axis * (1.0 - cos)
 
 
-def _foot(xy: np.ndarray, polyline: np.ndarray, start: np.ndarray):
-    """The nearest point of the closed ``polyline`` (P, 2) to each of ``xy`` (N, 2): (its arc
-    length s (N,) from the polyline's first point, by the edges' starting lengths ``start``
-    (P + 1,), and the distance (N,)); in chunks of ``PAIRS`` (point, edge) pairs."""
-    a, b = polyline, np.roll(polyline, -1, axis=0)
-    d = b - a
-    length2 = np.maximum((d * d).sum(axis=1), 1e-300)
-    s, distance = np.empty(len(xy)), np.empty(len(xy))
-    step = max(1, PAIRS // len(polyline))
-    for lo in range(0, len(xy), step):  # chunks of points, not single points
-        p = xy[lo : lo + step, None, :]
-        t = np.clip(((p - a) * d).sum(axis=2) / length2, 0.0, 1.0)
-        gap = np.linalg.norm(p - (a + t[..., None] * d), axis=2)
-        edge = np.argmin(gap, axis=1)
-        rows = np.arange(len(edge))
-        s[lo : lo + step] = start[edge] + t[rows, edge] * (start[edge + 1] - start[edge])
-        distance[lo : lo + step] = gap[rows, edge]
-    return s, distance
+class Loop:
+    """A closed polyline ``points`` (P, 2) of a cap loop (in the cap's frame), ``start`` (P + 1,)
+    the arc length at each point from the first (the last: the loop's length), and a k-d tree of
+    points along its edges at most a quarter of the mean edge length apart, for ``foot``."""
+
+    def __init__(self, points: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.points = np.asarray(points, dtype=float)
+        self.ends = np.roll(self.points, -1, axis=0)
+        lengths = np.linalg.norm(self.ends - self.points, axis=1)
+        self.start = np.concatenate([[0.0], np.cumsum(lengths)])
+        spacing = self.start[-1] / (4.0 * len(lengths))
+        counts = np.ceil(lengths / spacing).astype(np.int64)
+        self.sample_edge = np.repeat(np.arange(len(lengths)), counts)
+        share = (np.arange(len(self.sample_edge)) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[self.sample_edge]
+        edge = self.sample_edge
+        self.tree = cKDTree(self.points[edge] + share[:, None] * (self.ends[edge] - self.points[edge]))
+
+    def foot(self, xy: np.ndarray):
+        """The nearest point of the loop to each of ``xy`` (N, 2): (its arc length s (N,), the
+        distance (N,)), among the edges of the ``CANDIDATES`` nearest samples and their
+        neighbours (the exact nearest edge for a point on or near the loop)."""
+        xy = np.asarray(xy, dtype=float)
+        n = len(self.points)
+        near = self.tree.query(xy, k=min(CANDIDATES, self.tree.n))[1].reshape(len(xy), -1)
+        edges = (self.sample_edge[near][:, :, None] + np.array([-1, 0, 1])).reshape(len(xy), -1) % n  # (N, C)
+        a, b = self.points[edges], self.ends[edges]
+        d = b - a
+        t = np.clip(((xy[:, None, :] - a) * d).sum(axis=2) / np.maximum((d * d).sum(axis=2), 1e-300), 0.0, 1.0)
+        gap = np.linalg.norm(xy[:, None, :] - (a + t[..., None] * d), axis=2)
+        best = np.argmin(gap, axis=1)
+        rows = np.arange(len(xy))
+        edge = edges[rows, best]
+        return self.start[edge] + t[rows, best] * (self.start[edge + 1] - self.start[edge]), gap[rows, best]
 
 
-def _turned_back(points, motion, origin, frame, polyline, start):
+def _turned_back(points, motion, origin, frame, loop):
     """Each of ``points`` (N, 3) turned back onto the first cap's plane (the angle theta in
     [0, motion angle] that puts it there: of the two, the one nearer the loop) and measured against
-    the loop ``polyline`` (P, 2, in the cap's frame): (theta (N,), s (N,), distance (N,))."""
+    the cap's ``Loop``: (theta (N,), s (N,), distance (N,))."""
     point, axis, angle = motion["point"], motion["axis"], motion["angle"]
     normal = np.cross(frame[0], frame[1])
     v = points - point
@@ -82,7 +99,7 @@ def _turned_back(points, motion, origin, frame, polyline, start):
     for theta in (-beta + spread, -beta - spread):
         theta = np.clip(np.mod(theta - 0.5 * angle + np.pi, 2 * np.pi) - np.pi + 0.5 * angle, 0.0, angle)
         back = _turned(points, point, axis, -theta) - origin
-        s, across = _foot(back @ frame.T, polyline, start)
+        s, across = loop.foot(back @ frame.T)
         distance = np.hypot(across, back @ normal)
         if best is None:
             best = [theta, s, distance]
@@ -95,20 +112,19 @@ def _turned_back(points, motion, origin, frame, polyline, start):
 
 class SideMap:
     """The linking triangles of a bend as functions of (s, theta), one locator per cap loop
-    (module docstring): ``loop_of`` patch index -> loop; per loop its ``polylines`` (P, 2, in the
-    cap's frame), ``starts`` (P + 1,) arc lengths, and a ``locate.SquareLocator`` over
-    (s / loop length, theta / angle) with the triangles' corner points ``values`` (3m, 3)."""
+    (module docstring): ``loop_of`` patch index -> loop; per loop its ``Loop`` (in the cap's
+    frame) and a ``locate.SquareLocator`` over (s / loop length, theta / angle) with the
+    triangles' corner points ``values`` (3m, 3)."""
 
-    def __init__(self, loop_of, polylines, starts, locators, values):
-        self.loop_of, self.polylines, self.starts = loop_of, polylines, starts
-        self.locators, self.values = locators, values
+    def __init__(self, loop_of, loops, locators, values):
+        self.loop_of, self.loops, self.locators, self.values = loop_of, loops, locators, values
 
     def evaluate(self, patch: int, xy: np.ndarray, zeta: np.ndarray) -> np.ndarray:
         """(N, 3) the points on the linking triangles of ``patch`` at the cap-outline points ``xy``
         (N, 2, in the cap's frame, on the loop) turned a share ``zeta`` (N,) of the bend."""
         loop = self.loop_of[patch]
-        s, _ = _foot(np.asarray(xy, dtype=float), self.polylines[loop], self.starts[loop])
-        query = np.column_stack([s / self.starts[loop][-1], np.asarray(zeta, dtype=float)])
+        s, _ = self.loops[loop].foot(xy)
+        query = np.column_stack([s / self.loops[loop].start[-1], np.asarray(zeta, dtype=float)])
         return self.locators[loop].evaluate(self.values[loop], query)
 
 
@@ -122,12 +138,10 @@ def turned_sides(vertices, triangles, labels, motion, origin, frame, loops, size
     part's size (length), ``names`` the patch names."""
     point, axis = motion["point"], motion["axis"]
     words = f"turned {np.degrees(motion['angle']):.6g} deg about an axis"
-    loop_of, polylines, starts, locators, values, worst = {}, [], [], [], [], [0.0, 0.0]
+    loop_of, outlines, locators, values, worst = {}, [], [], [], [0.0, 0.0]
     for index, loop in enumerate(loops):
         ids = np.concatenate([curve["vertices"][:-1] for curve in loop])
-        polyline = (vertices[ids] - origin) @ frame.T
-        edges = np.linalg.norm(np.roll(polyline, -1, axis=0) - polyline, axis=1)
-        start = np.concatenate([[0.0], np.cumsum(edges)])
+        outline = Loop((vertices[ids] - origin) @ frame.T)
         v = vertices[ids] - point
         clearance = np.linalg.norm(v - np.outer(v @ axis, axis), axis=1).min()
         if clearance < AXIS_CLEARANCE * size:
@@ -141,12 +155,10 @@ def turned_sides(vertices, triangles, labels, motion, origin, frame, loops, size
         loop_of.update({patch: index for patch in patches})
         side = triangles[np.isin(labels, sorted(patches))]
         used, corner = np.unique(side, return_inverse=True)
-        theta, s, distance = _turned_back(vertices[used], motion, origin, frame, polyline, start)
+        theta, s, distance = _turned_back(vertices[used], motion, origin, frame, outline)
         centres = vertices[side].mean(axis=1)
-        sag = _turned_back(centres, motion, origin, frame, polyline, start)[2]
-        for k, (found, limit, what) in enumerate(
-            ((distance, VERTEX_TOLERANCE, "vertices"), (sag, CHORD_TOLERANCE, "triangles' centres"))
-        ):
+        for k, limit, what in ((0, VERTEX_TOLERANCE, "vertices"), (1, CHORD_TOLERANCE, "triangles' centres")):
+            found = distance if k == 0 else _turned_back(centres, motion, origin, frame, outline)[2]  # vertices first
             worst[k] = max(worst[k], float(found.max()) / size)
             if found.max() > limit * size:
                 at = (vertices[used] if k == 0 else centres)[int(np.argmax(found))]
@@ -157,7 +169,7 @@ def turned_sides(vertices, triangles, labels, motion, origin, frame, loops, size
                     f"({', '.join(f'{c:.6g}' for c in at)}); at most {limit:g})",
                 )
         params = np.column_stack([s, theta])[corner.reshape(-1, 3)]  # (m, 3, 2) per corner
-        total = start[-1]
+        total = outline.start[-1]
         seam = np.ptp(params[:, :, 0], axis=1) > 0.5 * total  # triangles across s = 0: unwrapped upwards
         params[:, :, 0] += np.where(seam[:, None] & (params[:, :, 0] < 0.5 * total), total, 0.0)
         copies = params[seam] - np.array([total, 0.0])  # and a copy of each below s = 0
@@ -166,6 +178,5 @@ def turned_sides(vertices, triangles, labels, motion, origin, frame, loops, size
         uv = (params / np.array([total, motion["angle"]])).reshape(-1, 2)
         locators.append(build_locator(uv, np.arange(len(uv)).reshape(-1, 3)))
         values.append(vertices[corners].reshape(-1, 3))
-        polylines.append(polyline)
-        starts.append(start)
-    return SideMap(loop_of, polylines, starts, locators, values), tuple(worst)
+        outlines.append(outline)
+    return SideMap(loop_of, outlines, locators, values), tuple(worst)
