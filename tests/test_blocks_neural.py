@@ -26,9 +26,11 @@ TINY_BLOCKS = ("pretrain.steps=20", "pretrain.points=300", "lbfgs.max_iter=10", 
 
 @pytest.fixture(scope="module")
 def pipe_checkpoint(tmp_path_factory):
-    """A pipe model after 20 TFI-fit, 20 Adam and 2 L-BFGS steps (about 4 s of CPU)."""
+    """A pipe model after 20 TFI-fit, 20 Adam and 2 L-BFGS steps (about 4 s of CPU): every stage of
+    the Winslow training from the TFI (``pretrain.target=tfi``; the default starts from the
+    elliptic mesh and stops there, ``test_elliptic_start.py``)."""
     run_dir = tmp_path_factory.mktemp("pipe-run")
-    config = tiny_config(*TINY_BLOCKS)
+    config = tiny_config(*TINY_BLOCKS, "pretrain.target=tfi")
     block_set = load_block_set("pipe", None, (4, 2, 4))
     result = train(config, block_set, run_dir, summary=False, geometry_spec="pipe")
     return result.checkpoint_path
@@ -97,7 +99,8 @@ def test_train_the_pipe_through_the_cli_and_mesh_the_newest_run(run_cli, tmp_pat
     tiny = [f"--set={item}" for item in (*TINY, *TINY_BLOCKS, *shorter)]
     trained = run_cli("train", "-g", "pipe", "--out", "runs/pipe-1", "--quiet", *tiny)
     assert trained.returncode == 0, trained.stderr
-    assert "Trained pipe for 8 steps" in trained.stdout
+    # the fit to the elliptic mesh alone: a block set started from it takes adam/lbfgs.block_steps (0)
+    assert "Trained pipe for 3 steps" in trained.stdout
     assert "'pipe' is an extrusion along (0, 0, 4): the networks map its 2D section" in trained.stdout
     monkeypatch.chdir(tmp_path)  # auto: the newest run of the pipe under ./runs
     made = meshgen.mesh("pipe", (4, 2, 3))

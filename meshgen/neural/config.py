@@ -97,9 +97,13 @@ class PointsConfig:
 
 @dataclass
 class PretrainConfig:
-    steps: int = 20  # L-BFGS steps fitting the network to TFI before training (0: start from random weights)
+    steps: int = 20  # L-BFGS steps fitting the network to its start before training (0: start from random weights)
     lr: float = 1.0
-    points: int = 4000  # fixed interior points (and as many boundary points) of the fit
+    points: int = 4000  # fixed interior points (and as many boundary points) of the fit to TFI
+    # what the networks are fitted to first: auto (a block set's elliptic mesh, one block's TFI),
+    # tfi, or elliptic (block sets only: the set's multi-block elliptic mesh on a fine grid,
+    # meshgen.neural.elliptic_start; method.tfi_anchor then pulls towards it too)
+    target: str = "auto"
 
 
 @dataclass
@@ -111,6 +115,9 @@ class AdamConfig:
     weights_lr: float | None = None  # learning rate of log a1, log a2 (null: lr, decayed alike)
     # a one-block run that trains an extruded shape's 2D section (design notes §20): its Adam steps (null: steps)
     section_steps: int | None = None
+    # a block set fitted to its elliptic mesh first (pretrain.target auto or elliptic): its Adam
+    # steps (null: steps); 0 by default, the fit being where the Winslow loss ends (design notes §20)
+    block_steps: int | None = 0
 
 
 @dataclass
@@ -123,6 +130,7 @@ class LbfgsConfig:
     # finite-difference residual's round-off stops L-BFGS well above what the network can reach
     float64: bool = False
     section_steps: int | None = None  # a one-block run that trains an extruded shape's 2D section: its L-BFGS steps (null: steps)
+    block_steps: int | None = 0  # a block set fitted to its elliptic mesh first: its L-BFGS steps (null: steps)
 
 
 @dataclass
@@ -161,7 +169,11 @@ class TrainConfig:
     test: TestConfig = field(default_factory=TestConfig)
 
 
-CHOICES = {"method.derivatives": ("fd", "autograd"), "method.boundary_error": ("relative", "absolute")}
+CHOICES = {
+    "method.derivatives": ("fd", "autograd"),
+    "method.boundary_error": ("relative", "absolute"),
+    "pretrain.target": ("auto", "tfi", "elliptic"),
+}
 
 # The range of every number of the configuration, (lowest, highest) inclusive (model.widths: of
 # each width). Every int and float key has one (tests/test_trust.py checks): an upper bound keeps
@@ -188,11 +200,13 @@ BOUNDS = {
     "adam.decay_every": (1, 10**9),
     "adam.weights_lr": (0.0, 1e3),
     "adam.section_steps": (0, 10**8),
+    "adam.block_steps": (0, 10**8),
     "lbfgs.steps": (0, 10**7),
     "lbfgs.max_iter": (1, 10**4),
     "lbfgs.history_size": (1, 10**4),
     "lbfgs.lr": (0.0, 1e3),
     "lbfgs.section_steps": (0, 10**7),
+    "lbfgs.block_steps": (0, 10**7),
     "checkpoint.every": (1, 10**9),
     "guard.max_retries": (0, 1000),
     "guard.lr_factor": (0.0, 1.0),

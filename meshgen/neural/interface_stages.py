@@ -21,6 +21,7 @@ from meshgen.geometry.block_nodes import merged_mesh
 from meshgen.geometry.blocks import BlockSet, tfi_blocks
 from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.config import ConfigError, keys_off_default
+from meshgen.neural.elliptic_start import elliptic_pools, elliptic_targets, hidden_parameters, projected_fit_step
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.interfaces import (
@@ -56,6 +57,7 @@ __all__ = [
     "BLOCK_UNUSED_KEYS",
     "SUMMARY_DIMS",
     "block_gradients",
+    "block_steps",
     "block_stage_table",
     "check_block_keys",
     "describe_blocks",
@@ -220,8 +222,22 @@ def lbfgs_points(training: Training, pool_count: int) -> tuple[dict, dict]:
     return pool, fixed_block_points(problem, config, pool_count, config.seed + 2, lattice=count)
 
 
-def block_stage_table(pool: dict, pool_count: int) -> tuple:
-    """The stages of a block set's run (the runner's table): ``pretrain``, ``adam``, ``lbfgs``."""
+def block_steps(training: Training, name: str) -> int:
+    """The steps of stage ``name`` (adam, lbfgs) of a block set's run: its ``block_steps`` where the
+    networks are fitted to the elliptic mesh first (``pretrain.target`` auto or elliptic, and
+    ``pretrain.steps`` above 0: not an ``--init`` run) and the configuration sets it, else its ``steps``."""
+    config = training.config
+    stage = getattr(config, name)
+    if config.pretrain.target == "tfi" or config.pretrain.steps == 0 or stage.block_steps is None:
+        return stage.steps
+    return stage.block_steps
+
+
+def block_stage_table(pool: dict, pool_count: int, start_pools=None, start_note: str | None = None) -> tuple:
+    """The stages of a block set's run (the runner's table): ``pretrain``, ``adam``, ``lbfgs``.
+    ``start_pools`` (a callable giving the fit's per-block pools, ``elliptic_start.elliptic_pools``):
+    what ``pretrain`` fits the networks to, ``start_note`` the line that says so; None: their TFI at
+    ``pretrain.points`` random points."""
 
     def balance(training: Training, say) -> None:
         weights, config = training.weights, training.config
@@ -231,6 +247,15 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
         pde, boundary = _fixed_losses(training, pool, fixed)
         weights.balance(pde, boundary)
         say(f"reweighting started at the balance of L1 {pde:.3g}, L2 {boundary:.3g}")
+
+    def fitted(t: Training):
+        """The fit to the elliptic mesh moves the hidden layers (the output layer is solved), in
+        float64: in float32 the features' round-off stalls L-BFGS's line search within a few
+        iterations (the wedge's section at a misfit of 1.8e-6, where float64 reaches 1e-8)."""
+        if start_pools is None:
+            return None
+        t.network.double()
+        return hidden_parameters(t.network.networks)
 
     def adam_steps(t: Training) -> AdamSteps:
         return AdamSteps(
@@ -242,9 +267,18 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
     return (
         Stage(
             "pretrain",
-            optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config),
-            points=lambda t, state: pretrain_block_pool(t.problem, t.config.pretrain.points, t.config.seed + 1),
-            step=lambda t, optimizer, scheduler, pools: _pretrain_step(t, optimizer, pools),
+            optimizer=lambda t: make_optimizer("pretrain", t.network, t.weights, t.config, fitted(t)),
+            points=lambda t, state: (
+                start_pools()
+                if start_pools is not None
+                else pretrain_block_pool(t.problem, t.config.pretrain.points, t.config.seed + 1)
+            ),
+            step=lambda t, optimizer, scheduler, pools: (
+                _pretrain_step(t, optimizer, pools)
+                if start_pools is None
+                else projected_fit_step(t.network.networks, optimizer, pools)
+            ),
+            start=lambda t, say: say(start_note) if start_note else None,
         ),
         Stage(
             "adam",
@@ -253,12 +287,14 @@ def block_stage_table(pool: dict, pool_count: int) -> tuple:
             step=lambda t, optimizer, scheduler, steps: steps(optimizer, scheduler),
             start=balance,
             block=lambda t: DEVICE_BLOCK if t.problem.device.type == "cuda" else 1,
+            total=lambda t: block_steps(t, "adam"),
         ),
         Stage(
             "lbfgs",
             optimizer=lbfgs_optimizer,
             points=lambda t, state: lbfgs_points(t, pool_count),
             step=lambda t, optimizer, scheduler, points: _lbfgs_step(t, optimizer, *points),
+            total=lambda t: block_steps(t, "lbfgs"),
         ),
     )
 
@@ -278,8 +314,22 @@ def set_job(config, block_set: BlockSet, device: torch.device, resume=None, geom
         check_start_model(start["model"], block_set, "--resume" if resume is not None else "--init")
         center, scale = start["model"]["center"], start["model"]["scale"]
     problem = block_problem(trained_set, device, center, scale)
+    start_pools, say_start = None, None
+    needed = config.pretrain.steps > 0 or config.method.tfi_anchor > 0
+    if needed and config.pretrain.target != "tfi":  # the fit and the pull go to the set's fine elliptic mesh (design notes §20)
+        fine, targets, account = elliptic_targets(trained_set, geometry_spec or block_set.name)
+
+        def start_pools():
+            return elliptic_pools(fine, targets, problem.center, problem.scale, device)
+
+        say_start = f"the networks start from {account}"
     problem.anchor_weight = config.method.tfi_anchor
-    problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6) if config.method.tfi_anchor > 0 else []
+    if config.method.tfi_anchor <= 0:
+        problem.anchor = []
+    elif start_pools is not None:
+        problem.anchor = elliptic_pools(fine, targets, problem.center, problem.scale, device, ANCHOR_POINTS, config.seed + 6)
+    else:
+        problem.anchor = tfi_anchor_pool(problem, ANCHOR_POINTS, config.seed + 6)
     torch.manual_seed(config.seed)
     network = BlockNetworks(problem.dim, list(config.model.widths), len(trained_set.names)).to(device)
     weights = UncertaintyWeights(config.method.pde_weight, config.method.boundary_weight, config.method.reweighting)
@@ -322,7 +372,7 @@ def set_job(config, block_set: BlockSet, device: torch.device, resume=None, geom
     def summary(checkpoint, run_dir):
         return write_block_summary(checkpoint, block_set, run_dir)
 
-    return Job(training, state, block_stage_table(pool, pool_count), describe_run, summary)
+    return Job(training, state, block_stage_table(pool, pool_count, start_pools, say_start), describe_run, summary)
 
 
 def write_block_summary(checkpoint: dict, block_set: BlockSet, run_dir) -> dict:

@@ -44,6 +44,8 @@ RESUMABLE_KEYS = (
     "lbfgs.steps",
     "adam.section_steps",
     "lbfgs.section_steps",
+    "adam.block_steps",
+    "lbfgs.block_steps",
     "checkpoint.every",
     "guard.max_retries",
     "guard.lr_factor",
@@ -272,7 +274,11 @@ def _refuse_unused_keys(config, name: str, blocks: bool, vary: bool, walled: boo
         check_block_keys(config, f"block set '{name}'")
 
 
-BLOCK_ONLY_KEYS = ("method.tfi_anchor",)  # keys only a block set uses: refused away from their default for one shape
+BLOCK_ONLY_KEYS = (
+    "method.tfi_anchor",
+    "adam.block_steps",
+    "lbfgs.block_steps",
+)  # keys only a block set uses: refused away from their default for one shape
 
 
 def _refuse_block_only_keys(config, blocks: bool, name: str) -> None:
@@ -281,6 +287,8 @@ def _refuse_block_only_keys(config, blocks: bool, name: str) -> None:
     if blocks:
         return
     unused = [f"{key}={value}" for key, value in keys_off_default(config, BLOCK_ONLY_KEYS).items()]
+    if config.pretrain.target == "elliptic":  # one block fits its TFI (auto and tfi)
+        unused.append("pretrain.target=elliptic")
     if unused:
         raise ConfigError(f"'{name}' is one block: {', '.join(unused)} applies to block sets only (leave it at the default)")
 

@@ -204,9 +204,10 @@ def lbfgs_step(training: Training, optimizer, fixed) -> dict:
     return {**last, "total": total, "a1": a[0], "a2": a[1], "lr": optimizer.param_groups[0]["lr"]}
 
 
-def make_optimizer(stage: str, network, weights, config: TrainConfig):
+def make_optimizer(stage: str, network, weights, config: TrainConfig, parameters=None):
     """The optimiser (and scheduler, or None) of ``stage``: L-BFGS for the TFI fit (a least-squares
-    fit, where it converges in a fraction of Adam's time) and for the last stage, Adam between."""
+    fit, where it converges in a fraction of Adam's time) and for the last stage, Adam between.
+    ``parameters``: the L-BFGS stages' parameters (default every one of ``network``'s)."""
     if stage == "adam":
         groups = [{"params": list(network.parameters())}]
         if weights.learned:
@@ -216,7 +217,7 @@ def make_optimizer(stage: str, network, weights, config: TrainConfig):
         return optimizer, scheduler
     lbfgs = config.lbfgs
     optimizer = torch.optim.LBFGS(
-        network.parameters(),
+        network.parameters() if parameters is None else parameters,
         lr=config.pretrain.lr if stage == "pretrain" else lbfgs.lr,
         max_iter=lbfgs.max_iter,
         history_size=lbfgs.history_size,
