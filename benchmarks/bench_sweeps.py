@@ -15,7 +15,10 @@ circle of radius 0.5 to a 0.8 x 0.8 square 2 above it), ``stl_cylinder`` (trimes
 90 degrees and the ``bent_pentagon`` turned 120 degrees, 25 steps each (the nodes between the rings): boundary distance from
 the facets by VTK's closest point, volume against the divergence theorem over the file's
 triangles), each at about 20 cells across
-its cap (--quick: about 10), by TFI and by the elliptic method (the wing's keeps the TFI mesh). Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
+its cap (--quick: about 10), by TFI and by the elliptic method (the wing's keeps the TFI mesh), and
+(not --quick) the CAD solids by the neural method: a model trained in the run (``meshgen train -g
+FILE``, the default configuration: the networks fitted to the solid's elliptic mesh), its training
+seconds in the row. Per method: inverted cells, the worst scaled Jacobian and minimum angle, the largest
 distance of a patch node from its own CAD face (gmsh's closest point) over the bounding-box
 diagonal L, the mesh volume's relative difference from OCC's, checkMesh's verdict on the OpenFOAM
 case (None without OpenFOAM), and seconds (reading the file and meshing). The cylinder also gets
@@ -32,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
 import sys
 import tempfile
 import time
@@ -91,11 +95,25 @@ def check_mesh_ok(made, folder: Path):
 def bench_solid(kind: str, folder: Path, dims, method: str) -> dict:
     path = folder / f"{kind}.step"
     volume = write_sweep_solid(kind, path)
+    options, trained = {}, {}
+    if method == "neural":  # a model of the solid, trained as a user trains it
+        trained = train_model(path, folder / f"run-{kind}")
+        options["model"] = str(trained["checkpoint"])
     start = time.perf_counter()
-    made = mesh(str(path), dims, method=method)
+    made = mesh(str(path), dims, method=method, **options)
     seconds = time.perf_counter() - start
     distance, length = patch_distance(path, made)
-    return figures(made, dims, distance / length, volume, seconds, folder)
+    row = figures(made, dims, distance / length, volume, seconds, folder)
+    return row | ({"training_seconds": trained["seconds"]} if trained else {})
+
+
+def train_model(path: Path, run: Path) -> dict:
+    """``meshgen train -g PATH --out RUN -q`` in a subprocess: {"checkpoint", "seconds"}."""
+    environment = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    start = time.perf_counter()
+    command = [sys.executable, "-m", "meshgen", "train", "-g", str(path), "--out", str(run), "-q"]
+    subprocess.run(command, check=True, env=environment, stdout=subprocess.DEVNULL)
+    return {"checkpoint": run / "checkpoint.pt", "seconds": time.perf_counter() - start}
 
 
 def figures(made, dims, distance_rel: float, volume: float, seconds: float, folder: Path) -> dict:
@@ -163,7 +181,7 @@ def bench_stl_bend(row: str, folder: Path, dims, method: str) -> dict:
 
 
 def run(quick: bool = False) -> dict:
-    """Rows ``sweep_<solid>`` -> {"tfi": figures, "elliptic": figures} (module docstring); the
+    """Rows ``sweep_<solid>`` -> {"tfi": figures, "elliptic": figures[, "neural": figures]} (module docstring); the
     cylinder's also ``pipe_min_angle_min`` (the built-in pipe's, elliptic, same counts)."""
     try:
         import gmsh  # noqa: F401
@@ -176,13 +194,14 @@ def run(quick: bool = False) -> dict:
         os.environ["MESHGEN_CACHE_DIR"] = str(Path(folder) / "cache")
         for kind in SWEEP_SOLIDS:
             row = results[f"sweep_{kind}"] = {}
-            for method in ("tfi", "elliptic"):
+            for method in ("tfi", "elliptic") if quick else ("tfi", "elliptic", "neural"):
                 m = row[method] = bench_solid(kind, Path(folder), dims_of[kind], method)
                 print(
                     f"sweep_{kind:9s} {method:8s} {'x'.join(map(str, m['dims']))}  {m['blocks']:2d} blocks  inverted "
                     f"{m['inverted']}  scaled Jacobian {m['scaled_jacobian_min']:.3f}  min angle {m['min_angle_min']:.1f}  "
                     f"boundary {m['boundary_distance_max_rel']:.1e} L  volume {m['volume_rel_error']:.1e}  checkMesh "
-                    f"{m['checkmesh_ok']}  {m['seconds']:.2f} s",
+                    f"{m['checkmesh_ok']}  {m['seconds']:.2f} s"
+                    + (f"  (trained {m['training_seconds']:.0f} s)" if "training_seconds" in m else ""),
                     flush=True,
                 )
         try:

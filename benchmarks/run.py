@@ -1461,7 +1461,10 @@ def sweep_rows(data: dict, add) -> None:
     method, the worst case named."""
     shapes = {name: row for name, row in data.items() if name.startswith("sweep_")}
     judged = not data.get("quick")
-    figures = [(name[len("sweep_") :], method, row[method]) for name, row in shapes.items() for method in ("tfi", "elliptic")]
+    methods = ("tfi", "elliptic", "neural")
+    figures = [
+        (name[len("sweep_") :], method, row[method]) for name, row in shapes.items() for method in methods if method in row
+    ]
 
     def worst(key, largest=True):
         pick = max if largest else min
@@ -1477,7 +1480,11 @@ def sweep_rows(data: dict, add) -> None:
         add("swept NACA 0012 wing: worst scaled Jacobian", min(f[2]["scaled_jacobian_min"] for f in wing), "",
             key="sweep_wing_scaled_jacobian", judged=judged, note="the cell at the trailing edge; elliptic keeps the TFI mesh")  # fmt: skip
     add("swept CAD solids: inverted cells", sum(f[2]["inverted"] for f in figures), "", key="sweep_inverted", judged=judged,
-        note=f"{len(shapes)} shapes x 2 methods; checkMesh OK on {sum(bool(f[2]['checkmesh_ok']) for f in figures)} of {len(figures)}")  # fmt: skip
+        note=f"{len(shapes)} shapes, {len(figures)} meshes (neural: {sum(f[1] == 'neural' for f in figures)}); checkMesh OK on {sum(bool(f[2]['checkmesh_ok']) for f in figures)} of {len(figures)}")  # fmt: skip
+    trained = [f[2]["training_seconds"] for f in figures if "training_seconds" in f[2]]
+    if trained:
+        add("swept CAD solids: meshgen train, longest", max(trained), "s", judged=judged,
+            note=f"{len(trained)} solids, the networks fitted to each one's elliptic mesh; median {sorted(trained)[len(trained) // 2]:.0f} s")  # fmt: skip
     value, where = worst("boundary_distance_max_rel")
     add(
         "swept CAD solids: patch node distance from its CAD face",

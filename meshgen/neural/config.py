@@ -73,8 +73,9 @@ class MethodConfig:
     boundary_error: str = "relative"
     pde_weight: float = 1.0  # fixed weight of L1 (the starting weight when reweighting)
     boundary_weight: float = 1.0  # fixed weight of L2 (the starting weight when reweighting)
-    # block sets only: weight in L1 of the pull of every block's network towards its TFI (design
-    # notes §20); 0 switches it off. Refused (unless 1) for one shape or a family
+    # block sets only: weight in L1 of the pull of every block's network towards its start, the
+    # elliptic mesh (pretrain.target tfi: its TFI; design notes §20); 0 switches it off. Refused
+    # (unless 1) for one shape or a family
     tfi_anchor: float = 1.0
 
 
