@@ -25,7 +25,6 @@ import itertools
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from meshgen.geometry.shapes.surface_patches import (
     check_closed,
@@ -78,6 +77,8 @@ def read_surface_sweep(path) -> dict:
         centre = (areas[labels == k, None] * V[T[labels == k]].mean(axis=1)).sum(axis=0) / areas[labels == k].sum()
         flat = np.abs((V[vertices_of[k]] - centre) @ normal).max() <= tolerance
         planes.append((flat, normal, centre, areas[labels == k].sum()))
+    from scipy.spatial import cKDTree  # when a surface is read, not on every command's path (meshgen --help)
+
     why, nearest = "no two planar patches that every other patch touches", np.inf
     for i, j in itertools.combinations(range(len(names)), 2):
         if not (planes[i][0] and planes[j][0]) or np.intersect1d(vertices_of[i], vertices_of[j]).size:
