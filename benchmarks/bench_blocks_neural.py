@@ -5,7 +5,7 @@ elliptic mesh, at two resolutions, through the request path (``meshgen.mesh``).
 
 The model is trained in the run, as a user trains it: ``meshgen train -g pipe`` with the default
 configuration in a subprocess (imports, the elliptic start, checkpoints and summary), wall and CPU
-seconds (issue 39's row: at most 5 minutes on 2 cores); ``--checkpoint`` measures a given model instead.
+seconds (target: at most 5 minutes on 2 cores); ``--checkpoint`` measures a given model instead.
 
 Per resolution: the elliptic mesh (started from the TFI), the default neural mesh (the networks'
 mesh after the conforming correction) and ``--polish`` (that mesh polished by the multi-block

@@ -207,16 +207,16 @@ def test_gmsh_reads_the_merged_msh_of_a_block_set(tmp_path, request, case):
 @pytest.mark.parametrize("method", ["tfi", "elliptic", "neural"])
 def test_openfoam_pipe_checkmesh_and_uniform_potential_flow(tmp_path, method):
     """The pipe's mesh is an extrusion of its section (the elliptic one too: its inlet and outlet
-    nodes slide in their planes; the neural one by construction: the benchmark model's section,
+    nodes slide in their planes; the neural one by construction: a section model (tests/data),
     extruded): the finite-volume potential flow from a uniform inlet is uniform to solver accuracy."""
     from meshgen.methods.elliptic import elliptic_blocks
     from meshgen.neural.checkpoint import load_checkpoint
     from meshgen.neural.inference import neural_blocks
 
-    length = 4.0 if method == "neural" else 1.0  # the benchmark model's pipe
+    length = 4.0 if method == "neural" else 1.0  # the stored model's pipe
     block_set = load_block_set("pipe", {"length": length}, (6, 3, 4))
     if method == "neural":
-        model = load_checkpoint(Path(__file__).resolve().parents[1] / "benchmarks" / "models" / "pipe" / "checkpoint.pt")["model"]
+        model = load_checkpoint(Path(__file__).resolve().parent / "data" / "pipe-section-model.pt")["model"]
         Xs = neural_blocks(block_set, model)[0]
     else:
         Xs = tfi_blocks(block_set) if method == "tfi" else elliptic_blocks(block_set)[0]

@@ -1,7 +1,7 @@
 """The elliptic start of a block set's networks (``meshgen.neural.elliptic_start``, design notes
 §20): the fine grid (refined nodes, conforming interfaces, gradings kept), the projected fit (its
 output layer the least-squares solution, computed here again with NumPy; better than L-BFGS on
-every weight), the default run of the pipe meeting issue 39's row (within 0.5 degrees of the
+every weight), the default run of the pipe meeting its benchmark target (within 0.5 degrees of the
 elliptic mesh's mean min angle), the step counts a run takes, and the one-block refusal."""
 
 from __future__ import annotations
@@ -19,17 +19,9 @@ from meshgen.geometry.blocks import check_interfaces, load_block_set
 from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.checkpoint import load_checkpoint
 from meshgen.neural.config import resolve_config
-from meshgen.neural.elliptic_start import (
-    FIT_NODES,
-    RIDGE,
-    elliptic_pools,
-    elliptic_targets,
-    hidden_parameters,
-    projected_fit_step,
-    refined,
-    refinement,
-)
+from meshgen.neural.elliptic_start import FIT_NODES, elliptic_pools, elliptic_targets, refined, refinement
 from meshgen.neural.interfaces import BlockNetworks, block_problem
+from meshgen.neural.projected_fit import RIDGE, hidden_parameters, projected_fit_step
 from meshgen.neural.train import train
 from meshgen.quality import quality_report
 
@@ -144,7 +136,7 @@ def pipe_run(tmp_path_factory):
 
 
 def test_the_default_pipe_model_is_within_half_a_degree_of_the_elliptic_mesh(pipe_run):
-    """Issue 39's row: mean min angle within 0.5 deg of the multi-block elliptic mesh's at 8 4 4 and
+    """The benchmark's target: mean min angle within 0.5 deg of the multi-block elliptic mesh's at 8 4 4 and
     16 8 4, no inverted cell, identical interface nodes."""
     checkpoint = load_checkpoint(pipe_run)
     assert checkpoint["step"] == 20  # the fit alone: adam and lbfgs take their block_steps, 0

@@ -17,7 +17,7 @@ from meshgen.neural.models import build_neural, load_model
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "meshgen" / "_models" / "semicylinder" / "checkpoint.pt"
-PIPE = ROOT / "benchmarks" / "models" / "pipe" / "checkpoint.pt"
+PIPE = ROOT / "tests" / "data" / "pipe-section-model.pt"  # a 0.2 block-set checkpoint
 COORDS = [np.linspace(0.0, 1.0, 9), np.linspace(0.0, 1.0, 7) ** 1.5, np.linspace(0.0, 1.0, 6)]
 
 

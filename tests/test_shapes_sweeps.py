@@ -483,7 +483,7 @@ def test_an_elongated_cap_meshes_alike_turned(tmp_path, long_side, share, least)
 
 @pytest.mark.parametrize("kind", ["cylinder", "wedge"])
 def test_a_swept_solid_meshes_by_its_trained_networks_on_its_cad_faces(solids, kind, tmp_path):
-    """The neural method on a swept CAD solid (issue 35's "every method"): ``meshgen train`` with
+    """The neural method on a swept CAD solid: ``meshgen train`` with
     the default configuration (the networks fitted to the solid's elliptic mesh), then meshing at
     the test's counts: valid, no scaled Jacobian under 0.4, every patch node on its CAD face,
     the CAD volume, and the mean min angle at least the elliptic mesh's less 0.5 deg."""

@@ -21,7 +21,7 @@ from meshgen.geometry.block_nodes import merged_mesh
 from meshgen.geometry.blocks import BlockSet, tfi_blocks
 from meshgen.geometry.extrusion import extrusion_of, section_of
 from meshgen.neural.config import ConfigError, keys_off_default
-from meshgen.neural.elliptic_start import elliptic_pools, elliptic_targets, hidden_parameters, projected_fit_step
+from meshgen.neural.elliptic_start import elliptic_pools, elliptic_targets
 from meshgen.neural.history import TrainState, state_from_checkpoint
 from meshgen.neural.inference import check_start_model, network_blocks, neural_blocks
 from meshgen.neural.interfaces import (
@@ -39,6 +39,7 @@ from meshgen.neural.interfaces import (
 )
 from meshgen.neural.model import INPUT_MAP
 from meshgen.neural.pcgrad import assign, flatten
+from meshgen.neural.projected_fit import hidden_parameters, projected_fit_step
 from meshgen.neural.reweighting import UncertaintyWeights
 from meshgen.neural.stages import Job, Stage
 from meshgen.neural.steps import (
@@ -279,6 +280,7 @@ def block_stage_table(pool: dict, pool_count: int, start_pools=None, start_note:
                 else projected_fit_step(t.network.networks, optimizer, pools)
             ),
             start=lambda t, say: say(start_note) if start_note else None,
+            title=None if start_pools is None else "Elliptic fit",
         ),
         Stage(
             "adam",

@@ -43,10 +43,14 @@ class MLP(torch.nn.Module):
         self.layers = torch.nn.ModuleList(torch.nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
 
     def forward(self, xi: torch.Tensor) -> torch.Tensor:
+        return self.layers[-1](self.hidden(xi))
+
+    def hidden(self, xi: torch.Tensor) -> torch.Tensor:
+        """The last hidden layer (N, widths[-1]) at ``xi`` (N, dim)."""
         hidden = 2.0 * xi - 1.0
         for layer in self.layers[:-1]:
             hidden = torch.tanh(layer(hidden))
-        return self.layers[-1](hidden)
+        return hidden
 
 
 def bubble(xi):

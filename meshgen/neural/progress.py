@@ -17,7 +17,7 @@ __all__ = ["STAGE_TITLES", "FIELD_HELP", "shown_fields", "describe_row", "RichRe
 STAGE_TITLES = {"pretrain": "TFI fit", "adam": "Adam", "lbfgs": "L-BFGS"}
 # What the optional figures of a progress line mean; ``meshgen train --help`` prints these.
 FIELD_HELP = {
-    "misfit": "the TFI fit's loss (squared distance from the TFI map)",
+    "misfit": "the first fit's loss (mean squared distance from the start: the TFI map, a block set's elliptic mesh, or the marched layers round a wall)",
     "L1": "the PDE (Winslow) loss",
     "L2": "the boundary loss",
     "a": "the learned weights a1 (PDE), a2 (boundary) of the losses",

@@ -58,6 +58,7 @@ class Stage:
     # (Training) -> steps taken between two reads of their rows (one wait for the device)
     block: Callable = lambda training: 1
     total: Callable | None = None  # (Training) -> the stage's steps; None: the configuration's <name>.steps
+    title: str | None = None  # what the progress shows (None: ``meshgen.neural.progress.STAGE_TITLES``)
 
 
 @dataclass
@@ -219,7 +220,7 @@ def run_stages(
             if state.stage_step == 0:
                 stage.start(training, say)
             if reporter is not None:
-                reporter.stage(stage.name, state.stage_step, total)
+                reporter.stage(stage.title or stage.name, state.stage_step, total)
             guard = DivergenceGuard(training, optimizer, scheduler, state)
             block = stage.block(training)
             every = config.checkpoint.every
