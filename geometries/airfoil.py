@@ -25,8 +25,8 @@ the section's, C-grid: turning from down at the lower trailing edge through upst
 leading edge to up, at half the rate of the polar angle about the mid-chord point of the mean
 line, or the mean line's point nearest it about which the section is star-shaped (a thin, strongly
 cambered section); O-grid: radial from it). TFI reproduces it, so the TFI mesh's straight grid lines have their first cells exactly of
-the asked height; the parametric eta nodes are the wall-normal distances over D
-(``meshgen.geometry.wall_spacing``). ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
+the asked height; the parametric eta nodes are the wall-normal distances over D, the nodes'
+spacing is ``meshgen.geometry.airfoil_spacing``'s. ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
 marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the layers beyond one
 chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
 the designed, wall-normal spacing: see ``mesh_elliptic``).
@@ -48,6 +48,8 @@ import time
 import numpy as np
 
 from meshgen.errors import GeometryError, ParameterError
+from meshgen.geometry import airfoil_spacing
+from meshgen.geometry.airfoil_spacing import first_height, level_scale
 from meshgen.methods.clustering import respaced_lines, smoothed_spacing
 
 name = "airfoil"
@@ -79,17 +81,11 @@ dims_meaning = (
     "default 1; side planes front and back, symmetry)"
 )
 shown_dims = (448, 128)  # what `meshgen geometries show` builds the set with (4 cells cannot reach the far field)
-LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
 blocks = ("lower", "section", "upper")
 # What a member of a family of sections (meshgen.neural.wall_family) sets at will: the wall spacing,
 # which the network's frame applies exactly; the section and the far field are the family's.
 wall_free = ("yplus", "reynolds", "first_height", "growth", "layers", "le_spacing", "te_spacing", "level")
 train_dims = (448, 128)  # meshgen train: the marched mesh the wall-layer network learns (TMR's 449 x 129 points)
-WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
-MIN_SECTION_CELLS = 16
-MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
-RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
-# solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
 MARCH_SMOOTHING = (0.05, 0.1, 0.2, 0.4)  # the march's dissipation, tried in turn (a thick section with aft camber folds at 0.05)
 BLEND_START = 1.0  # chords: the marched layers beyond this distance are blended into straight lines
 FARFIELD_SMOOTHING = 8.0  # cells over which the far field's spacing is smoothed
@@ -388,111 +384,12 @@ def boundary(block, points, **values):
 
 
 # ---------------------------------------------------------------------------------------------
-# node distributions
-
-
-def level_scale(values) -> float:
-    """The factor (2/3)^K of every designed length at grid level K = ``level`` (DPW's family rule)."""
-    return LEVEL_RATIO ** -int(values.get("level", 0.0))
-
-
-def level_dims(values, dims) -> tuple[int, int]:
-    """The cell counts (N, M) at grid level K: round(1.5^K N), round(1.5^K M)."""
-    return tuple(round(LEVEL_RATIO ** int(values.get("level", 0.0)) * int(k)) for k in dims)
-
-
-def first_height(values) -> tuple[float, str]:
-    """The first-cell height (chords) at the grid level and how it was found (one phrase)."""
-    from meshgen.geometry.wall_spacing import first_cell_height
-
-    scale = level_scale(values)
-    at_level = "" if scale == 1 else f", times (2/3)^{int(values['level'])} at level {int(values['level'])}"
-    if values["first_height"] > 0:
-        return float(values["first_height"]) * scale, "as given" + at_level
-    try:
-        cell = first_cell_height(values["yplus"], values["reynolds"])
-    except ParameterError as exc:
-        raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
-    return cell.height * scale, (
-        f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
-        + at_level
-    )
-
-
-def _design_ratio(cap: float) -> float:
-    return 1.0 + RATIO_MARGIN * (cap - 1.0)
-
-
-def normal_distances(values, cells: int) -> tuple[np.ndarray, float]:
-    """The wall-normal node distances (cells+1,) from 0 to D and the growth ratio they take."""
-    from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
-
-    h, _ = first_height(values)
-    cap, layers, distance = _design_ratio(values["growth"]), int(values["layers"]), float(values["farfield"])
-    smallest = minimal_cell_count(h, distance, cap, layers)
-    if cells < smallest:
-        raise ParameterError(
-            "dims",
-            f"{{name}}: M = {cells} cells cannot reach the far field ({distance:g} chords) from a first cell of {h:.3g} "
-            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}"
-            + (f" (at level {int(values['level'])}: M is round(1.5^K M) of --dims)" if values.get("level") else ""),
-        )
-    return wall_normal_distances(h, distance, cap, layers, cells=cells)
-
-
-def _split_at(r: np.ndarray, arc: float, first: int, last: int) -> int:
-    """Move node nearest ``arc`` among r[first..last] onto it, stretching its neighbours linearly."""
-    j = first + 1 + int(np.argmin(np.abs(r[first + 1 : last] - arc)))
-    lo, hi = r[first], r[last]
-    r[first : j + 1] = lo + (r[first : j + 1] - lo) * (arc - lo) / (r[j] - lo)
-    r[j : last + 1] = arc + (r[j : last + 1] - r[j]) * (hi - arc) / (hi - r[j])
-    return j
+# node distributions (meshgen.geometry.airfoil_spacing)
 
 
 def block_coords(dims, **values):
-    from meshgen.geometry.airfoil_curve import chordwise_distribution
-    from meshgen.geometry.wall_spacing import minimal_cell_count, wall_normal_distances
-
-    setup = _setup(_key(values))
-    n, m = level_dims(values, dims)
-    eta = normal_distances(values, m)[0] / setup.distance
-    te_h, le_h = values["te_spacing"] * level_scale(values), values["le_spacing"] * level_scale(values)
-    if setup.sharp:
-        cap = _design_ratio(values["growth"])
-        least = minimal_cell_count(te_h, setup.wake, cap, 1)
-        wake_cells = max(least, round(WAKE_SHARE * n))
-        if n - 2 * wake_cells < MIN_SECTION_CELLS:
-            smallest = max(2 * least + MIN_SECTION_CELLS, math.ceil((MIN_SECTION_CELLS + 1) / (1 - 2 * WAKE_SHARE)))
-            raise ParameterError(
-                "dims", f"{{name}}: N = {n} is too few for the section and its wake: the smallest N that works is {smallest}"
-            )
-        wake = wall_normal_distances(te_h, setup.wake, cap, 1, cells=wake_cells)[0] / setup.wake
-        around = chordwise_distribution(setup.section, n - 2 * wake_cells, le_h, te_h) / setup.section.length
-        return {"lower": [1.0 - wake[::-1], eta], "section": [around, eta], "upper": [wake, eta]}
-    base = max(MIN_BASE_CELLS, 2 * math.ceil(setup.gap / (2 * te_h)))
-    if n - base < MIN_SECTION_CELLS:
-        raise ParameterError(
-            "dims", f"{{name}}: N = {n} is too few round the section: the smallest N that works is {base + MIN_SECTION_CELLS}"
-        )
-    half = 0.5 * setup.gap
-    s = chordwise_distribution(setup.section, n - base, le_h, te_h)
-    r = np.concatenate(
-        [
-            np.linspace(0.0, half, base // 2 + 1)[:-1],
-            half + s,
-            half + setup.section.length + np.linspace(0.0, half, base // 2 + 1)[1:],
-        ]
-    )
-    le = base // 2 + int(np.argmin(np.abs(s - setup.le_arc)))
-    a, b = setup.splits
-    ja = _split_at(r, a, base // 2, le)
-    jb = _split_at(r, b, le, base // 2 + len(s) - 1)
-    total = _ring_length(setup)
-    return {
-        "lower": [r[: ja + 1] / a, eta],
-        "section": [(r[ja : jb + 1] - a) / (b - a), eta],
-        "upper": [(r[jb:] - b) / (total - b), eta],
-    }
+    """The blocks' parametric nodes (``airfoil_spacing.block_coords`` of this section)."""
+    return airfoil_spacing.block_coords(_setup(_key(values)), dims, values)
 
 
 def notes(block_set):

@@ -113,6 +113,7 @@ LAYERS = [
         "meshgen.geometry.extrusion",
         "meshgen.geometry.grading",
         "meshgen.geometry.wall_spacing",
+        "meshgen.geometry.airfoil_spacing",
         "meshgen.quality.deviation",
     ],
     [

@@ -1,0 +1,135 @@
+"""The node spacing of the ``airfoil`` geometry's grids (``geometries/airfoil.py``): the grid
+family's levels, the first cell from y+, the wall-normal distances, the parametric nodes of the
+blocks (C-grid: the wake cut's and round the section; O-grid: round the ring).
+
+Lengths are in chords. ``values`` is the geometry's parameter dict; ``setup`` its ``_Setup`` (the
+section, the trailing edge, the far field's distance D, the wake's length, the turn by alpha).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from meshgen.errors import ParameterError
+from meshgen.geometry.airfoil_curve import chordwise_distribution
+from meshgen.geometry.wall_spacing import first_cell_height, minimal_cell_count, wall_normal_distances
+
+__all__ = [
+    "LEVEL_RATIO",
+    "block_coords",
+    "design_ratio",
+    "first_height",
+    "level_dims",
+    "level_scale",
+    "normal_distances",
+]
+
+LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
+WAKE_SHARE = 0.2  # the least share of N on each side of a C-grid's wake cut
+MIN_SECTION_CELLS = 16
+MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
+RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
+# solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
+
+
+def level_scale(values) -> float:
+    """The factor (2/3)^K of every designed length at grid level K = ``level`` (DPW's family rule)."""
+    return LEVEL_RATIO ** -int(values.get("level", 0.0))
+
+
+def level_dims(values, dims) -> tuple[int, int]:
+    """The cell counts (N, M) at grid level K: round(1.5^K N), round(1.5^K M)."""
+    return tuple(round(LEVEL_RATIO ** int(values.get("level", 0.0)) * int(k)) for k in dims)
+
+
+def first_height(values) -> tuple[float, str]:
+    """The first-cell height (chords) at the grid level and how it was found (one phrase)."""
+    scale = level_scale(values)
+    at_level = "" if scale == 1 else f", times (2/3)^{int(values['level'])} at level {int(values['level'])}"
+    if values["first_height"] > 0:
+        return float(values["first_height"]) * scale, "as given" + at_level
+    try:
+        cell = first_cell_height(values["yplus"], values["reynolds"])
+    except ParameterError as exc:
+        raise ParameterError("yplus" if exc.parameter == "y_plus" else exc.parameter, exc.template) from None
+    return cell.height * scale, (
+        f"y+ {values['yplus']:g} at Re {values['reynolds']:.3g}: h = y+ / (Re sqrt(Cf/2)), Cf = (2 log10 Re - 0.65)^-2.3 = {cell.cf:.4g}"
+        + at_level
+    )
+
+
+def design_ratio(cap: float) -> float:
+    """The growth ratio the wall-normal distances are designed to under the cap: 1 + 0.95 (cap - 1)."""
+    return 1.0 + RATIO_MARGIN * (cap - 1.0)
+
+
+def normal_distances(values, cells: int) -> tuple[np.ndarray, float]:
+    """The wall-normal node distances (cells+1,) from 0 to D and the growth ratio they take."""
+    h, _ = first_height(values)
+    cap, layers, distance = design_ratio(values["growth"]), int(values["layers"]), float(values["farfield"])
+    smallest = minimal_cell_count(h, distance, cap, layers)
+    if cells < smallest:
+        raise ParameterError(
+            "dims",
+            f"{{name}}: M = {cells} cells cannot reach the far field ({distance:g} chords) from a first cell of {h:.3g} "
+            f"with growth ratios <= {values['growth']:g}: the smallest M that works is {smallest}"
+            + (f" (at level {int(values['level'])}: M is round(1.5^K M) of --dims)" if values.get("level") else ""),
+        )
+    return wall_normal_distances(h, distance, cap, layers, cells=cells)
+
+
+def _split_at(r: np.ndarray, arc: float, first: int, last: int) -> int:
+    """Move node nearest ``arc`` among r[first..last] onto it, stretching its neighbours linearly."""
+    j = first + 1 + int(np.argmin(np.abs(r[first + 1 : last] - arc)))
+    lo, hi = r[first], r[last]
+    r[first : j + 1] = lo + (r[first : j + 1] - lo) * (arc - lo) / (r[j] - lo)
+    r[j : last + 1] = arc + (r[j : last + 1] - r[j]) * (hi - arc) / (hi - r[j])
+    return j
+
+
+def block_coords(setup, dims, values) -> dict:
+    """{block: [xi nodes, eta nodes]} (1D, 0 to 1) of the blocks at --dims ``dims`` (N, M) and
+    grid level: eta the wall-normal distances over D; C-grid: the wake's share of N on each side
+    of the cut (the cut's streamwise nodes from the trailing-edge spacing), the rest round the
+    section; O-grid: the ring, base included, split at the middle of each surface."""
+    n, m = level_dims(values, dims)
+    eta = normal_distances(values, m)[0] / setup.distance
+    te_h, le_h = values["te_spacing"] * level_scale(values), values["le_spacing"] * level_scale(values)
+    if setup.sharp:
+        cap = design_ratio(values["growth"])
+        least = minimal_cell_count(te_h, setup.wake, cap, 1)
+        wake_cells = max(least, round(WAKE_SHARE * n))
+        if n - 2 * wake_cells < MIN_SECTION_CELLS:
+            smallest = max(2 * least + MIN_SECTION_CELLS, math.ceil((MIN_SECTION_CELLS + 1) / (1 - 2 * WAKE_SHARE)))
+            raise ParameterError(
+                "dims", f"{{name}}: N = {n} is too few for the section and its wake: the smallest N that works is {smallest}"
+            )
+        wake = wall_normal_distances(te_h, setup.wake, cap, 1, cells=wake_cells)[0] / setup.wake
+        around = chordwise_distribution(setup.section, n - 2 * wake_cells, le_h, te_h) / setup.section.length
+        return {"lower": [1.0 - wake[::-1], eta], "section": [around, eta], "upper": [wake, eta]}
+    base = max(MIN_BASE_CELLS, 2 * math.ceil(setup.gap / (2 * te_h)))
+    if n - base < MIN_SECTION_CELLS:
+        raise ParameterError(
+            "dims", f"{{name}}: N = {n} is too few round the section: the smallest N that works is {base + MIN_SECTION_CELLS}"
+        )
+    half = 0.5 * setup.gap
+    s = chordwise_distribution(setup.section, n - base, le_h, te_h)
+    r = np.concatenate(
+        [
+            np.linspace(0.0, half, base // 2 + 1)[:-1],
+            half + s,
+            half + setup.section.length + np.linspace(0.0, half, base // 2 + 1)[1:],
+        ]
+    )
+    le = base // 2 + int(np.argmin(np.abs(s - setup.le_arc)))
+    a, b = setup.splits
+    ja = _split_at(r, a, base // 2, le)
+    jb = _split_at(r, b, le, base // 2 + len(s) - 1)
+    total = setup.section.length + setup.gap  # the ring's length
+    return {
+        "lower": [r[: ja + 1] / a, eta],
+        "section": [(r[ja : jb + 1] - a) / (b - a), eta],
+        "upper": [(r[jb:] - b) / (total - b), eta],
+    }
