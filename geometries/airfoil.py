@@ -29,7 +29,9 @@ the asked height; the parametric eta nodes are the wall-normal distances over D,
 spacing is ``meshgen.geometry.airfoil_spacing``'s. ``mesh_elliptic`` (the hook of ``meshgen.run.meshing``)
 marches every layer off the wall (``meshgen.methods.hyperbolic``) and blends the layers beyond one
 chord into the TFI mesh: no Winslow equations are solved (a Winslow outer region keeps harmonic, not
-the designed, wall-normal spacing: see ``mesh_elliptic``).
+the designed, wall-normal spacing: see ``mesh_elliptic``); the wake cut's lines take their own
+distances, their first cells growing downstream with the cut's (``airfoil_spacing.line_distances``;
+not the TFI mesh's: its eta nodes are one set for every line).
 
 A third --dims number K extrudes the set into a straight wing section (``extruded``): every block
 times [0, ``span``] along z, K equal cells, the 2D patches plus ``front`` (z = 0) and ``back``
@@ -510,8 +512,9 @@ def _blend(block_set, near, check=True):
     """The mesh from the marched layers ``near`` (per block (n_b, m + 1, 2), turned; or a learned
     mesh, ``wall_finish``): the layers beyond ``BLEND_START`` chords blended into straight lines from the wall
     nodes to the far-field nodes (``far_field``: the spacing smoothed), nodes slid along each line
-    to the designed distances (``meshgen.methods.clustering.respaced_lines``), interface nodes made identical. GeometryError when a
-    cell is inverted (``check``)."""
+    to the designed distances (``meshgen.methods.clustering.respaced_lines``; the wake cut's lines
+    to their own, ``airfoil_spacing.line_distances``), interface nodes made identical. GeometryError
+    when a cell is inverted (``check``)."""
     from meshgen.geometry.block_nodes import unify_interfaces
     from meshgen.methods.hyperbolic import cell_areas
 
@@ -525,7 +528,7 @@ def _blend(block_set, near, check=True):
     curve, far = _turned(setup, curve), _turned(setup, far_field(setup, block_set.coords))  # turning is affine
     lines = curve[:, None] + (d / setup.distance)[None, :, None] * (far - curve)[:, None]
     Xs = [X + weight * (lines[o : o + size] - X) for X, o, size in zip(near, offsets, sizes)]
-    Xs = [respaced_lines(X, d, weight[0, :, 0]) for X in Xs]
+    Xs = [respaced_lines(X, along, weight[0, :, 0]) for X, along in zip(Xs, airfoil_spacing.line_distances(setup, walls, d))]
     unify_interfaces(block_set, Xs)
     inverted = sum(int(np.sum(cell_areas(X) <= 0)) for X in Xs)
     if inverted and check:

@@ -7,6 +7,7 @@ import pytest
 
 from meshgen.errors import ParameterError
 from meshgen.geometry.wall_spacing import (
+    cut_normal_distances,
     first_cell_height,
     minimal_cell_count,
     skin_friction,
@@ -114,3 +115,23 @@ def test_bad_distances_are_refused(args, kwargs, message):
     with pytest.raises(ParameterError, match=message) as caught:
         wall_normal_distances(*args, **kwargs)
     assert "\n" not in str(caught.value)
+
+
+def test_cut_normal_distances_grow_the_first_cell_and_keep_the_growth():
+    d, _ = wall_normal_distances(4.46e-6, 1000.0, 1.1425, 2, cells=131)
+    spacing = np.geomspace(1e-4, 120.0, 60)  # a wake cut's streamwise cells, trailing edge to outflow
+    lines = cut_normal_distances(d, spacing, 224.0)
+    assert lines.shape == (60, 132)
+    kept = spacing / 224.0 <= 4.46e-6
+    assert 0 < kept.sum() < 60 and np.array_equal(lines[kept], np.broadcast_to(d, (kept.sum(), 132)))  # bit for bit
+    cells = np.diff(lines, axis=1)
+    assert np.all(cells > 0) and np.all(lines[:, 0] == 0) and np.all(lines[:, -1] == 1000.0)
+    wall_ratio = (np.diff(d)[1:] / np.diff(d)[:-1]).max()
+    assert (cells[:, 1:] / cells[:, :-1]).max() <= wall_ratio * (1 + 1e-12)
+    # The first cell: the streamwise cell over 224, less the scaling back to 1000 chords (at most
+    # the 131 raised cells' share of the line).
+    want = np.maximum(spacing / 224.0, 4.46e-6)
+    assert np.all(cells[:, 0] <= want * (1 + 1e-12))
+    assert np.all(cells[:, 0] >= want * 1000.0 / (1000.0 + 131 * want))
+    # Outwards the raise fades: the last cells are the wall's to within the scaling.
+    np.testing.assert_allclose(cells[:, -1], np.diff(d)[-1], rtol=0.1)

@@ -1,9 +1,18 @@
 """The node spacing of the ``airfoil`` geometry's grids (``geometries/airfoil.py``): the grid
 family's levels, the first cell from y+, the wall-normal distances, the parametric nodes of the
-blocks (C-grid: the wake cut's and round the section; O-grid: round the ring).
+blocks (C-grid: the wake cut's and round the section; O-grid: round the ring), and the wake
+cut's normal distances.
 
 Lengths are in chords. ``values`` is the geometry's parameter dict; ``setup`` its ``_Setup`` (the
 section, the trailing edge, the far field's distance D, the wake's length, the turn by alpha).
+
+checkMesh takes a 2D cell's aspect ratio as the larger over the smaller of its face areas' summed
+x and y components (limit 1000): the cell's length over its height where the cell runs along x,
+as along the wake cut. So the cut's lines (``line_distances``) take the wall's distances at the
+trailing edge, and downstream every cell raised so that the first is the cut's streamwise cell
+over the trailing edge's aspect ratio (``WAKE_ASPECT`` at least) high
+(``wall_spacing.cut_normal_distances``); kept at the wall's first height out to the outflow, the
+cut's cells reached 2.7e7 on the TMR grid at 1000 chords.
 """
 
 from __future__ import annotations
@@ -14,15 +23,17 @@ import numpy as np
 
 from meshgen.errors import ParameterError
 from meshgen.geometry.airfoil_curve import chordwise_distribution
-from meshgen.geometry.wall_spacing import first_cell_height, minimal_cell_count, wall_normal_distances
+from meshgen.geometry.wall_spacing import cut_normal_distances, first_cell_height, minimal_cell_count, wall_normal_distances
 
 __all__ = [
     "LEVEL_RATIO",
+    "WAKE_ASPECT",
     "block_coords",
     "design_ratio",
     "first_height",
     "level_dims",
     "level_scale",
+    "line_distances",
     "normal_distances",
 ]
 
@@ -32,6 +43,7 @@ MIN_SECTION_CELLS = 16
 MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's middle is a node)
 RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
+WAKE_ASPECT = 100.0  # the wake cut's cells grow in height where longer than this for it (or the trailing edge's)
 
 
 def level_scale(values) -> float:
@@ -133,3 +145,21 @@ def block_coords(setup, dims, values) -> dict:
         "section": [(r[ja : jb + 1] - a) / (b - a), eta],
         "upper": [(r[jb:] - b) / (total - b), eta],
     }
+
+
+def line_distances(setup, walls, d) -> list:
+    """The designed distances of each block's grid lines (chords): ``d`` (m + 1,) round the section;
+    along a C-grid's wake cut (``walls`` the blocks' wall or cut nodes, (n_b, 2) each) one row per
+    line, (n_b, m + 1), every cell raised so that the first is the cut's streamwise cell at the
+    line (the longer of its two) over A high, A the trailing edge's aspect ratio (its cut cell over
+    the first height) or ``WAKE_ASPECT`` where larger (``wall_spacing.cut_normal_distances``): the
+    trailing edge's line keeps ``d`` (it is the section block's too), and downstream the cut's
+    cells stay about A long for their height."""
+    if not setup.sharp:
+        return [d, d, d]
+    out = []
+    for cut, te in zip((walls[0], walls[2]), (-1, 0)):
+        chords = np.linalg.norm(np.diff(cut, axis=0), axis=1)
+        spacing = np.maximum(np.concatenate([chords[:1], chords]), np.concatenate([chords, chords[-1:]]))
+        out.append(cut_normal_distances(d, spacing, max(chords[te] / d[1], WAKE_ASPECT)))
+    return [out[0], d, out[1]]

@@ -11,6 +11,10 @@ cells growing by one ratio q. Given a cap r on q, the count is the smallest for 
 reaches the distance D; at that count q <= r is solved so that the cells sum to D exactly (every
 ratio is q, none is capped separately). Given a count instead, q follows from it, and a count too
 small to reach D under the cap is refused with the smallest count that works.
+
+Across a wake cut (``cut_normal_distances``): the wall's distances with every cell raised so the
+first is the cut's streamwise spacing over an aspect ratio high, scaled back to D, so the wake's cells stop
+lengthening (in OpenFOAM's terms, growing in aspect ratio) downstream of the trailing edge.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from meshgen.methods.clustering import Cluster, clustered_coordinates
 __all__ = [
     "RE_RANGE",
     "YPLUS_RANGE",
+    "cut_normal_distances",
     "FirstCell",
     "first_cell_height",
     "minimal_cell_count",
@@ -140,6 +145,27 @@ def wall_normal_distances(
     nodes[-1] = distance
     ratio = float((tail[2] - tail[1]) / (tail[1] - tail[0])) if grown > 1 else 1.0
     return nodes, ratio
+
+
+def cut_normal_distances(distances, spacing, aspect: float) -> np.ndarray:
+    """Node distances (n, m+1) from a wake cut along each of its n grid lines: the wall's
+    ``distances`` (m+1,), from 0 to D, with every cell raised by max(0, ``spacing`` / ``aspect``
+    minus the first cell), so the first is at least ``spacing / aspect`` high (``spacing`` (n,):
+    the cut's streamwise cell length at each line, units of ``distances``; ``aspect`` > 0), then
+    scaled by D over their sum so each line still ends at D. Raising cells by one amount lowers
+    every growth ratio (none exceeds the wall's), and the lift fades smoothly outwards as the
+    wall's cells grow past it (a cell's height, relative to its neighbour line's, changes slowly
+    from row to row: a sharp switch from equal to the wall's cells put OpenFOAM's non-orthogonality
+    at 65 degrees at 200:1 cells). A line whose ``spacing / aspect`` is at most the first cell
+    keeps ``distances`` bit for bit."""
+    d = np.asarray(distances, dtype=float)
+    cells = np.diff(d)
+    lift = np.maximum(np.asarray(spacing, dtype=float) / float(aspect) - cells[0], 0.0)
+    out = np.zeros((len(lift), len(d)))
+    np.cumsum(cells[None, :] + lift[:, None], axis=1, out=out[:, 1:])
+    out *= d[-1] / out[:, -1:]
+    out[:, -1] = d[-1]
+    return np.where((lift > 0)[:, None], out, d[None, :])
 
 
 def spacing_summary(nodes, ratio: float, layers: int = 2) -> str:

@@ -139,14 +139,15 @@ def smoothed_spacing(ds: np.ndarray, width: float) -> np.ndarray:
 
 def respaced_lines(X: np.ndarray, d: np.ndarray, weight: np.ndarray) -> np.ndarray:
     """The nodes of every grid line of ``X`` (n, m + 1, 2) slid along it (its polyline) to the arc
-    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, c the line's length over d[-1]
-    minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep their distances, the growth
-    ratio stays the designed one where the blend bends or stretches the lines."""
+    lengths d (1 + c w): ``d`` (m + 1,) the designed distances, or (n, m + 1) one row per line, c
+    the line's length over d's last minus 1, ``w`` (m + 1,) the blend weight: the wall layers keep
+    their distances, the growth ratio stays the designed one where the blend bends or stretches the lines."""
     n, nodes = X.shape[0], X.shape[1]
     steps = np.diff(X, axis=1)
     arc = np.zeros((n, nodes))
     np.cumsum(np.hypot(steps[..., 0], steps[..., 1]), axis=1, out=arc[:, 1:])
-    target = d[None, :] * (1.0 + (arc[:, -1:] / d[-1] - 1.0) * weight[None, :])
+    d = np.broadcast_to(d, (n, nodes))
+    target = d * (1.0 + (arc[:, -1:] / d[:, -1:] - 1.0) * weight[None, :])
     target[:, -1] = arc[:, -1]
     lift = 2.0 * arc[:, -1:].max() * np.arange(n)[:, None]  # one increasing array for all lines
     lifted, wanted = (arc + lift).ravel(), (target + lift).ravel()
