@@ -410,43 +410,57 @@ def notes(block_set):
 # the elliptic mesh: near-wall layers marched, the rest solved
 
 
-_FAR_CURVES = {}  # id(setup) -> (setup, dense far-field curve, its arc lengths): the curve of every --dims
+_FAR_CURVES = {}  # id(setup) -> (setup, arc -> curve parameter, curve length): the curve of every --dims
 
 
-def _far_curve(setup: _Setup) -> tuple[np.ndarray, np.ndarray]:
-    """The far-field curve w + D e (4001 points per block, unturned) and its arc lengths, made once per setup."""
+def _far_points(setup: _Setup, u: np.ndarray) -> np.ndarray:
+    """Points (k, 2) of the far-field curve w + D e (unturned) at curve parameters ``u`` (k,): the
+    block's index plus its xi (the section block of a C-grid: its curve parameter), 0 to 3."""
+    block = np.minimum(np.floor(u).astype(int), len(blocks) - 1)
+    out = np.empty((len(u), 2))
+    for b, name in enumerate(blocks):
+        on = block == b
+        if setup.sharp and name == "section":
+            points, direction = _section_at_parameters(setup, u[on] - b)
+        else:
+            points, direction = _wall_points(setup, name, np.clip(u[on] - b, 0.0, 1.0))
+        out[on] = points + setup.distance * direction
+    return out
+
+
+def _far_curve(setup: _Setup):
+    """The far-field curve's parameter as a function of its arc length (a monotone C1 interpolant,
+    scipy ``PchipInterpolator``, of 4001 points per block) and its length, made once per setup."""
+    from scipy.interpolate import PchipInterpolator
+
     cached = _FAR_CURVES.get(id(setup))
     if cached is not None and cached[0] is setup:
         return cached[1], cached[2]
-    dense = []
-    for block in blocks:
-        if setup.sharp and block == "section":  # 4001 points even in the curve's parameter: no arc length to invert
-            points, direction = _section_at_parameters(setup, np.linspace(0.0, 1.0, 4001))
-        else:
-            points, direction = _wall(setup, block, np.linspace(0.0, 1.0, 4001), turned=False)
-        dense.append(points + setup.distance * direction)
-    dense = np.concatenate([dense[0], dense[1][1:], dense[2][1:]])
+    u = np.concatenate([b + np.linspace(0.0, 1.0, 4001)[min(b, 1) :] for b in range(len(blocks))])
+    dense = _far_points(setup, u)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(dense, axis=0), axis=1))])
     if len(_FAR_CURVES) > 16:
         _FAR_CURVES.clear()
-    _FAR_CURVES[id(setup)] = (setup, dense, arc)
-    return dense, arc
+    _FAR_CURVES[id(setup)] = (setup, PchipInterpolator(arc, u), float(arc[-1]))
+    return _FAR_CURVES[id(setup)][1:]
 
 
 def far_field(setup: _Setup, coords) -> np.ndarray:
     """The far-field nodes (N + 1, 2) of the row of blocks, unturned: on the boundary map's outer
     curve (w + D e), spaced as the boundary map spaces them but with the logarithm of the spacing
     diffused over ``FARFIELD_SMOOTHING`` cells (the section block's far-field cells are about 15 times longer than
-    the wake blocks' where they meet)."""
+    the wake blocks' where they meet). Each node is the curve at the parameter its arc length maps to
+    (``_far_curve``): on the curve, and smooth in the section's parameters (nodes interpolated
+    along the dense polyline put kinks of about a chord per unit thickness into the derivatives of
+    a family's far-field nodes, ``meshgen.neural.wall_derivatives``)."""
     designed = []
     for block, c in zip(blocks, coords):
         points, direction = _wall(setup, block, np.asarray(c[0]), turned=False)
         designed.append(points + setup.distance * direction)
     designed = np.concatenate([designed[0], designed[1][1:], designed[2][1:]])
-    dense, arc = _far_curve(setup)
+    parameter, length = _far_curve(setup)
     spacing = smoothed_spacing(np.linalg.norm(np.diff(designed, axis=0), axis=1), FARFIELD_SMOOTHING)
-    s = np.concatenate([[0.0], np.cumsum(spacing)]) * arc[-1] / spacing.sum()
-    out = np.stack([np.interp(s, arc, dense[:, 0]), np.interp(s, arc, dense[:, 1])], axis=1)
+    out = _far_points(setup, parameter(np.concatenate([[0.0], np.cumsum(spacing)]) * length / spacing.sum()))
     out[0], out[-1] = designed[0], designed[-1]
     return out
 

@@ -12,6 +12,7 @@ import pytest
 import meshgen
 from meshgen.formats._cgns import read_zones
 from meshgen.geometry.blocks import load_block_set, tfi_blocks
+from meshgen.geometry.plugins import plugin_module
 from tests.openfoam_helpers import check_mesh, needs_openfoam
 
 RE = 6e6
@@ -171,6 +172,25 @@ def test_far_field_spacing_has_no_jump(grid, request):
     assert (tfi_spacing[1:] / tfi_spacing[:-1]).max() > 5 or grid == "o_grid"  # the jump that was there
     # On the far field's curve: as far from the wall's mid-chord as the TFI far field (D = 100 chords out).
     assert np.allclose(np.linalg.norm(far - [0.5, 0], axis=1).max(), np.linalg.norm(tfi_far - [0.5, 0], axis=1).max(), rtol=1e-3)
+
+
+def test_far_field_nodes_move_smoothly_with_the_section():
+    # A family's derivatives (meshgen.neural.wall_derivatives) difference the far field: its nodes
+    # must move smoothly with the section's parameters. Central differences of steps 30 times
+    # apart agree (nodes interpolated along the far field's dense polyline disagreed by 3e-3 of the
+    # largest derivative, the polyline's corners).
+    module = plugin_module("airfoil")[0]
+
+    def far(thickness):
+        values = {**module.params, "thickness": thickness, "camber": 0.023, "camber_position": 0.37}
+        block_set = load_block_set("airfoil", values, (224, 128))
+        return module.far_field(module._setup(module._key(values)), block_set.coords)
+
+    fine = (far(0.121 + 1e-5) - far(0.121 - 1e-5)) / 2e-5
+    coarse = (far(0.121 + 3e-4) - far(0.121 - 3e-4)) / 6e-4
+    largest = np.linalg.norm(fine, axis=1).max()
+    assert largest > 100  # chords per unit thickness: the far field's nodes slide along it
+    assert np.linalg.norm(fine - coarse, axis=1).max() < 1e-3 * largest
 
 
 @pytest.mark.parametrize("params", [{"sharp": 1}, {}])
