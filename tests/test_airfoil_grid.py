@@ -135,6 +135,41 @@ def tmr_grid():
     return meshgen.mesh("airfoil", dims=(456, 131), method="elliptic", params=TMR_GRID)
 
 
+@pytest.mark.parametrize("grid", ["c_grid", "o_grid", "tmr_grid"])
+def test_y_plus_1_cells_stay_under_checkmesh_aspect_limit(grid, request):
+    # checkMesh fails a cell above 1000; the y+ 1 C-grids' wake cut had 2.2e6 (100 chords) and 2.7e7
+    # (1000 chords), and the crest cell of each surface (the wall along x) 1150 on the TMR grid.
+    mesh = request.getfixturevalue(grid)
+    worst = max(_foam_aspect(X).max() for X in mesh.blocks)
+    assert worst < 1000
+    section = mesh.blocks[1 if grid != "o_grid" else 0]
+    h = np.linalg.norm(section[:, 1] - section[:, 0], axis=1)
+    assert np.abs(h / _height() - 1).max() < 0.02  # the wall's first cells as asked
+
+
+def test_crest_cells_of_a_thin_section_on_a_fine_level_stay_under_the_limit():
+    # NACA 0006 at level 3 (h = 1.3e-6): the crest's cells as the one segment has them (0.004 chord)
+    # read 2,460 in checkMesh, and 1,290 with a node on the crest (the wall too flat to tilt them):
+    # they must be shortened, to read 800.
+    from meshgen.geometry.airfoil_curve import chordwise_distribution, normals_at, points_at
+    from meshgen.geometry.airfoils import load_section
+
+    values = {"naca": 6, "sharp": 1, "level": 3}
+    block_set = load_block_set("airfoil", values, (448, 128))  # the parametric nodes only
+    section = load_section("0006", closed_te=True)
+    h = _height() * (2 / 3) ** 3
+
+    def first_layer(s):
+        wall = points_at(section, s)
+        return np.stack([wall, wall + h * normals_at(section, s)], axis=1)  # (n, 2, 2): one row of cells
+
+    cells = len(block_set.coords[1][0]) - 1
+    natural = chordwise_distribution(section, cells, 0.002 * (2 / 3) ** 3, 0.001 * (2 / 3) ** 3, crest=(np.inf, (0.0, 1.0)))
+    assert _foam_aspect(first_layer(natural)).max() > 1000
+    meshed = block_set.coords[1][0] * section.length
+    assert _foam_aspect(first_layer(meshed)).max() < 1000
+
+
 def test_wake_cut_stays_an_interface_and_its_cells_grow_downstream(tmp_path, tmr_grid):
     lower, section, upper = tmr_grid.blocks
     assert np.array_equal(lower[:, 0], upper[::-1, 0])  # the cut's nodes, both sides
@@ -155,6 +190,9 @@ def test_wake_cut_stays_an_interface_and_its_cells_grow_downstream(tmp_path, tmr
     tmr_grid.write(path, quality=False)
     zones = {zone["name"]: zone for zone in read_zones(path)}
     assert [c["donor"] for c in zones["lower"]["connections"]].count("upper") == 1
+    # A cambered 5-digit section with a closed trailing edge at y+ 1 with the defaults: under the limit too.
+    cambered = meshgen.mesh("airfoil", dims=(448, 128), method="elliptic", params={"naca": 23012, "sharp": 1})
+    assert max(_foam_aspect(X).max() for X in cambered.blocks) < 1000
 
 
 @pytest.mark.parametrize("grid", ["c_grid", "o_grid"])
@@ -264,6 +302,16 @@ def test_openfoam_cut_is_internal_and_checkmesh_passes(tmp_path, c_grid):
     # No severely non-orthogonal faces (the far field's 15-fold spacing jump made 86 degrees there).
     assert float(re.search(r"Mesh non-orthogonality Max: ([0-9.eE+-]+)", report["log"]).group(1)) < 60
     assert sum(faces for name, faces in report["patches"].items() if name != "frontAndBack") == 448 + 2 * 128 + 268
+
+
+@needs_openfoam
+def test_openfoam_tmr_grid_passes_checkmesh(tmp_path, tmr_grid):
+    # examples/naca0012's level-0 grid (1000 chords): checkMesh failed its aspect ratio (2.7e7 along the wake
+    # cut; 1150 at the crests, the wake's cells grown).
+    tmr_grid.write(tmp_path / "tmr", "openfoam", quality=False)
+    report = check_mesh(tmp_path / "tmr")
+    assert report["ok"], report["log"][-3000:]
+    assert report["cells"] == 456 * 131 and "***" not in report["log"]
 
 
 @pytest.mark.parametrize(

@@ -79,7 +79,7 @@ def test_wake_cut_and_block_ends_coincide(c_grid_checkpoint):
     np.testing.assert_array_equal(section[-1], upper[0])
     assert np.abs(upper[:, 0, 1] - upper[0, 0, 1]).max() < 1e-12  # the cut is straight (alpha 0)
     far = np.concatenate([lower[:, -1], section[:, -1], upper[:, -1]])
-    assert np.abs(far[:, 1]).max() == pytest.approx(100.0, rel=1e-9)  # the far field 100 chords off
+    assert np.abs(far[:, 1]).max() == pytest.approx(100.0, rel=1e-4)  # the far field 100 chords off (w + D e: 100.004 at most)
 
 
 def test_neural_mean_min_angle_is_near_the_elliptic_meshs_and_far_above_tfi(c_grid_checkpoint):

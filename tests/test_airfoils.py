@@ -287,6 +287,36 @@ def test_chordwise_distribution_meets_the_asked_spacings(name, cells, le, te):
         np.testing.assert_allclose(np.abs(p[:, 1]), tmr_formula(p[:, 0]), atol=2e-16)
 
 
+def test_chordwise_distribution_puts_a_node_on_each_crest():
+    # The TMR NACA 0012's crest: where the formula's slope is zero (the thickest point, x about 0.30).
+    from scipy.optimize import brentq
+
+    slope = lambda x: (tmr_formula(x + 1e-7) - tmr_formula(x - 1e-7)) / 2e-7  # noqa: E731
+    crest_x = brentq(slope, 0.2, 0.4, xtol=1e-12)
+    section = load_section("tmr0012")
+    plain = chordwise_distribution(section, 274, 1e-3, 1e-3)
+    x = points_at(section, plain)[:, 0]
+    assert np.abs(x - crest_x).min() > 1e-3  # no node there to start with
+    for spacing in (np.inf, 0.0036):
+        s = chordwise_distribution(section, 274, 1e-3, 1e-3, crest=(spacing, (0.0, 1.0)))
+        p = points_at(section, s)
+        assert s.shape == plain.shape and np.all(np.diff(s) > 0)
+        for surface in (p[:138], p[137:]):  # lower, upper (the leading edge is node 137 of both)
+            k = int(np.argmin(np.abs(surface[:, 0] - crest_x)))
+            assert surface[k, 0] == pytest.approx(crest_x, abs=1e-6)  # a node on the crest
+            if spacing < np.inf:  # its cells the asked length
+                np.testing.assert_allclose(np.linalg.norm(np.diff(surface[k - 1 : k + 2], axis=0), axis=1), spacing, rtol=0.01)
+        gaps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+        np.testing.assert_allclose([gaps[0], gaps[136], gaps[137], gaps[-1]], 1e-3, rtol=0.01)  # the edges as before
+    # Uncapped, only nodes near the crest move, each by less than its cells; the edges' stay bit for bit.
+    moved = chordwise_distribution(section, 274, 1e-3, 1e-3, crest=(np.inf, (0.0, 1.0)))
+    shift = np.abs(moved - plain)
+    assert np.all(shift[1:-1] < 0.5 * np.minimum(np.diff(plain)[1:], np.diff(plain)[:-1]) + 1e-15)
+    assert np.array_equal(moved[np.abs(x - crest_x) > 0.2], plain[np.abs(x - crest_x) > 0.2])
+    # A direction whose farthest point is an edge (upstream: the leading edge): nothing moves.
+    assert np.array_equal(chordwise_distribution(section, 274, 1e-3, 1e-3, crest=(0.0036, (-1.0, 0.0))), plain)
+
+
 def test_vinokur_end_spacings_and_refusals():
     s = vinokur(50, 1e-4, 3e-2)
     assert s[0] == 0 and s[-1] == 1 and np.all(np.diff(s) > 0)

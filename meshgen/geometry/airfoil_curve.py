@@ -37,6 +37,7 @@ __all__ = [
     "analytic_section",
     "chord_length",
     "chordwise_distribution",
+    "crest_arcs",
     "leading_edge_arc",
     "normals_at",
     "parameters_at",
@@ -259,12 +260,18 @@ def vinokur(n: int, first: float, last: float) -> np.ndarray:
     )
 
 
-def chordwise_distribution(section: Section, cells: int, le_spacing: float, te_spacing: float) -> np.ndarray:
+def chordwise_distribution(
+    section: Section, cells: int, le_spacing: float, te_spacing: float, crest: tuple | None = None
+) -> np.ndarray:
     """Arc lengths (cells+1,) of the nodes round the section, lower trailing edge -> leading edge
     -> upper trailing edge, with the leading edge a node: ``cells`` split between the surfaces in
     proportion to their arc lengths, each surface clustered by ``vinokur`` so that its cells at the
     leading and trailing edges are ``le_spacing`` and ``te_spacing`` of chord long (arc length).
-    A blunt trailing edge's base is not included."""
+    ``crest`` (spacing, up): each surface's crest (``crest_arcs``: its point farthest along the unit
+    vector ``up`` (2,), the lower surface's least far) a node too, where it is not an edge (the
+    nearest node moved onto it, its neighbours part of the way), and its cells at most ``spacing``
+    chords long (a number, or a pair: the lower surface's, the upper's; ``_surface``). A blunt
+    trailing edge's base is not included."""
     cells = int(cells)
     if cells < 4:
         raise ParameterError("cells", f"{{name}} {cells}: a section needs at least 4 cells round it")
@@ -273,11 +280,73 @@ def chordwise_distribution(section: Section, cells: int, le_spacing: float, te_s
             raise ParameterError(name, f"{{name}} {value:g}: the spacing must be a fraction of chord in (0, 0.5)")
     chord, length, s_le = chord_length(section), section.length, leading_edge_arc(section)
     lower_cells = min(max(int(round(cells * s_le / length)), 2), cells - 2)
-    lower = s_le * vinokur(lower_cells, te_spacing * chord / s_le, le_spacing * chord / s_le)
-    upper_length = length - s_le
-    upper = s_le + upper_length * vinokur(
-        cells - lower_cells, le_spacing * chord / upper_length, te_spacing * chord / upper_length
-    )
-    nodes = np.concatenate([lower, upper[1:]])
-    nodes[-1] = length
+    ends = ((0.0, s_le, lower_cells, te_spacing * chord, le_spacing * chord),
+            (s_le, length, cells - lower_cells, le_spacing * chord, te_spacing * chord))  # fmt: skip
+    arcs, caps = (None, None), (None, None)
+    if crest is not None:
+        arcs, caps = crest_arcs(section, crest[1]), np.broadcast_to(np.asarray(crest[0], dtype=float) * chord, (2,))
+    surfaces = [_surface(*end, at, cap) for end, at, cap in zip(ends, arcs, caps)]
+    nodes = np.concatenate([surfaces[0], surfaces[1][1:]])
+    nodes[0], nodes[lower_cells], nodes[-1] = 0.0, s_le, length
     return nodes
+
+
+def crest_arcs(section: Section, up) -> tuple:
+    """The arc lengths of the lower surface's point least far along the unit vector ``up`` (2,)
+    and of the upper surface's farthest (where the tangent is square to ``up``, to rounding: a
+    smooth function of the section, for the derivatives of a family's meshes), each None where
+    that point is an end of the surface (the leading or the trailing edge)."""
+    from scipy.optimize import brentq
+
+    up = np.asarray(up, dtype=float)
+    s_le, length = leading_edge_arc(section), section.length
+    out = []
+    for start, end, sign in ((0.0, s_le, -1.0), (s_le, length, 1.0)):
+        s = np.linspace(start, end, 2001)
+        k = int(np.argmax(sign * points_at(section, s) @ up))
+        if k < 2 or k > len(s) - 3:
+            out.append(None)
+            continue
+        rate = lambda x: float(tangents_at(section, np.array([x]))[0] @ up)  # noqa: E731 (d height / d s)
+        low, high = s[k - 1], s[k + 1]
+        out.append(
+            float(brentq(rate, low, high, xtol=1e-15, rtol=4 * np.finfo(float).eps)) if rate(low) * rate(high) < 0 else None
+        )
+    return tuple(out)
+
+
+CREST_REACH = 8  # nodes each side of a crest's node that move with it (the rest of the surface stays)
+
+
+def _surface(start: float, end: float, n: int, first: float, last: float, crest: float | None, spacing: float | None):
+    """Arc lengths (n+1,) from ``start`` to ``end``: Vinokur with end cells ``first``, ``last``; with
+    a ``crest`` arc, the node nearest it moved onto it and its ``CREST_REACH`` neighbours each side
+    part of the way, in the nodes' index (the distribution, monotone-interpolated between its nodes,
+    sampled at k + f cos^2(...) with f the crest's fractional index offset, at most a half: each
+    node moves by less than its cells, the others stay bit for bit); where the crest's cell
+    (interpolated between cell centres) is longer than ``spacing``, two Vinokur segments joined at
+    a node on the crest instead, its cells ``spacing`` long (the nearest node's count of cells each
+    side; one segment still where the crest is too near an end for them)."""
+    from scipy.interpolate import PchipInterpolator
+    from scipy.optimize import brentq
+
+    span = end - start
+    nodes = start + span * vinokur(n, first / span, last / span)
+    if crest is None:
+        return nodes
+    j = int(np.clip(np.argmin(np.abs(nodes - crest)), 2, n - 2))
+    if not nodes[j - 1] < crest < nodes[j + 1]:  # next to an edge's cell
+        return nodes
+    if np.interp(crest, 0.5 * (nodes[1:] + nodes[:-1]), np.diff(nodes)) <= spacing:
+        at = PchipInterpolator(np.arange(n + 1.0), nodes)  # monotone in the index
+        offset = brentq(lambda x: float(at(x)) - crest, j - 1.0, j + 1.0, xtol=1e-13) - j
+        k = np.arange(max(j - CREST_REACH, 1), min(j + CREST_REACH, n - 1) + 1)
+        nodes[k] = at(k + offset * np.cos(0.5 * np.pi * (k - j) / (CREST_REACH + 1)) ** 2)
+        nodes[j] = crest
+        return nodes
+    try:
+        before = start + (crest - start) * vinokur(j, first / (crest - start), spacing / (crest - start))
+        after = crest + (end - crest) * vinokur(n - j, spacing / (end - crest), last / (end - crest))
+    except ParameterError:  # a crest too near an edge for its cells: the surface stays one segment
+        return nodes
+    return np.concatenate([before, after[1:]])

@@ -1,18 +1,31 @@
 """The node spacing of the ``airfoil`` geometry's grids (``geometries/airfoil.py``): the grid
 family's levels, the first cell from y+, the wall-normal distances, the parametric nodes of the
-blocks (C-grid: the wake cut's and round the section; O-grid: round the ring), and the wake
-cut's normal distances.
+blocks (C-grid: the wake cut's and round the section; O-grid: round the ring), a node on each
+surface's crest, and the wake cut's normal distances.
 
 Lengths are in chords. ``values`` is the geometry's parameter dict; ``setup`` its ``_Setup`` (the
 section, the trailing edge, the far field's distance D, the wake's length, the turn by alpha).
 
-checkMesh takes a 2D cell's aspect ratio as the larger over the smaller of its face areas' summed
-x and y components (limit 1000): the cell's length over its height where the cell runs along x,
-as along the wake cut. So the cut's lines (``line_distances``) take the wall's distances at the
-trailing edge, and downstream every cell raised so that the first is the cut's streamwise cell
-over the trailing edge's aspect ratio (``WAKE_ASPECT`` at least) high
-(``wall_spacing.cut_normal_distances``); kept at the wall's first height out to the outflow, the
-cut's cells reached 2.7e7 on the TMR grid at 1000 chords.
+Two rules keep OpenFOAM's checkMesh under its aspect-ratio limit (1000) on y+ 1 grids. checkMesh
+takes a 2D cell's aspect ratio as the larger over the smaller of its face areas' summed x and y
+components, which is the cell's length over its height only where the cell runs along x or y:
+
+- the wake cut's lines (``line_distances``): the wall's distances at the trailing edge, and
+  downstream every cell raised so that the first is the cut's streamwise cell over the trailing
+  edge's aspect ratio (``WAKE_ASPECT`` at least) high (``wall_spacing.cut_normal_distances``);
+  kept at the wall's first height out to the outflow, the cut's cells reached 2.7e7 on the TMR
+  grid at 1000 chords;
+- a surface's crest (its point farthest from the chord line, where the wall runs along x), where
+  its cell is longer than ``CREST_ASPECT`` first heights: a node on it (``section_nodes``), so
+  that its two cells slope by half the wall's curvature times their length and checkMesh reads
+  each as l / (h + k l^2 / 2), not l / h (the TMR grid's crest cell, 0.0137 chord long, read 1150
+  with the crest inside it, 290 beside a node on it); shortened only where that still passes
+  ``CREST_ASPECT`` (thin sections, fine levels). Elsewhere the wall slopes and checkMesh reads at
+  most about 1 / slope. The true aspect ratio of the mid-chord wall cells (3,100 on the TMR grid)
+  is not capped: at 1000 that needs 457 cells round the section, N = 639 (83,709 cells at M = 131)
+  where the grid has 456 (59,736). A grid turned by alpha is the grid turned, its crests no
+  longer along x: checkMesh may read more there (448 x 128 at y+ 1: 520 at alpha 10, 1,567 at
+  -5); turning the free stream instead, as the TMR case does, keeps them.
 """
 
 from __future__ import annotations
@@ -22,10 +35,11 @@ import math
 import numpy as np
 
 from meshgen.errors import ParameterError
-from meshgen.geometry.airfoil_curve import chordwise_distribution
+from meshgen.geometry.airfoil_curve import chordwise_distribution, crest_arcs, points_at
 from meshgen.geometry.wall_spacing import cut_normal_distances, first_cell_height, minimal_cell_count, wall_normal_distances
 
 __all__ = [
+    "CREST_ASPECT",
     "LEVEL_RATIO",
     "WAKE_ASPECT",
     "block_coords",
@@ -35,6 +49,7 @@ __all__ = [
     "level_scale",
     "line_distances",
     "normal_distances",
+    "section_nodes",
 ]
 
 LEVEL_RATIO = 1.5  # cells per direction from one grid of a family to the next finer (DPW)
@@ -44,6 +59,7 @@ MIN_BASE_CELLS = 4  # across a blunt trailing edge (an even count: the base's mi
 RATIO_MARGIN = 0.95  # the wall-normal growth is designed to 1 + 0.95 (cap - 1): the march and the
 # solve move the spacing of some lines by up to a few tenths of a percent, and the mesh must stay under the cap
 WAKE_ASPECT = 100.0  # the wake cut's cells grow in height where longer than this for it (or the trailing edge's)
+CREST_ASPECT = 800.0  # the most checkMesh may read in a surface's crest cells (its limit: 1000; section_nodes)
 
 
 def level_scale(values) -> float:
@@ -101,12 +117,43 @@ def _split_at(r: np.ndarray, arc: float, first: int, last: int) -> int:
     return j
 
 
+def section_nodes(setup, cells: int, le_h: float, te_h: float, h: float) -> np.ndarray:
+    """Arc lengths (cells + 1,) of the nodes round the section (``chordwise_distribution``). Where a
+    surface's cell over its crest (its point farthest from the chord line, where the wall runs along
+    x; in the section's own frame, so a grid turned by alpha is this grid turned) is longer than
+    ``CREST_ASPECT`` first heights ``h``, checkMesh could read it as that long for its height: then
+    each crest is a node, and checkMesh reads its two cells, of length l, as l / (h + k l^2 / 2) (k
+    the wall's curvature there: they slope by k l / 2); where that still passes ``CREST_ASPECT``,
+    the crest's cells are shortened to the length it reads ``CREST_ASPECT`` at (the smaller root,
+    2 A h / (1 + sqrt(1 - 2 k A^2 h))). Otherwise the distribution is ``chordwise_distribution``'s."""
+    up = np.array([0.0, 1.0])  # the section's own frame
+    s = chordwise_distribution(setup.section, cells, le_h, te_h)
+    arcs = crest_arcs(setup.section, up)
+    a, caps, step = CREST_ASPECT, [math.inf, math.inf], 1e-4 * setup.section.length
+    if all(arc is None or np.interp(arc, 0.5 * (s[1:] + s[:-1]), np.diff(s)) <= a * h for arc in arcs):
+        return s
+    s = chordwise_distribution(setup.section, cells, le_h, te_h, crest=(math.inf, up))
+    for side, arc in enumerate(arcs):
+        if arc is None:
+            continue
+        k = int(np.argmin(np.abs(s - arc)))
+        length = max(s[k + 1] - s[k], s[k] - s[k - 1])
+        heights = points_at(setup.section, np.array([arc - step, arc, arc + step])) @ up
+        curvature = abs(heights[0] - 2.0 * heights[1] + heights[2]) / step**2
+        if length / (h + 0.5 * curvature * length**2) > a:
+            caps[side] = 2.0 * a * h / (1.0 + math.sqrt(max(1.0 - 2.0 * curvature * a * a * h, 0.0)))
+    if min(caps) < math.inf:
+        s = chordwise_distribution(setup.section, cells, le_h, te_h, crest=(caps, up))
+    return s
+
+
 def block_coords(setup, dims, values) -> dict:
     """{block: [xi nodes, eta nodes]} (1D, 0 to 1) of the blocks at --dims ``dims`` (N, M) and
     grid level: eta the wall-normal distances over D; C-grid: the wake's share of N on each side
     of the cut (the cut's streamwise nodes from the trailing-edge spacing), the rest round the
     section; O-grid: the ring, base included, split at the middle of each surface."""
     n, m = level_dims(values, dims)
+    h = first_height(values)[0]
     eta = normal_distances(values, m)[0] / setup.distance
     te_h, le_h = values["te_spacing"] * level_scale(values), values["le_spacing"] * level_scale(values)
     if setup.sharp:
@@ -119,7 +166,7 @@ def block_coords(setup, dims, values) -> dict:
                 "dims", f"{{name}}: N = {n} is too few for the section and its wake: the smallest N that works is {smallest}"
             )
         wake = wall_normal_distances(te_h, setup.wake, cap, 1, cells=wake_cells)[0] / setup.wake
-        around = chordwise_distribution(setup.section, n - 2 * wake_cells, le_h, te_h) / setup.section.length
+        around = section_nodes(setup, n - 2 * wake_cells, le_h, te_h, h) / setup.section.length
         return {"lower": [1.0 - wake[::-1], eta], "section": [around, eta], "upper": [wake, eta]}
     base = max(MIN_BASE_CELLS, 2 * math.ceil(setup.gap / (2 * te_h)))
     if n - base < MIN_SECTION_CELLS:
@@ -127,7 +174,7 @@ def block_coords(setup, dims, values) -> dict:
             "dims", f"{{name}}: N = {n} is too few round the section: the smallest N that works is {base + MIN_SECTION_CELLS}"
         )
     half = 0.5 * setup.gap
-    s = chordwise_distribution(setup.section, n - base, le_h, te_h)
+    s = section_nodes(setup, n - base, le_h, te_h, h)
     r = np.concatenate(
         [
             np.linspace(0.0, half, base // 2 + 1)[:-1],
