@@ -331,6 +331,12 @@ TARGETS = {
     "airfoil_first_cell_error": ("<=", 0.02, "", "airfoil: largest |first-cell height / asked - 1| over the wall nodes"),
     "airfoil_wall_angle_degrees": ("<=", 2.0, "deg", "airfoil: largest angle of a first grid line off the wall normal"),
     "airfoil_expansion_ratio": ("<=", 1.15, "x", "airfoil: largest wall-normal expansion ratio (the cap)"),
+    "airfoil_check_mesh_aspect_ratio": (
+        "<=",
+        1000.0,
+        "",
+        "airfoil C-grid 448 x 128, y+ 1: checkMesh max aspect ratio (its limit: above it, a failed check)",
+    ),
     "airfoil_classy_blocks_non_orthogonality": (
         "<=",
         0.0,
@@ -1388,7 +1394,8 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
         if mesh.get("check_mesh"):
             cm = mesh["check_mesh"]
             add("airfoil: checkMesh max non-orthogonality", cm["max_non_orthogonality"], "deg",
-                note=f"max skewness {cm['max_skewness']}; {'Mesh OK' if cm['mesh_ok'] else str(cm['failed_checks']) + ' failed (aspect ratio)'}")  # fmt: skip
+                note=f"max skewness {cm['max_skewness']}; {'Mesh OK' if cm['mesh_ok'] else str(cm['failed_checks']) + ' failed'}")  # fmt: skip
+            add("airfoil: checkMesh max aspect ratio", cm["max_aspect_ratio"], "", key="airfoil_check_mesh_aspect_ratio")
         anchor = sections["airfoil"].get("classy_blocks") or {}
         ours, theirs = anchor.get("meshgen"), anchor.get("classy_blocks")
         if ours and theirs:
