@@ -207,3 +207,96 @@ def test_the_warm_up_loads_every_kernel_the_report_calls(name, dims):
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "late: []"
+
+
+# ``meshgen evaluate`` in a new interpreter after ``PATCH``; says on stderr whether the report's
+# numba parts came from the evaluation worker.
+EVALUATE_DRIVER = """
+import sys
+import meshgen.quality.worker as worker
+original_parts = worker.EvaluationWorker.parts
+def parts(self):
+    found = original_parts(self)
+    print("parts from the worker" if found is not None else "parts not from the worker", file=sys.stderr)
+    return found
+worker.EvaluationWorker.parts = parts
+original_init = worker.EvaluationWorker.__init__
+def init(self, *arguments):
+    original_init(self, *arguments)
+    print(f"worker {{self._process.pid}}", file=sys.stderr, flush=True)
+worker.EvaluationWorker.__init__ = init
+{patch}
+from meshgen.cli import main
+sys.argv[0] = "meshgen"
+main()
+"""
+
+
+def run_evaluate(path, patch: str = "") -> subprocess.CompletedProcess:
+    command = [sys.executable, "-c", EVALUATE_DRIVER.format(patch=patch), "evaluate", str(path), "--json", "-"]
+    return subprocess.run(command, capture_output=True, text=True, timeout=300)
+
+
+def in_process_report(path) -> dict:
+    """``meshgen evaluate --json``'s report of ``path`` computed in this process, no worker."""
+    from unittest import mock
+
+    from meshgen.quality import files, json_ready
+
+    with mock.patch.object(files, "worker_fits", lambda node_shape: False):
+        return json.loads(json.dumps(json_ready(files.evaluate_file(path)), allow_nan=False))
+
+
+@pytest.fixture(scope="module")
+def large_vts(tmp_path_factory):
+    """A .vts meshgen wrote of ``DIMS`` cells (the compiled kernels' size), and its in-process report."""
+    folder = tmp_path_factory.mktemp("evaluate")
+    command = [sys.executable, "-m", "meshgen", "mesh", "-g", "semicylinder", "--method", "tfi", "--dims", *map(str, DIMS)]
+    made = subprocess.run([*command, "-o", str(folder / "mesh.vts"), "-q"], capture_output=True, text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    return folder / "mesh.vts", in_process_report(folder / "mesh.vts")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+def test_the_evaluation_worker_gives_the_in_process_report(large_vts):
+    """``meshgen evaluate`` of a large .vts: numba's parts of the report in a forked worker, the
+    boundary deviation in the command's process; the report is the in-process one to the bit."""
+    path, expected = large_vts
+    result = run_evaluate(path)
+    assert result.returncode == 0, result.stderr
+    assert "parts from the worker" in result.stderr
+    assert expected["boundary_deviation"]["max"] < 1e-12 and "solver_figures" in expected
+    assert json.loads(result.stdout) == expected
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+@pytest.mark.parametrize("failure", ["dies", "raises"])
+def test_a_failing_evaluation_worker_leaves_the_report_unchanged(large_vts, failure):
+    path, expected = large_vts
+    result = run_evaluate(path, FAILURES[failure])
+    assert result.returncode == 0, result.stderr
+    worker = int(result.stderr.split("worker ", 1)[1].split()[0])
+    assert "parts from the worker" not in result.stderr and "Traceback" not in result.stderr
+    assert json.loads(result.stdout) == expected
+    deadline = time.monotonic() + 10.0
+    while alive(worker) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not alive(worker)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+def test_a_large_file_that_is_no_structured_grid_ends_its_worker_unused(tmp_path):
+    """A large .vts meshgen did not write (no dims recorded): the worker forked while it was read
+    is closed unused, and the unstructured path reports as without it."""
+    from meshgen.formats import write_mesh
+
+    axes = [np.linspace(0.0, 1.0, n + 1) for n in DIMS]
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    X[..., 0] += 0.3 * X[..., 1] ** 2
+    path = tmp_path / "foreign.vts"
+    write_mesh(path, X)
+    result = run_evaluate(path)
+    assert result.returncode == 0, result.stderr
+    assert "worker " in result.stderr and "parts" not in result.stderr
+    report = json.loads(result.stdout)
+    assert not report["structured"] and report == in_process_report(path)

@@ -3,6 +3,7 @@ per-cell metrics and the ``<mesh>.quality.json`` sidecar, JSON output."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
@@ -24,8 +25,17 @@ from meshgen.quality.chunked import chunked_report
 from meshgen.quality.deviation import block_set_deviation
 from meshgen.quality.faces import cells_for_quality
 from meshgen.quality.merged import merged_reports
-from meshgen.quality.report import assess, assess_in_parallel, build_report, quality_report, report_in_parallel
+from meshgen.quality.report import (
+    assemble_report,
+    assess,
+    assess_in_parallel,
+    build_report,
+    node_array_deviation,
+    quality_report,
+    report_in_parallel,
+)
 from meshgen.quality.structured import check_node_array, load_compiled_kernels, use_compiled
+from meshgen.quality.worker import EvaluationWorker, worker_fits
 from meshgen.run.atomic import atomic_path
 from meshgen.run.inputs import read_input_text
 from meshgen.run.publish import publishing
@@ -222,22 +232,38 @@ def evaluate_file(
         chunked = _chunked_by_default(path, client)
     if chunked:
         return _evaluate_file_in_blocks(path, geometry, params, client, progress, block_nodes)
-    preloading = []
+    preloading = _Preloading()
     try:
         if mesh is None:
             progress(0.0, phase="reading")
             mesh = _read_for_evaluation(path, preloading)
-        return _evaluate_mesh(path, mesh, geometry, params, progress, per_block)
+        return _evaluate_mesh(path, mesh, geometry, params, progress, per_block, preloading.worker)
     finally:
-        for thread in preloading:
+        preloading.close()
+
+
+class _Preloading:
+    """What ``_read_for_evaluation`` started for the metrics while the file is read: an
+    ``EvaluationWorker`` (a forked process loading numba) or threads loading numba here."""
+
+    def __init__(self):
+        self.worker = None
+        self.threads = []
+
+    def close(self) -> None:
+        for thread in self.threads:
             thread.join()
+        if self.worker is not None:
+            self.worker.close()
+            self.worker = None
 
 
-def _read_for_evaluation(path: Path, preloading: list):
+def _read_for_evaluation(path: Path, preloading: _Preloading):
     """The mesh file ``path`` as ``read_mesh`` reads it; a .vts as its grid (``read_grid``: no
-    connectivity, only the cell data ``block`` of its cell arrays), with numba's kernels loaded on
-    a thread (appended to ``preloading``) while its arrays inflate when the compiled kernels will
-    measure it."""
+    connectivity, only the cell data ``block`` of its cell arrays). When the compiled kernels will
+    measure it, numba loads while its arrays inflate: in an ``EvaluationWorker`` (a forked process,
+    where ``worker_fits``: design notes §21, "meshgen evaluate: numba in a forked worker"), else on
+    a thread here (``preloading`` holds either)."""
 
     def load():
         try:
@@ -246,17 +272,22 @@ def _read_for_evaluation(path: Path, preloading: list):
             pass
 
     def preload(node_shape):
+        if worker_fits(node_shape):
+            with contextlib.suppress(OSError):  # no fork: the thread
+                preloading.worker = EvaluationWorker(node_shape)
+                return
         if use_compiled(int(np.prod([n - 1 for n in node_shape]))):
             thread = threading.Thread(target=load, name="meshgen-numba")
             thread.start()
-            preloading.append(thread)
+            preloading.threads.append(thread)
 
     grid = read_grid(path, cell_arrays=(BLOCK_DATA,), point_arrays=(), on_shape=preload)
     return grid if grid is not None else read_mesh(path)
 
 
-def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool) -> dict:
-    """``evaluate_file`` of the file ``path`` read as ``mesh`` (a ``meshio.Mesh`` or a .vts grid)."""
+def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool, worker=None) -> dict:
+    """``evaluate_file`` of the file ``path`` read as ``mesh`` (a ``meshio.Mesh`` or a .vts grid);
+    ``worker``: an ``EvaluationWorker`` made for its node shape, or None."""
     grid_shape = getattr(mesh, "node_shape", None)  # a .vts grid: the cells are the grid's
     if grid_shape is not None:
         points, cells, skipped = mesh.points, None, {}
@@ -287,7 +318,7 @@ def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool
         X = as_node_array(points, cells, dims, grid_shape)
     progress(0.3, phase="metrics")
     if X is not None:
-        report = _node_array_report(path, X, geometry, source, notes, skipped, progress)
+        report = _node_array_report(path, X, geometry, source, notes, skipped, progress, worker)
         progress(1.0, phase="done")
         return _finish_file_report(path, report, source, notes, metadata, True)
     cells = cells if cells is not None else cell_connectivity(grid_shape)
@@ -304,13 +335,28 @@ def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool
     return _finish_file_report(path, report, source, notes, metadata, False)
 
 
-def _node_array_report(path, X, geometry, source, notes, skipped, progress) -> dict:
+def _node_array_report(path, X, geometry, source, notes, skipped, progress, worker=None) -> dict:
     """The report of a file that is meshgen's structured grid, node array ``X``: the per-cell
-    metrics here, the solver figures and the boundary deviation on threads meanwhile."""
+    metrics here, the solver figures and the boundary deviation on threads meanwhile; or, by
+    ``worker`` (an ``EvaluationWorker`` of X's shape), the metrics' summaries and the solver
+    figures in its process, the boundary deviation here meanwhile. The same functions on the same
+    values, so the same report; a worker that fails changes only where the report is made."""
     geometry = _geometry_of_dim(geometry, X.shape[-1], source, notes)
+    measured = geometry if geometry is not None and geometry.dim == X.shape[-1] else None
+    if worker is not None and worker.submit(X):
+        deviation = node_array_deviation(X, measured) if measured is not None else None
+        parts = worker.parts()
+        if parts is not None:
+            if parts["all_degenerate"]:
+                _check_not_all_degenerate(path, np.ones(parts["cells"], dtype=bool))
+            info = {"dim": parts["dim"], "nonfinite_nodes": parts["nonfinite_nodes"], "skipped": skipped}
+            info["solver_figures"] = lambda: parts["solver_figures"]
+            if deviation is not None:
+                info["boundary_deviation"] = deviation
+            progress(0.8, phase="report")
+            return assemble_report(parts["summaries"], parts["counts"], info, geometry)
     with ThreadPoolExecutor(max_workers=3, thread_name_prefix="meshgen-quality") as pool:
         try:
-            measured = geometry if geometry is not None and geometry.dim == X.shape[-1] else None
             metrics, degenerate, info = assess_in_parallel(X, measured, pool)
         except MeshgenError as exc:
             raise MeshgenError(f"{path}: {exc}") from None

@@ -21,6 +21,7 @@ __all__ = [
     "assess",
     "assess_in_parallel",
     "build_report",
+    "metric_summaries",
     "node_array_deviation",
     "quality_report",
     "report_in_parallel",
@@ -135,6 +136,14 @@ def quality_report(X_or_mesh, geometry=None) -> dict:
 
 
 def build_report(metrics, degenerate, info, geometry) -> dict:
+    """The report (``quality_report``'s) of the per-cell ``metrics`` with their ``degenerate`` mask
+    and ``info`` (``assess``'s), measured against ``geometry``."""
+    return assemble_report(*metric_summaries(metrics, degenerate), info, geometry)
+
+
+def metric_summaries(metrics, degenerate) -> tuple[dict, dict]:
+    """(summaries {name: {mean, min, max, p01, p99}}, counts {cells, inverted, degenerate}) of the
+    per-cell ``metrics`` and their ``degenerate`` mask: what ``assemble_report`` makes the report of."""
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
     every = bool(shaped.all())  # then the arrays themselves, not copies of them
@@ -147,7 +156,7 @@ def build_report(metrics, degenerate, info, geometry) -> dict:
         "inverted": int(np.count_nonzero(inverted)),
         "degenerate": int(np.count_nonzero(degenerate)),
     }
-    return assemble_report(summaries, counts, info, geometry)
+    return summaries, counts
 
 
 def assemble_report(summaries: dict, counts: dict, info: dict, geometry) -> dict:

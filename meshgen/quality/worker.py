@@ -28,6 +28,13 @@ parent gone). Whatever goes wrong in the child (it died, a kernel raised), ``met
 None and the caller computes the report in its own process: the worker only changes where the same
 work runs.
 
+``meshgen evaluate`` of a large file (``EvaluationWorker``) forks one the same way as soon as the
+file's extent is read: the child loads the kernels while the parent inflates the file, loads the
+geometry and, once the nodes are submitted, measures the boundary deviation; the child sends back
+only what the report needs of the metrics (their summaries and the solver figures:
+``report_parts``), never the metric arrays, and the parent assembles the report
+(``assemble_report``) as the in-process path does.
+
 Used only where it pays and is safe: on Linux (fork), where numba is not loaded yet in this
 process (forking a process whose numba threads run is unsafe, and a loaded numba costs nothing
 more), and for meshes that take the compiled kernels (``NUMPY_CELLS`` cells and more).
@@ -47,7 +54,7 @@ import numpy as np
 
 from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import METRICS
-from meshgen.quality.report import report_in_parallel
+from meshgen.quality.report import assess_in_parallel, metric_summaries, report_in_parallel
 from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import structured_metrics, use_compiled
 from meshgen.run.signals import TERMINATING_SIGNALS
@@ -55,10 +62,12 @@ from meshgen.run.signals import TERMINATING_SIGNALS
 __all__ = [
     "WAIT_BASE_SECONDS",
     "WAIT_SECONDS_PER_CELL",
+    "EvaluationWorker",
     "QualityWorker",
     "is_stopped",
     "load_compiled_kernels",
     "quality_worker",
+    "report_parts",
     "worker_fits",
     "worker_timeout",
 ]
@@ -111,20 +120,21 @@ def _shared(count: int) -> np.ndarray:
     return np.frombuffer(buffer, dtype=np.float64, count=count)
 
 
-class QualityWorker:
-    """A forked process computing the quality report of one node array (see the module text)."""
+class _ForkedWorker:
+    """A forked child that loads the kernels, then works on the node array handed to it
+    (``submit``): the shared memory, the pipe and the bounded waits of both workers."""
 
-    def __init__(self, node_shape, geometry=None):
+    def _start(self, node_shape, serve, metric_rows: int, *arguments) -> None:
         import multiprocessing
 
         node_shape = tuple(int(n) for n in node_shape)
         cells = int(np.prod([n - 1 for n in node_shape]))
         # a node array has one coordinate per index axis (``check_node_array``)
         self._nodes = _shared(int(np.prod(node_shape)) * len(node_shape)).reshape(*node_shape, len(node_shape))
-        self._metrics = _shared(len(METRICS) * cells).reshape(len(METRICS), cells)
+        self._metrics = _shared(metric_rows * cells).reshape(metric_rows, cells)
         context = multiprocessing.get_context("fork")
         self._connection, child_end = context.Pipe()
-        arguments = (child_end, self._connection, os.getpid(), self._nodes, self._metrics, geometry)
+        arguments = (child_end, self._connection, os.getpid(), self._nodes, serve, self._metrics, *arguments)
         self._process = context.Process(target=_serve, args=arguments, name="meshgen-quality", daemon=True)
         self._process.start()
         child_end.close()
@@ -141,17 +151,6 @@ class QualityWorker:
         np.copyto(self._nodes, X)
         self._deadline = time.monotonic() + self._timeout
         return self._send("go")
-
-    def metrics(self) -> dict | None:
-        """The seven per-cell arrays (views of the shared memory), once the child has them; None
-        when it failed."""
-        if self._receive("metrics") is None:
-            return None
-        return {name: self._metrics[index] for index, name in enumerate(METRICS)}
-
-    def report(self) -> dict | None:
-        """The report (``quality_report``'s), once the child sent it; None when it failed."""
-        return self._receive("report")
 
     def close(self) -> None:
         """End the child (at once if it still works) and release the pipe."""
@@ -186,6 +185,61 @@ class QualityWorker:
         return True if value is None else value
 
 
+class QualityWorker(_ForkedWorker):
+    """A forked process computing the quality report of one node array (see the module text)."""
+
+    def __init__(self, node_shape, geometry=None):
+        self._start(node_shape, _report_and_metrics, len(METRICS), geometry)
+
+    def metrics(self) -> dict | None:
+        """The seven per-cell arrays (views of the shared memory), once the child has them; None
+        when it failed."""
+        if self._receive("metrics") is None:
+            return None
+        return {name: self._metrics[index] for index, name in enumerate(METRICS)}
+
+    def report(self) -> dict | None:
+        """The report (``quality_report``'s), once the child sent it; None when it failed."""
+        return self._receive("report")
+
+
+class EvaluationWorker(_ForkedWorker):
+    """A forked process computing the parts of a node array's report that need numba (the
+    per-cell metrics' summaries and the solver figures: ``report_parts``) for ``meshgen evaluate``,
+    which reads the file and measures the boundary deviation meanwhile. The metric arrays stay in
+    the child (the report needs only their summaries)."""
+
+    def __init__(self, node_shape):
+        self._start(node_shape, _parts, 0)
+
+    def parts(self) -> dict | None:
+        """``report_parts`` of the submitted nodes, once the child sent them; None when it failed."""
+        return self._receive("parts")
+
+
+def report_parts(X: np.ndarray) -> dict:
+    """What the report of node array ``X`` needs from the per-cell metrics and the solver figures,
+    as ``assess_in_parallel`` and ``metric_summaries`` compute them: {"cells", "all_degenerate"}
+    and, unless every cell is degenerate, "summaries", "counts" (``assemble_report``'s), "dim",
+    "nonfinite_nodes" and "solver_figures"."""
+    with ThreadPoolExecutor(max_workers=3, thread_name_prefix="meshgen-quality") as pool:
+        metrics, degenerate, info = assess_in_parallel(X, None, pool)
+        parts = {"cells": int(len(degenerate)), "all_degenerate": bool(degenerate.all())}
+        if parts["all_degenerate"]:
+            return parts
+        summaries, counts = metric_summaries(metrics, degenerate)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            figures = info["solver_figures"]()
+    return {
+        **parts,
+        "summaries": summaries,
+        "counts": counts,
+        "dim": info["dim"],
+        "nonfinite_nodes": info["nonfinite_nodes"],
+        "solver_figures": figures,
+    }
+
+
 @contextlib.contextmanager
 def quality_worker(node_shape, geometry=None):
     """A ``QualityWorker`` for a mesh of ``node_shape`` nodes when ``worker_fits`` (else None, also
@@ -201,11 +255,27 @@ def quality_worker(node_shape, geometry=None):
             worker.close()
 
 
-def _serve(connection, parent_end, parent: int, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
-    """The child: load the kernels, wait for the nodes, send ("metrics", None) once the metric
-    arrays are in shared memory, then ("report", report); ("error", text) if anything fails. It
-    ends when the parent does: its copy of the parent's end of the pipe is closed first, so the
-    pipe ends with the parent, and the wait also checks that ``parent`` is still its parent."""
+def _report_and_metrics(connection, nodes: np.ndarray, metrics: np.ndarray, geometry) -> None:
+    """``QualityWorker``'s work: the metric arrays into the shared memory, ("metrics", None) once
+    they are there, then ("report", report)."""
+    with ThreadPoolExecutor(max_workers=4, thread_name_prefix="meshgen-quality") as pool:
+        computed, report = report_in_parallel(nodes, geometry, pool)
+        for index, name in enumerate(METRICS):
+            metrics[index] = computed[name]
+        connection.send(("metrics", None))
+        connection.send(("report", report.result()))
+
+
+def _parts(connection, nodes: np.ndarray, metrics: np.ndarray) -> None:
+    """``EvaluationWorker``'s work: ("parts", ``report_parts``)."""
+    connection.send(("parts", report_parts(nodes)))
+
+
+def _serve(connection, parent_end, parent: int, nodes: np.ndarray, work, *arguments) -> None:
+    """The child: load the kernels, wait for the nodes, then ``work(connection, nodes,
+    *arguments)`` sends what it computed; ("error", text) if anything fails. It ends when the
+    parent does: its copy of the parent's end of the pipe is closed first, so the pipe ends with
+    the parent, and the wait also checks that ``parent`` is still its parent."""
     parent_end.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in TERMINATING_SIGNALS:
@@ -217,12 +287,7 @@ def _serve(connection, parent_end, parent: int, nodes: np.ndarray, metrics: np.n
             if os.getppid() != parent:
                 raise EOFError("the parent is gone")
         if connection.recv() == "go":
-            with ThreadPoolExecutor(max_workers=4, thread_name_prefix="meshgen-quality") as pool:
-                computed, report = report_in_parallel(nodes, geometry, pool)
-                for index, name in enumerate(METRICS):
-                    metrics[index] = computed[name]
-                connection.send(("metrics", None))
-                connection.send(("report", report.result()))
+            work(connection, nodes, *arguments)
     except EOFError:  # the parent is gone
         status = 1
     except BaseException as error:  # noqa: BLE001 - reported to the parent, which computes the report itself
