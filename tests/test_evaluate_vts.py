@@ -83,3 +83,16 @@ def test_the_command_keeps_the_output_and_the_exit_status(semicylinder_vts, run_
     tripped = run_cli_process("evaluate", semicylinder_vts, "--fail-if", "cells>10", "-q")
     assert tripped.returncode == 1
     assert "gate cells>10: FAILED" in tripped.stderr and tripped.stdout == ""
+
+
+def test_the_evaluate_command_imports_no_heavy_library():
+    """The command's own start (design notes §21): numba loads in the metrics' worker or thread,
+    rich for the table at the end; SciPy, torch, meshio, Dask, h5py and urllib (by
+    ``xml.sax.saxutils``) are not needed to read a .vts and measure it."""
+    import subprocess
+    import sys
+
+    code = "import sys, meshgen.cli.evaluate\nprint(' '.join(sorted(m for m in sys.argv[1:] if m in sys.modules)))\n"
+    heavy = ["numba", "scipy", "torch", "meshio", "dask", "h5py", "rich", "urllib.request", "matplotlib", "trimesh"]
+    done = subprocess.run([sys.executable, "-c", code, *heavy], capture_output=True, text=True, timeout=120, check=True)
+    assert done.stdout.split() == []

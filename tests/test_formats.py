@@ -402,3 +402,17 @@ def test_cli_unknown_extension_is_one_line_error(run_cli, tmp_path):
     assert result.returncode == 2
     assert result.stderr.strip().count("\n") == 0 and ".cgns" in result.stderr and ".xyz" in result.stderr
     assert os.listdir(tmp_path) == []
+
+
+def test_the_vtk_writers_quote_attributes_as_saxutils_does():
+    """``meshgen.formats._xml`` stands in for ``xml.sax.saxutils`` (which imports urllib.request):
+    the same strings, so the files keep their bytes."""
+    from xml.sax import saxutils
+
+    from meshgen.formats._xml import escape, quoteattr
+
+    cases = ["", "min_angle", 'a"b', "a'b", "a'\"b", "<&>", "x\ny\r\tz", "blocks/b 1.vts", "'\"&<>\n\r\t", "é中"]
+    for text in cases:
+        assert quoteattr(text) == saxutils.quoteattr(text)
+        assert escape(text) == saxutils.escape(text)
+        assert escape(text, {'"': "&quot;"}) == saxutils.escape(text, {'"': "&quot;"})

@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from xml.sax.saxutils import escape
 
 import numpy as np
 
 from meshgen.errors import FormatError
+from meshgen.formats._xml import escape
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry.grid import cell_connectivity, flat_points
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -30,6 +29,7 @@ from meshgen.formats._vts import PATCH_ARRAY, block_extent, whole_extent
 from meshgen.formats._vts import read as read_piece
 from meshgen.formats._vts import read_patches as read_piece_patches
 from meshgen.formats._vts import write as write_piece
+from meshgen.formats._xml import quoteattr
 from meshgen.formats.streamed import NodeFile, slab_slices
 from meshgen.geometry.grid import cell_connectivity
 from meshgen.run.atomic import atomic_path, check_pieces_folder

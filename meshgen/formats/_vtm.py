@@ -14,9 +14,9 @@ from __future__ import annotations
 import os
 import re
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 from meshgen.formats._vts import write
+from meshgen.formats._xml import quoteattr
 from meshgen.run.atomic import atomic_path, check_pieces_folder
 
 __all__ = ["check_target", "write_blocks_vtm"]

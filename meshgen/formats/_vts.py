@@ -36,7 +36,6 @@ import json
 import xml.etree.ElementTree as ET
 from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -49,6 +48,7 @@ from meshgen.formats._vtu import (
     compression_header,
     cpu_count,
 )
+from meshgen.formats._xml import quoteattr
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry import cube
 from meshgen.geometry.grid import cell_connectivity

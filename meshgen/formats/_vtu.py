@@ -42,11 +42,11 @@ import itertools
 import os
 import zlib
 from concurrent.futures import ThreadPoolExecutor
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from isal import isal_zlib
 
+from meshgen.formats._xml import quoteattr
 from meshgen.formats.metadata import METADATA_KEY, metadata_json
 from meshgen.geometry.grid import HEX_CORNERS, QUAD_CORNERS, flat_points
 
