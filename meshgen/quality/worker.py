@@ -271,6 +271,20 @@ def _parts(connection, nodes: np.ndarray, metrics: np.ndarray) -> None:
     connection.send(("parts", report_parts(nodes)))
 
 
+def _numba_without_extras() -> None:
+    """Leave out, in this child only, the parts of numba's start that meshgen's kernels never use:
+    the CFFI support its type registries set up (``import cffi`` and cffi's C parser, about 30 ms)
+    and the scan of every installed distribution for numba extensions (``entry_points()``, 20 to
+    30 ms here). The child runs nothing but these kernels, then exits; the parent's numba, if it
+    ever loads one, is untouched. Before numba is imported (``worker_fits``) and only then."""
+    if "numba" in sys.modules:
+        return
+    sys.modules.setdefault("cffi", None)  # None: ``import cffi`` raises ImportError, numba types no CFFI
+    import numba.core.entrypoints as entrypoints
+
+    entrypoints._already_initialized = True  # numba's own flag for "extensions loaded"
+
+
 def _serve(connection, parent_end, parent: int, nodes: np.ndarray, work, *arguments) -> None:
     """The child: load the kernels, wait for the nodes, then ``work(connection, nodes,
     *arguments)`` sends what it computed; ("error", text) if anything fails. It ends when the
@@ -282,6 +296,7 @@ def _serve(connection, parent_end, parent: int, nodes: np.ndarray, work, *argume
         signal.signal(signum, signal.SIG_DFL)
     status = 0
     try:
+        _numba_without_extras()
         load_compiled_kernels(nodes.shape[-1])
         while not connection.poll(PARENT_CHECK_SECONDS):
             if os.getppid() != parent:
