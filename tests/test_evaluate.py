@@ -235,3 +235,25 @@ def test_solver_figures_of_our_own_mesh_and_their_gates(run_cli, tmp_path, semic
     write_gmsh(tmp_path / "box.msh", sheared_box((3, 2, 2), 0.7))
     foreign = run_cli("evaluate", "box.msh", "--fail-if", "expansion_ratio.max>2")
     assert foreign.returncode == 2 and "structured mesh" in foreign.stderr
+
+
+def test_the_table_is_printed_as_without_rich_warmed_up(run_cli, tmp_path, monkeypatch):
+    """rich is warmed up on a thread while the metrics are computed (``tables.warm_up``): the table
+    is the one printed without that, and the thread has ended when the command returns."""
+    import threading
+
+    import meshgen.cli.evaluate as command
+
+    made = run_cli("mesh", "-m", "tfi", "-g", "semicylinder", "--dims", "6", "5", "4", "-o", "m.vts", "-q")
+    assert made.returncode == 0, made.stderr
+    calls = []
+    original = command.warm_up
+    monkeypatch.setattr(command, "warm_up", lambda: (calls.append(1), original()))
+    warmed = run_cli("evaluate", "m.vts", "m.vts")
+    assert warmed.returncode == 0, warmed.stderr
+    assert len(calls) == 2 and not [t for t in threading.enumerate() if t.name == "meshgen-rich"]
+    monkeypatch.setattr(command, "warm_up", lambda: None)
+    plain = run_cli("evaluate", "m.vts", "m.vts")
+    assert warmed.stdout == plain.stdout and "mesh quality" in plain.stdout
+    quiet = run_cli("evaluate", "m.vts", "--json", "-")
+    assert quiet.returncode == 0 and len(calls) == 2  # no table, no warm-up

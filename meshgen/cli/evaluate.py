@@ -8,12 +8,13 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
 
 import click
 
 from meshgen.cli._options import block_nodes_option, geometry_options
 from meshgen.cli._progress import progress_display
-from meshgen.cli.tables import METRIC_LABELS, markdown_table, print_table
+from meshgen.cli.tables import METRIC_LABELS, markdown_table, print_table, warm_up
 from meshgen.cli.tables import number as _number
 from meshgen.geometry.blocks import block_spec
 from meshgen.geometry.plugins import load_geometry, parse_params
@@ -193,9 +194,9 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
         if per_block:
             options["per_block"] = True
         by_name = isinstance(chosen, str)
-        reports = [
-            _evaluate_one(path, chosen, parsed_params if by_name or not chosen else None, interactive, options) for path in meshes
-        ]
+        table = not quiet and json_path != "-"
+        params_of = parsed_params if by_name or not chosen else None
+        reports = [_evaluate_one(path, chosen, params_of, interactive, options, table) for path in meshes]
     finally:
         if client is not None:
             client.close()
@@ -254,7 +255,23 @@ def _print_table(reports) -> None:
         print_table(header, rows, title=title)
 
 
-def _evaluate_one(path, geometry, params, interactive: bool, options: dict) -> dict:
-    """The report of one mesh file, with a progress bar and a running clock at a terminal."""
+def _evaluate_one(path, geometry, params, interactive: bool, options: dict, table: bool = False) -> dict:
+    """The report of one mesh file, with a progress bar and a running clock at a terminal.
+    ``table``: the report will be printed as a table; rich is warmed up on a thread once the file
+    is read (``tables.warm_up``), while the metrics are computed, and that thread ends here, before
+    the next file is read (where a worker may be forked: no import may be under way then)."""
+    warming = []
+
+    def progress(done, **figures):
+        if table and figures.get("phase") == "metrics" and not warming:
+            warming.append(threading.Thread(target=warm_up, name="meshgen-rich", daemon=True))
+            warming[0].start()
+        if bar is not None:
+            bar(done, **figures)
+
     with progress_display(f"evaluating {click.format_filename(path)}", interactive) as bar:
-        return evaluate_file(path, geometry, params, progress=bar, **options)
+        try:
+            return evaluate_file(path, geometry, params, progress=progress, **options)
+        finally:
+            for thread in warming:
+                thread.join()

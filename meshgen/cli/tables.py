@@ -5,10 +5,12 @@ in Markdown)."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import shutil
 import sys
 
-__all__ = ["METRIC_LABELS", "markdown_table", "number", "print_table", "transposed"]
+__all__ = ["METRIC_LABELS", "markdown_table", "number", "print_table", "transposed", "warm_up"]
 
 # How each per-cell metric of meshgen.quality is named in tables and figure labels.
 METRIC_LABELS = {
@@ -70,6 +72,14 @@ def print_table(header, rows, title=None, highlight=frozenset(), caption=None, f
         turned_header, turned_rows, turned_highlight = transposed(header, rows, highlight)
         table = _rich_table(turned_header, turned_rows, title, turned_highlight, caption)
     console.print(table)
+
+
+def warm_up() -> None:
+    """Import rich and print a small table into memory, so that the next ``print_table`` pays
+    only for its own table (the first one costs some 40 ms more: rich's imports and caches), e.g.
+    on a thread while a command waits for its results. Errors are left to that print."""
+    with contextlib.suppress(Exception):
+        print_table(["quantity", "value"], [["cells", "1"]], title="warm-up", file=io.StringIO())
 
 
 def _terminal_columns(stream) -> int | None:
