@@ -47,13 +47,13 @@ main()
 """
 
 FAILURES = {
-    "raises": "def failing(dim):\n    raise MemoryError('no memory in the worker')\nworker.load_compiled_kernels = failing",
-    "dies": "import os\ndef dying(dim):\n    os._exit(9)\nworker.load_compiled_kernels = dying",
+    "raises": "def failing():\n    raise MemoryError('no memory in the worker')\nworker.start_numba = failing",
+    "dies": "import os\ndef dying():\n    os._exit(9)\nworker.start_numba = dying",
     # SIGSTOP (a debugger, a job-control stop): seen in /proc at once, the worker killed
-    "stopped": "import os, signal\ndef stopping(dim):\n    os.kill(os.getpid(), signal.SIGSTOP)\nworker.load_compiled_kernels = stopping",
+    "stopped": "import os, signal\ndef stopping():\n    os.kill(os.getpid(), signal.SIGSTOP)\nworker.start_numba = stopping",
     # alive but making no progress: the wait ends at worker_timeout (shortened here to 1 s)
     "stuck": (
-        "import time\ndef stuck(dim):\n    time.sleep(3600)\nworker.load_compiled_kernels = stuck\n"
+        "import time\ndef stuck():\n    time.sleep(3600)\nworker.start_numba = stuck\n"
         "worker.WAIT_BASE_SECONDS, worker.WAIT_SECONDS_PER_CELL = 1.0, 0.0"
     ),
 }

@@ -195,6 +195,27 @@ def vts_bomb(path: Path, declared: int, inflated: int = 2**25) -> None:
     path.write_bytes(head.encode() + header + stream + b"\n</AppendedData>\n</VTKFile>\n")
 
 
+@pytest.mark.parametrize("level", [1, 6, 9])
+def test_inflate_gives_zlibs_bytes_and_zlibs_refusals(level):
+    """``inputs.inflate`` inflates by ISA-L: zlib's bytes; a stream that is no zlib data, or whose
+    checksum is wrong, is refused with zlib's own words; the declared size still bounds it."""
+    from meshgen.run.inputs import InputError, inflate
+
+    raw = np.cumsum(np.random.default_rng(level).normal(size=50_000)).tobytes()
+    stream = zlib.compress(raw, level)
+    assert inflate(stream, len(raw), "the block") == raw
+    assert inflate(memoryview(stream + b"tail")[: len(stream)], len(raw), "the block") == raw
+    corrupt = bytearray(stream)
+    corrupt[-1] ^= 1  # the Adler-32 checksum
+    for bad, words in ((b"not zlib data at all", "incorrect header check"), (bytes(corrupt), "incorrect data check")):
+        with pytest.raises(InputError, match=f"the block is not a zlib stream .*{words}"):
+            inflate(bad, len(raw), "the block")
+    with pytest.raises(InputError, match="inflates to more than"):
+        inflate(stream, len(raw) - 1, "the block")
+    with pytest.raises(InputError, match="inflates to 400000 bytes, not the 400001"):
+        inflate(stream, len(raw) + 1, "the block")
+
+
 def claiming_cgns(path: Path, n: int) -> None:
     """A .cgns whose one zone claims n^3 nodes over compressed coordinate arrays with no chunk
     written (HDF5 would read fill values)."""

@@ -9,7 +9,8 @@ parent hands it:
 
 - the parent allocates, before forking, anonymous shared memory for the nodes ``(node_shape, dim)``
   float64 and the seven per-cell metrics ``(7, cells)`` float64;
-- the child loads the kernels (``load_compiled_kernels``) and waits on a pipe;
+- the child loads the kernels (``start_numba``, then ``load_compiled_kernels`` unless the nodes
+  are there already) and waits on a pipe;
 - ``submit(X)`` copies the nodes in and wakes the child, which computes ``report_in_parallel``
   (the same functions on the same values: the report and the metric arrays are those of the
   parent's own path to the bit), copies the metrics into the shared memory, says so, then sends
@@ -56,6 +57,7 @@ from meshgen.quality.faces_openfoam import non_orthogonality
 from meshgen.quality.kernels import METRICS
 from meshgen.quality.report import assess_in_parallel, metric_summaries, report_in_parallel
 from meshgen.quality.smoothness import smoothness_figures
+from meshgen.quality.structured import load_compiled_kernels as load_first_kernel
 from meshgen.quality.structured import structured_metrics, use_compiled
 from meshgen.run.signals import TERMINATING_SIGNALS
 
@@ -68,6 +70,7 @@ __all__ = [
     "load_compiled_kernels",
     "quality_worker",
     "report_parts",
+    "start_numba",
     "worker_fits",
     "worker_timeout",
 ]
@@ -271,6 +274,15 @@ def _parts(connection, nodes: np.ndarray, metrics: np.ndarray) -> None:
     connection.send(("parts", report_parts(nodes)))
 
 
+def start_numba() -> None:
+    """numba's import, its type registries and the first kernel (``structured.load_compiled_kernels``):
+    most of the kernels' load, the part that nothing in the child can overlap. The others take
+    5 to 10 ms each; a child whose nodes are there already loads them while it computes (the
+    per-cell metrics' C code runs while the other parts' threads load theirs)."""
+    _numba_without_extras()
+    load_first_kernel()
+
+
 def _numba_without_extras() -> None:
     """Leave out, in this child only, the parts of numba's start that meshgen's kernels never use:
     the CFFI support its type registries set up (``import cffi`` and cffi's C parser, about 30 ms)
@@ -296,8 +308,9 @@ def _serve(connection, parent_end, parent: int, nodes: np.ndarray, work, *argume
         signal.signal(signum, signal.SIG_DFL)
     status = 0
     try:
-        _numba_without_extras()
-        load_compiled_kernels(nodes.shape[-1])
+        start_numba()
+        if not connection.poll(0):  # no nodes yet: the other kernels load meanwhile, else while the first part runs
+            load_compiled_kernels(nodes.shape[-1])
         while not connection.poll(PARENT_CHECK_SECONDS):
             if os.getppid() != parent:
                 raise EOFError("the parent is gone")
