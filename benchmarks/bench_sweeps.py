@@ -136,6 +136,15 @@ def figures(made, dims, distance_rel: float, volume: float, seconds: float, fold
     }
 
 
+def patch_nodes(made) -> np.ndarray:
+    """(N, 3) the nodes of every block face on a patch of the mesh ``made``."""
+    nodes = []
+    for (block, face_name), _ in made.geometry.patches.items():
+        face = cube.face_named(face_name, 3)
+        nodes.append(np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3))
+    return np.concatenate(nodes)
+
+
 def bench_stl(folder: Path, dims, method: str) -> dict:
     """The ``stl_cylinder`` row: trimesh's cylinder (radius 0.5, height 2, 64 sections) as STL;
     boundary distance from its facets (``prism_distance``), volume against trimesh's."""
@@ -146,11 +155,7 @@ def bench_stl(folder: Path, dims, method: str) -> dict:
     start = time.perf_counter()
     made = mesh(str(path), dims, method=method)
     seconds = time.perf_counter() - start
-    nodes = []
-    for (block, face_name), _ in made.geometry.patches.items():
-        face = cube.face_named(face_name, 3)
-        nodes.append(np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3))
-    distance = prism_distance(path, np.concatenate(nodes)) / np.sqrt(6.0)
+    distance = prism_distance(path, patch_nodes(made)) / np.sqrt(6.0)
     return figures(made, dims, distance, trimesh.load(path).volume, seconds, folder)
 
 
@@ -171,12 +176,8 @@ def bench_stl_bend(row: str, folder: Path, dims, method: str) -> dict:
     start = time.perf_counter()
     made = mesh(str(path), dims, method=method)
     seconds = time.perf_counter() - start
-    nodes = []
-    for (block, face_name), _ in made.geometry.patches.items():
-        face = cube.face_named(face_name, 3)
-        nodes.append(np.take(made.blocks[block], 0 if face.side == 0 else -1, axis=face.axis).reshape(-1, 3))
     length = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
-    distance = float(distance_to_triangles(np.concatenate(nodes), vertices, triangles).max()) / length
+    distance = float(distance_to_triangles(patch_nodes(made), vertices, triangles).max()) / length
     return figures(made, dims, distance, surface_volume(vertices, triangles), seconds, folder)
 
 
