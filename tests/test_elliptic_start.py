@@ -177,3 +177,16 @@ def test_one_block_refuses_the_elliptic_target_in_one_line(run_cli):
     assert len(done.stderr.strip().splitlines()) == 1 and not Path("run").exists()
     done = run_cli("train", "-g", "semicylinder", "--set", "pretrain.target=sideways", "--out", "run")
     assert done.returncode == 2 and "must be one of auto, tfi, elliptic" in done.stderr
+
+
+def test_winslow_steps_after_the_elliptic_fit_run_in_float64(tmp_path):
+    """``adam.block_steps`` and ``lbfgs.block_steps`` set: the run goes on from the fit (whose
+    networks are float64) through Adam and L-BFGS on the Winslow loss, every row finite."""
+    config = tiny_config("pretrain.steps=2", "adam.block_steps=2", "lbfgs.block_steps=1", "model.widths=[8,8]")
+    result = train(config, load_block_set("pipe", None, (4, 2, 4)), tmp_path, summary=False, geometry_spec="pipe")
+    checkpoint = load_checkpoint(result.checkpoint_path)
+    assert checkpoint["step"] == 5 and checkpoint["stage"] == "done"
+    rows = (tmp_path / "history.csv").read_text().splitlines()[1:]
+    assert [row.split(",")[0] for row in rows] == ["pretrain"] * 2 + ["adam"] * 2 + ["lbfgs"]
+    assert all(np.isfinite(float(row.split(",")[4])) for row in rows)  # the total of every row
+    assert all(np.isfinite(checkpoint["test_loss"][key]) for key in ("pde", "boundary"))
