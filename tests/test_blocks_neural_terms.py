@@ -3,6 +3,8 @@ rule on flat patches, the parallelogram rule at junctions, the L-BFGS stage's la
 ``meshgen train --init`` (a new run from a block model's weights). Closed forms throughout: maps
 given as plain functions whose derivatives are known."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -104,6 +106,27 @@ def test_the_parallelogram_rule_vanishes_for_affine_maps_and_measures_a_mixed_de
         du, dv = (points[core, 3] - points[core, 0])[:2]
         areas = [np.prod(np.abs(points[q, 3] - points[q, 0])[np.abs(points[q, 3] - points[q, 0]) > 0]) for q in quads]
         np.testing.assert_allclose(rows[j], du * dv * e.numpy() / 3 / np.mean(areas), rtol=1e-10)
+
+
+def test_junction_nodes_at_every_blocks_corner_get_no_rows():
+    """The T-joint's junction nodes include nodes at a corner of every block round them (on no block
+    edge's interior: no quad in the layer of an edge): they are left out, so every junction kept has
+    quads, a finite area and rows, and affine maps still complete every parallelogram (before, such
+    a node's 0 / 0 area made the held-out PDE loss NaN)."""
+    from meshgen.methods.interfaces import junction_nodes
+
+    topology = Path(__file__).resolve().parents[1] / "examples" / "topologies" / "t-joint-3d.yaml"
+    block_set = load_block_set(str(topology), None, (2, 2, 2))
+    pool = junction_pool(block_set, torch.device("cpu"))
+    assert 0 < pool["count"] < len(junction_nodes(block_set)[0])
+    assert np.bincount(pool["node"].numpy(), minlength=pool["count"]).min() >= 1
+    assert np.all(np.isfinite(pool["area"].numpy())) and np.all(pool["area"].numpy() > 0)
+    generator = torch.Generator().manual_seed(5)
+    networks = [
+        Map(lambda p, A=torch.rand((3, 3), generator=generator, dtype=torch.float64): p @ A.T) for _ in block_set.names
+    ]
+    rows = junction_rows(networks, pool)
+    assert rows.shape == (pool["count"], 3) and float(rows.abs().max()) < 1e-9  # rounding over small areas
 
 
 def test_the_lbfgs_lattices_are_regular_and_the_same_on_every_face():

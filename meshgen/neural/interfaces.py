@@ -192,7 +192,8 @@ def junction_pool(block_set: BlockSet, device, lengths=None) -> dict | None:
     times the shortest mean block length around the junction. Returns None without junctions, else
     ``node`` (Q,) the junction number of each quad, ``block`` (Q,), ``points`` (Q, 4, d) the
     parametric node, a, b and ab in the quad's block, ``area`` (J,) the mean over the junction's
-    quads of the product of their parametric sides, ``count`` J. ``lengths``: the blocks'
+    quads of the product of their parametric sides, ``count`` J, the junctions that have quads (in
+    3D a node at a corner of every block round it has none: no rows for it). ``lengths``: the blocks'
     ``block_lengths`` (computed when not given)."""
     junctions, numbering, _ = junction_nodes(block_set)
     if len(junctions) == 0:
@@ -225,8 +226,14 @@ def junction_pool(block_set: BlockSet, device, lengths=None) -> dict | None:
                         blocks.append(block)
                         quads.append((point, plane, (step_a, step_b)))
                         sides.append(min(lengths[block][axis] for axis in plane))
+    if not nodes:
+        return None
     nodes = np.array(nodes)
-    side = np.full(len(junctions), np.inf)
+    used = np.unique(nodes)  # a 3D node at a corner of every block round it lies inside no block edge: no quads
+    renumber = np.zeros(len(junctions), dtype=nodes.dtype)
+    renumber[used] = np.arange(len(used))
+    nodes = renumber[nodes]
+    side = np.full(len(used), np.inf)
     np.minimum.at(side, nodes, np.array(sides))
     side *= JUNCTION_STEP
     points = np.empty((len(nodes), 4, dim))
@@ -237,15 +244,15 @@ def junction_pool(block_set: BlockSet, device, lengths=None) -> dict | None:
         corner[2][plane[1]] = corner[3][plane[1]] = offsets[1]
         points[q] = point + np.stack(corner)
     areas = np.abs(np.prod(points[:, 3] - points[:, 0], axis=1, where=(points[:, 3] != points[:, 0])))
-    area = np.zeros(len(junctions))
+    area = np.zeros(len(used))
     np.add.at(area, nodes, areas)
-    area /= np.bincount(nodes, minlength=len(junctions))
+    area /= np.bincount(nodes, minlength=len(used))
     return {
         "node": torch.from_numpy(nodes).to(device),
         "block": np.array(blocks),
         "points": torch.from_numpy(points).to(device),
         "area": torch.from_numpy(area).to(device),
-        "count": len(junctions),
+        "count": len(used),
     }
 
 
