@@ -24,27 +24,34 @@ from meshgen.quality.structured import NUMPY_CELLS, structured_metrics
 
 DIMS = (80, 80, 80)  # 512,000 cells: the compiled kernels' size (NUMPY_CELLS), so the worker's
 
-# Runs ``meshgen mesh`` in this interpreter after ``PATCH``; says on stderr which process computed
-# the metrics ("worker" when the worker returned them).
-DRIVER = """
+# Runs a meshgen command in a new interpreter after ``{patch}``; says on stderr the worker's pid and
+# which process computed WHAT ("WHAT from the worker" when the worker's METHOD returned them).
+DRIVER_TEMPLATE = """
 import sys
 import meshgen.quality.worker as worker
-original_metrics = worker.QualityWorker.metrics
-def metrics(self):
-    found = original_metrics(self)
-    print("metrics from the worker" if found is not None else "metrics not from the worker", file=sys.stderr)
-    return found
-worker.QualityWorker.metrics = metrics
-original_init = worker.QualityWorker.__init__
+original_found = worker.CLASS.METHOD
+def found(self):
+    value = original_found(self)
+    print("WHAT from the worker" if value is not None else "WHAT not from the worker", file=sys.stderr)
+    return value
+worker.CLASS.METHOD = found
+original_init = worker.CLASS.__init__
 def init(self, *arguments):
     original_init(self, *arguments)
     print(f"worker {{self._process.pid}}", file=sys.stderr, flush=True)
-worker.QualityWorker.__init__ = init
+worker.CLASS.__init__ = init
 {patch}
 from meshgen.cli import main
 sys.argv[0] = "meshgen"
 main()
 """
+
+
+def worker_driver(worker_class: str, method: str, what: str) -> str:
+    return DRIVER_TEMPLATE.replace("CLASS", worker_class).replace("METHOD", method).replace("WHAT", what)
+
+
+DRIVER = worker_driver("QualityWorker", "metrics", "metrics")  # meshgen mesh's per-cell metrics
 
 FAILURES = {
     "raises": "def failing():\n    raise MemoryError('no memory in the worker')\nworker.start_numba = failing",
@@ -209,27 +216,7 @@ def test_the_warm_up_loads_every_kernel_the_report_calls(name, dims):
     assert result.stdout.strip().splitlines()[-1] == "late: []"
 
 
-# ``meshgen evaluate`` in a new interpreter after ``PATCH``; says on stderr whether the report's
-# numba parts came from the evaluation worker.
-EVALUATE_DRIVER = """
-import sys
-import meshgen.quality.worker as worker
-original_parts = worker.EvaluationWorker.parts
-def parts(self):
-    found = original_parts(self)
-    print("parts from the worker" if found is not None else "parts not from the worker", file=sys.stderr)
-    return found
-worker.EvaluationWorker.parts = parts
-original_init = worker.EvaluationWorker.__init__
-def init(self, *arguments):
-    original_init(self, *arguments)
-    print(f"worker {{self._process.pid}}", file=sys.stderr, flush=True)
-worker.EvaluationWorker.__init__ = init
-{patch}
-from meshgen.cli import main
-sys.argv[0] = "meshgen"
-main()
-"""
+EVALUATE_DRIVER = worker_driver("EvaluationWorker", "parts", "parts")  # meshgen evaluate's numba parts
 
 
 def run_evaluate(path, patch: str = "") -> subprocess.CompletedProcess:
