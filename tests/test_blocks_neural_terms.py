@@ -122,9 +122,7 @@ def test_junction_nodes_at_every_blocks_corner_get_no_rows():
     assert np.bincount(pool["node"].numpy(), minlength=pool["count"]).min() >= 1
     assert np.all(np.isfinite(pool["area"].numpy())) and np.all(pool["area"].numpy() > 0)
     generator = torch.Generator().manual_seed(5)
-    networks = [
-        Map(lambda p, A=torch.rand((3, 3), generator=generator, dtype=torch.float64): p @ A.T) for _ in block_set.names
-    ]
+    networks = [Map(lambda p, A=torch.rand((3, 3), generator=generator, dtype=torch.float64): p @ A.T) for _ in block_set.names]
     rows = junction_rows(networks, pool)
     assert rows.shape == (pool["count"], 3) and float(rows.abs().max()) < 1e-9  # rounding over small areas
 
