@@ -268,3 +268,53 @@ def test_a_recorded_yaml_path_loads_only_when_given(solids, tmp_path, monkeypatc
     assert load_recorded_geometry(str(yaml), check=False, where="the checkpoint").source == str(yaml)
     with pytest.raises(trust.UntrustedGeometry):
         load_recorded_geometry(str(solids / "cylinder.step"), check=False, where="the checkpoint")
+
+
+EVIL_PLUGIN = """
+from pathlib import Path
+Path({marker!r}).write_text("imported")
+name = "evil"
+dim = 3
+description = "writes a file when imported"
+def boundary(points):
+    return points
+"""
+
+
+@pytest.mark.slow
+def test_training_on_the_yaml_file_and_a_checkpoint_naming_a_file(solids, tmp_path, run_cli, monkeypatch):
+    """``meshgen train -g part.yaml`` trains the sweep's networks (the hint to mesh says -g
+    part.yaml); its checkpoint meshes with -g part.yaml, the renamed patches written. Without -g,
+    in a process where the user named no file, the checkpoint's recorded path is refused in one
+    line, as is a block-set checkpoint whose recorded spec is a plugin file (never imported)."""
+    torch = pytest.importorskip("torch")
+    from meshgen.run import trust
+
+    write(tmp_path, "part.yaml", f"surface: {solids / 'cylinder.step'}\nrename: {{face2: inlet, face3: outlet}}\n")
+    result = run_cli("train", "-g", "part.yaml", "--out", "run", "-q", "--steps", 2, "--set", "pretrain.steps=2")
+    assert result.returncode == 0, result.stderr
+    assert "Mesh with: meshgen mesh -g part.yaml --method neural --checkpoint run/checkpoint.pt" in result.stdout
+    meshed = run_cli(
+        "mesh", "-g", "part.yaml", "--method", "neural", "--checkpoint", "run/checkpoint.pt", "--dims", 4, 2, 3,
+        "--format", "openfoam", "-o", "case",
+    )  # fmt: skip
+    assert meshed.returncode == 0, meshed.stderr
+    assert boundary_file(tmp_path / "case") == {"face1": "wall", "inlet": "patch", "outlet": "patch"}
+    monkeypatch.setattr(trust, "_GIVEN_PLUGIN_FILES", set())  # a fresh process: the user named nothing yet
+    (tmp_path / "evil.py").write_text(EVIL_PLUGIN.format(marker=str(tmp_path / "imported")))
+    checkpoint = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
+    checkpoint["geometry"]["spec"] = str(tmp_path / "evil.py")
+    torch.save(checkpoint, tmp_path / "hostile.pt")
+    for name, words in (("run/checkpoint.pt", "part.yaml"), ("hostile.pt", "evil.py")):
+        line = refused_checkpoint(run_cli, tmp_path, name)
+        assert words in line and "pass -g PATH" in line
+    assert not (tmp_path / "imported").exists()
+
+
+def refused_checkpoint(run_cli, folder, checkpoint) -> str:
+    before = sorted(p.name for p in folder.iterdir())
+    result = run_cli("mesh", "--method", "neural", "--checkpoint", checkpoint, "--dims", 4, 2, 3, "-o", "n.vtu")
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert result.returncode == 2 and len(lines) == 1, result.stderr
+    assert sorted(p.name for p in folder.iterdir()) == before
+    return lines[0]
