@@ -15,7 +15,7 @@ from shape_helpers import write_ascii_stl, write_sweep_solid
 import meshgen
 from meshgen.geometry import cube
 from meshgen.geometry.blocks import block_spec
-from meshgen.geometry.shapes.sweep_blocks import is_sweep_file
+from meshgen.geometry.shapes.sweep_yaml import is_sweep_geometry
 
 gmsh = pytest.importorskip("gmsh", reason="CAD files need the gmsh Python package (pip install gmsh)")
 
@@ -80,7 +80,7 @@ def test_a_yaml_file_over_a_cylinder_renames_and_types_its_patches(solids, tmp_p
     are the bare .step's, bit for bit, and the run says the renames."""
     text = "surface: {}\nrename: {{face1: side, face2: inlet, face3: outlet}}\ntypes: {{side: symmetry}}\n"
     yaml = write(tmp_path, "part.yaml", text.format(solids / "cylinder.step"))
-    assert is_sweep_file(yaml) and block_spec(str(yaml)) == str(yaml)
+    assert is_sweep_geometry(yaml) and block_spec(str(yaml)) == str(yaml)
     result = run_cli(
         "mesh", "-g", "part.yaml", "--method", method, "--dims", *CYLINDER_DIMS, "--format", "openfoam", "-o", "case"
     )
@@ -239,13 +239,13 @@ def test_what_stays_as_it_was(solids, tmp_path):
     """A geometry file of a six-faced solid, a ``patches`` file and a topology file are no
     sweep's; the box's YAML file meshes its one block as before."""
     box = write(tmp_path, "box.yaml", f"surface: {solids / 'box.step'}\nrename: {{face1: inlet}}\n")
-    assert not is_sweep_file(box) and block_spec(str(box)) is None
+    assert not is_sweep_geometry(box) and block_spec(str(box)) is None
     X = meshgen.mesh(str(box), (2, 3, 4), method="tfi").X
     assert X.shape == (3, 4, 5, 3)
     listed = write(tmp_path, "listed.yaml", "patches:\n  inlet: a.stl\n")
     topology = write(tmp_path, "topology.yaml", "vertices: []\nblocks: []\n")
     missing = write(tmp_path, "missing.yaml", "surface: nowhere.step\n")
-    assert not any(is_sweep_file(p) for p in (listed, topology, missing, tmp_path / "absent.yaml"))
+    assert not any(is_sweep_geometry(p) for p in (listed, topology, missing, tmp_path / "absent.yaml"))
 
 
 def test_a_recorded_yaml_path_loads_only_when_given(solids, tmp_path, monkeypatch):

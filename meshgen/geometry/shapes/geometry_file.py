@@ -43,7 +43,7 @@ from meshgen.geometry.shapes.faces import FACE_NAMES
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.run.inputs import InputError, load_yaml_file, named_input_file
 
-__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "read_geometry_file"]
+__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "named_file", "read_geometry_file"]
 
 GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types", "caps")
 
@@ -99,7 +99,9 @@ def read_geometry_file(path: Path) -> dict:
     return data
 
 
-def _named_file(base: Path, value, path: Path, what: str) -> Path:
+def named_file(base: Path, value, path: Path, what: str) -> Path:
+    """The file ``value`` a geometry file ``path`` names for ``what``, relative to its folder
+    ``base``, checked to be a regular file (GeometryError otherwise)."""
     if not isinstance(value, str) or not value:
         raise GeometryError(f"geometry file {path}: {what} must be a file name")
     try:
@@ -118,7 +120,7 @@ def load_geometry_file(path) -> object:
     corners = data.get("corners")
     rename = dict(data.get("rename") or {})
     if "surface" in data:
-        file = _named_file(base, data["surface"], path, "'surface'")
+        file = named_file(base, data["surface"], path, "'surface'")
         suffix = file.suffix.lower()
         options = {"yaml": path.read_bytes().hex()}  # the whole file: faces, corners, angle
         if suffix in CAD_FORMATS:
@@ -141,7 +143,7 @@ def load_geometry_file(path) -> object:
                 if "type" in entry:
                     types.setdefault(str(name), str(entry["type"]))
                 entry = entry.get("file")
-            files.append(_named_file(base, entry, path, f"patch '{name}'"))
+            files.append(named_file(base, entry, path, f"patch '{name}'"))
             names.append(str(name))
         bad = [f for f in files if f.suffix.lower() not in TRIANGULATED_FORMATS]
         if bad:

@@ -42,8 +42,9 @@ rulings, which lie on the linking faces.
 Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
 
-A YAML geometry file whose ``surface`` is such a sweep is one too (``sweep_yaml``): its ``caps``
-choose the pair the cap search tries, ``rename`` and ``types`` the patches written.
+A YAML geometry file whose ``surface`` is such a sweep is one too (``sweep_yaml``, through
+``build_sweep_module``): its ``caps`` choose the pair the cap search tries, ``rename`` and
+``types`` the patches written.
 """
 
 from __future__ import annotations
@@ -56,19 +57,23 @@ import numpy as np
 
 from meshgen.errors import GeometryError
 from meshgen.geometry import cube
-from meshgen.geometry.shapes.assemble import (
-    CAD_FORMATS,
-    TRIANGULATED_FORMATS,
-    YAML_FORMATS,
-    content_hash,
-    default_patch_type,
-)
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
 from meshgen.geometry.shapes.sweep_ring import coons, piece, ring_blocks, segment
 from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
-__all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
+__all__ = [
+    "BULGE",
+    "CORE",
+    "WEDGE_ANGLE",
+    "WEDGE_DEPTH",
+    "build_sweep_module",
+    "file_state",
+    "is_sweep_file",
+    "read_sweep_file",
+    "sweep_module",
+]
 
 CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
 BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
@@ -87,16 +92,17 @@ _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
 
 
-def _key(path: Path) -> tuple:
+def file_state(path: Path) -> tuple:
+    """(resolved path, size, modification time in ns) of the file ``path``: what the caches key on."""
     status = path.stat()
     return (str(path.resolve()), status.st_size, status.st_mtime_ns)
 
 
-def _read(path: Path, caps=None, feature_angle=None) -> dict:
+def read_sweep_file(path: Path, caps=None, feature_angle=None) -> dict:
     """The sweep reader's answer for the file ``path`` (``caps``: the pair of names to try as the
     caps; ``feature_angle``: a triangulated surface's split), kept per file state and arguments."""
     caps = None if caps is None else tuple(caps)
-    key = (*_key(path), caps, feature_angle)
+    key = (*file_state(path), caps, feature_angle)
     if key not in _READ:
         if path.suffix.lower() in TRIANGULATED_FORMATS:
             _READ[key] = read_surface_sweep(path, caps, feature_angle)
@@ -109,20 +115,16 @@ def is_sweep_file(spec) -> bool:
     """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
     then meshed as a block set, or refused with a pointer to topology files), or a triangulated
     surface that is a sweep (``sweep_stl``) or has two planar caps that every other patch touches
-    (refused here, saying why they are no sweep's); or a YAML geometry file whose ``surface`` is
-    one of those (``sweep_yaml.is_sweep_yaml``)."""
+    (refused here, saying why they are no sweep's). A YAML geometry file naming one:
+    ``sweep_yaml.is_sweep_geometry``."""
     suffix = Path(str(spec)).suffix.lower() if isinstance(spec, (str, Path)) else ""
-    if suffix in YAML_FORMATS:  # a geometry file naming such a surface (``sweep_yaml``)
-        from meshgen.geometry.shapes.sweep_yaml import is_sweep_yaml
-
-        return is_sweep_yaml(Path(str(spec)))
     if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         return False
     path = Path(str(spec))
     if not path.is_file():
         return False
     try:  # a triangulated surface only when a sweep: else its own reader says what it is
-        found = _read(path)
+        found = read_sweep_file(path)
         if suffix in TRIANGULATED_FORMATS:
             return found["kind"] == "sweep" or bool(found.get("caps_found"))
         return found["kind"] != "six"
@@ -457,20 +459,16 @@ def _cut_cap(who: str, found: dict, summary: str):
 def sweep_module(path) -> types.ModuleType:
     """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
     (path, size, modification time). GeometryError (one line) when the solid is no sweep
-    this meshes. A YAML geometry file naming one: ``sweep_yaml.yaml_sweep_module``."""
+    this meshes. A YAML geometry file naming one: ``sweep_yaml.sweep_geometry_module``."""
     path = Path(path)
-    if path.suffix.lower() in YAML_FORMATS:
-        from meshgen.geometry.shapes.sweep_yaml import yaml_sweep_module
-
-        return yaml_sweep_module(path)
-    key = _key(path)
+    key = file_state(path)
     if key not in _MODULES:
-        _MODULES[key] = build_sweep_module(path, _read(path))
+        _MODULES[key] = build_sweep_module(path, read_sweep_file(path))
     return _MODULES[key]
 
 
 def build_sweep_module(path: Path, found: dict, named: dict | None = None) -> types.ModuleType:
-    """The module of the sweep ``found`` (``_read``'s answer for ``path``). ``named``: a geometry
+    """The module of the sweep ``found`` (``read_sweep_file``'s answer for ``path``). ``named``: a geometry
     file's (``sweep_yaml``): "file" (its path), "where" (how an error names the surface), per
     patch found its name written ("rename") and type ("kinds"), and "caps" (it named them)."""
     named = named or {}

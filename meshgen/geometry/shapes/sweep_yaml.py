@@ -6,6 +6,10 @@ as that sweep's block set, with the file's patch names and types and, if it name
     rename: {face1: wall, face2: inlet, face3: outlet}
     types: {wall: wall}           # by either name; default by the written name
 
+- ``is_sweep_geometry(spec)`` and ``sweep_geometry_module(path)``: ``sweep_blocks``' pair
+  (``is_sweep_file``, ``sweep_module``) for a bare file, these for a YAML file; the dispatch
+  points (``plugins.load_geometry``, ``_plugin_module``, ``blocks.block_spec``, ``is_multiblock``)
+  call them.
 - ``is_sweep_yaml(path)``: the file reads as a geometry file whose ``surface`` the sweep reader,
   trying every pair, takes for what ``is_sweep_file`` of the bare file says is a sweep (or, with
   ``caps``, for anything but six four-cornered faces). Otherwise, a topology file, a ``patches``
@@ -21,7 +25,8 @@ as that sweep's block set, with the file's patch names and types and, if it name
 - ``faces`` and ``corners`` assign the six faces of one block: refused on a sweep;
   ``feature_angle`` is a triangulated surface's sharp-edge split (refused for a CAD solid).
 - Modules are kept per state (path, size, modification time) of both the geometry file and the
-  surface file, so editing either takes effect in the same process.
+  surface file (``_MODULES``; the surface's reads by ``sweep_blocks.read_sweep_file`` per its own
+  state, the caps and the angle), so editing either takes effect in the same process.
 """
 
 from __future__ import annotations
@@ -31,14 +36,30 @@ from pathlib import Path
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry.patches import PATCH_TYPES, check_patch_name
-from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, default_patch_type
-from meshgen.geometry.shapes.geometry_file import _named_file, read_geometry_file
-from meshgen.geometry.shapes.sweep_blocks import _MODULES, _key, _read, build_sweep_module
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, YAML_FORMATS, default_patch_type
+from meshgen.geometry.shapes.geometry_file import named_file, read_geometry_file
+from meshgen.geometry.shapes.sweep_blocks import build_sweep_module, file_state, is_sweep_file, read_sweep_file, sweep_module
 from meshgen.geometry.topology_file import is_topology_file
 
-__all__ = ["is_sweep_yaml", "yaml_sweep_module"]
+__all__ = ["is_sweep_geometry", "is_sweep_yaml", "sweep_geometry_module", "yaml_sweep_module"]
 
 SWEEP_KINDS = ("sweep", "loft")
+_MODULES: dict = {}  # (geometry file's state, surface file's state) -> module
+
+
+def _is_yaml(spec) -> bool:
+    return isinstance(spec, (str, Path)) and Path(str(spec)).suffix.lower() in YAML_FORMATS
+
+
+def is_sweep_geometry(spec) -> bool:
+    """Whether ``spec`` names a sweep's file (``sweep_blocks.is_sweep_file``) or a YAML geometry
+    file over one (``is_sweep_yaml``): a block set, not the single block of ``shapes.loader``."""
+    return is_sweep_yaml(Path(str(spec))) if _is_yaml(spec) else is_sweep_file(spec)
+
+
+def sweep_geometry_module(path) -> types.ModuleType:
+    """The block-set module of a sweep's file or of a YAML geometry file over one."""
+    return yaml_sweep_module(Path(path)) if _is_yaml(path) else sweep_module(path)
 
 
 def _surface(path: Path):
@@ -47,7 +68,7 @@ def _surface(path: Path):
     data = read_geometry_file(path)
     if "surface" not in data:
         raise GeometryError(f"geometry file {path}: a sweep is read from one 'surface' file")
-    file = _named_file(path.parent, data["surface"], path, "'surface'")
+    file = named_file(path.parent, data["surface"], path, "'surface'")
     suffix = file.suffix.lower()
     if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         raise GeometryError(f"geometry file {path}: 'surface' {data['surface']}: unknown format {suffix or '(none)'}")
@@ -61,7 +82,7 @@ def is_sweep_yaml(path: Path) -> bool:
         if not path.is_file() or is_topology_file(path):
             return False
         data, file, triangulated = _surface(path)
-        found = _read(file, None, data.get("feature_angle") if triangulated else None)
+        found = read_sweep_file(file, None, data.get("feature_angle") if triangulated else None)
     except (MeshgenError, OSError):
         return False
     if found["kind"] == "six":
@@ -75,7 +96,7 @@ def yaml_sweep_module(path: Path) -> types.ModuleType:
     """The block-set module of the sweep the geometry file ``path`` names, with its patch names,
     types and caps (module docstring); kept per state of both files. GeometryError (one line)."""
     data, file, triangulated = _surface(path)
-    key = ("yaml", *_key(path), *_key(file))
+    key = (file_state(path), file_state(file))
     if key in _MODULES:
         return _MODULES[key]
     angle = data.get("feature_angle")
@@ -84,7 +105,7 @@ def yaml_sweep_module(path: Path) -> types.ModuleType:
             f"geometry file {path}: 'feature_angle' splits a triangulated surface at its sharp edges; "
             f"the patches of the CAD solid {file.name} are its faces"
         )
-    found = _read(file, None, angle)
+    found = read_sweep_file(file, None, angle)
     names = tuple(found["names"])
     for assigning in ("faces", "corners"):
         if data.get(assigning) is not None and found["kind"] in SWEEP_KINDS:
@@ -123,7 +144,7 @@ def yaml_sweep_module(path: Path) -> types.ModuleType:
             raise GeometryError(f"{path}: 'caps' names no patch '{unknown[0]}' {listing} (the names found, before 'rename')")
         automatic = tuple(names[k] for k in found["caps"]) if found["kind"] in SWEEP_KINDS else None
         if caps != automatic:
-            found = _read(file, caps, angle)
+            found = read_sweep_file(file, caps, angle)
         if found["kind"] not in SWEEP_KINDS:
             why = found.get("reason", "one block of six four-cornered faces")
             raise GeometryError(f"{path}: 'caps' {caps[0]} and {caps[1]} are not the caps of a sweep: {why}")
