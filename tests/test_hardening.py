@@ -78,6 +78,7 @@ Trust boundary (design notes, "Trust boundary and faults"): data, sizes, files, 
 | mesh metadata (.vtu, .cgns) names a plugin file: evaluate    | test_trust.py::test_a_mesh_naming_a_plugin_file_is_evaluated_without_running_it[vtu], [cgns] |
 | .quality.json sidecar names a plugin file: evaluate          | test_trust.py::test_a_mesh_naming_a_plugin_file_is_evaluated_without_running_it[sidecar] |
 | checkpoint's geometry.spec names a plugin: mesh, train       | test_trust.py::test_a_checkpoint_naming_a_plugin_file_asks_for_it |
+| block-set checkpoint names a plugin or a file not given: mesh | test_shapes_sweep_yaml.py::test_training_on_the_yaml_file_and_a_checkpoint_naming_a_file |
 | plugin name ../../x, /abs, a/b: never a path                 | test_trust.py::test_a_plugin_name_never_becomes_a_path |
 | --dims 1e10 1, 100000^3 (mesh, compare), --in-memory         | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[mesh-one-long-axis], [compare] |
 | model.widths, points.interior too large; train memory        | test_trust.py::test_sizes_and_numbers_are_checked_before_anything_is_allocated[train-widths], [train-memory] |

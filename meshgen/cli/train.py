@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import shlex
+
 import click
 
 from meshgen.cli._options import geometry_options
 from meshgen.cli._text import echo
 from meshgen.geometry.extrusion import extrusion_from, extrusion_of
+from meshgen.geometry.plugins import looks_like_path
 from meshgen.neural.config import list_presets as preset_list
 from meshgen.neural.progress import FIELD_HELP
 from meshgen.neural.session import prepare_run, run_training
@@ -192,7 +195,10 @@ def train(
         echo(f"  {line}")
     echo(f"Run folder: {run.run_dir}")
     echo(f"Checkpoint: {result.checkpoint_path}")
-    echo("Mesh with: " + MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims))
+    hint = MESH_HINT.format(checkpoint=result.checkpoint_path, dims=dims)
+    if geometry and looks_like_path(geometry):  # a file: a checkpoint naming it is trusted only with -g
+        hint = hint.replace("meshgen mesh ", f"meshgen mesh -g {shlex.quote(geometry)} ", 1)
+    echo("Mesh with: " + hint)
 
 
 def _family_report(run, result) -> None:

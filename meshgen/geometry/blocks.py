@@ -37,7 +37,7 @@ from meshgen.geometry.cyclic import CYCLIC, check_cyclic
 from meshgen.geometry.patches import PATCH_TYPES, Patch, check_patch_name
 from meshgen.geometry.plugins import Geometry, available_names, bind, load_geometry, plugin_module
 from meshgen.geometry.shapes.loader import is_shape_file
-from meshgen.geometry.shapes.sweep_blocks import is_sweep_file
+from meshgen.geometry.shapes.sweep_yaml import is_sweep_geometry
 from meshgen.methods.tfi import tfi
 from meshgen.run.limits import check_block_set_memory
 
@@ -117,7 +117,7 @@ def block_spec(geometry) -> str | None:
             return None
     else:
         spec = str(geometry)
-    if is_sweep_file(spec):  # a CAD solid swept from a cap: a block set
+    if is_sweep_geometry(spec):  # a CAD solid swept from a cap: a block set
         return spec
     if is_shape_file(spec) or Path(spec).suffix.lower() not in ("", ".py", ".yaml", ".yml", ".dat"):
         return None  # a shape file is one block (a topology file, .yaml too, is a block set)
@@ -135,7 +135,7 @@ def measured_block_set(spec: str, params: dict | None = None, dims=None) -> Bloc
 
 def is_multiblock(spec: str) -> bool:
     """Whether the geometry ``spec`` (name or plugin path) declares blocks (a shape file never does)."""
-    if isinstance(spec, str) and is_sweep_file(spec):
+    if isinstance(spec, str) and is_sweep_geometry(spec):
         return True
     if not isinstance(spec, str) or is_shape_file(spec):
         return False

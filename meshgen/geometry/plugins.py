@@ -41,7 +41,7 @@ from meshgen.geometry.domain import Geometry, bind
 from meshgen.geometry.patches import face_assignment, patches_from_assignment
 from meshgen.geometry.plugin_calls import call_plugin
 from meshgen.geometry.shapes.loader import is_shape_file, load_shape
-from meshgen.geometry.shapes.sweep_blocks import is_sweep_file, sweep_module
+from meshgen.geometry.shapes.sweep_yaml import is_sweep_geometry, sweep_geometry_module
 from meshgen.geometry.topology import topology_module
 from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.trust import check_plugin_name, note_given_plugin, recorded_spec
@@ -236,7 +236,7 @@ def _plugin_module(spec: str) -> tuple[ModuleType, str]:
         elif is_topology_file(path):
             module = topology_module(path)
         else:  # a CAD solid other than six four-cornered faces: a sweep's block set
-            module = sweep_module(path) if is_sweep_file(path) else _import_file(path)
+            module = sweep_geometry_module(path) if is_sweep_geometry(path) else _import_file(path)
         note_given_plugin(path)  # named by the user: a file recording this path may load it too
         return module, str(path)
     builtins = _builtin_files()
@@ -258,7 +258,7 @@ def load_geometry(spec: str, params: dict[str, float] | None = None, check: bool
     (shape, finiteness, continuity across the cube's edges). A shape file (STEP, IGES, BREP, STL,
     OBJ, PLY, or a YAML geometry file: ``meshgen.geometry.shapes.loader``) gives a geometry without
     parameters. ``dims``: the cell counts, when they choose a plugin's 3D version (``plugin_module``)."""
-    single = is_shape_file(spec) and not is_sweep_file(spec)
+    single = is_shape_file(spec) and not is_sweep_geometry(spec)
     geometry = load_shape(spec) if single else _from_module(*plugin_module(spec, dims))
     geometry = bind(geometry, params)
     if check:

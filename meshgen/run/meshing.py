@@ -57,6 +57,7 @@ from meshgen.quality import (
 from meshgen.quality.deviation import block_set_deviation
 from meshgen.quality.merged import merged_reports
 from meshgen.run.publish import publishing
+from meshgen.run.trust import recorded_spec
 
 __all__ = ["BLOCK_METHODS", "Mesh", "block_spec", "checkpoint_block_spec", "mesh_block_set", "run_metadata"]
 
@@ -200,7 +201,10 @@ def checkpoint_block_spec(checkpoint) -> str | None:
     except MeshgenError:
         return None
     entry = loaded.get("geometry", {})
-    return str(entry["spec"]) if "blocks" in entry else None
+    if "blocks" not in entry:
+        return None
+    # a name, or a file the user named in this process (a checkpoint never makes meshgen read or run one)
+    return recorded_spec(str(entry["spec"]), f"checkpoint {getattr(checkpoint, 'path', checkpoint)}")
 
 
 def _block_model(request, block_set_name: str, params: dict, fallback: bool, warn=None):

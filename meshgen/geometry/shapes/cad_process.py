@@ -72,11 +72,13 @@ def cad_block(path, given_faces: dict | None = None, content_hash: str = "", giv
     return ContainedCadBlock(names, assignment, pieces, volume, face_tags, box)
 
 
-def cad_sweep(path, content_hash: str = "") -> dict:
+def cad_sweep(path, content_hash: str = "", caps=None) -> dict:
     """The CAD file's solid seen as a straight sweep (``sweep_read.read_sweep``: plain values), read
-    in the CAD process; GeometryError for anything wrong with the file, its crash included."""
+    in the CAD process; ``caps``: the two face names to try as its caps (strings), else every pair;
+    GeometryError for anything wrong with the file, its crash included."""
     path = Path(path)
-    return _request(path, ("sweep", (os.getcwd(), str(path), None, content_hash, None), None, None))
+    caps = None if caps is None else tuple(str(name) for name in caps)
+    return _request(path, ("sweep", (os.getcwd(), str(path), caps, content_hash, None), None, None))
 
 
 def cad_face_projection(path, face: int):
@@ -272,11 +274,11 @@ def _serve(connection, parent_end) -> None:
                     connection.send(answer)
                     continue
                 if kind == "sweep":
-                    folder, path, _, content_hash, _ = load
+                    folder, path, caps, content_hash, _ = load
                     os.chdir(folder)
                     _limit_memory(cad_read_bytes(os.stat(path).st_size))
                     try:
-                        answer = ("ok", read_sweep(path, content_hash))
+                        answer = ("ok", read_sweep(path, content_hash, caps))
                     finally:
                         _limit_memory(int(available_memory()))
                     connection.send(answer)

@@ -17,10 +17,17 @@ and patch names and types, so that ``meshgen mesh -g duct.yaml`` is explicit and
     #   [[x, y, z], ...]        # (xi, eta, zeta) = (0,0,0), (0,0,1), (0,1,0), (0,1,1), (1,0,0), ...
     rename: {patch1: inlet}    # patch names as written to the mesh files
     types: {inlet: patch, outlet: patch, floor: symmetry}   # default: by name (wall otherwise)
+    # caps: [face2, face3]     # a swept solid's caps (first on zeta0), instead of faces/corners
 
 Every key is optional except ``surface`` or ``patches``. ``faces`` must name all six faces;
 ``corners`` (eight points, each within 1e-6 of the size of a corner vertex) fixes the assignment
 instead. A left-handed assignment is refused.
+
+A ``surface`` that is a sweep (``sweep_blocks``: a cylinder, a prism, a bend, a loft) is meshed
+as that sweep's block set (``sweep_yaml``), its patches renamed and typed by ``rename`` and
+``types``; ``caps`` names its two caps (patch names as found), which the cap search then checks
+as it checks every pair it tries. ``faces`` and ``corners`` are refused there, and ``caps`` here:
+a solid of six four-cornered faces stays one block, its faces chosen by ``faces``.
 """
 
 from __future__ import annotations
@@ -36,9 +43,9 @@ from meshgen.geometry.shapes.faces import FACE_NAMES
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.run.inputs import InputError, load_yaml_file, named_input_file
 
-__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "read_geometry_file"]
+__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "named_file", "read_geometry_file"]
 
-GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types")
+GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types", "caps")
 
 
 def read_geometry_file(path: Path) -> dict:
@@ -81,13 +88,20 @@ def read_geometry_file(path: Path) -> dict:
             array = np.zeros(0)
         if array.shape != (8, 3) or not np.all(np.isfinite(array)):
             raise GeometryError(f"geometry file {path}: 'corners' must be eight points [x, y, z]")
+    caps = data.get("caps")
+    if caps is not None and not (
+        isinstance(caps, list) and len(caps) == 2 and all(isinstance(c, str) and c for c in caps) and caps[0] != caps[1]
+    ):
+        raise GeometryError(f"geometry file {path}: 'caps' must be two different patch names, [first, second]")
     angle = data.get("feature_angle")
     if angle is not None and (isinstance(angle, bool) or not isinstance(angle, (int, float)) or not 0 < angle < 180):
         raise GeometryError(f"geometry file {path}: 'feature_angle' must be a number of degrees between 0 and 180")
     return data
 
 
-def _named_file(base: Path, value, path: Path, what: str) -> Path:
+def named_file(base: Path, value, path: Path, what: str) -> Path:
+    """The file ``value`` a geometry file ``path`` names for ``what``, relative to its folder
+    ``base``, checked to be a regular file (GeometryError otherwise)."""
     if not isinstance(value, str) or not value:
         raise GeometryError(f"geometry file {path}: {what} must be a file name")
     try:
@@ -106,7 +120,7 @@ def load_geometry_file(path) -> object:
     corners = data.get("corners")
     rename = dict(data.get("rename") or {})
     if "surface" in data:
-        file = _named_file(base, data["surface"], path, "'surface'")
+        file = named_file(base, data["surface"], path, "'surface'")
         suffix = file.suffix.lower()
         options = {"yaml": path.read_bytes().hex()}  # the whole file: faces, corners, angle
         if suffix in CAD_FORMATS:
@@ -129,7 +143,7 @@ def load_geometry_file(path) -> object:
                 if "type" in entry:
                     types.setdefault(str(name), str(entry["type"]))
                 entry = entry.get("file")
-            files.append(_named_file(base, entry, path, f"patch '{name}'"))
+            files.append(named_file(base, entry, path, f"patch '{name}'"))
             names.append(str(name))
         bad = [f for f in files if f.suffix.lower() not in TRIANGULATED_FORMATS]
         if bad:
@@ -139,4 +153,9 @@ def load_geometry_file(path) -> object:
         options = {"yaml": path.read_bytes().hex()}
         block = surface_block(files, str(path), names, None, faces, content_hash(files, options), corners)
         kind = "surface"
+    if data.get("caps") is not None:  # a sweep's geometry file goes to sweep_yaml instead
+        raise GeometryError(
+            f"geometry file {path}: 'caps' names a swept solid's caps, but {kind} {data.get('surface', 'of the patch files')} "
+            f"is one block of six four-cornered faces: choose the faces on zeta0 and zeta1 with 'faces'"
+        )
     return shape_geometry(block, path, kind, types, rename)

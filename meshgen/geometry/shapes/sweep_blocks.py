@@ -41,6 +41,10 @@ rulings, which lie on the linking faces.
 
 Other caps with holes and solids that are no such sweep are one GeometryError naming what was
 found and pointing to topology files.
+
+A YAML geometry file whose ``surface`` is such a sweep is one too (``sweep_yaml``, through
+``build_sweep_module``): its ``caps`` choose the pair the cap search tries, ``rename`` and
+``types`` the patches written.
 """
 
 from __future__ import annotations
@@ -59,7 +63,17 @@ from meshgen.geometry.shapes.sweep_read import moved
 from meshgen.geometry.shapes.sweep_ring import coons, piece, ring_blocks, segment
 from meshgen.geometry.shapes.sweep_stl import read_surface_sweep
 
-__all__ = ["BULGE", "CORE", "WEDGE_ANGLE", "WEDGE_DEPTH", "is_sweep_file", "sweep_module"]
+__all__ = [
+    "BULGE",
+    "CORE",
+    "WEDGE_ANGLE",
+    "WEDGE_DEPTH",
+    "build_sweep_module",
+    "file_state",
+    "is_sweep_file",
+    "read_sweep_file",
+    "sweep_module",
+]
 
 CORE = 0.45 * np.sqrt(2.0)  # the O-grid core's corners: this share of the way to the loop
 BULGE = np.radians(15.0)  # the core's sides leave its corners turned by this (as the pipe's)
@@ -78,16 +92,22 @@ _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
 
 
-def _key(path: Path) -> tuple:
+def file_state(path: Path) -> tuple:
+    """(resolved path, size, modification time in ns) of the file ``path``: what the caches key on."""
     status = path.stat()
     return (str(path.resolve()), status.st_size, status.st_mtime_ns)
 
 
-def _read(path: Path) -> dict:
-    key = _key(path)
+def read_sweep_file(path: Path, caps=None, feature_angle=None) -> dict:
+    """The sweep reader's answer for the file ``path`` (``caps``: the pair of names to try as the
+    caps; ``feature_angle``: a triangulated surface's split), kept per file state and arguments."""
+    caps = None if caps is None else tuple(caps)
+    key = (*file_state(path), caps, feature_angle)
     if key not in _READ:
-        triangulated = path.suffix.lower() in TRIANGULATED_FORMATS
-        _READ[key] = read_surface_sweep(path) if triangulated else cad_sweep(path, content_hash([path], {}))
+        if path.suffix.lower() in TRIANGULATED_FORMATS:
+            _READ[key] = read_surface_sweep(path, caps, feature_angle)
+        else:
+            _READ[key] = cad_sweep(path, content_hash([path], {} if caps is None else {"caps": caps}), caps)
     return _READ[key]
 
 
@@ -95,7 +115,8 @@ def is_sweep_file(spec) -> bool:
     """Whether ``spec`` names a readable CAD file whose solid is not six four-cornered faces (it is
     then meshed as a block set, or refused with a pointer to topology files), or a triangulated
     surface that is a sweep (``sweep_stl``) or has two planar caps that every other patch touches
-    (refused here, saying why they are no sweep's)."""
+    (refused here, saying why they are no sweep's). A YAML geometry file naming one:
+    ``sweep_yaml.is_sweep_geometry``."""
     suffix = Path(str(spec)).suffix.lower() if isinstance(spec, (str, Path)) else ""
     if suffix not in CAD_FORMATS + TRIANGULATED_FORMATS:
         return False
@@ -103,7 +124,7 @@ def is_sweep_file(spec) -> bool:
     if not path.is_file():
         return False
     try:  # a triangulated surface only when a sweep: else its own reader says what it is
-        found = _read(path)
+        found = read_sweep_file(path)
         if suffix in TRIANGULATED_FORMATS:
             return found["kind"] == "sweep" or bool(found.get("caps_found"))
         return found["kind"] != "six"
@@ -331,7 +352,7 @@ def _folded(blocks) -> list[str]:
     return folded
 
 
-def _cut_cap(path: Path, found: dict, summary: str):
+def _cut_cap(who: str, found: dict, summary: str):
     """The first cap's blocks by the scheme its loop takes (module docstring), and the second cap's
     for a loft: (blocks, second cap's blocks or None, block sides on CAD faces, interfaces, what
     was done, the --dims meaning, per block the --dims axes it counts, elliptic options, lines)."""
@@ -406,7 +427,7 @@ def _cut_cap(path: Path, found: dict, summary: str):
         )
         counts = {name: ((1, 0, 2) if name.startswith("ring") else (0, 0, 2)) for name in blocks}
         options = {"keep_tfi": True}
-        lines_extra = (WEDGE_ELLIPTIC.format(name=path.name),)
+        lines_extra = (WEDGE_ELLIPTIC.format(name=who),)
     elif all(sharp):
         blocks, sides_of, interfaces = _midpoint_blocks(curves, faces)
         how = f"{len(loop)} sharp corners: midpoint subdivision into {len(loop)} blocks (quad0..) around its centroid"
@@ -425,11 +446,11 @@ def _cut_cap(path: Path, found: dict, summary: str):
         counts = {name: ((1, 0, 2) if name[0] in "ab" else (0, 0, 2)) for name in blocks}
         if offset:
             options = {"keep_tfi": True}
-            lines_extra = (OFFSET_ELLIPTIC.format(name=path.name),)
+            lines_extra = (OFFSET_ELLIPTIC.format(name=who),)
     if fixed and not options:  # ring blocks at sharp corners or smooth joints
         options = {"slide_section": False}
         lines_extra = (
-            f"{path.name}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
+            f"{who}: elliptic: the cap's boundary nodes stay where the TFI puts them (nodes sliding along a "
             "flat side pass a corner or a smooth joint of its ring blocks and fold cells)",
         )
     return blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra
@@ -438,20 +459,28 @@ def _cut_cap(path: Path, found: dict, summary: str):
 def sweep_module(path) -> types.ModuleType:
     """The block-set plugin module of the swept CAD solid in ``path`` (module docstring); kept per
     (path, size, modification time). GeometryError (one line) when the solid is no sweep
-    this meshes."""
+    this meshes. A YAML geometry file naming one: ``sweep_yaml.sweep_geometry_module``."""
     path = Path(path)
-    key = _key(path)
-    if key in _MODULES:
-        return _MODULES[key]
-    found = _read(path)
-    summary = f"{path}: the solid has {found['summary']}"
+    key = file_state(path)
+    if key not in _MODULES:
+        _MODULES[key] = build_sweep_module(path, read_sweep_file(path))
+    return _MODULES[key]
+
+
+def build_sweep_module(path: Path, found: dict, named: dict | None = None) -> types.ModuleType:
+    """The module of the sweep ``found`` (``read_sweep_file``'s answer for ``path``). ``named``: a geometry
+    file's (``sweep_yaml``): "file" (its path), "where" (how an error names the surface), per
+    patch found its name written ("rename") and type ("kinds"), and "caps" (it named them)."""
+    named = named or {}
+    who, what = (named["file"].name, f"{path.name}: ") if named else (path.name, "")
+    summary = f"{named.get('where', path)}: the solid has {found['summary']}"
     if found["kind"] == "six":
         raise GeometryError(f"{summary}: one block, not a sweep")
     if found["kind"] not in ("sweep", "loft"):
         raise GeometryError(f"{summary}; it is no sweep meshgen cuts into blocks ({found['reason']}): {TOPOLOGY_HINT}")
     names, loft = found["names"], found["kind"] == "loft"
     first, second = found["caps"]
-    blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra = _cut_cap(path, found, summary)
+    blocks, second_blocks, sides_of, interfaces, how, meaning, counts, options, lines_extra = _cut_cap(who, found, summary)
     folded = _folded(blocks) + (_folded(second_blocks) if loft else [])
     if folded:
         raise GeometryError(
@@ -474,37 +503,43 @@ def sweep_module(path) -> types.ModuleType:
     if motion["kind"] == "rotation" and not options.get("keep_tfi"):
         options = {"slide": False}
         lines_extra = (
-            f"{path.name}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
+            f"{who}: elliptic: every boundary node stays where the TFI puts it (on a bend, nodes sliding along "
             "the line where two flat faces meet can pass a corner)",
         )
-    kinds = {name: default_patch_type(name) for name in names}
+    written = named.get("rename") or {name: name for name in names}
+    kinds = named.get("kinds") or {name: default_patch_type(name) for name in names}
+    shown = {name: name if written[name] == name else f"{name} as {written[name]}" for name in names}
+    patch = {index: (written[name], kinds[name]) for index, name in enumerate(names)}
     block_patches = {}
     for name in blocks:
-        block_patches[name] = {face: (names[index], kinds[names[index]]) for face, index in sides_of.get(name, {}).items()}
-        block_patches[name]["zeta0"] = (names[first], kinds[names[first]])
-        block_patches[name]["zeta1"] = (names[second], kinds[names[second]])
+        block_patches[name] = {face: patch[index] for face, index in sides_of.get(name, {}).items()}
+        block_patches[name]["zeta0"], block_patches[name]["zeta1"] = patch[first], patch[second]
     size = float(np.linalg.norm(np.subtract(*found["box"][::-1])))
-    stem = re.sub(r"[^A-Za-z0-9_-]", "_", path.stem)[:64].lstrip("_-") or "sweep"
+    stem = re.sub(r"[^A-Za-z0-9_-]", "_", (named["file"] if named else path).stem)[:64].lstrip("_-") or "sweep"
     face, plural, faces = (
         ("patch", "patches", found["patch_words"]) if found.get("linear") else ("face", "faces", "one per CAD face")
     )
+    listed = [shown[name] + (f" ({kinds[name]})" if named else "") for name in names]
     lines = (
-        f"{path.name}: {found['summary']}: {path_words}; "
-        f"caps {names[first]} (zeta0) and {names[second]} (zeta1): {cap_words}, every other {face} touches both; "
+        f"{who}: {what}{found['summary']}: {path_words}; "
+        f"caps {shown[names[first]]} (zeta0) and {shown[names[second]]} (zeta1)"
+        + (f", named in {who}" if named.get("caps") else "")
+        + f": {cap_words}, every other {face} touches both; "
         f"{'the rulings lie' if loft else 'the outline carried along lies'} on the linking {plural} to "
         f"{motion['gap']:.1e} of the part's size"
         + (f" (their facets' chords within {motion['sag']:.1e} of it)" if "sag" in motion else ""),
-        f"{path.name}: cap {names[first]}: {how}",
-        f"{path.name}: patches {', '.join(names)}: {faces} (the linking {plural} on the blocks' outer sides"
+        f"{who}: cap {shown[names[first]]}: {how}",
+        f"{who}: patches {', '.join(listed)}: {faces} (the linking {plural} on the blocks' outer sides"
         + (", their nodes on the facets" if found.get("linear") else "")
         + ")",
         *lines_extra,
     )
 
     module = types.ModuleType(f"meshgen_sweep_{stem}")
-    module.__file__ = str(path)
+    module.__file__ = str(named["file"] if named else path)
     module.name, module.dim = stem, 3
-    module.description = f"CAD solid {path.name}: a sweep of its cap {names[first]} ({len(blocks)} blocks)"
+    described = f"CAD solid {path.name}: a sweep of its cap {written[names[first]]} ({len(blocks)} blocks)"
+    module.description = f"geometry file {who}: {described}" if named else described
     module.params = {}
     module.blocks = tuple(blocks)
     module.dims_meaning = meaning
@@ -545,5 +580,4 @@ def sweep_module(path) -> types.ModuleType:
     module.block_coords = block_coords
     module.boundary = boundary
     module.notes = notes
-    _MODULES[key] = module
     return module

@@ -3,7 +3,9 @@ joined by linking faces, the second cap the first moved by a rigid motion, a tra
 straight sweep) or a rotation about an axis (a bend, a revolve), the linking faces the cap's
 outline carried along it (``moved``).
 
-``read_sweep(path, content_hash)`` returns plain values only (they cross the CAD process's pipe):
+``read_sweep(path, content_hash, caps)`` returns plain values only (they cross the CAD process's
+pipe). ``caps``: two face names (a geometry file's, ``sweep_yaml``): only that pair, in that order,
+is tried as the caps, by the same checks; the answer is then "other" with the reason they are not.
 
     kind         "six" (six four-cornered faces: the single block of ``cad``), "sweep", or "other"
     summary      one line: how many faces of how many sides each
@@ -50,8 +52,9 @@ MASS_AGREE = 1e-9  # a planar face's OCC area and centre are kept within this (r
 SNAP_ROUNDS = 3  # projections onto each face in turn (one is exact where the faces meet at right angles)
 
 
-def read_sweep(path, content_hash: str = "") -> dict:
-    """The solid of the CAD file ``path`` seen as a straight sweep (module docstring)."""
+def read_sweep(path, content_hash: str = "", caps=None) -> dict:
+    """The solid of the CAD file ``path`` seen as a straight sweep (module docstring); ``caps``:
+    the names of the two faces to try as its caps (first, second), else every pair."""
     path = Path(path)
     gmsh = gmsh_model(path, f"meshgen-{content_hash[:16]}")
     _POINTS.clear()
@@ -65,6 +68,7 @@ def read_sweep(path, content_hash: str = "") -> dict:
     for k, face in enumerate(faces):
         name = gmsh.model.getEntityName(2, face).split("/")[-1].strip().replace(" ", "_")
         names.append(name if name and name not in names else f"face{k + 1}")
+    pair = None if caps is None else tuple(_face_index(path, names, name) for name in caps)
     box = np.array(gmsh.model.getBoundingBox(-1, -1)).reshape(2, 3)
     size = float(np.linalg.norm(box[1] - box[0]))
     found = {
@@ -75,12 +79,15 @@ def read_sweep(path, content_hash: str = "") -> dict:
         "summary": f"{len(faces)} faces with ({', '.join(map(str, sides))}) sides",
     }
     if len(faces) == 6 and all(n == 4 for n in sides):  # one block, unless its caps' outlines turn smoothly
-        loft = _find_loft(gmsh, faces, curves_of, size)
+        loft = _find_loft(gmsh, faces, curves_of, size, pair)
+        if pair is not None:  # named caps: a loft of them, or why not
+            why = _pair_fault(gmsh, faces, curves_of, pair, names) or "they are no loft's caps (ruled linking faces)"
+            return {**found, "kind": "loft", **loft} if loft is not None else {**found, "kind": "other", "reason": why}
         smooth = loft is not None and any(c["smooth"] for loop in loft["loops"] for c in loop)
         return {**found, "kind": "loft", **loft} if smooth else {**found, "kind": "six"}
-    caps, reason = _find_caps(gmsh, faces, curves_of, size)
+    caps, reason = _find_caps(gmsh, faces, curves_of, size, pair, names)
     if caps is None and "not of one area" in reason:
-        loft = _find_loft(gmsh, faces, curves_of, size)
+        loft = _find_loft(gmsh, faces, curves_of, size, pair)
         if loft is not None:
             return {**found, "kind": "loft", **loft}
     if caps is None:
@@ -124,29 +131,55 @@ def cap_motions(n_i, n_j, c_i, c_j, size, tolerance: float = 1e-9):
     return found
 
 
-def _find_caps(gmsh, faces, curves_of, size):
+def _face_index(path, names, name) -> int:
+    if name not in names:
+        raise GeometryError(f"{path}: 'caps' names no face '{name}' (faces: {', '.join(names)})")
+    return names.index(name)
+
+
+def _pair_fault(gmsh, faces, curves_of, pair, names=None) -> str:
+    """Why the faces ``pair`` (i, j) cannot be a sweep's caps: not planar, touching each other, or a
+    third face that does not touch both; "" when they may be (``names``: the faces' names, for the
+    words; else "face k")."""
+    i, j = pair
+    name = (lambda k: names[k]) if names is not None else (lambda k: f"face {k + 1}")
+    flat = [k for k in pair if gmsh.model.getType(2, faces[k]) != "Plane"]
+    if flat:
+        return f"{name(flat[0])} is not planar ({gmsh.model.getType(2, faces[flat[0]])})"
+    if i == j or curves_of[i] & curves_of[j]:
+        return "they touch (share an edge)" if i != j else "they are one face"
+    for k in range(len(faces)):
+        if k not in pair and not (curves_of[k] & curves_of[i] and curves_of[k] & curves_of[j]):
+            return f"{name(k)} does not touch both"
+    return ""
+
+
+def _find_caps(gmsh, faces, curves_of, size, pair=None, names=None):
     """((first, second, motion), "") for the first pair of faces that are caps of a sweep by a
-    rigid motion (a translation or a rotation: ``moved``), else (None, why no pair is)."""
-    planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
+    rigid motion (a translation or a rotation: ``moved``), else (None, why no pair is); ``pair``
+    (i, j): that pair only, in that order (why not in ``names``' words)."""
     mass = {}  # face index -> (area, centre): planar faces', as needed
     why = "no two planar faces that every other face touches"
-    for i, j in itertools.combinations(range(len(faces)), 2):
-        if not (planar[i] and planar[j]) or curves_of[i] & curves_of[j]:
+    if pair is not None:
+        why = _pair_fault(gmsh, faces, curves_of, pair, names)
+        if why:
+            return None, why
+    for i, j in [pair] if pair is not None else itertools.combinations(range(len(faces)), 2):
+        if pair is None and _pair_fault(gmsh, faces, curves_of, (i, j)):
             continue
         others = [k for k in range(len(faces)) if k not in (i, j)]
-        if not all(curves_of[k] & curves_of[i] and curves_of[k] & curves_of[j] for k in others):
-            continue
+        both = f"{names[i]} and {names[j]}" if pair is not None and names else f"faces {i + 1} and {j + 1}"
         for k in (i, j):
             mass[k] = mass[k] if k in mass else _plane_mass(gmsh, faces, k)
         areas = {k: mass[k][0] for k in (i, j)}
         if abs(areas[i] - areas[j]) > 1e-6 * max(areas[i], areas[j]):
-            why = f"faces {i + 1} and {j + 1} could be caps but are not of one area"
+            why = f"{both} could be caps but are not of one area"
             continue
         if len(gmsh.model.occ.getCurveLoops(faces[i])[0]) > 2:
-            return None, f"faces {i + 1} and {j + 1} are caps with more than one hole (not meshed yet)"
+            return None, f"{both} are caps with more than one hole (not meshed yet)"
         centres = [mass[k][1] for k in (i, j)]
         samples = np.concatenate([_curve_points(gmsh, curve, 17)[1] for curve in sorted(curves_of[i])])
-        why = f"faces {i + 1} and {j + 1} are planar but not one shape moved along a line or turned about an axis"
+        why = f"{both} are planar but not one shape moved along a line or turned about an axis"
         for motion in cap_motions(_normal(gmsh, faces[i]), _normal(gmsh, faces[j]), *centres, size):
             gaps = [_outline_distance(gmsh, curves_of[j], moved(motion, samples, 1.0))]
             if gaps[0] > TOLERANCE * size:
@@ -158,7 +191,7 @@ def _find_caps(gmsh, faces, curves_of, size):
                 gaps.append(_distance(gmsh, faces[link], between))
             if max(gaps) <= TOLERANCE * size:
                 return (i, j, {**motion, "gap": max(gaps) / size}), ""
-            why = f"faces {i + 1} and {j + 1} are caps of a sweep along another path (a twist, a helix, a spline)"
+            why = f"{both} are caps of a sweep along another path (a twist, a helix, a spline)"
     return None, why
 
 
@@ -314,12 +347,12 @@ def _curves(gmsh, face: int) -> set:
     return {abs(tag) for _, tag in gmsh.model.getBoundary([(2, face)], oriented=False, combined=False)}
 
 
-def _find_loft(gmsh, faces, curves_of, size):
+def _find_loft(gmsh, faces, curves_of, size, pair=None):
     """A loft (module docstring) or None: two planar parallel caps without holes whose loops have as
     many curves, the k-th of each on one linking face, which the straight lines between their
-    points at equal arc-length fractions (the rulings) lie on."""
+    points at equal arc-length fractions (the rulings) lie on; ``pair``: those two faces only."""
     planar = [gmsh.model.getType(2, face) == "Plane" for face in faces]
-    for first, second in itertools.combinations(range(len(faces)), 2):
+    for first, second in [pair] if pair is not None else itertools.combinations(range(len(faces)), 2):
         others = [k for k in range(len(faces)) if k not in (first, second)]
         if not (planar[first] and planar[second]) or curves_of[first] & curves_of[second]:
             continue

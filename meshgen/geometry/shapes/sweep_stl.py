@@ -16,7 +16,9 @@ outline's points turned, on the linking facets) and its motion the chords' large
 (relative to the size). ``caps_found``: two planar patches that every other touches were found
 after the sharp-edge split (a refusal then names what they are not; named solids that are no
 sweep are the single-block reader's to refuse); ``patch_words`` where the patches come from. Caps match to ``PLANAR`` of the size, or to the
-float32 rounding of a file written in float32 (``_rounding``).
+float32 rounding of a file written in float32 (``_rounding``). ``caps`` (a geometry file's two
+patch names, ``sweep_yaml``): only that pair, in that order, is tried, by the same checks (kind
+"other" with the reason they are not); ``feature_angle``: the sharp-edge split's (degrees).
 """
 
 from __future__ import annotations
@@ -26,7 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from meshgen.errors import GeometryError
 from meshgen.geometry.shapes.surface_patches import (
+    DEFAULT_FEATURE_ANGLE,
     check_closed,
     patch_corners,
     read_surface,
@@ -41,13 +45,14 @@ __all__ = ["read_surface_sweep"]
 PLANAR = 1e-9  # relative to the surface's size: a planar patch's points off its plane
 
 
-def read_surface_sweep(path) -> dict:
-    """The triangulated surface in ``path`` seen as a straight sweep (module docstring)."""
+def read_surface_sweep(path, caps=None, feature_angle=None) -> dict:
+    """The triangulated surface in ``path`` seen as a straight sweep (module docstring); ``caps``:
+    the names of the two patches to try as its caps (first, second), else every pair."""
     path = Path(path)
     surface = read_surface(path)
     named = bool((surface.labels >= 0).any())  # patches of its own (a multi-solid ASCII STL's solids)
     if not named:
-        surface = split_at_sharp_edges(surface)
+        surface = split_at_sharp_edges(surface, DEFAULT_FEATURE_ANGLE if feature_angle is None else feature_angle)
     check_closed(surface, str(path))
     V, T, labels, names = surface.vertices, surface.triangles, surface.labels, surface.names
     box = np.stack([V.min(axis=0), V.max(axis=0)])
@@ -63,7 +68,13 @@ def read_surface_sweep(path) -> dict:
         "linear": True,
         "patch_words": "the file's named solids" if named else "the sharp-edge split's",
     }
-    if len(names) == 6 and all(len(c) == 4 for c in corners):
+    pair = None
+    if caps is not None:
+        unknown = [name for name in caps if name not in names]
+        if unknown:
+            raise GeometryError(f"{path}: 'caps' names no patch '{unknown[0]}' (patches: {', '.join(names)})")
+        pair = tuple(names.index(name) for name in caps)
+    elif len(names) == 6 and all(len(c) == 4 for c in corners):
         return {**found, "kind": "six"}
     normals = triangle_normals(V, T)
     cross = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
@@ -80,12 +91,14 @@ def read_surface_sweep(path) -> dict:
     from scipy.spatial import cKDTree  # when a surface is read, not on every command's path (meshgen --help)
 
     why, nearest = "no two planar patches that every other patch touches", np.inf
-    for i, j in itertools.combinations(range(len(names)), 2):
-        if not (planes[i][0] and planes[j][0]) or np.intersect1d(vertices_of[i], vertices_of[j]).size:
+    if pair is not None:
+        why = _pair_fault(planes, vertices_of, pair, names)
+        if why:
+            return {**found, "kind": "other", "reason": why}
+    for i, j in [pair] if pair is not None else itertools.combinations(range(len(names)), 2):
+        if pair is None and _pair_fault(planes, vertices_of, (i, j), names):
             continue
         others = [k for k in range(len(names)) if k not in (i, j)]
-        if not all(np.intersect1d(vertices_of[k], vertices_of[c]).size for k in others for c in (i, j)):
-            continue
         found["caps_found"] = not named  # a sweep's refusal then says why, not the single block's
         outline = [_boundary_edges(T[labels == c]) for c in (i, j)]
         ends = [V[np.unique(e)] for e in outline]
@@ -134,6 +147,21 @@ def read_surface_sweep(path) -> dict:
             motion.update(gap=max(gap / size, measured[0]), sag=measured[1])
             return {**sweep, "sides": sides}
     return {**found, "kind": "other", "reason": why}
+
+
+def _pair_fault(planes, vertices_of, pair, names) -> str:
+    """Why the patches ``pair`` (i, j) cannot be a sweep's caps: not planar, touching each other,
+    or a third patch that does not touch both; "" when they may be."""
+    i, j = pair
+    flat = [k for k in pair if not planes[k][0]]
+    if flat:
+        return f"{names[flat[0]]} is not planar"
+    if i == j or np.intersect1d(vertices_of[i], vertices_of[j]).size:
+        return "they touch (share a vertex)" if i != j else "they are one patch"
+    for k in range(len(names)):
+        if k not in pair and not all(np.intersect1d(vertices_of[k], vertices_of[c]).size for c in pair):
+            return f"{names[k]} does not touch both"
+    return ""
 
 
 def _rounding(V: np.ndarray, size: float) -> float:
