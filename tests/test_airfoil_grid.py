@@ -243,13 +243,35 @@ def test_tfi_first_cells_are_the_asked_height(params):
 
 
 def test_alpha_turns_the_whole_grid_about_the_quarter_chord():
-    straight = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1})
-    turned = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1, "alpha": 10})
+    # First cells of 1e-3 chord: no crest cell is longer than CREST_ASPECT of them, so no crest node.
+    straight = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1, "first_height": 1e-3})
+    turned = meshgen.mesh("airfoil", dims=(160, 120), method="elliptic", params={"sharp": 1, "first_height": 1e-3, "alpha": 10})
     a = math.radians(10)
     turn = np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
     for X, Y in zip(straight.blocks, turned.blocks):
         assert np.abs((X - [0.25, 0]) @ turn.T + [0.25, 0] - Y).max() < 1e-9
     assert turned.blocks[1][0, 0, 1] == pytest.approx(-0.75 * math.sin(a), abs=1e-12)  # the trailing edge went down: nose up
+
+
+@pytest.mark.parametrize("alpha", [5.0, -5.0])
+def test_a_turned_y_plus_1_grid_has_nodes_on_the_turned_walls_crests(alpha):
+    # Turned by alpha, the wall runs along x where the turned section is lowest (alpha 5) or highest
+    # (-5), not at its thickest point: checkMesh read 1,567 there with the unturned crests as nodes.
+    from scipy.optimize import minimize_scalar
+
+    mesh = meshgen.mesh("airfoil", dims=(448, 128), method="elliptic", params={"sharp": 1, "alpha": alpha})
+    assert max(_foam_aspect(X).max() for X in mesh.blocks) < 1000
+    a, sign = math.radians(alpha), 1.0 if alpha > 0 else -1.0  # alpha > 0: the lower surface's crest moves
+
+    def turned_y(x):  # the turned surface's height at chord station x (TMR's formula; nose up by alpha)
+        y = -sign * TMR[0] * sum(c * x ** (k + 0.5 if k == 0 else k) for k, c in enumerate(TMR[1]))
+        return -math.sin(a) * (x - 0.25) + math.cos(a) * y
+
+    crest = minimize_scalar(lambda x: sign * turned_y(x), bounds=(0.05, 0.95), method="bounded", options={"xatol": 1e-12})
+    wall = mesh.blocks[1][:, 0]
+    surface = wall[wall[:, 1] * sign < turned_y(0.5) * sign + 0.2]  # the turned surface of that crest
+    extreme = float((sign * surface[:, 1]).min()) * sign
+    assert extreme == pytest.approx(turned_y(crest.x), abs=1e-9)  # a node on it (half a cell off: ~1e-5)
 
 
 def test_cgns_wake_cut_is_one_to_one(tmp_path, c_grid):

@@ -23,9 +23,10 @@ components, which is the cell's length over its height only where the cell runs 
   ``CREST_ASPECT`` (thin sections, fine levels). Elsewhere the wall slopes and checkMesh reads at
   most about 1 / slope. The true aspect ratio of the mid-chord wall cells (3,100 on the TMR grid)
   is not capped: at 1000 that needs 457 cells round the section, N = 639 (83,709 cells at M = 131)
-  where the grid has 456 (59,736). A grid turned by alpha is the grid turned, its crests no
-  longer along x: checkMesh may read more there (448 x 128 at y+ 1: 520 at alpha 10, 1,567 at
-  -5); turning the free stream instead, as the TMR case does, keeps them.
+  where the grid has 456 (59,736). On a grid turned by alpha the crests are the turned wall's
+  (where it runs along x after the turn): the section's nodes are its own distribution with those
+  crests as nodes, the rest of the grid the unturned one turned (448 x 128 at y+ 1, checkMesh's
+  reading at alpha 5: 1,567 with the unturned crests as nodes, under 800 with the turned ones).
 """
 
 from __future__ import annotations
@@ -119,14 +120,14 @@ def _split_at(r: np.ndarray, arc: float, first: int, last: int) -> int:
 
 def section_nodes(setup, cells: int, le_h: float, te_h: float, h: float) -> np.ndarray:
     """Arc lengths (cells + 1,) of the nodes round the section (``chordwise_distribution``). Where a
-    surface's cell over its crest (its point farthest from the chord line, where the wall runs along
-    x; in the section's own frame, so a grid turned by alpha is this grid turned) is longer than
+    surface's cell over its crest (its point farthest along the vertical of the turned grid, where
+    the wall runs along x once turned by alpha: ``setup.turn``) is longer than
     ``CREST_ASPECT`` first heights ``h``, checkMesh could read it as that long for its height: then
     each crest is a node, and checkMesh reads its two cells, of length l, as l / (h + k l^2 / 2) (k
     the wall's curvature there: they slope by k l / 2); where that still passes ``CREST_ASPECT``,
     the crest's cells are shortened to the length it reads ``CREST_ASPECT`` at (the smaller root,
     2 A h / (1 + sqrt(1 - 2 k A^2 h))). Otherwise the distribution is ``chordwise_distribution``'s."""
-    up = np.array([0.0, 1.0])  # the section's own frame
+    up = np.asarray(setup.turn[1], dtype=float)  # the turned grid's y in the section's frame: turn @ up = (0, 1)
     s = chordwise_distribution(setup.section, cells, le_h, te_h)
     arcs = crest_arcs(setup.section, up)
     a, caps, step = CREST_ASPECT, [math.inf, math.inf], 1e-4 * setup.section.length
