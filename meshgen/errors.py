@@ -61,8 +61,11 @@ def unknown_name(kind: str, name: str, choices, error=MeshgenError) -> MeshgenEr
     return error(f"unknown {kind} '{name}' ({kind}s: {', '.join(choices)}){did_you_mean(name, choices)}")
 
 
-def excerpt(text, limit: int = EXCERPT_CHARS) -> str:
+def excerpt(text, limit: int = EXCERPT_CHARS, tail: bool = False) -> str:
     """``text`` on one line, cut to ``limit`` characters (an ellipsis and the length marks a cut):
-    an error message never repeats more than a short excerpt of what it was given."""
+    an error message never repeats more than a short excerpt of what it was given. ``tail``: keep
+    the end (a path's file name) rather than the start."""
     flat = " ".join(str(text).split())
-    return flat if len(flat) <= limit else f"{flat[: limit - 1]}… ({len(flat)} characters)"
+    if len(flat) <= limit:
+        return flat
+    return f"…{flat[1 - limit :]} ({len(flat)} characters)" if tail else f"{flat[: limit - 1]}… ({len(flat)} characters)"

@@ -104,6 +104,15 @@ def test_a_checkpoint_naming_a_plugin_file_asks_for_it(tmp_path, evil, semidisk_
     assert not marker.exists() and snapshot(tmp_path) == before
 
 
+def test_a_long_recorded_path_keeps_its_file_name_in_the_message(tmp_path, semidisk_checkpoint):
+    # The message is cut to a short excerpt; for a path it keeps the end, the file the user must pass.
+    deep = tmp_path.joinpath(*["folder-with-a-long-name"] * 6, "plugin-the-user-trained.py")
+    hostile = {**semidisk_checkpoint, "geometry": {**semidisk_checkpoint["geometry"], "spec": str(deep)}}
+    torch.save(hostile, tmp_path / "hostile.pt")
+    result = invoke("mesh", "--checkpoint", "hostile.pt", "--dims", 4, 4, "-o", "out.vtu")
+    one_line_error(result, "plugin-the-user-trained.py", "characters)", "pass -g PATH")
+
+
 @pytest.mark.parametrize("name", ["../../escaped", "/tmp/abs", "a/b", "", "x" * 65, "dot.dot"])
 def test_a_plugin_name_never_becomes_a_path(name, tmp_path):
     plugin = tmp_path / "named.py"

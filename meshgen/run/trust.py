@@ -71,6 +71,6 @@ def recorded_spec(spec, where: str) -> str:
     if is_given_plugin(spec):
         return spec
     raise UntrustedGeometry(
-        f"{where} names the geometry file {excerpt(spec)}; a geometry named by a file is only looked up among "
+        f"{where} names the geometry file {excerpt(spec, tail=True)}; a geometry named by a file is only looked up among "
         f"built-in and installed geometries (a file never makes meshgen run or read another): pass -g PATH to use it"
     )
