@@ -39,6 +39,20 @@ def test_yaml_assigns_faces_renames_and_types(duct):
     assert np.abs(X[0, 0, 0] - [0.0, -0.3, 1.5]).max() < 1e-12
 
 
+def test_editing_a_geometry_files_surface_takes_effect_in_the_same_process(duct):
+    # The loaded geometry is kept per state of the YAML file and of the surface it names: a surface
+    # rewritten (here the duct made 2.5 times as large) is read again though the YAML is unchanged.
+    folder, (vertices, triangles, labels) = duct
+    write_ascii_stl(folder / "bend.stl", vertices, triangles, labels)
+    (folder / "bend.yaml").write_text(
+        "surface: bend.stl\nfaces: {xi0: floor, xi1: ceiling, eta0: inner, eta1: outer, zeta0: outlet, zeta1: inlet}\n"
+    )
+    first = meshgen.mesh(str(folder / "bend.yaml"), (2, 2, 4), method="tfi").X
+    write_ascii_stl(folder / "bend.stl", 2.5 * vertices, triangles, labels)
+    second = meshgen.mesh(str(folder / "bend.yaml"), (2, 2, 4), method="tfi").X
+    np.testing.assert_allclose(second, 2.5 * first, rtol=1e-9, atol=1e-12)
+
+
 def test_yaml_with_one_file_per_patch(duct):
     folder, (vertices, triangles, labels) = duct
     lines = []

@@ -43,7 +43,7 @@ from meshgen.geometry.shapes.faces import FACE_NAMES
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.run.inputs import InputError, load_yaml_file, named_input_file
 
-__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "named_file", "read_geometry_file"]
+__all__ = ["GEOMETRY_FILE_KEYS", "load_geometry_file", "named_file", "read_geometry_file", "surface_files"]
 
 GEOMETRY_FILE_KEYS = ("surface", "patches", "feature_angle", "faces", "corners", "rename", "types", "caps")
 
@@ -108,6 +108,20 @@ def named_file(base: Path, value, path: Path, what: str) -> Path:
         return named_input_file(base, value, f"geometry file {path}: the file {value} named for {what}")
     except InputError as exc:
         raise GeometryError(str(exc)) from None
+
+
+def surface_files(path) -> list[Path]:
+    """The surface files the geometry file ``path`` names (its ``surface``, or its ``patches``' files,
+    resolved against its folder), for caches to key on; [] where the file does not read (its
+    loader reports why)."""
+    path = Path(path)
+    try:
+        data = read_geometry_file(path)
+    except GeometryError:
+        return []
+    entries = [data["surface"]] if "surface" in data else list((data.get("patches") or {}).values())
+    entries = [entry.get("file") if isinstance(entry, dict) else entry for entry in entries]
+    return [path.parent / entry for entry in entries if isinstance(entry, str) and entry]
 
 
 def load_geometry_file(path) -> object:

@@ -26,7 +26,7 @@ from meshgen.geometry.shapes.assemble import (
     shape_geometry,
 )
 from meshgen.geometry.shapes.cad_process import cad_block
-from meshgen.geometry.shapes.geometry_file import load_geometry_file
+from meshgen.geometry.shapes.geometry_file import load_geometry_file, surface_files
 from meshgen.geometry.shapes.triangulated import surface_block
 from meshgen.geometry.topology_file import is_topology_file
 from meshgen.run.inputs import InputError, check_input_file
@@ -46,6 +46,15 @@ FORMAT_HELP = (
 _LOADED: dict = {}
 
 
+def _state(path: Path) -> tuple:
+    """(resolved path, size, modification time in ns) of ``path``; (path,) where it cannot be read."""
+    try:
+        stat = path.stat()
+    except OSError:
+        return (str(path),)
+    return (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+
+
 def is_shape_file(spec) -> bool:
     """Whether ``spec`` names a shape file by its extension (a topology file, YAML too, is not one)."""
     return Path(str(spec)).suffix.lower() in SHAPE_FORMATS and not is_topology_file(spec)
@@ -59,8 +68,8 @@ def load_shape(spec) -> Geometry:
         check_input_file(path, "geometry file")  # a FIFO or a device is never opened
     except InputError as exc:
         raise GeometryError(str(exc).replace(" cannot be read: it does not exist", " does not exist")) from None
-    stat = path.stat()
-    key = (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+    named = surface_files(path) if suffix in YAML_FORMATS else []  # a geometry file's surfaces: edits of them count
+    key = tuple(_state(file) for file in [path, *named])
     if key in _LOADED:
         return _LOADED[key]
     if suffix in YAML_FORMATS:
