@@ -12,7 +12,8 @@ nu = 1/Re, the free stream turned by alpha (the airfoil stays put), far-field ve
 ``freestream`` conditions, the wall ``noSlip`` with nut = nu_tilde = 0 (the first cells at y+ ~ 1:
 no wall function). Second-order upwind convection (linearUpwind, unlimited gradients) for U and
 nu_tilde, SIMPLEC with U relaxed by 0.9 and nu_tilde by 0.6 (at 0.8, CL and CD flip by 1.2e-5 and
-1e-5 every other iteration for good, more than ``CHANGE``), p by GAMG with the DIC-Gauss-Seidel
+1e-5 every other iteration for good, more than ``CHANGE``; at alpha 15 they flip so by 0.6 too,
+2.4e-5 and 2.0e-5, and converge by 0.4: ``NU_TILDE_RELAXATION``), p by GAMG with the DIC-Gauss-Seidel
 smoother (Gauss-Seidel took 56-84 cycles an iteration on the stretched wall cells: 4x slower).
 Forces by ``forceCoeffs`` (lift square to the free stream, moments about the quarter chord).
 simpleFoam runs in rounds of ``ROUND`` iterations until CL and CD change by less than ``CHANGE``
@@ -46,6 +47,7 @@ REYNOLDS, MACH = 6e6, 0.15
 NU = 1.0 / REYNOLDS  # U = 1, chord 1
 NU_TILDE = 3.0 * NU  # TMR's far-field SA value
 PRANDTL_GLAUERT = 1.0 / math.sqrt(1.0 - MACH**2)
+NU_TILDE_RELAXATION = ((12.5, 0.4), (0.0, 0.6))  # (from |alpha| in degrees, nu_tilde's relaxation factor)
 ROUND, WINDOW, CHANGE = 1000, 500, 1e-5  # a restart kicks CL, CD by up to 1e-5 for ~150 iterations: judge a round's last 500
 # TMR, NACA 0012 at Re 6e6, M 0.15 (CFL3D on the finest grid; the range over eight codes at alpha 10).
 REFERENCE = {
@@ -66,6 +68,11 @@ def _field(case: Path, name: str, cls: str, dimensions: str, internal: str, rule
     """0/NAME: ``rules`` maps a patch type (wall, patch, empty) to its boundary entry."""
     entries = "".join(f"    {patch} {{ {rules[kind]} }}\n" for patch, kind in patch_types(case).items())
     write(case / "0" / name, cls, f"dimensions {dimensions};\ninternalField {internal};\nboundaryField\n{{\n{entries}}}\n")
+
+
+def nu_tilde_relaxation(alpha: float) -> float:
+    """nu_tilde's relaxation factor at incidence ``alpha`` degrees (``NU_TILDE_RELAXATION``)."""
+    return next(factor for start, factor in NU_TILDE_RELAXATION if abs(alpha) >= start)
 
 
 def set_up(case: Path, alpha: float, end_time: int) -> None:
@@ -124,7 +131,7 @@ def set_up(case: Path, alpha: float, end_time: int) -> None:
         "solvers\n{\n    p { solver GAMG; smoother DICGaussSeidel; tolerance 1e-10; relTol 0.1; }\n"
         '    "(U|nuTilda)" { solver smoothSolver; smoother symGaussSeidel; tolerance 1e-12; relTol 0.1; }\n}\n'
         "SIMPLE { consistent yes; nNonOrthogonalCorrectors 0; }\n"
-        "relaxationFactors { equations { U 0.9; nuTilda 0.6; } fields { p 1; } }\n",
+        f"relaxationFactors {{ equations {{ U 0.9; nuTilda {nu_tilde_relaxation(alpha):g}; }} fields {{ p 1; }} }}\n",
     )
 
 
