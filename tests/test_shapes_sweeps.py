@@ -348,6 +348,17 @@ def test_a_cap_with_two_holes_is_refused(run_cli, tmp_path):
     refused(run_cli, tmp_path, "two.step", "more than one hole", "docs/topologies.md")
 
 
+def test_a_t_junction_is_refused_pointing_to_topology_files(run_cli, tmp_path):
+    # Two fused cylinders: three planar ends, no pair of which every other face touches.
+    def make(occ):
+        run = occ.addCylinder(-2, 0, 0, 4, 0, 0, 0.5)
+        branch = occ.addCylinder(0, 0, 0, 0, 2, 0, 0.3)
+        occ.fuse([(3, run)], [(3, branch)])
+
+    write_solid(tmp_path / "tee.step", make)
+    refused(run_cli, tmp_path, "tee.step", "no sweep", "docs/topologies.md")
+
+
 def test_six_faced_solids_stay_one_block(tmp_path):
     write_solid(tmp_path / "box.step", lambda occ: occ.addBox(0, 0, 0, 1, 2, 3))
     assert block_spec(str(tmp_path / "box.step")) is None
