@@ -118,8 +118,8 @@ def test_caps_choose_the_sweep_direction(solids, tmp_path):
     assert report["inverted"]["count"] == 0 and report["metrics"]["scaled_jacobian"]["min"] >= 0.4
 
 
-def test_caps_naming_the_pair_the_search_finds_reads_once(solids, tmp_path):
-    """Naming the caps the search finds anyway gives the bare file's nodes (the read is reused)."""
+def test_caps_naming_the_pair_the_search_finds_mesh_as_the_bare_file(solids, tmp_path):
+    """Naming the caps the search finds anyway gives the bare file's nodes, and the run says they were named."""
     yaml = write(tmp_path, "same.yaml", f"surface: {solids / 'pentagon.step'}\ncaps: [face6, face7]\n")
     named = meshgen.mesh(str(yaml), (2, 1, 2), method="tfi")
     bare = meshgen.mesh(str(solids / "pentagon.step"), (2, 1, 2), method="tfi")

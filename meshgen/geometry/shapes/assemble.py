@@ -20,6 +20,7 @@ __all__ = [
     "YAML_FORMATS",
     "content_hash",
     "default_patch_type",
+    "file_state",
     "shape_geometry",
 ]
 
@@ -39,6 +40,16 @@ def content_hash(paths, options: dict) -> str:
         except OSError:
             pass  # the reader reports it
     return digest.hexdigest()
+
+
+def file_state(path: Path) -> tuple:
+    """(resolved path, size, modification time in ns) of the file ``path``, what the shape caches
+    key on; (path,) where it cannot be read (its reader then says why)."""
+    try:
+        status = Path(path).stat()
+    except OSError:
+        return (str(path),)
+    return (str(Path(path).resolve()), status.st_size, status.st_mtime_ns)
 
 
 def default_patch_type(name: str) -> str:

@@ -23,6 +23,7 @@ from meshgen.geometry.shapes.assemble import (
     TRIANGULATED_FORMATS,
     YAML_FORMATS,
     content_hash,
+    file_state,
     shape_geometry,
 )
 from meshgen.geometry.shapes.cad_process import cad_block
@@ -46,15 +47,6 @@ FORMAT_HELP = (
 _LOADED: dict = {}
 
 
-def _state(path: Path) -> tuple:
-    """(resolved path, size, modification time in ns) of ``path``; (path,) where it cannot be read."""
-    try:
-        stat = path.stat()
-    except OSError:
-        return (str(path),)
-    return (str(path.resolve()), stat.st_size, stat.st_mtime_ns)
-
-
 def is_shape_file(spec) -> bool:
     """Whether ``spec`` names a shape file by its extension (a topology file, YAML too, is not one)."""
     return Path(str(spec)).suffix.lower() in SHAPE_FORMATS and not is_topology_file(spec)
@@ -69,7 +61,7 @@ def load_shape(spec) -> Geometry:
     except InputError as exc:
         raise GeometryError(str(exc).replace(" cannot be read: it does not exist", " does not exist")) from None
     named = surface_files(path) if suffix in YAML_FORMATS else []  # a geometry file's surfaces: edits of them count
-    key = tuple(_state(file) for file in [path, *named])
+    key = tuple(file_state(file) for file in [path, *named])
     if key in _LOADED:
         return _LOADED[key]
     if suffix in YAML_FORMATS:

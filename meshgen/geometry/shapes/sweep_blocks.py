@@ -57,7 +57,7 @@ import numpy as np
 
 from meshgen.errors import GeometryError
 from meshgen.geometry import cube
-from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, content_hash, default_patch_type, file_state
 from meshgen.geometry.shapes.cad_process import cad_sweep
 from meshgen.geometry.shapes.sweep_read import moved
 from meshgen.geometry.shapes.sweep_ring import coons, piece, ring_blocks, segment
@@ -69,7 +69,6 @@ __all__ = [
     "WEDGE_ANGLE",
     "WEDGE_DEPTH",
     "build_sweep_module",
-    "file_state",
     "is_sweep_file",
     "read_sweep_file",
     "sweep_module",
@@ -90,12 +89,6 @@ OFFSET_ELLIPTIC = (
 _READ: dict = {}
 _MODULES: dict = {}
 TOPOLOGY_HINT = "describe its blocks in a topology file (docs/topologies.md)"
-
-
-def file_state(path: Path) -> tuple:
-    """(resolved path, size, modification time in ns) of the file ``path``: what the caches key on."""
-    status = path.stat()
-    return (str(path.resolve()), status.st_size, status.st_mtime_ns)
 
 
 def read_sweep_file(path: Path, caps=None, feature_angle=None) -> dict:

@@ -80,9 +80,11 @@ def read_sweep(path, content_hash: str = "", caps=None) -> dict:
     }
     if len(faces) == 6 and all(n == 4 for n in sides):  # one block, unless its caps' outlines turn smoothly
         loft = _find_loft(gmsh, faces, curves_of, size, pair)
-        if pair is not None:  # named caps: a loft of them, or why not
+        if pair is not None and loft is not None:  # named caps: a loft of them, or why not
+            return {**found, "kind": "loft", **loft}
+        if pair is not None:
             why = _pair_fault(gmsh, faces, curves_of, pair, names) or "they are no loft's caps (ruled linking faces)"
-            return {**found, "kind": "loft", **loft} if loft is not None else {**found, "kind": "other", "reason": why}
+            return {**found, "kind": "other", "reason": why}
         smooth = loft is not None and any(c["smooth"] for loop in loft["loops"] for c in loop)
         return {**found, "kind": "loft", **loft} if smooth else {**found, "kind": "six"}
     caps, reason = _find_caps(gmsh, faces, curves_of, size, pair, names)

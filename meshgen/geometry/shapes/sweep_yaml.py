@@ -36,9 +36,9 @@ from pathlib import Path
 
 from meshgen.errors import GeometryError, MeshgenError
 from meshgen.geometry.patches import PATCH_TYPES, check_patch_name
-from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, YAML_FORMATS, default_patch_type
+from meshgen.geometry.shapes.assemble import CAD_FORMATS, TRIANGULATED_FORMATS, YAML_FORMATS, default_patch_type, file_state
 from meshgen.geometry.shapes.geometry_file import named_file, read_geometry_file
-from meshgen.geometry.shapes.sweep_blocks import build_sweep_module, file_state, is_sweep_file, read_sweep_file, sweep_module
+from meshgen.geometry.shapes.sweep_blocks import build_sweep_module, is_sweep_file, read_sweep_file, sweep_module
 from meshgen.geometry.topology_file import is_topology_file
 
 __all__ = ["is_sweep_geometry", "is_sweep_yaml", "sweep_geometry_module", "yaml_sweep_module"]
