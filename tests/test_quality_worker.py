@@ -294,3 +294,66 @@ def test_a_large_file_that_is_no_structured_grid_ends_its_worker_unused(tmp_path
     assert "worker " in result.stderr and "parts" not in result.stderr
     report = json.loads(result.stdout)
     assert not report["structured"] and report == in_process_report(path)
+
+
+# Says on stderr the pid of the child ``meshgen evaluate`` forked first ("early PID", "early None"
+# when it forked none) and, at the command's exit, whether that child is still there.
+EARLY = """
+import atexit, os
+original_early = worker.fork_early_worker
+def early():
+    original_early()
+    pid = worker._early[0].pid if worker._early else None
+    print(f"early {pid}", file=sys.stderr, flush=True)
+    atexit.register(lambda: print(f"early child at exit: {pid is not None and os.path.exists(f'/proc/{pid}')}", file=sys.stderr))
+worker.fork_early_worker = early
+"""
+
+
+def early_pid(stderr: str) -> int | None:
+    word = stderr.split("early ", 1)[1].split()[0]
+    return None if word == "None" else int(word)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2, reason="forked on Linux, two CPUs")
+def test_meshgen_evaluate_measures_with_the_child_it_forked_first(large_vts):
+    """The child forked when ``meshgen evaluate`` starts (before the file is opened) is the worker
+    that computes the report's parts; the report is the in-process one; the child is gone when the
+    command exits."""
+    path, expected = large_vts
+    result = run_evaluate(path, EARLY)
+    assert result.returncode == 0, result.stderr
+    pid = early_pid(result.stderr)
+    assert pid is not None and f"worker {pid}" in result.stderr and "parts from the worker" in result.stderr
+    assert json.loads(result.stdout) == expected
+    assert "early child at exit: False" in result.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
+def test_without_the_early_child_the_worker_is_forked_once_the_extent_is_read(large_vts):
+    """Where ``meshgen evaluate`` forks no child first (one CPU, no memory files), the worker
+    forked when the file's extent is read gives the same report."""
+    path, expected = large_vts
+    result = run_evaluate(path, "worker.fork_early_worker = lambda: None")
+    assert result.returncode == 0, result.stderr
+    assert "parts from the worker" in result.stderr
+    assert json.loads(result.stdout) == expected
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2, reason="forked on Linux, two CPUs")
+def test_a_small_file_ends_the_early_child_unused(tmp_path):
+    """A file too small for the compiled kernels: the early child is ended unused (not left to
+    load numba beside the command) and the report is the in-process one."""
+    path, expected = vts_and_report(tmp_path, "semicylinder", (8, 8, 8))
+    result = run_evaluate(path, EARLY)
+    assert result.returncode == 0, result.stderr
+    assert early_pid(result.stderr) is not None and "worker " not in result.stderr.replace("early child", "")
+    assert json.loads(result.stdout) == expected
+    assert "early child at exit: False" in result.stderr
+
+
+def test_asking_evaluate_for_help_forks_nothing():
+    command = [sys.executable, "-c", EVALUATE_DRIVER.format(patch=EARLY), "evaluate", "--help"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "Usage:" in result.stdout and "early" not in result.stderr

@@ -21,6 +21,7 @@ from meshgen.run.signals import Terminated, exit_interrupted, install_terminatio
 
 __all__ = [
     "COMMANDS",
+    "EARLY_STARTS",
     "FLAGS",
     "MAX_ERROR_CHARS",
     "MeshgenGroup",
@@ -29,6 +30,7 @@ __all__ = [
     "main",
     "message_for_command_line",
     "one_line",
+    "start_early",
 ]
 
 # name -> (module:function, one-line help). The help is kept here so listing commands imports nothing.
@@ -39,6 +41,18 @@ COMMANDS = {
     "compare": ("meshgen.cli.compare:compare", "Compare meshing methods side by side."),
     "geometries": ("meshgen.cli.geometries:geometries", "List geometries; show one as a surface."),
 }
+
+
+# name -> module:function run first when the command starts, before click parses it or the command's
+# module is imported: evaluate forks the process that loads numba meanwhile (meshgen.quality.worker).
+EARLY_STARTS = {"evaluate": "meshgen.quality.worker:fork_early_worker"}
+
+
+def start_early(args) -> None:
+    """Run the early start of the command ``args`` name (``EARLY_STARTS``), unless it only asks for help."""
+    if args and args[0] in EARLY_STARTS and not {"-h", "--help"} & set(args):
+        module_name, function_name = EARLY_STARTS[args[0]].split(":")
+        getattr(importlib.import_module(module_name), function_name)()
 
 
 # The longest error line printed: a message that quotes a file's contents is cut here at the latest.
@@ -158,4 +172,5 @@ def main():
     # threads make a CPU that other processes share tens of times slower; the user's setting wins.
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     install_termination_handlers()
+    start_early(sys.argv[1:])
     cli.main()

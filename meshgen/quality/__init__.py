@@ -13,20 +13,15 @@ Where things are:
 - ``chunked`` and ``sketch``: meshes larger than memory, block by block on Dask, percentiles by a
   mergeable quantile sketch.
 
-This module re-exports the public names, so ``from meshgen.quality import X`` keeps working.
+This module re-exports the public names, so ``from meshgen.quality import X`` keeps working. Those
+of ``files`` are imported when first asked for: ``files`` reads and writes every format and loads
+geometries (a quarter of a second of imports), which the forked quality worker
+(``meshgen.quality.worker``) and the kernels never need.
 """
 
+import importlib
+
 from meshgen.quality.faces import CELL_TYPES, cell_metrics_unstructured, cells_for_quality, match_faces
-from meshgen.quality.files import (
-    as_node_array,
-    evaluate_file,
-    json_ready,
-    recorded_metadata,
-    sidecar_path,
-    write_json,
-    write_mesh_alone,
-    write_mesh_with_quality,
-)
 from meshgen.quality.kernels import (
     BLOCK_CELLS,
     DEFINITIONS,
@@ -46,6 +41,17 @@ from meshgen.quality.kernels import (
 from meshgen.quality.report import quality_report, summarize
 from meshgen.quality.structured import cell_metrics
 from meshgen.quality.text import summary_lines
+
+_FILES_NAMES = (
+    "as_node_array",
+    "evaluate_file",
+    "json_ready",
+    "recorded_metadata",
+    "sidecar_path",
+    "write_json",
+    "write_mesh_alone",
+    "write_mesh_with_quality",
+)
 
 __all__ = [
     "BLOCK_CELLS",
@@ -79,3 +85,9 @@ __all__ = [
     "write_mesh_alone",
     "write_mesh_with_quality",
 ]
+
+
+def __getattr__(name):
+    if name in _FILES_NAMES:
+        return getattr(importlib.import_module("meshgen.quality.files"), name)
+    raise AttributeError(f"module 'meshgen.quality' has no attribute {name!r}")

@@ -35,7 +35,7 @@ from meshgen.quality.report import (
     report_in_parallel,
 )
 from meshgen.quality.structured import check_node_array, load_compiled_kernels, use_compiled
-from meshgen.quality.worker import EvaluationWorker, worker_fits
+from meshgen.quality.worker import EvaluationWorker, release_early_worker, worker_fits
 from meshgen.run.atomic import atomic_path
 from meshgen.run.inputs import read_input_text
 from meshgen.run.publish import publishing
@@ -222,6 +222,13 @@ def evaluate_file(
     (``meshgen.quality.deviation.block_set_deviation``); ``per_block``: its blocks' reports too,
     under ``blocks`` (``file`` named ``<path>:<block>``).
     """
+    try:
+        return _evaluate_file(path, geometry, params, mesh, chunked, client, progress, block_nodes, per_block)
+    finally:
+        release_early_worker()  # the child ``meshgen evaluate`` forked first, unless a worker adopted it
+
+
+def _evaluate_file(path, geometry, params, mesh, chunked, client, progress, block_nodes, per_block) -> dict:
     progress = progress or (lambda done, **figures: None)
     path = Path(path)
     if not path.exists():
@@ -262,8 +269,9 @@ def _read_for_evaluation(path: Path, preloading: _Preloading):
     """The mesh file ``path`` as ``read_mesh`` reads it; a .vts as its grid (``read_grid``: no
     connectivity, only the cell data ``block`` of its cell arrays). When the compiled kernels will
     measure it, numba loads while its arrays inflate: in an ``EvaluationWorker`` (a forked process,
-    where ``worker_fits``: design notes §21, "meshgen evaluate: numba in a forked worker"), else on
-    a thread here (``preloading`` holds either)."""
+    where ``worker_fits``: design notes §21, "meshgen evaluate: numba in a forked worker"; the child
+    ``meshgen evaluate`` forked first, if there is one), else on a thread here (``preloading`` holds
+    either)."""
 
     def load():
         try:
@@ -276,6 +284,7 @@ def _read_for_evaluation(path: Path, preloading: _Preloading):
             with contextlib.suppress(OSError):  # no fork: the thread
                 preloading.worker = EvaluationWorker(node_shape)
                 return
+        release_early_worker()  # a small mesh: no core is taken from the parent's NumPy threads
         if use_compiled(int(np.prod([n - 1 for n in node_shape]))):
             thread = threading.Thread(target=load, name="meshgen-numba")
             thread.start()

@@ -36,6 +36,18 @@ only what the report needs of the metrics (their summaries and the solver figure
 ``report_parts``), never the metric arrays, and the parent assembles the report
 (``assemble_report``) as the in-process path does.
 
+``meshgen evaluate`` forks that child earlier still, first thing when the command starts
+(``fork_early_worker``, before the command's own imports and the file's first byte): the child
+loads numba during the whole quarter of a second the parent spends importing what reads files and
+loads geometries. The nodes' shape is not known then, so their memory is a memory file
+(``memfd_create``) that the parent sizes and both processes map once the file's extent is read;
+the first ``EvaluationWorker`` of the command adopts that child, and a command that never makes one
+ends it (``release_early_worker``). Only where a second CPU runs the child meanwhile.
+
+The child allocates without transparent huge pages (NumPy asks the kernel for them on large arrays):
+its arrays are touched once, and on a kernel that compacts memory to make a huge page on the first
+touch (``defrag`` set to ``madvise``), those faults cost a report's first call twice its time.
+
 Used only where it pays and is safe: on Linux (fork), where numba is not loaded yet in this
 process (forking a process whose numba threads run is unsafe, and a loaded numba costs nothing
 more), and for meshes that take the compiled kernels (``NUMPY_CELLS`` cells and more).
@@ -66,9 +78,11 @@ __all__ = [
     "WAIT_SECONDS_PER_CELL",
     "EvaluationWorker",
     "QualityWorker",
+    "fork_early_worker",
     "is_stopped",
     "load_compiled_kernels",
     "quality_worker",
+    "release_early_worker",
     "report_parts",
     "start_numba",
     "worker_fits",
@@ -123,24 +137,92 @@ def _shared(count: int) -> np.ndarray:
     return np.frombuffer(buffer, dtype=np.float64, count=count)
 
 
+def _mapped(memory: int, node_shape: tuple, size: bool = False) -> np.ndarray:
+    """The node array ``(*node_shape, dim)`` float64 in memory file ``memory``, which both
+    processes map; ``size``: first make the file that long (the parent)."""
+    count = int(np.prod(node_shape)) * len(node_shape)
+    if size:
+        os.ftruncate(memory, max(8, 8 * count))
+    buffer = mmap.mmap(memory, max(8, 8 * count))
+    return np.frombuffer(buffer, dtype=np.float64, count=count).reshape(*node_shape, len(node_shape))
+
+
+def _fork(nodes, work, *arguments):
+    """(process, connection): a forked child running ``_serve(..., nodes, work, *arguments)``."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    connection, child_end = context.Pipe()
+    arguments = (child_end, connection, os.getpid(), nodes, work, *arguments)
+    process = context.Process(target=_serve, args=arguments, name="meshgen-quality", daemon=True)
+    process.start()
+    child_end.close()
+    return process, connection
+
+
+_early = None  # (process, connection, memory file) of the child fork_early_worker forked, until adopted
+
+
+def fork_early_worker() -> None:
+    """Fork, first thing in ``meshgen evaluate``, the child the command's first ``EvaluationWorker``
+    adopts (see the module text): Linux with ``memfd_create``, two CPUs or more for this process,
+    numba not loaded here. Nothing happens where one of those is missing or the fork fails."""
+    global _early
+    if _early is not None or not sys.platform.startswith("linux") or not hasattr(os, "memfd_create"):
+        return
+    if "numba" in sys.modules or len(os.sched_getaffinity(0)) < 2:
+        return
+    try:
+        memory = os.memfd_create("meshgen-nodes")
+    except OSError:
+        return
+    try:
+        _early = (*_fork(memory, _parts, None), memory)
+    except OSError:
+        os.close(memory)
+
+
+def _take_early():
+    """The early child's (process, connection, memory file), once; None when there is none or it
+    died meanwhile."""
+    global _early
+    early, _early = _early, None
+    if early is not None and not early[0].is_alive():
+        _end(*early)
+        return None
+    return early
+
+
+def release_early_worker() -> None:
+    """End the child ``fork_early_worker`` forked if no ``EvaluationWorker`` adopted it."""
+    early = _take_early()
+    if early is not None:
+        _end(*early)
+
+
+def _end(process, connection, memory) -> None:
+    with contextlib.suppress(OSError, ValueError):
+        process.kill()
+        process.join()
+    connection.close()
+    with contextlib.suppress(OSError):
+        os.close(memory)
+
+
 class _ForkedWorker:
     """A forked child that loads the kernels, then works on the node array handed to it
     (``submit``): the shared memory, the pipe and the bounded waits of both workers."""
 
     def _start(self, node_shape, serve, metric_rows: int, *arguments) -> None:
-        import multiprocessing
-
         node_shape = tuple(int(n) for n in node_shape)
         cells = int(np.prod([n - 1 for n in node_shape]))
         # a node array has one coordinate per index axis (``check_node_array``)
         self._nodes = _shared(int(np.prod(node_shape)) * len(node_shape)).reshape(*node_shape, len(node_shape))
         self._metrics = _shared(metric_rows * cells).reshape(metric_rows, cells)
-        context = multiprocessing.get_context("fork")
-        self._connection, child_end = context.Pipe()
-        arguments = (child_end, self._connection, os.getpid(), self._nodes, serve, self._metrics, *arguments)
-        self._process = context.Process(target=_serve, args=arguments, name="meshgen-quality", daemon=True)
-        self._process.start()
-        child_end.close()
+        self._process, self._connection = _fork(self._nodes, serve, self._metrics, *arguments)
+        self._begin(cells)
+
+    def _begin(self, cells: int) -> None:
         self._failed = False
         self._timeout = worker_timeout(cells)
         self._deadline = float("inf")
@@ -213,7 +295,25 @@ class EvaluationWorker(_ForkedWorker):
     the child (the report needs only their summaries)."""
 
     def __init__(self, node_shape):
+        early = _take_early()
+        if early is not None:
+            try:
+                self._adopt(early, node_shape)
+                return
+            except OSError:  # the memory file could not take the nodes: a child of our own
+                _end(*early)
         self._start(node_shape, _parts, 0)
+
+    def _adopt(self, early, node_shape) -> None:
+        """Take over the child ``fork_early_worker`` forked: size its memory file for the nodes,
+        map it, and tell the child their shape (it maps the same file)."""
+        process, connection, memory = early
+        node_shape = tuple(int(n) for n in node_shape)
+        self._nodes = _mapped(memory, node_shape, size=True)
+        self._process, self._connection = process, connection
+        self._begin(int(np.prod([n - 1 for n in node_shape])))
+        os.close(memory)
+        self._send(("shape", node_shape))
 
     def parts(self) -> dict | None:
         """``report_parts`` of the submitted nodes, once the child sent them; None when it failed."""
@@ -297,23 +397,45 @@ def _numba_without_extras() -> None:
     entrypoints._already_initialized = True  # numba's own flag for "extensions loaded"
 
 
-def _serve(connection, parent_end, parent: int, nodes: np.ndarray, work, *arguments) -> None:
+def _without_huge_pages() -> None:
+    """Let NumPy's large arrays in this process take ordinary pages (the module text)."""
+    core = getattr(np, "_core", None) or getattr(np, "core", None)
+    setting = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if setting is not None:
+        setting(False)
+
+
+def _wait(connection, parent: int) -> None:
+    """Wait for the parent's next message; EOFError when the parent is gone."""
+    while not connection.poll(PARENT_CHECK_SECONDS):
+        if os.getppid() != parent:
+            raise EOFError("the parent is gone")
+
+
+def _serve(connection, parent_end, parent: int, nodes, work, *arguments) -> None:
     """The child: load the kernels, wait for the nodes, then ``work(connection, nodes,
-    *arguments)`` sends what it computed; ("error", text) if anything fails. It ends when the
-    parent does: its copy of the parent's end of the pipe is closed first, so the pipe ends with
-    the parent, and the wait also checks that ``parent`` is still its parent."""
+    *arguments)`` sends what it computed; ("error", text) if anything fails. ``nodes``: the node
+    array in shared memory, or (an early child) the memory file they will lie in, whose shape the
+    parent sends first (("shape", node_shape)). It ends when the parent does: its copy of the
+    parent's end of the pipe is closed first, so the pipe ends with the parent, and the wait also
+    checks that ``parent`` is still its parent."""
     parent_end.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in TERMINATING_SIGNALS:
         signal.signal(signum, signal.SIG_DFL)
     status = 0
     try:
+        _without_huge_pages()
         start_numba()
+        if not isinstance(nodes, np.ndarray):
+            _wait(connection, parent)
+            kind, node_shape = connection.recv()
+            if kind != "shape":
+                raise EOFError("no nodes to come")
+            nodes = _mapped(nodes, tuple(node_shape))
         if not connection.poll(0):  # no nodes yet: the other kernels load meanwhile, else while the first part runs
             load_compiled_kernels(nodes.shape[-1])
-        while not connection.poll(PARENT_CHECK_SECONDS):
-            if os.getppid() != parent:
-                raise EOFError("the parent is gone")
+        _wait(connection, parent)
         if connection.recv() == "go":
             work(connection, nodes, *arguments)
     except EOFError:  # the parent is gone
