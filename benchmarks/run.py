@@ -461,16 +461,20 @@ def git_commit() -> str | None:
         return None
 
 
+def memory_gigabytes() -> float | None:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
 def machine(quick: bool) -> dict:
     import bench_inference
     import torch
 
     import meshgen
 
-    try:
-        memory = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
-    except (ValueError, OSError, AttributeError):
-        memory = None
+    memory = memory_gigabytes()
     data = {
         "cpus": os.cpu_count(),
         "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
@@ -1622,8 +1626,8 @@ def markdown(results: dict) -> str:
     machine_data = results["sections"].get("machine", {})
     lines = [
         f"Measured {results['date'][:10]} by `{results['command']}` (meshgen {machine_data.get('meshgen', '?')}, "
-        f"commit {machine_data.get('git_commit') or '?'}) on {machine_data.get('processor', '?')}, "
-        f"{machine_data.get('usable_cpus', '?')} cores, {machine_data.get('memory_gigabytes') or 0:.0f} GB, "
+        f"commit {machine_data.get('git_commit') or git_commit() or '?'}) on {machine_data.get('processor') or processor_name()}, "
+        f"{machine_data.get('usable_cpus') or len(os.sched_getaffinity(0))} cores, {machine_data.get('memory_gigabytes') or memory_gigabytes() or 0:.0f} GB, "
         f"Python {machine_data.get('python', '?')}, torch {machine_data.get('torch', '?')}, numpy "
         f"{machine_data.get('numpy', '?')}; load average {results['load_average']['start'][0]:.1f} at the start and "
         f"{results['load_average']['end'][0]:.1f} at the end (other jobs shared the machine); the whole run took "
@@ -1642,8 +1646,8 @@ def markdown(results: dict) -> str:
     lines += [
         "",
         "Times are wall seconds (medians); CPU is the process's CPU time over all threads: on a busy "
-        "machine the wall time grows with the load, the CPU time much less. All meshes are of the "
-        "semicylinder; the neural rows use the bundled model.",
+        "machine the wall time grows with the load, the CPU time much less. A row that names no geometry is "
+        "of the semicylinder; a neural row says which model it meshes with (the bundled one, or one the run trains).",
     ]
     if results["sections"].get("time_to_quality"):
         lines += [

@@ -171,7 +171,7 @@ def test_quad_meshes_from_the_mesh_command(run_cli, tmp_path):
     [
         (lambda d: None, "does not exist"),
         (lambda d: (d / "m.vtu").write_bytes(b""), "empty"),
-        (lambda d: (d / "m.vtu").write_text("<VTKFile nonsense"), "could not read"),
+        (lambda d: (d / "m.vtu").write_text("<VTKFile nonsense"), "not a VTK XML file"),
         (
             lambda d: meshio.write(
                 d / "m.vtu", meshio.Mesh(np.random.rand(4, 3), [("triangle", np.array([[0, 1, 2], [1, 2, 3]]))])

@@ -234,12 +234,14 @@ def in_process_report(path) -> dict:
         return json.loads(json.dumps(json_ready(files.evaluate_file(path)), allow_nan=False))
 
 
-def vts_and_report(folder, name: str, dims) -> tuple:
-    """A .vts meshgen wrote of geometry ``name`` at ``dims`` cells, and its in-process report."""
+def vts_and_report(folder, name: str, dims, suffix: str = ".vts") -> tuple:
+    """A .vts (or ``suffix``) file meshgen wrote of geometry ``name`` at ``dims`` cells, and its
+    in-process report."""
     command = [sys.executable, "-m", "meshgen", "mesh", "-g", name, "--method", "tfi", "--dims", *map(str, dims)]
-    made = subprocess.run([*command, "-o", str(folder / "mesh.vts"), "-q"], capture_output=True, text=True, timeout=300)
+    path = folder / f"mesh{suffix}"
+    made = subprocess.run([*command, "-o", str(path), "-q"], capture_output=True, text=True, timeout=300)
     assert made.returncode == 0, made.stderr
-    return folder / "mesh.vts", in_process_report(folder / "mesh.vts")
+    return path, in_process_report(path)
 
 
 @pytest.fixture(scope="module")
@@ -357,3 +359,17 @@ def test_asking_evaluate_for_help_forks_nothing():
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "Usage:" in result.stdout and "early" not in result.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2, reason="forked on Linux, two CPUs")
+def test_a_large_vtu_is_measured_by_the_child_forked_first(tmp_path):
+    """A .vtu (``meshgen mesh``'s default format) has no extent to read first: the early child
+    loads numba while the whole file is read and takes the nodes after; the report is the
+    in-process one."""
+    path, expected = vts_and_report(tmp_path, "semicylinder", DIMS, ".vtu")
+    assert expected["structured"] and expected["cells"] >= NUMPY_CELLS
+    result = run_evaluate(path, EARLY)
+    assert result.returncode == 0, result.stderr
+    pid = early_pid(result.stderr)
+    assert pid is not None and f"worker {pid}" in result.stderr and "parts from the worker" in result.stderr
+    assert json.loads(result.stdout) == expected

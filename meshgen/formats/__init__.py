@@ -53,6 +53,7 @@ __all__ = [
     "format_names",
     "metadata_json",
     "metadata_of",
+    "read_cells",
     "read_grid",
     "read_header",
     "read_mesh",
@@ -385,6 +386,19 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None):
         return None
     reader = importlib.import_module(fmt.module)
     return _reading(path, lambda where: reader.read_grid(where, cell_arrays, point_arrays, on_shape))
+
+
+def read_cells(path, cell_arrays=None):
+    """A .vtu file of hexahedra or of quadrilaterals read by meshgen's decoder as a ``meshio.Mesh``
+    with only the cell arrays named in ``cell_arrays`` (None: all) and no point data
+    (``meshgen.formats._vtu_read``); None for a file of another format or a .vtu it leaves to
+    meshio (``read_mesh`` reads those). Errors as ``read_mesh``'s."""
+    path = _checked_input(path)
+    fmt = _reading_format(path)
+    if fmt is None or fmt.module != "meshgen.formats._vtu":
+        return None
+    reader = importlib.import_module("meshgen.formats._vtu_read")
+    return _reading(path, lambda where: reader.read_cells(where, cell_arrays))
 
 
 def _checked_input(path) -> Path:

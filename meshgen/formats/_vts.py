@@ -65,8 +65,10 @@ __all__ = [
     "TYPES",
     "block_extent",
     "data_array",
+    "decode_array",
     "field_arrays",
     "file_head",
+    "parse_xml",
     "patch_ids",
     "read",
     "read_grid",
@@ -199,8 +201,9 @@ def field_arrays(metadata, patches) -> list:
 # --- reading ---------------------------------------------------------------------------------
 
 
-def _parse(path):
-    """(XML root, raw appended bytes or None) of a .vts file."""
+def parse_xml(path, grid_type: str = "StructuredGrid"):
+    """(XML root, raw appended bytes or None) of a VTK XML file of ``grid_type`` (its root's
+    ``type``: "StructuredGrid", "UnstructuredGrid"); FormatError for another file."""
     data = open(path, "rb").read()
     appended = None
     start = data.find(b"<AppendedData")
@@ -214,12 +217,12 @@ def _parse(path):
         root = ET.fromstring(data)
     except ET.ParseError as exc:
         raise FormatError(f"{path}: not a VTK XML file ({exc})") from None
-    if root.get("type") != "StructuredGrid":
-        raise FormatError(f"{path}: not a VTK StructuredGrid file")
+    if root.get("type") != grid_type:
+        raise FormatError(f"{path}: not a VTK {grid_type} file")
     return root, appended
 
 
-def _decode(element, root, appended=None, count: int | None = None, what: str = "a DataArray", pool=None) -> np.ndarray:
+def decode_array(element, root, appended=None, count: int | None = None, what: str = "a DataArray", pool=None) -> np.ndarray:
     """The values of a DataArray: ascii, inline binary, or raw appended, with or without zlib
     compression. ``count``: the number of values the file's extent implies; the sizes the array
     declares are compared with it before anything is inflated, and each zlib stream is inflated
@@ -313,7 +316,7 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
     ``cell_arrays`` and ``point_arrays`` (None: all; the others are not inflated) and meshgen's
     field data. The compressed blocks of each array are inflated on all cores.
     ``on_shape(node_shape)``: called once the extent is known, before anything is inflated."""
-    root, appended = _parse(path)
+    root, appended = parse_xml(path)
     grid = root.find("StructuredGrid")
     pieces = grid.findall("Piece")
     if len(pieces) != 1:
@@ -347,7 +350,7 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
         def decode(element, count, name):
             if element is None:
                 raise FormatError(f"{path}: no {name} array")
-            return _decode(element, root, appended, count, f"{path}: the {name} array", pool)
+            return decode_array(element, root, appended, count, f"{path}: the {name} array", pool)
 
         points = _writable(
             c_order(decode(pieces[0].find("Points/DataArray"), 3 * nodes, "points").astype(float, copy=False), node_shape, 3)
@@ -361,7 +364,7 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
             a.get("Name"): c_order(decode(a, nodes, f"point data {a.get('Name')!r}"), node_shape)
             for a in wanted(pieces[0].findall("PointData/DataArray"), point_arrays)
         }
-    field_data = {a.get("Name"): _decode(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
+    field_data = {a.get("Name"): decode_array(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
     field_data = {k: v for k, v in field_data.items() if k in (METADATA_KEY, PATCHES_KEY)}
     return Grid(node_shape, points, cell_data, point_data, field_data)
 

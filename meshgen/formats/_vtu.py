@@ -7,7 +7,8 @@ thread pool deflates as soon as the array exists, while the calling thread build
 or encodes and writes the finished ones. The deflate is ISA-L's (``isal.isal_zlib``, which
 releases the GIL): its streams are ordinary zlib streams that VTK's ``vtkZLibDataCompressor`` and
 meshio inflate, made at about a sixth of zlib's CPU time and 3% larger (level 1 of each;
-design notes §21, benchmarks/formats.py). Reading stays with meshio (``read``).
+design notes §21, benchmarks/formats.py). Reading stays with meshio (``read``), but for
+``meshgen evaluate``, whose reader of the points and cells alone is ``_vtu_read``.
 
 The file, VTK's XML format version 1.0 as VTK writes it in its "binary" data mode::
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from meshgen.errors import FormatError, GeometryError, MeshgenError, excerpt
-from meshgen.formats import metadata_of, read_grid, read_header, read_mesh, write_mesh
+from meshgen.formats import metadata_of, read_cells, read_grid, read_header, read_mesh, write_mesh
 from meshgen.formats.metadata import is_timing
 from meshgen.formats.multiblock import MultiZoneError, read_zones, zone_count
 from meshgen.geometry.blocks import BlockSet, block_spec, measured_block_set
@@ -244,7 +244,7 @@ def _evaluate_file(path, geometry, params, mesh, chunked, client, progress, bloc
         if mesh is None:
             progress(0.0, phase="reading")
             mesh = _read_for_evaluation(path, preloading)
-        return _evaluate_mesh(path, mesh, geometry, params, progress, per_block, preloading.worker)
+        return _evaluate_mesh(path, mesh, geometry, params, progress, per_block, preloading)
     finally:
         preloading.close()
 
@@ -257,6 +257,15 @@ class _Preloading:
         self.worker = None
         self.threads = []
 
+    def worker_for(self, node_shape):
+        """The ``EvaluationWorker`` of a node array of ``node_shape`` nodes: the one forked while
+        the file was read, else one made now (adopting the child ``meshgen evaluate`` forked
+        first, if any) where ``worker_fits``; None where none fits or none can be forked."""
+        if self.worker is None and not self.threads and worker_fits(node_shape):
+            with contextlib.suppress(OSError):
+                self.worker = EvaluationWorker(node_shape)
+        return self.worker
+
     def close(self) -> None:
         for thread in self.threads:
             thread.join()
@@ -267,7 +276,8 @@ class _Preloading:
 
 def _read_for_evaluation(path: Path, preloading: _Preloading):
     """The mesh file ``path`` as ``read_mesh`` reads it; a .vts as its grid (``read_grid``: no
-    connectivity, only the cell data ``block`` of its cell arrays). When the compiled kernels will
+    connectivity, only the cell data ``block`` of its cell arrays); a .vtu of hexahedra or of
+    quadrilaterals with only that cell data (``read_cells``: meshgen's decoder, not meshio's). When the compiled kernels will
     measure it, numba loads while its arrays inflate: in an ``EvaluationWorker`` (a forked process,
     where ``worker_fits``: design notes §21, "meshgen evaluate: numba in a forked worker"; the child
     ``meshgen evaluate`` forked first, if there is one), else on a thread here (``preloading`` holds
@@ -291,12 +301,16 @@ def _read_for_evaluation(path: Path, preloading: _Preloading):
             preloading.threads.append(thread)
 
     grid = read_grid(path, cell_arrays=(BLOCK_DATA,), point_arrays=(), on_shape=preload)
-    return grid if grid is not None else read_mesh(path)
+    if grid is not None:
+        return grid
+    mesh = read_cells(path, cell_arrays=(BLOCK_DATA,))  # a .vtu of one cell kind: points, cells and blocks only
+    return mesh if mesh is not None else read_mesh(path)
 
 
-def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool, worker=None) -> dict:
+def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool, preloading: _Preloading) -> dict:
     """``evaluate_file`` of the file ``path`` read as ``mesh`` (a ``meshio.Mesh`` or a .vts grid);
-    ``worker``: an ``EvaluationWorker`` made for its node shape, or None."""
+    ``preloading``: what was started for the metrics while it was read (``worker_for`` gives the
+    ``EvaluationWorker`` of a structured mesh)."""
     grid_shape = getattr(mesh, "node_shape", None)  # a .vts grid: the cells are the grid's
     if grid_shape is not None:
         points, cells, skipped = mesh.points, None, {}
@@ -327,6 +341,7 @@ def _evaluate_mesh(path: Path, mesh, geometry, params, progress, per_block: bool
         X = as_node_array(points, cells, dims, grid_shape)
     progress(0.3, phase="metrics")
     if X is not None:
+        worker = preloading.worker_for(X.shape[:-1])
         report = _node_array_report(path, X, geometry, source, notes, skipped, progress, worker)
         progress(1.0, phase="done")
         return _finish_file_report(path, report, source, notes, metadata, True)
