@@ -844,6 +844,7 @@ def evaluate(quick: bool) -> dict:
     data = bench_quality.measure((100, 100, 100), 2 if quick else 5, cases)
     data["first_call"] = bench_quality.first_call()
     data["cli"] = bench_quality.evaluate_cli((100, 100, 100), 5)
+    data["cli_vtu"] = bench_quality.evaluate_cli((100, 100, 100), 5, ".vtu")
     bench_quality.print_table(data)
     rows = [
         {
@@ -868,6 +869,7 @@ def evaluate(quick: bool) -> dict:
         "results": rows,
         "first_call": data["first_call"],
         "cli": data["cli"],
+        "cli_vtu": data["cli_vtu"],
     }
 
 
@@ -1156,6 +1158,15 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 "s",
                 "evaluate_cli_100_seconds",
                 cpu=cli["cpu_seconds"],
+            )
+        if "cli_vtu" in data:
+            cli = data["cli_vtu"]
+            add(
+                f"`meshgen evaluate` of the 100^3 .vtu, end to end (median of {len(cli['runs_seconds'])}, after a warm-up)",
+                cli["seconds"],
+                "s",
+                cpu=cli["cpu_seconds"],
+                note="meshgen mesh's default format: no extent to read first",
             )
         if "first_call" in data:
             first = data["first_call"]
