@@ -74,6 +74,7 @@ __all__ = [
     "read_grid",
     "read_patches",
     "whole_extent",
+    "writable",
     "write",
 ]
 
@@ -352,7 +353,7 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
                 raise FormatError(f"{path}: no {name} array")
             return decode_array(element, root, appended, count, f"{path}: the {name} array", pool)
 
-        points = _writable(
+        points = writable(
             c_order(decode(pieces[0].find("Points/DataArray"), 3 * nodes, "points").astype(float, copy=False), node_shape, 3)
         )
         cell_shape = tuple(n - 1 for n in node_shape)
@@ -369,7 +370,7 @@ def read_grid(path, cell_arrays=None, point_arrays=None, on_shape=None) -> Grid:
     return Grid(node_shape, points, cell_data, point_data, field_data)
 
 
-def _writable(values: np.ndarray) -> np.ndarray:
+def writable(values: np.ndarray) -> np.ndarray:
     """``values``, copied where they are a view of the file's (read-only) bytes."""
     return values if values.flags.writeable else values.copy()
 

@@ -18,7 +18,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from meshgen.errors import FormatError, MeshgenError
-from meshgen.formats._vts import decode_array, parse_xml
+from meshgen.formats._vts import decode_array, parse_xml, writable
 from meshgen.formats._vtu import cpu_count
 from meshgen.run.limits import READ_BYTES_PER_NODE, check_memory
 
@@ -67,18 +67,13 @@ def read_cells(path, cell_arrays=None):
         if not np.array_equal(offsets, np.arange(corners, corners * n_cells + 1, corners)):
             return None
         connectivity = decode(cells["connectivity"], corners * n_cells, "connectivity")
-        connectivity = _writable(connectivity.astype(np.int64, copy=False).reshape(n_cells, corners))
-        coordinates = _writable(decode(points, 3 * n_points, "points").astype(float, copy=False).reshape(n_points, 3))
+        connectivity = writable(connectivity.astype(np.int64, copy=False).reshape(n_cells, corners))
+        coordinates = writable(decode(points, 3 * n_points, "points").astype(float, copy=False).reshape(n_points, 3))
         cell_data = {}
         for array in piece.findall("CellData/DataArray"):
             if cell_arrays is None or array.get("Name") in cell_arrays:
                 components = int(array.get("NumberOfComponents", 1))
                 values = decode(array, components * n_cells, f"cell data {array.get('Name')!r}")
-                cell_data[array.get("Name")] = [_writable(values.reshape(n_cells, components) if components > 1 else values)]
+                cell_data[array.get("Name")] = [writable(values.reshape(n_cells, components) if components > 1 else values)]
     field_data = {a.get("Name"): decode_array(a, root, appended).copy() for a in grid.findall("FieldData/DataArray")}
     return meshio.Mesh(coordinates, [(name, connectivity)], cell_data=cell_data, field_data=field_data)
-
-
-def _writable(values: np.ndarray) -> np.ndarray:
-    """``values``, copied where they are a view of the file's (read-only) bytes, as meshio's are not."""
-    return values if values.flags.writeable else values.copy()
