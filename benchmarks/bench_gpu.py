@@ -4,7 +4,7 @@
   against the CPU solver's mesh and time (``bench_elliptic.gpu_elliptic_row``);
 - ``quality``: the seven per-cell metrics and their summary of 1e9 hexahedra, made slab by slab on
   the device (``bench_quality.gpu_quality_row``), a sub-block checked against the numba kernels;
-- ``neural``: 1e9 hexahedra of the bundled semicylinder network made, boundary-corrected and
+- ``neural``: 1e9 hexahedra of a 3D semicylinder network (0.2's bundled model, ``THREE_D``) made, boundary-corrected and
   quality-checked on the device slab by slab (``meshgen.neural.gpu_mesh``), the copy of the nodes
   to the host (what writing would start from) timed apart; a sub-block checked against the CPU
   path's nodes; the CPU path's rate at 200^3 beside it;
@@ -35,6 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 ROWS = ("elliptic", "quality", "neural", "training")
+# 0.2's bundled semicylinder model, a 3D network (the slab mesher's case; today's bundled model is a section)
+THREE_D = Path(__file__).resolve().parents[1] / "tests" / "data" / "semicylinder-3d-model.pt"
 NEURAL_CHECK_PLANES = 4  # cell planes of the neural mesh compared with the CPU path's nodes and metrics
 
 
@@ -71,7 +73,8 @@ def _owned(slab_iterator):
 
 
 def neural_row(cells: int = 1000, device: str = "cuda", planes: int | None = None) -> dict:
-    """The bundled semicylinder network's mesh of ``cells``^3 hexahedra made, corrected and
+    """A 3D semicylinder network's mesh (``THREE_D``: the bundled model is a section network, which
+    meshgen extrudes) of ``cells``^3 hexahedra made, corrected and
     quality-checked on ``device`` slab by slab (``seconds``, the setup of the face data on the host
     included); the mesh alone timed in a second pass; then the copy of every node plane into one
     host array (where a writer would start), timed apart; a sub-block against the CPU path."""
@@ -80,12 +83,12 @@ def neural_row(cells: int = 1000, device: str = "cuda", planes: int | None = Non
     from meshgen.geometry.plugins import load_geometry
     from meshgen.methods.tfi import parametric_grid
     from meshgen.neural.gpu_mesh import SLAB_PLANES, SlabMesher, slabs
-    from meshgen.neural.models import find_model
+    from meshgen.neural.models import load_model
     from meshgen.quality.torch_kernels import report_summaries, summarise_hex_torch
 
     planes = planes or SLAB_PLANES
     geometry = load_geometry("semicylinder")
-    model = find_model(None, "semicylinder").checkpoint["model"]
+    model = load_model(THREE_D).checkpoint["model"]
     coords = parametric_grid([cells] * 3)
     small = SlabMesher(model, geometry, parametric_grid([16] * 3), device)  # warm-up: context, cuBLAS, kernels
     summarise_hex_torch(_owned(slabs(small, 8)), small.tolerance)
@@ -168,21 +171,23 @@ def cpu_quality_rate(cells: int = 200, repeat: int = 3) -> dict:
 
 
 def cpu_neural_rate(cells: int = 200) -> dict:
-    """The CPU path's neural mesh (bundled model, corrected; ``make_mesh``) and the seven metrics of
+    """The CPU path's neural mesh (``THREE_D``'s network, corrected; ``make_mesh``) and the seven metrics of
     its cells by the numba kernels, in memory at ``cells``^3 on this machine's cores: cells per
     second of both together."""
     from meshgen.geometry.plugins import load_geometry
     from meshgen.methods.registry import make_mesh
     from meshgen.methods.tfi import parametric_grid
+    from meshgen.neural.models import load_model
     from meshgen.quality.compiled import structured_hex
     from meshgen.quality.kernels import METRICS
 
     geometry = load_geometry("semicylinder")
-    make_mesh("neural", geometry, parametric_grid([20] * 3))  # warm-up: kernels loaded
+    model = load_model(THREE_D)
+    make_mesh("neural", geometry, parametric_grid([20] * 3), model=model)  # warm-up: kernels loaded
     count = cells**3
     out, degenerate = np.empty((len(METRICS), count)), np.empty(count, dtype=bool)
     start = time.perf_counter()
-    X, _ = make_mesh("neural", geometry, parametric_grid([cells] * 3))
+    X, _ = make_mesh("neural", geometry, parametric_grid([cells] * 3), model=model)
     structured_hex(np.ascontiguousarray(X), (0, 0, 0), (cells,) * 3, 1e-12, out, degenerate)
     seconds = time.perf_counter() - start
     return {"cells": count, "seconds": seconds, "cells_per_second": count / seconds, "cores": os.cpu_count()}

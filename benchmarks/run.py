@@ -558,7 +558,8 @@ def meshing(quick: bool, roof: dict | None) -> dict:
                 flush=True,
             )
 
-    # The forward pass alone: the bundled model at each size, and the [85]*4 network of the target.
+    # The forward pass alone: the bundled model at each size (a section network: the section's nodes,
+    # which meshgen extrudes), and the [85]*4 network of the target.
     networks = [(f"bundled {model.preset()}", model.checkpoint["model"], n + 1) for n in sizes]
     torch.manual_seed(0)
     paper = describe(MLP(3, PAPER_WIDTHS), PAPER_WIDTHS, False, [0.0, 0.0, 0.0], 1.0)
@@ -566,17 +567,19 @@ def meshing(quick: bool, roof: dict | None) -> dict:
     forward = []
     print(f"\nforward pass alone (NumPy, evaluate_network){'':6}nodes  GFLOP  median s   cpu s  fraction of the roof")
     for label, description, nodes in networks:
-        coords = [np.linspace(0.0, 1.0, nodes)] * 3
+        dim = int(description.get("dim", 3))
+        coords = [np.linspace(0.0, 1.0, nodes)] * dim
         evaluate_network(description, coords)  # warm up
         timing = timed_runs(lambda: evaluate_network(description, coords), 3 if quick else 5)
         timing.pop("result")
-        gflop = bench_inference.network_flops(description["widths"], 3, nodes**3) / 1e9
+        gflop = bench_inference.network_flops(description["widths"], dim, nodes**dim) / 1e9
         roof_seconds = gflop / roof["gflops"] if roof else None
         row = {
             "network": label,
             "widths": list(description["widths"]),
             "nodes_per_axis": nodes,
-            "nodes": nodes**3,
+            "dim": dim,
+            "nodes": nodes**dim,
             "gflop": gflop,
             **timing,
             "roof_seconds": roof_seconds,
@@ -587,7 +590,7 @@ def meshing(quick: bool, roof: dict | None) -> dict:
         forward.append(row)
         fraction = f"{row['fraction_of_roof']:.0%} (per CPU second {row['fraction_of_roof_per_cpu_second']:.0%})" if roof else "-"
         print(
-            f"{label + ' ' + str(row['widths']):<38}{nodes:>6}^3{gflop:>7.1f}{row['seconds']:>10.3f}"
+            f"{label + ' ' + str(row['widths']):<38}{nodes:>6}^{dim}{gflop:>7.1f}{row['seconds']:>10.3f}"
             f"{row['cpu_seconds']:>8.3f}  {fraction}",
             flush=True,
         )
@@ -966,7 +969,7 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 else ""
             )
             add(
-                f"network forward pass, {row['network']}, {n}^3 nodes",
+                f"network forward pass, {row['network']}, {n}^{row.get('dim', 3)} nodes",
                 row["seconds"],
                 "s",
                 "inference_101_seconds" if row["widths"] == PAPER_WIDTHS and n == 101 else None,

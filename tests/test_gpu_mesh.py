@@ -1,6 +1,8 @@
 """The slab-by-slab neural mesh of ``meshgen.neural.gpu_mesh`` (torch; run here on the CPU device)
 against the chunked CPU path's mesh, and its slabs' quality summary against the CPU report."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -8,18 +10,19 @@ torch = pytest.importorskip("torch")
 
 from meshgen.geometry.plugins import load_geometry  # noqa: E402
 from meshgen.neural.gpu_mesh import SlabMesher, slabs  # noqa: E402
-from meshgen.neural.models import find_model  # noqa: E402
+from meshgen.neural.models import load_model  # noqa: E402
 from meshgen.quality import quality_report  # noqa: E402
 from meshgen.quality.torch_kernels import report_summaries, summarise_hex_torch  # noqa: E402
 from meshgen.run.chunked import neural_array  # noqa: E402
 
 DIMS = (13, 9, 11)
+THREE_D = Path(__file__).resolve().parent / "data" / "semicylinder-3d-model.pt"  # the slabs are of a 3D network
 
 
 @pytest.fixture(scope="module")
 def case():
     geometry = load_geometry("semicylinder")
-    model = find_model(None, "semicylinder").checkpoint["model"]
+    model = load_model(THREE_D).checkpoint["model"]
     coords = [np.linspace(0.0, 1.0, n + 1) ** 1.2 for n in DIMS]  # graded: the coordinates are used, not assumed
     X, info = neural_array(model, geometry, coords)
     return geometry, model, coords, X.compute(), info

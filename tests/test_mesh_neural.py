@@ -6,6 +6,7 @@ import hashlib
 import json
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -28,6 +29,7 @@ from meshgen.neural.train import train
 from meshgen.quality import quality_report
 
 BUNDLED = MODELS_DIR / "semicylinder" / "checkpoint.pt"
+THREE_D = Path(__file__).resolve().parent / "data" / "semicylinder-3d-model.pt"  # 0.2's bundled model: a 3D network
 
 
 @pytest.fixture(scope="module")
@@ -175,7 +177,7 @@ def test_mesh_from_a_checkpoint_is_the_network_at_the_same_points(run_cli, tmp_p
 
 
 def test_exact_boundary_map_on_a_clustered_grid(semicylinder):
-    checkpoint = load_checkpoint(BUNDLED)
+    checkpoint = load_checkpoint(THREE_D)
     coords = node_coordinates((5, 4, 12), ["zeta:both:1.3", "xi:0:h=0.05"])
     from meshgen.geometry.layout import trained_layout, with_layout
 
@@ -421,12 +423,13 @@ def test_corrected_mesh_of_a_blown_up_map_stays_valid(run_cli, tmp_path, soft_2d
 
 def test_clustering_gives_the_requested_first_cell(run_cli, tmp_path, semicylinder):
     dims = (4, 4, 20)
-    result = run_cli("mesh", "--no-polish", "--dims", *dims, "--cluster", "zeta:both:1.15", "-o", "m.vtu")
+    three_d = ["--checkpoint", THREE_D]  # a 3D network, whose clustered nodes network_at computes
+    result = run_cli("mesh", *three_d, "--no-polish", "--dims", *dims, "--cluster", "zeta:both:1.15", "-o", "m.vtu")
     assert result.returncode == 0, result.stderr
     X = read_points(tmp_path / "m.vtu", dims)
     coords = node_coordinates(dims, ["zeta:both:1.15"])
     # NumPy's float32 forward pass (meshing) against torch's (network_at): float32 round-off
-    np.testing.assert_allclose(X, network_at(load_checkpoint(BUNDLED), coords, semicylinder), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(X, network_at(load_checkpoint(THREE_D), coords, semicylinder), rtol=0, atol=1e-5)
     # Along the axis z = 2 zeta for the exact Winslow map of a prism; the network keeps it closely,
     # so physical cell heights grow by the ratio asked for.
     heights = np.diff(X[2, 2, :, 2])

@@ -13,6 +13,7 @@ from meshgen.neural.mlp_numpy import forward_on_grid, read_checkpoint
 
 torch = pytest.importorskip("torch")
 BUNDLED = Path(__file__).resolve().parents[1] / "meshgen" / "_models" / "semicylinder" / "checkpoint.pt"
+THREE_D = Path(__file__).resolve().parents[1] / "tests" / "data" / "semicylinder-3d-model.pt"  # a 3D network
 
 
 def random_model(dim, widths, seed):
@@ -45,8 +46,8 @@ def test_forward_agrees_with_torch_to_float32_round_off(dim, widths, workers, co
 def test_the_checkpoint_reads_as_torch_loads_it(tmp_path):
     from meshgen.neural.gpu_forward import evaluate_on_grid
 
-    expected = torch.load(BUNDLED, map_location="cpu", weights_only=True)
-    read = read_checkpoint(BUNDLED)
+    expected = torch.load(THREE_D, map_location="cpu", weights_only=True)
+    read = read_checkpoint(THREE_D)
 
     def compare(a, b):
         if isinstance(b, torch.Tensor):
@@ -226,8 +227,8 @@ def test_a_small_mesh_never_imports_numba_and_is_the_compiled_mesh(tmp_path):
     done = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, env=environment, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip().splitlines()[-1] == "False"
-    model = find_model(geometry_name="semicylinder").checkpoint["model"]
-    coords = parametric_grid((20, 20, 20))
+    model = find_model(geometry_name="semicylinder").checkpoint["model"]  # a section network: 2D
+    coords = parametric_grid((20,) * model["dim"])
     assert not compiled_for(model, 21**3) and compiled_for(model, 101**3)
     blas, kernel = forward_on_grid(model, coords, compiled=False), forward_on_grid(model, coords, compiled=True)
     # float32 round-off of the last layer's sum, whose terms (|W| times tanh values up to 1) are far

@@ -16,7 +16,7 @@ from meshgen.neural.inference import block_count, block_model, block_nodes, chec
 from meshgen.neural.models import build_neural, load_model
 
 ROOT = Path(__file__).resolve().parents[1]
-BUNDLED = ROOT / "meshgen" / "_models" / "semicylinder" / "checkpoint.pt"
+BUNDLED = ROOT / "tests" / "data" / "semicylinder-3d-model.pt"  # 0.2's bundled one-block model (3D network)
 PIPE = ROOT / "tests" / "data" / "pipe-section-model.pt"  # a 0.2 block-set checkpoint
 COORDS = [np.linspace(0.0, 1.0, 9), np.linspace(0.0, 1.0, 7) ** 1.5, np.linspace(0.0, 1.0, 6)]
 
@@ -55,7 +55,7 @@ def test_a_0_2_checkpoint_loads_as_a_set_of_one_block():
 
 
 def test_the_one_block_map_is_the_raw_weights_forward_pass():
-    """The bundled exact-boundary model: X = TFI + scale b N. The path computes N in float32
+    """0.2's bundled exact-boundary model: X = TFI + scale b N. The path computes N in float32
     (NumPy's products, whose rounding depends on the BLAS kernel), the oracle in float64: they
     agree to float32 round-off of N (|N| < 1), scaled by the model's scale."""
     checkpoint = load_model(BUNDLED).checkpoint
