@@ -373,3 +373,17 @@ def test_a_large_vtu_is_measured_by_the_child_forked_first(tmp_path):
     pid = early_pid(result.stderr)
     assert pid is not None and f"worker {pid}" in result.stderr and "parts from the worker" in result.stderr
     assert json.loads(result.stdout) == expected
+
+
+def test_the_worker_module_leaves_the_file_readers_unimported():
+    """``meshgen evaluate`` forks its worker once ``meshgen.quality.worker`` is imported: that import
+    must not pull in ``meshgen.quality.files`` (every format's reader, the geometry plugins), which
+    ``meshgen.quality`` imports only when one of its names is asked for."""
+    code = (
+        "import sys, meshgen.quality.worker\n"
+        "print('meshgen.quality.files' in sys.modules)\n"
+        "from meshgen.quality import evaluate_file\n"
+        "print('meshgen.quality.files' in sys.modules, evaluate_file.__module__)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert done.stdout.split() == ["False", "True", "meshgen.quality.files"]

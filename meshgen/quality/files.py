@@ -261,6 +261,7 @@ class _Preloading:
         """The ``EvaluationWorker`` of a node array of ``node_shape`` nodes: the one forked while
         the file was read, else one made now (adopting the child ``meshgen evaluate`` forked
         first, if any) where ``worker_fits``; None where none fits or none can be forked."""
+        # not while a thread here may be importing numba: no fork with an import under way
         if self.worker is None and not self.threads and worker_fits(node_shape):
             with contextlib.suppress(OSError):
                 self.worker = EvaluationWorker(node_shape)

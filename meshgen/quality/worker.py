@@ -200,13 +200,15 @@ def release_early_worker() -> None:
         _end(*early)
 
 
-def _end(process, connection, memory) -> None:
+def _end(process, connection, memory: int | None = None) -> None:
+    """Kill the child ``process`` (if it still runs), reap it, close its pipe and ``memory`` file."""
     with contextlib.suppress(OSError, ValueError):
         process.kill()
         process.join()
     connection.close()
-    with contextlib.suppress(OSError):
-        os.close(memory)
+    if memory is not None:
+        with contextlib.suppress(OSError):
+            os.close(memory)
 
 
 class _ForkedWorker:
@@ -239,10 +241,7 @@ class _ForkedWorker:
 
     def close(self) -> None:
         """End the child (at once if it still works) and release the pipe."""
-        if self._process.is_alive():
-            self._process.kill()
-        self._process.join()
-        self._connection.close()
+        _end(self._process, self._connection)
 
     def _send(self, message) -> bool:
         try:
