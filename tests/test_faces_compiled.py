@@ -1,7 +1,8 @@
 """The compiled face and cell geometry (``meshgen.quality.faces_compiled``) against the NumPy
 definition of ``meshgen.quality.faces_openfoam`` (itself held to checkMesh in
 ``tests/test_checkmesh_non_orthogonality.py``): the same face centres and areas, cell centres to
-round-off, and the same non-orthogonality report on perturbed, left-handed, degenerate and 2D
+round-off (the compiled ones from the nodes alone), the internal faces' cosines reduced as NumPy
+reduces them, and the same non-orthogonality report on perturbed, left-handed, degenerate and 2D
 meshes."""
 
 from __future__ import annotations
@@ -44,9 +45,50 @@ def test_faces_and_cells_are_the_numpy_definitions(name):
     for (centres, areas), (our_centres, our_areas) in zip(faces, compiled):
         # The same operations in the same order: equal to the last bit.
         assert np.array_equal(our_centres, centres) and np.array_equal(our_areas, areas)
-    for sign in (1.0, -1.0):
-        expected = faces_openfoam.cell_centres(X, faces, sign)
-        assert np.abs(faces_compiled.cell_centres(compiled, sign) - expected).max() <= 1e-14 * np.abs(expected).max()
+    expected = faces_openfoam.cell_centres(X, faces)
+    assert np.abs(faces_compiled.cell_centres(X) - expected).max() <= 1e-14 * np.abs(expected).max()
+
+
+@pytest.mark.parametrize("name", sorted(MESHES))
+def test_internal_faces_reduced_as_numpy_reduces_their_cosines(name):
+    """The compiled reduction (sum, count, least and where) of the internal faces' cosines against
+    the NumPy definition's array of them reduced by NumPy."""
+    X = MESHES[name]
+    faces = [faces_openfoam.face_centres_and_areas(X, axis) for axis in range(3)]
+    sign = faces_openfoam._orientation(faces)
+    C = faces_openfoam.cell_centres(X, faces, sign)
+    for axis, (_, areas) in enumerate(faces):
+        cosines = faces_openfoam._angles(
+            faces_openfoam._along(C, axis, 1, None) - faces_openfoam._along(C, axis, 0, -1),
+            sign * faces_openfoam._along(areas, axis, 1, -1),
+        )
+        total, count, least, where = faces_compiled.internal_cosines(X, faces_compiled.cell_centres(X), axis, sign)
+        if not cosines.size:  # one cell along the axis
+            assert (total, count, least, where) == (0.0, 0, None, None)
+            continue
+        assert count == cosines.size and total == pytest.approx(cosines.sum(), rel=1e-12)
+        assert least == pytest.approx(cosines.min(), abs=1e-14)
+        assert cosines[where] == pytest.approx(least, abs=1e-14)
+
+
+def test_a_nan_cosine_is_the_least_where_the_first_nan_lies():
+    """As ``np.min`` and ``np.argmin``: a NaN cosine (a non-finite node) is the least, the first NaN
+    in C order its index."""
+    X = perturbed_box((6, 7, 8), 0.02)
+    X[3, 4, 5] = np.nan
+    C = faces_compiled.cell_centres(X)
+    for axis in range(3):
+        total, count, least, where = faces_compiled.internal_cosines(X, C, axis, 1.0)
+        cells = np.zeros((5, 6, 7), dtype=bool)  # the cells of the node (3, 4, 5)
+        cells[2:4, 3:5, 4:6] = True
+        nan = faces_openfoam._along(cells, axis, 1, None) | faces_openfoam._along(cells, axis, 0, -1)
+        assert np.isnan(total) and np.isnan(least) and count == nan.size
+        assert where == np.unravel_index(int(np.argmax(nan)), nan.shape)
+
+
+def test_no_internal_faces_along_a_one_cell_axis():
+    X = perturbed_box((2, 5, 6), 0.01)
+    assert faces_compiled.internal_cosines(X, faces_compiled.cell_centres(X), 0, 1.0) == (0.0, 0, None, None)
 
 
 @pytest.mark.parametrize("name", sorted(MESHES))
@@ -75,7 +117,7 @@ def test_two_d_meshes_are_measured_extruded_by_both():
 
 def test_auto_picks_by_mesh_size(monkeypatch):
     calls = []
-    monkeypatch.setattr(faces_compiled, "cell_centres", lambda *a: calls.append(1) or faces_openfoam.cell_centres(X, *a))
+    monkeypatch.setattr(faces_compiled, "cell_centres", lambda X: calls.append(1) or faces_openfoam.cell_centres(X))
     X = perturbed_box((5, 5, 5), 0.01)
     non_orthogonality(X)  # 64 cells: NumPy
     assert not calls

@@ -30,8 +30,9 @@ from meshgen.run.jit import numba
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["cell_centres", "face_centres_and_areas", "face_cosines"]
+__all__ = ["boundary_cosines", "boundary_faces", "cell_centres", "face_centres_and_areas", "internal_cosines"]
 
+CHUNK_LAYERS = 4  # layers of cells along the first axis a task of ``cell_centres`` (its faces between tasks twice)
 ROOT_VSMALL = 1e-150  # OpenFOAM's ROOTVSMALL (double), added to |d| |S|
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 # Corner offsets (di, dj, dk) of the faces normal to each axis, in the cyclic order whose right-hand
@@ -56,6 +57,45 @@ def _triangle(p0, p1, p2, q0, q1, q2, e0, e1, e2):
     return n0, n1, n2, a, a * (p0 + q0 + e0), a * (p1 + q1 + e1), a * (p2 + q2 + e2)
 
 
+@njit(inline="always", **_JIT)
+def _face(X, corners, i, j, k):
+    """Centre and area vector (six numbers) of the face whose corners are ``X`` at (i, j, k) plus
+    the offsets ``corners`` (4, 3): the triangles about the mean of its corners, summed in order
+    from zero as the NumPy definition adds them."""
+    pa = X[i + corners[0, 0], j + corners[0, 1], k + corners[0, 2]]
+    pb = X[i + corners[1, 0], j + corners[1, 1], k + corners[1, 2]]
+    pc = X[i + corners[2, 0], j + corners[2, 1], k + corners[2, 2]]
+    pd = X[i + corners[3, 0], j + corners[3, 1], k + corners[3, 2]]
+    a0, a1, a2 = pa[0], pa[1], pa[2]
+    b0, b1, b2 = pb[0], pb[1], pb[2]
+    c0, c1, c2 = pc[0], pc[1], pc[2]
+    d0, d1, d2 = pd[0], pd[1], pd[2]
+    e0 = 0.25 * (a0 + b0 + c0 + d0)
+    e1 = 0.25 * (a1 + b1 + c1 + d1)
+    e2 = 0.25 * (a2 + b2 + c2 + d2)
+    s0, s1, s2, sa, t0, t1, t2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for m in range(4):
+        if m == 0:
+            r = _triangle(a0, a1, a2, b0, b1, b2, e0, e1, e2)
+        elif m == 1:
+            r = _triangle(b0, b1, b2, c0, c1, c2, e0, e1, e2)
+        elif m == 2:
+            r = _triangle(c0, c1, c2, d0, d1, d2, e0, e1, e2)
+        else:
+            r = _triangle(d0, d1, d2, a0, a1, a2, e0, e1, e2)
+        sa += r[3]
+        s0 += r[0]
+        s1 += r[1]
+        s2 += r[2]
+        t0 += r[4]
+        t1 += r[5]
+        t2 += r[6]
+    if sa > 0:
+        scale = 1.0 / (3.0 * sa)
+        e0, e1, e2 = t0 * scale, t1 * scale, t2 * scale
+    return e0, e1, e2, 0.5 * s0, 0.5 * s1, 0.5 * s2
+
+
 @njit(parallel=True, **_JIT)
 def _faces(X, corners, centres, areas):
     """Centres and area vectors of the faces whose corner offsets are ``corners`` (4, 3), into
@@ -64,47 +104,10 @@ def _faces(X, corners, centres, areas):
     for i in prange(n0):
         for j in range(n1):
             for k in range(n2):
-                pa = X[i + corners[0, 0], j + corners[0, 1], k + corners[0, 2]]
-                pb = X[i + corners[1, 0], j + corners[1, 1], k + corners[1, 2]]
-                pc = X[i + corners[2, 0], j + corners[2, 1], k + corners[2, 2]]
-                pd = X[i + corners[3, 0], j + corners[3, 1], k + corners[3, 2]]
-                a0, a1, a2 = pa[0], pa[1], pa[2]
-                b0, b1, b2 = pb[0], pb[1], pb[2]
-                c0, c1, c2 = pc[0], pc[1], pc[2]
-                d0, d1, d2 = pd[0], pd[1], pd[2]
-                e0 = 0.25 * (a0 + b0 + c0 + d0)
-                e1 = 0.25 * (a1 + b1 + c1 + d1)
-                e2 = 0.25 * (a2 + b2 + c2 + d2)
-                # The four triangles in order (sums from zero, as the NumPy definition adds them).
-                s0, s1, s2, sa, t0, t1, t2 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-                for m in range(4):
-                    if m == 0:
-                        r = _triangle(a0, a1, a2, b0, b1, b2, e0, e1, e2)
-                    elif m == 1:
-                        r = _triangle(b0, b1, b2, c0, c1, c2, e0, e1, e2)
-                    elif m == 2:
-                        r = _triangle(c0, c1, c2, d0, d1, d2, e0, e1, e2)
-                    else:
-                        r = _triangle(d0, d1, d2, a0, a1, a2, e0, e1, e2)
-                    sa += r[3]
-                    s0 += r[0]
-                    s1 += r[1]
-                    s2 += r[2]
-                    t0 += r[4]
-                    t1 += r[5]
-                    t2 += r[6]
-                if sa > 0:
-                    scale = 1.0 / (3.0 * sa)
-                    centres[i, j, k, 0] = t0 * scale
-                    centres[i, j, k, 1] = t1 * scale
-                    centres[i, j, k, 2] = t2 * scale
-                else:
-                    centres[i, j, k, 0] = e0
-                    centres[i, j, k, 1] = e1
-                    centres[i, j, k, 2] = e2
-                areas[i, j, k, 0] = 0.5 * s0
-                areas[i, j, k, 1] = 0.5 * s1
-                areas[i, j, k, 2] = 0.5 * s2
+                face = _face(X, corners, i, j, k)
+                for c in range(3):
+                    centres[i, j, k, c] = face[c]
+                    areas[i, j, k, c] = face[3 + c]
 
 
 def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
@@ -120,51 +123,79 @@ def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.nda
 
 
 @njit(inline="always", **_JIT)
-def _pyramid(C, A, estimate, outward, volume_weighted, i, j, k):
-    """Add the pyramid of the face (centre ``C[i, j, k]``, area ``A[i, j, k]``, ``outward`` +-1) to
-    ``volume_weighted`` [volume, weighted x, y, z]."""
-    dot = A[i, j, k, 0] * (C[i, j, k, 0] - estimate[0])
-    dot += A[i, j, k, 1] * (C[i, j, k, 1] - estimate[1])
-    dot += A[i, j, k, 2] * (C[i, j, k, 2] - estimate[2])
-    pyramid = outward * dot
-    volume_weighted[0] += pyramid
-    for c in range(3):
-        volume_weighted[1 + c] += pyramid * (0.75 * C[i, j, k, c] + 0.25 * estimate[c])
+def _store(faces, face):
+    for c in range(6):
+        faces[c] = face[c]
 
 
 @njit(parallel=True, **_JIT)
-def _cells(C0, A0, C1, A1, C2, A2, sign, out):
+def _cells(X, corners, out, chunk):
+    """Cell centres of the node array ``X`` into ``out`` (n1, n2, n3, 3), ``chunk`` layers of cells
+    along the first axis a task. Each face is computed once (``_face``) for the two cells beside
+    it (within a task): the faces normal to the first axis a layer at a time, to the second a row,
+    to the third one by one; then per cell the mean of its six face centres and its pyramids in the
+    NumPy definition's order (the faces at the lower and the upper node layer along the first axis,
+    the second, the third), each sum from zero. The pyramids take the outward normals of a
+    right-handed map: a left-handed map negates every pyramid and every sum exactly, so the
+    centres (their ratio) are the same to the bit."""
     n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
-    for i in prange(n0):
+    for block in prange((n0 + chunk - 1) // chunk):
+        first, stop = block * chunk, min(block * chunk + chunk, n0)
+        lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
+        front, back = np.empty((n2, 6)), np.empty((n2, 6))
+        faces = np.empty((6, 6))
         estimate = np.empty(3)
         sums = np.empty(4)
         for j in range(n1):
             for k in range(n2):
-                for c in range(3):
-                    total = C0[i, j, k, c] + C0[i + 1, j, k, c]
-                    total += C1[i, j, k, c] + C1[i, j + 1, k, c]
-                    total += C2[i, j, k, c] + C2[i, j, k + 1, c]
-                    estimate[c] = total / 6.0
-                for s in range(4):
-                    sums[s] = 0.0
-                _pyramid(C0, A0, estimate, -sign, sums, i, j, k)
-                _pyramid(C0, A0, estimate, sign, sums, i + 1, j, k)
-                _pyramid(C1, A1, estimate, -sign, sums, i, j, k)
-                _pyramid(C1, A1, estimate, sign, sums, i, j + 1, k)
-                _pyramid(C2, A2, estimate, -sign, sums, i, j, k)
-                _pyramid(C2, A2, estimate, sign, sums, i, j, k + 1)
-                volume = sums[0]
-                for c in range(3):
-                    out[i, j, k, c] = sums[1 + c] / volume if abs(volume) > 1e-300 else estimate[c]
+                _store(lower[j, k], _face(X, corners[0], first, j, k))
+        for i in range(first, stop):
+            for j in range(n1):
+                for k in range(n2):
+                    _store(upper[j, k], _face(X, corners[0], i + 1, j, k))
+            for k in range(n2):
+                _store(front[k], _face(X, corners[1], i, 0, k))
+            for j in range(n1):
+                for k in range(n2):
+                    _store(back[k], _face(X, corners[1], i, j + 1, k))
+                _store(faces[5], _face(X, corners[2], i, j, 0))
+                for k in range(n2):
+                    for c in range(6):
+                        faces[0, c] = lower[j, k, c]
+                        faces[1, c] = upper[j, k, c]
+                        faces[2, c] = front[k, c]
+                        faces[3, c] = back[k, c]
+                        faces[4, c] = faces[5, c]
+                    _store(faces[5], _face(X, corners[2], i, j, k + 1))
+                    for c in range(3):
+                        total = faces[0, c] + faces[1, c]
+                        total += faces[2, c] + faces[3, c]
+                        total += faces[4, c] + faces[5, c]
+                        estimate[c] = total / 6.0
+                    for m in range(4):
+                        sums[m] = 0.0
+                    for slot in range(6):
+                        dot = faces[slot, 3] * (faces[slot, 0] - estimate[0])
+                        dot += faces[slot, 4] * (faces[slot, 1] - estimate[1])
+                        dot += faces[slot, 5] * (faces[slot, 2] - estimate[2])
+                        pyramid = (1.0 if slot % 2 else -1.0) * dot
+                        sums[0] += pyramid
+                        for c in range(3):
+                            sums[1 + c] += pyramid * (0.75 * faces[slot, c] + 0.25 * estimate[c])
+                    volume = sums[0]
+                    for c in range(3):
+                        out[i, j, k, c] = sums[1 + c] / volume if abs(volume) > 1e-300 else estimate[c]
+                front, back = back, front
+            lower, upper = upper, lower
 
 
-def cell_centres(faces, sign: float) -> np.ndarray:
-    """``faces_openfoam.cell_centres`` from the three axes' :func:`face_centres_and_areas`
-    ``faces`` and the map's orientation ``sign`` (+1 or -1): (n1, n2, n3, 3)."""
-    (C0, A0), (C1, A1), (C2, A2) = faces
-    out = np.empty((C1.shape[0], C0.shape[1], C0.shape[2], 3))
+def cell_centres(X: np.ndarray) -> np.ndarray:
+    """``faces_openfoam.cell_centres`` of the 3D node array ``X`` (contiguous float64), computed
+    from the nodes cell by cell (no face arrays): (n1, n2, n3, 3)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    out = np.empty((*(n - 1 for n in X.shape[:-1]), 3))
     if out.size:
-        _cells(C0, A0, C1, A1, C2, A2, float(sign), out)
+        _cells(X, _CORNERS, out, CHUNK_LAYERS)
     return out
 
 
@@ -177,45 +208,85 @@ def _cosine(d0, d1, d2, s0, s1, s2):
 
 
 @njit(parallel=True, **_JIT)
-def _internal(C, areas, step, sign, out):
-    """Cosines of the internal faces: out[i, j, k] for the face between cells (i, j, k) and
-    (i, j, k) + ``step`` (one unit along the axis), the face at node layer + ``step``."""
-    n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
+def _internal(X, corners, C, step, sign, sums, lows, where):
+    """The internal faces normal to one axis (corner offsets ``corners``), face by face: the face
+    between cells (i, j, k) and (i, j, k) + ``step`` lies at node layer (i, j, k) + ``step``. Per
+    layer ``i`` of faces: the sum of their cosines in C order (``sums[i]``), the least (``lows[i]``,
+    NaN if one is NaN, as ``np.min``) and its index within the layer (``where[i]``: the first NaN,
+    else the first least, as ``np.argmin``)."""
+    n0, n1, n2 = sums.shape[0], C.shape[1] - step[1], C.shape[2] - step[2]
     for i in prange(n0):
+        total = 0.0
+        low = np.inf
+        at = -1
+        flat = 0
         for j in range(n1):
             for k in range(n2):
                 i1, j1, k1 = i + step[0], j + step[1], k + step[2]
-                out[i, j, k] = _cosine(
+                face = _face(X, corners, i1, j1, k1)
+                cosine = _cosine(
                     C[i1, j1, k1, 0] - C[i, j, k, 0],
                     C[i1, j1, k1, 1] - C[i, j, k, 1],
                     C[i1, j1, k1, 2] - C[i, j, k, 2],
-                    sign * areas[i1, j1, k1, 0],
-                    sign * areas[i1, j1, k1, 1],
-                    sign * areas[i1, j1, k1, 2],
+                    sign * face[3],
+                    sign * face[4],
+                    sign * face[5],
                 )
+                total += cosine
+                if at < 0 or (not math.isnan(low) and (math.isnan(cosine) or cosine < low)):
+                    low = cosine
+                    at = flat
+                flat += 1
+        sums[i] = total
+        lows[i] = low
+        where[i] = at
 
 
-def face_cosines(C: np.ndarray, faces, axis: int, sign: float):
-    """Cosines of the faces normal to ``axis`` (``faces``: that axis's centres and areas, ``C``:
-    the cell centres, ``sign``: the orientation): the internal faces (node layers 1 to n-1 along
-    ``axis``) and the boundary faces of layer 0 and of the last layer (each with that axis dropped),
-    as ``faces_openfoam.non_orthogonality`` defines them."""
-    centres, areas = faces
+def internal_cosines(X: np.ndarray, C: np.ndarray, axis: int, sign: float):
+    """The cosines of the internal faces normal to ``axis`` (node layers 1 to n-1 along it) of the
+    node array ``X`` with cell centres ``C`` and orientation ``sign`` (+1 or -1), reduced without
+    an array of them: (sum, count, least, index of the least), as ``np.sum``, ``size``, ``np.min``
+    and ``np.unravel_index(np.argmin)`` of that array (shaped like the cells, one fewer along
+    ``axis``) give them; the sum is added layer by layer along the first axis, so it agrees with
+    NumPy's to round-off. (0.0, 0, None, None) when there are none."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
     shape = list(C.shape[:-1])
     shape[axis] -= 1
-    internal = np.empty(shape)
+    if min(shape) <= 0:
+        return 0.0, 0, None, None
     step = np.zeros(3, dtype=np.int64)
     step[axis] = 1
-    if internal.size:
-        _internal(C, areas, step, float(sign), internal)
-    boundary = []
-    last = centres.shape[axis] - 1
-    for side, outward, cell in ((0, -1.0, 0), (last, 1.0, -1)):
-        d = np.take(centres, side, axis) - np.take(C, cell, axis)
-        S = outward * (sign * np.take(areas, side, axis))
+    sums, lows = np.empty(shape[0]), np.empty(shape[0])
+    where = np.empty(shape[0], dtype=np.int64)
+    _internal(X, _CORNERS[axis], C, step, float(sign), sums, lows, where)
+    layer = int(np.argmin(lows))  # the first layer holding a NaN, else the first with the least
+    index = np.unravel_index(layer * shape[1] * shape[2] + int(where[layer]), shape)
+    return float(sums.sum()), int(np.prod(shape)), float(lows[layer]), tuple(int(i) for i in index)
+
+
+def boundary_faces(X: np.ndarray, axis: int):
+    """``face_centres_and_areas`` of the two boundary node layers along ``axis`` (first, last),
+    each with that axis dropped: [(centres, areas), (centres, areas)], shapes (cells along the
+    other two axes) + (3,)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    sides = []
+    for layer in (0, X.shape[axis] - 1):
+        nodes = np.ascontiguousarray(np.take(X, [layer], axis=axis))
+        centres, areas = face_centres_and_areas(nodes, axis)
+        sides.append((np.take(centres, 0, axis), np.take(areas, 0, axis)))
+    return sides
+
+
+def boundary_cosines(C: np.ndarray, sides, axis: int, sign: float) -> list[np.ndarray]:
+    """Cosines of the boundary faces normal to ``axis`` (``sides``: their ``boundary_faces``) with
+    cell centres ``C`` and orientation ``sign``: first layer, last layer (that axis dropped)."""
+    cosines = []
+    for (centres, areas), outward, cell in zip(sides, (-1.0, 1.0), (0, -1)):
+        d = centres - np.take(C, cell, axis)
+        S = outward * (sign * areas)
         dot = d[..., 0] * S[..., 0] + d[..., 1] * S[..., 1] + d[..., 2] * S[..., 2]
         lengths = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]) * np.sqrt(
             S[..., 0] * S[..., 0] + S[..., 1] * S[..., 1] + S[..., 2] * S[..., 2]
         )
-        boundary.append(dot / (lengths + ROOT_VSMALL))
-    return internal, boundary
+        cosines.append(dot / (lengths + ROOT_VSMALL))
+    return cosines

@@ -159,17 +159,17 @@ def non_orthogonality(X: np.ndarray, kernels: str = "auto") -> dict:
     faces = [face_centres_and_areas(X3, axis) for axis in range(3)]
     sign = _orientation(faces)
     C = cell_centres(X3, faces, sign)
-    internal, boundary = [], []  # (cosines, axis, index offset along axis)
+    internal, boundary = [], []  # ``_reduced`` cosines, with their axis and index offset along it
     for axis, (centres, areas) in enumerate(faces):
         if two_d and axis == 2:
             continue
         S = sign * areas
         d = _along(C, axis, 1, None) - _along(C, axis, 0, -1)
-        internal.append((_angles(d, _along(S, axis, 1, -1)), axis, 1))
+        internal.append(_reduced(_angles(d, _along(S, axis, 1, -1)), axis, 1))
         last = centres.shape[axis] - 1
         for side, outward, cell in ((0, -1.0, 0), (last, 1.0, -1)):
             cos = _angles(np.take(centres, side, axis) - np.take(C, cell, axis), outward * np.take(S, side, axis))
-            boundary.append((np.expand_dims(cos, axis), axis, side))
+            boundary.append(_reduced(np.expand_dims(cos, axis), axis, side))
     return {
         "non_orthogonality_internal": _summary(internal),
         "non_orthogonality_boundary": _summary(boundary),
@@ -178,37 +178,59 @@ def non_orthogonality(X: np.ndarray, kernels: str = "auto") -> dict:
 
 def _non_orthogonality_compiled(X3: np.ndarray, two_d: bool) -> dict:
     """:func:`non_orthogonality` of the 3D node array ``X3`` with the compiled kernels (``two_d``:
-    the front and back faces of an extruded 2D mesh left out)."""
+    the front and back faces of an extruded 2D mesh left out): the cell centres from the nodes, the
+    internal faces' cosines reduced as they are computed (no face or cosine arrays: at 1e6 cells
+    those were 200 MB, and their first touch most of the time), the boundary faces' as arrays."""
     from meshgen.quality import faces_compiled  # numba
 
     X3 = np.ascontiguousarray(X3, dtype=np.float64)
-    faces = [faces_compiled.face_centres_and_areas(X3, axis) for axis in range(3)]
-    sign = _orientation(faces)
-    C = faces_compiled.cell_centres(faces, sign)
-    internal, boundary = [], []  # (cosines, axis, index offset along axis)
+    sides = [faces_compiled.boundary_faces(X3, axis) for axis in range(3)]
+    sign = _orientation_of_sides(sides)
+    C = faces_compiled.cell_centres(X3)
+    internal, boundary = [], []
     for axis in range(2 if two_d else 3):
-        inside, sides = faces_compiled.face_cosines(C, faces[axis], axis, sign)
-        internal.append((inside, axis, 1))
-        last = faces[axis][0].shape[axis] - 1
-        boundary += [(np.expand_dims(cos, axis), axis, side) for cos, side in zip(sides, (0, last))]
+        internal.append((*faces_compiled.internal_cosines(X3, C, axis, sign), axis, 1))
+        last = X3.shape[axis] - 1
+        cosines = faces_compiled.boundary_cosines(C, sides[axis], axis, sign)
+        boundary += [_reduced(np.expand_dims(cos, axis), axis, side) for cos, side in zip(cosines, (0, last))]
     return {
         "non_orthogonality_internal": _summary(internal),
         "non_orthogonality_boundary": _summary(boundary),
     }
 
 
+def _orientation_of_sides(sides) -> float:
+    """``_orientation`` from the boundary faces alone: ``sides[axis]`` the (centres, areas) of the
+    first and the last node layer along ``axis``, that axis dropped."""
+    total = 0.0
+    for axis_sides in sides:
+        for (centres, areas), sign in zip(axis_sides, (-1.0, 1.0)):
+            total += sign * float(np.sum(centres * areas))
+    return 1.0 if total >= 0 else -1.0
+
+
+def _reduced(cosines: np.ndarray, axis: int, offset: int) -> tuple:
+    """(sum, count, least, index of the least, axis, offset) of an array of face ``cosines``: the
+    form ``_summary`` takes; least and index None when there are none."""
+    if not cosines.size:
+        return 0.0, 0, None, None, axis, offset
+    flat = int(np.argmin(cosines))  # the first NaN, else the first least
+    index = tuple(int(i) for i in np.unravel_index(flat, cosines.shape))
+    return float(cosines.sum()), int(cosines.size), float(cosines.reshape(-1)[flat]), index, axis, offset
+
+
 def _summary(parts) -> dict:
-    """max angle, arccos(mean cosine), worst face of ``parts`` [(cosines, axis, offset)]."""
-    parts = [p for p in parts if p[0].size]
+    """max angle, arccos(mean cosine), worst face of ``parts`` [(sum, count, least cosine, its
+    index, axis, index offset along the axis)]."""
+    parts = [p for p in parts if p[1]]
     if not parts:
         return {"max": None, "average": None, "worst_face": None, "faces": 0}
-    count = sum(p[0].size for p in parts)
-    mean_cos = sum(float(p[0].sum()) for p in parts) / count
-    worst_cos, axis, offset = min(parts, key=lambda p: float(p[0].min()))
-    flat = int(np.argmin(worst_cos))
-    index = [int(i) for i in np.unravel_index(flat, worst_cos.shape)]
+    count = sum(p[1] for p in parts)
+    mean_cos = sum(p[0] for p in parts) / count
+    _, _, worst_cos, index, axis, offset = min(parts, key=lambda p: p[2])
+    index = list(index)
     index[axis] += offset
-    worst = float(np.degrees(np.arccos(np.clip(worst_cos.reshape(-1)[flat], -1.0, 1.0))))
+    worst = float(np.degrees(np.arccos(np.clip(worst_cos, -1.0, 1.0))))
     return {
         "max": worst,
         "average": float(np.degrees(np.arccos(np.clip(mean_cos, -1.0, 1.0)))),
