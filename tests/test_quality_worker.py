@@ -302,13 +302,14 @@ def test_a_large_file_that_is_no_structured_grid_ends_its_worker_unused(tmp_path
 # when it forked none) and, at the command's exit, whether that child is still there.
 EARLY = """
 import atexit, os
-original_early = worker.fork_early_worker
+import meshgen.run.early as early_start
+original_early = early_start.fork_early_worker
 def early():
     original_early()
-    pid = worker._early[0].pid if worker._early else None
+    pid = early_start._early[0].pid if early_start._early else None
     print(f"early {pid}", file=sys.stderr, flush=True)
     atexit.register(lambda: print(f"early child at exit: {pid is not None and os.path.exists(f'/proc/{pid}')}", file=sys.stderr))
-worker.fork_early_worker = early
+early_start.fork_early_worker = early
 """
 
 
@@ -331,12 +332,38 @@ def test_meshgen_evaluate_measures_with_the_child_it_forked_first(large_vts):
     assert "early child at exit: False" in result.stderr
 
 
+# ``python -m meshgen ...`` with an audit hook that says, at the process's first fork, whether NumPy
+# and click were imported by then.
+FIRST_FORK = """
+import runpy, sys
+def hook(event, arguments):
+    if event == "os.fork" and not hasattr(sys, "first_fork"):
+        sys.first_fork = True
+        print("first fork: numpy", "numpy" in sys.modules, "click", "click" in sys.modules, file=sys.stderr, flush=True)
+sys.addaudithook(hook)
+sys.argv = ["meshgen", *sys.argv[1:]]
+runpy.run_module("meshgen", run_name="__main__", alter_sys=True)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2, reason="forked on Linux, two CPUs")
+def test_python_m_meshgen_forks_the_early_child_before_numpy_and_click(large_vts):
+    """``python -m meshgen evaluate`` forks its child before it imports NumPy or click (the child
+    imports them itself, while the parent does), and the report is the in-process one."""
+    path, expected = large_vts
+    command = [sys.executable, "-c", FIRST_FORK, "evaluate", str(path), "--json", "-"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "first fork: numpy False click False" in result.stderr
+    assert json.loads(result.stdout) == expected
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
 def test_without_the_early_child_the_worker_is_forked_once_the_extent_is_read(large_vts):
     """Where ``meshgen evaluate`` forks no child first (one CPU, no memory files), the worker
     forked when the file's extent is read gives the same report."""
     path, expected = large_vts
-    result = run_evaluate(path, "worker.fork_early_worker = lambda: None")
+    result = run_evaluate(path, "import meshgen.run.early\nmeshgen.run.early.fork_early_worker = lambda: None")
     assert result.returncode == 0, result.stderr
     assert "parts from the worker" in result.stderr
     assert json.loads(result.stdout) == expected

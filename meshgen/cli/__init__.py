@@ -17,6 +17,8 @@ import click
 
 from meshgen import __version__
 from meshgen.errors import MeshgenError, ParameterError, did_you_mean, excerpt
+from meshgen.run.early import EARLY_STARTS, start_early
+from meshgen.run.quick_exit import exit_quickly
 from meshgen.run.signals import Terminated, exit_interrupted, install_termination_handlers
 
 __all__ = [
@@ -25,6 +27,7 @@ __all__ = [
     "FLAGS",
     "MAX_ERROR_CHARS",
     "MeshgenGroup",
+    "QUICK_EXITS",
     "cli",
     "flag_of",
     "main",
@@ -43,17 +46,9 @@ COMMANDS = {
 }
 
 
-# name -> module:function run first when the command starts, before click parses it or the command's
-# module is imported: evaluate forks the process that loads numba meanwhile (meshgen.quality.worker).
-EARLY_STARTS = {"evaluate": "meshgen.quality.worker:fork_early_worker"}
-
-
-def start_early(args) -> None:
-    """Run the early start of the command ``args`` name (``EARLY_STARTS``), unless it only asks for help."""
-    if args and args[0] in EARLY_STARTS and not {"-h", "--help"} & set(args):
-        module_name, function_name = EARLY_STARTS[args[0]].split(":")
-        getattr(importlib.import_module(module_name), function_name)()
-
+# Commands whose process ends without the interpreter's teardown (``meshgen.run.quick_exit``): by
+# the exit their output is written and flushed, and nothing runs after them.
+QUICK_EXITS = frozenset({"evaluate"})
 
 # The longest error line printed: a message that quotes a file's contents is cut here at the latest.
 MAX_ERROR_CHARS = 600
@@ -173,4 +168,9 @@ def main():
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
     install_termination_handlers()
     start_early(sys.argv[1:])
-    cli.main()
+    try:
+        cli.main()
+    except SystemExit as exc:  # the process's own command line only: cli.main() called in a program returns to it
+        if sys.argv[1:2] and sys.argv[1] in QUICK_EXITS and isinstance(exc.code, (int, type(None))):
+            exit_quickly(exc.code or 0)
+        raise

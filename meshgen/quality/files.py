@@ -35,8 +35,9 @@ from meshgen.quality.report import (
     report_in_parallel,
 )
 from meshgen.quality.structured import check_node_array, load_compiled_kernels, use_compiled
-from meshgen.quality.worker import EvaluationWorker, release_early_worker, worker_fits
+from meshgen.quality.worker import EvaluationWorker, worker_fits
 from meshgen.run.atomic import atomic_path
+from meshgen.run.early import release_early_worker
 from meshgen.run.inputs import read_input_text
 from meshgen.run.publish import publishing
 from meshgen.run.resources import needs_chunking

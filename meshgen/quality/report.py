@@ -29,18 +29,15 @@ __all__ = [
 ]
 
 
-def summarize(values: np.ndarray) -> dict:
-    """mean, min, max, p01, p99 of ``values`` (floats); all None when there are none."""
+def summarize(values: np.ndarray, overwrite: bool = False) -> dict:
+    """mean, min, max, p01, p99 of ``values`` (floats); all None when there are none.
+    ``overwrite``: the percentiles may reorder ``values`` in place (no copy of them), for arrays
+    nobody reads afterwards."""
     if values.size == 0:
         return {stat: None for stat in STATS}
-    p01, p99 = np.percentile(values, [1.0, 99.0])
-    return {
-        "mean": float(np.mean(values)),
-        "min": float(np.min(values)),
-        "max": float(np.max(values)),
-        "p01": float(p01),
-        "p99": float(p99),
-    }
+    summary = {"mean": float(np.mean(values)), "min": float(np.min(values)), "max": float(np.max(values))}
+    p01, p99 = np.percentile(values, [1.0, 99.0], overwrite_input=overwrite)
+    return {**summary, "p01": float(p01), "p99": float(p99)}
 
 
 def assess(X_or_mesh):
@@ -141,16 +138,20 @@ def build_report(metrics, degenerate, info, geometry) -> dict:
     return assemble_report(*metric_summaries(metrics, degenerate), info, geometry)
 
 
-def metric_summaries(metrics, degenerate) -> tuple[dict, dict]:
+def metric_summaries(metrics, degenerate, overwrite: bool = False) -> tuple[dict, dict]:
     """(summaries {name: {mean, min, max, p01, p99}}, counts {cells, inverted, degenerate}) of the
-    per-cell ``metrics`` and their ``degenerate`` mask: what ``assemble_report`` makes the report of."""
+    per-cell ``metrics`` and their ``degenerate`` mask: what ``assemble_report`` makes the report of.
+    ``overwrite``: the metric arrays may be reordered in place (``summarize``): the caller is done
+    with them."""
     inverted = degenerate | ~(metrics["scaled_jacobian"] > 0.0)
     shaped = ~degenerate
     every = bool(shaped.all())  # then the arrays themselves, not copies of them
+
+    def summary(name):
+        return summarize(metrics[name], overwrite) if every else summarize(metrics[name][shaped], True)
+
     # One metric per thread: np.percentile's partition, the most of the report's own time, releases the GIL.
-    summaries = dict(
-        zip(METRICS, map_in_threads(lambda name: summarize(metrics[name] if every else metrics[name][shaped]), METRICS))
-    )
+    summaries = dict(zip(METRICS, map_in_threads(summary, METRICS)))
     counts = {
         "cells": int(len(degenerate)),
         "inverted": int(np.count_nonzero(inverted)),

@@ -36,13 +36,14 @@ only what the report needs of the metrics (their summaries and the solver figure
 ``report_parts``), never the metric arrays, and the parent assembles the report
 (``assemble_report``) as the in-process path does.
 
-``meshgen evaluate`` forks that child earlier still, first thing when the command starts
-(``fork_early_worker``, before the command's own imports and the file's first byte): the child
-loads numba during the whole quarter of a second the parent spends importing what reads files and
-loads geometries. The nodes' shape is not known then, so their memory is a memory file
-(``memfd_create``) that the parent sizes and both processes map once the file's extent is read;
-the first ``EvaluationWorker`` of the command adopts that child, and a command that never makes one
-ends it (``release_early_worker``). Only where a second CPU runs the child meanwhile.
+``meshgen evaluate`` forks that child earlier still, first thing when the process starts
+(``meshgen.run.early.fork_early_worker``, before the parent imports NumPy, the command or the
+file's first byte): the child imports NumPy and loads numba while the parent imports what reads
+files and loads geometries and reads the file. The nodes' shape is not known then, so their memory
+is a memory file (``memfd_create``) that the parent sizes and both processes map once the file's
+extent is read; the first ``EvaluationWorker`` of the command adopts that child, and a command that
+never makes one ends it (``release_early_worker``). Only where a second CPU runs the child
+meanwhile.
 
 The child allocates without transparent huge pages (NumPy asks the kernel for them on large arrays):
 its arrays are touched once, and on a kernel that compacts memory to make a huge page on the first
@@ -71,6 +72,7 @@ from meshgen.quality.report import assess_in_parallel, metric_summaries, report_
 from meshgen.quality.smoothness import smoothness_figures
 from meshgen.quality.structured import load_compiled_kernels as load_first_kernel
 from meshgen.quality.structured import structured_metrics, use_compiled
+from meshgen.run.early import end, fork, take_early_worker
 from meshgen.run.signals import TERMINATING_SIGNALS
 
 __all__ = [
@@ -78,12 +80,11 @@ __all__ = [
     "WAIT_SECONDS_PER_CELL",
     "EvaluationWorker",
     "QualityWorker",
-    "fork_early_worker",
     "is_stopped",
     "load_compiled_kernels",
     "quality_worker",
-    "release_early_worker",
     "report_parts",
+    "serve_early",
     "start_numba",
     "worker_fits",
     "worker_timeout",
@@ -149,66 +150,7 @@ def _mapped(memory: int, node_shape: tuple, size: bool = False) -> np.ndarray:
 
 def _fork(nodes, work, *arguments):
     """(process, connection): a forked child running ``_serve(..., nodes, work, *arguments)``."""
-    import multiprocessing
-
-    context = multiprocessing.get_context("fork")
-    connection, child_end = context.Pipe()
-    arguments = (child_end, connection, os.getpid(), nodes, work, *arguments)
-    process = context.Process(target=_serve, args=arguments, name="meshgen-quality", daemon=True)
-    process.start()
-    child_end.close()
-    return process, connection
-
-
-_early = None  # (process, connection, memory file) of the child fork_early_worker forked, until adopted
-
-
-def fork_early_worker() -> None:
-    """Fork, first thing in ``meshgen evaluate``, the child the command's first ``EvaluationWorker``
-    adopts (see the module text): Linux with ``memfd_create``, two CPUs or more for this process,
-    numba not loaded here. Nothing happens where one of those is missing or the fork fails."""
-    global _early
-    if _early is not None or not sys.platform.startswith("linux") or not hasattr(os, "memfd_create"):
-        return
-    if "numba" in sys.modules or len(os.sched_getaffinity(0)) < 2:
-        return
-    try:
-        memory = os.memfd_create("meshgen-nodes")
-    except OSError:
-        return
-    try:
-        _early = (*_fork(memory, _parts, None), memory)
-    except OSError:
-        os.close(memory)
-
-
-def _take_early():
-    """The early child's (process, connection, memory file), once; None when there is none or it
-    died meanwhile."""
-    global _early
-    early, _early = _early, None
-    if early is not None and not early[0].is_alive():
-        _end(*early)
-        return None
-    return early
-
-
-def release_early_worker() -> None:
-    """End the child ``fork_early_worker`` forked if no ``EvaluationWorker`` adopted it."""
-    early = _take_early()
-    if early is not None:
-        _end(*early)
-
-
-def _end(process, connection, memory: int | None = None) -> None:
-    """Kill the child ``process`` (if it still runs), reap it, close its pipe and ``memory`` file."""
-    with contextlib.suppress(OSError, ValueError):
-        process.kill()
-        process.join()
-    connection.close()
-    if memory is not None:
-        with contextlib.suppress(OSError):
-            os.close(memory)
+    return fork(_serve, nodes, work, *arguments)
 
 
 class _ForkedWorker:
@@ -241,7 +183,7 @@ class _ForkedWorker:
 
     def close(self) -> None:
         """End the child (at once if it still works) and release the pipe."""
-        _end(self._process, self._connection)
+        end(self._process, self._connection)
 
     def _send(self, message) -> bool:
         try:
@@ -294,13 +236,13 @@ class EvaluationWorker(_ForkedWorker):
     the child (the report needs only their summaries)."""
 
     def __init__(self, node_shape):
-        early = _take_early()
+        early = take_early_worker()
         if early is not None:
             try:
                 self._adopt(early, node_shape)
                 return
             except OSError:  # the memory file could not take the nodes: a child of our own
-                _end(*early)
+                end(*early)
         self._start(node_shape, _parts, 0)
 
     def _adopt(self, early, node_shape) -> None:
@@ -329,7 +271,7 @@ def report_parts(X: np.ndarray) -> dict:
         parts = {"cells": int(len(degenerate)), "all_degenerate": bool(degenerate.all())}
         if parts["all_degenerate"]:
             return parts
-        summaries, counts = metric_summaries(metrics, degenerate)
+        summaries, counts = metric_summaries(metrics, degenerate, overwrite=True)  # the arrays end here
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
             figures = info["solver_figures"]()
     return {
@@ -383,17 +325,49 @@ def start_numba() -> None:
 
 
 def _numba_without_extras() -> None:
-    """Leave out, in this child only, the parts of numba's start that meshgen's kernels never use:
-    the CFFI support its type registries set up (``import cffi`` and cffi's C parser, about 30 ms)
-    and the scan of every installed distribution for numba extensions (``entry_points()``, 20 to
-    30 ms here). The child runs nothing but these kernels, then exits; the parent's numba, if it
-    ever loads one, is untouched. Before numba is imported (``worker_fits``) and only then."""
+    """Leave out, in this child only, the parts of numba's start that meshgen's kernels never use
+    (the child runs nothing but these kernels from numba's cache, then exits; the parent's numba,
+    if it ever loads one, is untouched; before numba is imported, ``worker_fits``, and only then):
+
+    - the CFFI support its type registries set up (``import cffi`` and cffi's C parser, about 30 ms);
+    - the scan of every installed distribution for numba extensions (``entry_points()``, 20 to
+      30 ms here);
+    - PyYAML (about 20 ms), which numba imports to read a ``.numba_config.yaml`` in the working
+      folder: left out only where there is none;
+    - its lowering and typing registries (every NumPy function's implementation, about 60 ms and
+      50 modules), which a kernel loaded from the cache never calls: ``_load_from_cache_alone``.
+    """
     if "numba" in sys.modules:
         return
     sys.modules.setdefault("cffi", None)  # None: ``import cffi`` raises ImportError, numba types no CFFI
+    if not os.path.isfile(".numba_config.yaml"):
+        sys.modules.setdefault("yaml", None)  # numba's config then reads the NUMBA_ variables alone
     import numba.core.entrypoints as entrypoints
 
     entrypoints._already_initialized = True  # numba's own flag for "extensions loaded"
+    _load_from_cache_alone()
+
+
+def _load_from_cache_alone() -> None:
+    """Load cached kernels without numba's registries: numba's ``Cache.load_overload`` refreshes
+    the target context (imports and installs every registry, "to ensure it is initialized") before
+    it reads the cache; what a cached kernel needs of that is the runtime (``rtsys.initialize``).
+    A kernel not in the cache compiles as ever: numba's compiler refreshes both contexts itself.
+    Where numba's internals differ from these, nothing changes."""
+    from numba.core import caching
+    from numba.core.runtime import nrt
+
+    cache = getattr(caching, "Cache", None)
+    needed = ("load_overload", "_load_overload", "_guard_against_spurious_io_errors")
+    if cache is None or not all(hasattr(cache, name) for name in needed) or not hasattr(nrt, "rtsys"):
+        return
+
+    def load_overload(self, sig, target_context):
+        nrt.rtsys.initialize(target_context)
+        with self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+
+    cache.load_overload = load_overload
 
 
 def _without_huge_pages() -> None:
@@ -402,6 +376,13 @@ def _without_huge_pages() -> None:
     setting = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
     if setting is not None:
         setting(False)
+
+
+def serve_early(connection, parent_end, parent: int, memory: int) -> None:
+    """The child ``meshgen.run.early.fork_early_worker`` forks (its ``EARLY_CHILD``): ``_serve``
+    of the ``EvaluationWorker``'s parts (no metric arrays come back), the nodes to come in the
+    memory file ``memory``."""
+    _serve(connection, parent_end, parent, memory, _parts, None)
 
 
 def _wait(connection, parent: int) -> None:
