@@ -156,7 +156,11 @@ def evaluate_cli(dims=(100, 100, 100), repeat: int = 5, suffix: str = ".vts") ->
     """``meshgen evaluate`` of the TFI semicylinder's .vts (or ``suffix``: ``.vtu``, ``meshgen
     mesh``'s default; ``meshgen mesh --method tfi``), end to end: a subprocess from its start to
     its exit, as a user runs it; one warm-up run (numba's cache and the page cache warm), then the
-    median of ``repeat``, wall and CPU (user + system of the process, all its threads) seconds."""
+    median of ``repeat``, wall and CPU (user + system of the process, all its threads) seconds.
+    meshgen's bytecode is compiled first, as an installed meshgen has it (``bytecode.py``)."""
+    from bytecode import compile_bytecode
+
+    bytecode = compile_bytecode()
     root = str(Path(__file__).resolve().parents[1])
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
     with tempfile.TemporaryDirectory() as folder:
@@ -181,6 +185,7 @@ def evaluate_cli(dims=(100, 100, 100), repeat: int = 5, suffix: str = ".vts") ->
         "runs_seconds": walls,
         "format": suffix,
         "target_seconds": CLI_TARGET_SECONDS if suffix == ".vts" else None,
+        **bytecode,
     }
 
 
@@ -204,7 +209,7 @@ def print_table(data: dict) -> None:
         print(
             f"meshgen evaluate of the {cli.get('format', '.vts')}, end to end: median {cli['seconds']:.3f} s "
             f"(min {cli['min_seconds']:.3f}, max {cli['max_seconds']:.3f}, cpu {cli['cpu_seconds']:.3f}) of "
-            f"{len(cli['runs_seconds'])} runs{target}"
+            f"{len(cli['runs_seconds'])} runs{target}; bytecode {cli.get('bytecode', 'as found')}"
         )
     if "first_call" in data:
         first = data["first_call"]
