@@ -34,6 +34,8 @@ MESHES = {
     "strongly perturbed": perturbed_box((6, 5, 7), 0.06, seed=3),
     "left-handed": perturbed_box((7, 8, 9), 0.02)[:, :, ::-1],
     "thin": perturbed_box((2, 9, 3), 0.01, seed=5),
+    # 13 layers of cells: tasks of faces_compiled.CHUNK_LAYERS layers meet three times
+    "long": perturbed_box((14, 5, 6), 0.03, seed=7),
 }
 
 
@@ -62,7 +64,7 @@ def test_internal_faces_reduced_as_numpy_reduces_their_cosines(name):
             faces_openfoam._along(C, axis, 1, None) - faces_openfoam._along(C, axis, 0, -1),
             sign * faces_openfoam._along(areas, axis, 1, -1),
         )
-        total, count, least, where = faces_compiled.internal_cosines(X, faces_compiled.cell_centres(X), axis, sign)
+        total, count, least, where = faces_compiled.cells_and_internal_cosines(X, sign)[1][axis]
         if not cosines.size:  # one cell along the axis
             assert (total, count, least, where) == (0.0, 0, None, None)
             continue
@@ -76,9 +78,8 @@ def test_a_nan_cosine_is_the_least_where_the_first_nan_lies():
     in C order its index."""
     X = perturbed_box((6, 7, 8), 0.02)
     X[3, 4, 5] = np.nan
-    C = faces_compiled.cell_centres(X)
     for axis in range(3):
-        total, count, least, where = faces_compiled.internal_cosines(X, C, axis, 1.0)
+        total, count, least, where = faces_compiled.cells_and_internal_cosines(X, 1.0)[1][axis]
         cells = np.zeros((5, 6, 7), dtype=bool)  # the cells of the node (3, 4, 5)
         cells[2:4, 3:5, 4:6] = True
         nan = faces_openfoam._along(cells, axis, 1, None) | faces_openfoam._along(cells, axis, 0, -1)
@@ -88,7 +89,7 @@ def test_a_nan_cosine_is_the_least_where_the_first_nan_lies():
 
 def test_no_internal_faces_along_a_one_cell_axis():
     X = perturbed_box((2, 5, 6), 0.01)
-    assert faces_compiled.internal_cosines(X, faces_compiled.cell_centres(X), 0, 1.0) == (0.0, 0, None, None)
+    assert faces_compiled.cells_and_internal_cosines(X, 1.0)[1][0] == (0.0, 0, None, None)
 
 
 @pytest.mark.parametrize("name", sorted(MESHES))
@@ -117,7 +118,8 @@ def test_two_d_meshes_are_measured_extruded_by_both():
 
 def test_auto_picks_by_mesh_size(monkeypatch):
     calls = []
-    monkeypatch.setattr(faces_compiled, "cell_centres", lambda X: calls.append(1) or faces_openfoam.cell_centres(X))
+    original = faces_compiled.cells_and_internal_cosines
+    monkeypatch.setattr(faces_compiled, "cells_and_internal_cosines", lambda *a: calls.append(1) or original(*a))
     X = perturbed_box((5, 5, 5), 0.01)
     non_orthogonality(X)  # 64 cells: NumPy
     assert not calls

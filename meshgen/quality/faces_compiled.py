@@ -30,9 +30,9 @@ from meshgen.run.jit import numba
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["boundary_cosines", "boundary_faces", "cell_centres", "face_centres_and_areas", "internal_cosines"]
+__all__ = ["boundary_cosines", "boundary_faces", "cell_centres", "cells_and_internal_cosines", "face_centres_and_areas"]
 
-CHUNK_LAYERS = 4  # layers of cells along the first axis a task of ``cell_centres`` (its faces between tasks twice)
+CHUNK_LAYERS = 4  # layers of cells along the first axis a task of ``_cells`` (the faces between tasks: twice)
 ROOT_VSMALL = 1e-150  # OpenFOAM's ROOTVSMALL (double), added to |d| |S|
 _JIT = {"cache": True, "fastmath": False, "nogil": True, "error_model": "numpy"}
 # Corner offsets (di, dj, dk) of the faces normal to each axis, in the cyclic order whose right-hand
@@ -128,75 +128,17 @@ def _store(faces, face):
         faces[c] = face[c]
 
 
-@njit(parallel=True, **_JIT)
-def _cells(X, corners, out, chunk):
-    """Cell centres of the node array ``X`` into ``out`` (n1, n2, n3, 3), ``chunk`` layers of cells
-    along the first axis a task. Each face is computed once (``_face``) for the two cells beside
-    it (within a task): the faces normal to the first axis a layer at a time, to the second a row,
-    to the third one by one; then per cell the mean of its six face centres and its pyramids in the
-    NumPy definition's order (the faces at the lower and the upper node layer along the first axis,
-    the second, the third), each sum from zero. The pyramids take the outward normals of a
-    right-handed map: a left-handed map negates every pyramid and every sum exactly, so the
-    centres (their ratio) are the same to the bit."""
-    n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
-    for block in prange((n0 + chunk - 1) // chunk):
-        first, stop = block * chunk, min(block * chunk + chunk, n0)
-        lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
-        front, back = np.empty((n2, 6)), np.empty((n2, 6))
-        faces = np.empty((6, 6))
-        estimate = np.empty(3)
-        sums = np.empty(4)
-        for j in range(n1):
-            for k in range(n2):
-                _store(lower[j, k], _face(X, corners[0], first, j, k))
-        for i in range(first, stop):
-            for j in range(n1):
-                for k in range(n2):
-                    _store(upper[j, k], _face(X, corners[0], i + 1, j, k))
-            for k in range(n2):
-                _store(front[k], _face(X, corners[1], i, 0, k))
-            for j in range(n1):
-                for k in range(n2):
-                    _store(back[k], _face(X, corners[1], i, j + 1, k))
-                _store(faces[5], _face(X, corners[2], i, j, 0))
-                for k in range(n2):
-                    for c in range(6):
-                        faces[0, c] = lower[j, k, c]
-                        faces[1, c] = upper[j, k, c]
-                        faces[2, c] = front[k, c]
-                        faces[3, c] = back[k, c]
-                        faces[4, c] = faces[5, c]
-                    _store(faces[5], _face(X, corners[2], i, j, k + 1))
-                    for c in range(3):
-                        total = faces[0, c] + faces[1, c]
-                        total += faces[2, c] + faces[3, c]
-                        total += faces[4, c] + faces[5, c]
-                        estimate[c] = total / 6.0
-                    for m in range(4):
-                        sums[m] = 0.0
-                    for slot in range(6):
-                        dot = faces[slot, 3] * (faces[slot, 0] - estimate[0])
-                        dot += faces[slot, 4] * (faces[slot, 1] - estimate[1])
-                        dot += faces[slot, 5] * (faces[slot, 2] - estimate[2])
-                        pyramid = (1.0 if slot % 2 else -1.0) * dot
-                        sums[0] += pyramid
-                        for c in range(3):
-                            sums[1 + c] += pyramid * (0.75 * faces[slot, c] + 0.25 * estimate[c])
-                    volume = sums[0]
-                    for c in range(3):
-                        out[i, j, k, c] = sums[1 + c] / volume if abs(volume) > 1e-300 else estimate[c]
-                front, back = back, front
-            lower, upper = upper, lower
-
-
-def cell_centres(X: np.ndarray) -> np.ndarray:
-    """``faces_openfoam.cell_centres`` of the 3D node array ``X`` (contiguous float64), computed
-    from the nodes cell by cell (no face arrays): (n1, n2, n3, 3)."""
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    out = np.empty((*(n - 1 for n in X.shape[:-1]), 3))
-    if out.size:
-        _cells(X, _CORNERS, out, CHUNK_LAYERS)
-    return out
+@njit(inline="always", **_JIT)
+def _pyramid(face, estimate, outward, sums):
+    """Add the pyramid of ``face`` (centre, area vector; ``outward`` +-1) about ``estimate`` to
+    ``sums`` [volume, weighted x, y, z]."""
+    dot = face[3] * (face[0] - estimate[0])
+    dot += face[4] * (face[1] - estimate[1])
+    dot += face[5] * (face[2] - estimate[2])
+    pyramid = outward * dot
+    sums[0] += pyramid
+    for c in range(3):
+        sums[1 + c] += pyramid * (0.75 * face[c] + 0.25 * estimate[c])
 
 
 @njit(inline="always", **_JIT)
@@ -207,61 +149,182 @@ def _cosine(d0, d1, d2, s0, s1, s2):
     return dot / (lengths + ROOT_VSMALL)
 
 
+@njit(inline="always", **_JIT)
+def _between(C, p0, p1, p2, q0, q1, q2, area, sign):
+    """The cosine of the internal face of area vector ``area`` (3) between the cells p and q."""
+    return _cosine(
+        C[q0, q1, q2, 0] - C[p0, p1, p2, 0],
+        C[q0, q1, q2, 1] - C[p0, p1, p2, 1],
+        C[q0, q1, q2, 2] - C[p0, p1, p2, 2],
+        sign * area[0],
+        sign * area[1],
+        sign * area[2],
+    )
+
+
+@njit(inline="always", **_JIT)
+def _least(cosine, low, at, flat):
+    """(least, its index) after ``cosine`` (the ``flat``-th), as ``np.min`` / ``np.argmin`` keep
+    them: the first NaN, else the first least."""
+    if at < 0 or (not math.isnan(low) and (math.isnan(cosine) or cosine < low)):
+        return cosine, flat
+    return low, at
+
+
 @njit(parallel=True, **_JIT)
-def _internal(X, corners, C, step, sign, sums, lows, where):
-    """The internal faces normal to one axis (corner offsets ``corners``), face by face: the face
-    between cells (i, j, k) and (i, j, k) + ``step`` lies at node layer (i, j, k) + ``step``. Per
-    layer ``i`` of faces: the sum of their cosines in C order (``sums[i]``), the least (``lows[i]``,
-    NaN if one is NaN, as ``np.min``) and its index within the layer (``where[i]``: the first NaN,
-    else the first least, as ``np.argmin``)."""
-    n0, n1, n2 = sums.shape[0], C.shape[1] - step[1], C.shape[2] - step[2]
-    for i in prange(n0):
-        total = 0.0
-        low = np.inf
-        at = -1
-        flat = 0
+def _cells(X, corners, sign, out, chunk, sums, lows, where):
+    """Cell centres of the node array ``X`` into ``out`` (n1, n2, n3, 3), and the internal faces'
+    cosines reduced per layer (``sums``, ``lows``, ``where``: (axis, layer), see ``_layers``),
+    ``chunk`` layers of cells along the first axis a task.
+
+    Each face is computed once (``_face``) for the two cells beside it (within a task), into
+    buffers: the faces normal to the first axis a node layer at a time, to the second and the
+    third a row of cells at a time; per cell, the mean of its six face centres and its pyramids in
+    the NumPy definition's order (the faces at the lower and the upper node layer along the first
+    axis, the second, the third), each sum from zero. The pyramids take the outward normals of a
+    right-handed map: a left-handed map negates every pyramid and every sum exactly, so the centres
+    (their ratio) are the same to the bit. Once a layer of cells has its centres, the internal
+    faces within it and those to the layer below (in the same task) get their cosines, with
+    ``sign`` (the map's orientation) on the area vectors; the faces between two tasks' layers are
+    ``_layers``'."""
+    n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
+    for block in prange((n0 + chunk - 1) // chunk):
+        first, stop = block * chunk, min(block * chunk + chunk, n0)
+        lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
+        front, back = np.empty((n2, 6)), np.empty((n2, 6))
+        side = np.empty((n2 + 1, 6))
+        across = np.empty((n1 + 1, n2, 3))  # the layer's area vectors normal to the second axis
+        along = np.empty((n1, n2 + 1, 3))  # and to the third
+        estimate = np.empty(3)
+        sums4 = np.empty(4)
         for j in range(n1):
             for k in range(n2):
-                i1, j1, k1 = i + step[0], j + step[1], k + step[2]
-                face = _face(X, corners, i1, j1, k1)
+                _store(lower[j, k], _face(X, corners[0], first, j, k))
+        for i in range(first, stop):
+            for j in range(n1):
+                for k in range(n2):
+                    _store(upper[j, k], _face(X, corners[0], i + 1, j, k))
+            for k in range(n2):
+                _store(front[k], _face(X, corners[1], i, 0, k))
+                for c in range(3):
+                    across[0, k, c] = front[k, 3 + c]
+            for j in range(n1):
+                for k in range(n2):
+                    _store(back[k], _face(X, corners[1], i, j + 1, k))
+                    for c in range(3):
+                        across[j + 1, k, c] = back[k, 3 + c]
+                for k in range(n2 + 1):
+                    _store(side[k], _face(X, corners[2], i, j, k))
+                    for c in range(3):
+                        along[j, k, c] = side[k, 3 + c]
+                for k in range(n2):
+                    for c in range(3):
+                        total = lower[j, k, c] + upper[j, k, c]
+                        total += front[k, c] + back[k, c]
+                        total += side[k, c] + side[k + 1, c]
+                        estimate[c] = total / 6.0
+                    for m in range(4):
+                        sums4[m] = 0.0
+                    _pyramid(lower[j, k], estimate, -1.0, sums4)
+                    _pyramid(upper[j, k], estimate, 1.0, sums4)
+                    _pyramid(front[k], estimate, -1.0, sums4)
+                    _pyramid(back[k], estimate, 1.0, sums4)
+                    _pyramid(side[k], estimate, -1.0, sums4)
+                    _pyramid(side[k + 1], estimate, 1.0, sums4)
+                    volume = sums4[0]
+                    for c in range(3):
+                        out[i, j, k, c] = sums4[1 + c] / volume if abs(volume) > 1e-300 else estimate[c]
+                front, back = back, front
+            if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
+                total, low, at, flat = 0.0, np.inf, -1, 0
+                for j in range(n1):
+                    for k in range(n2):
+                        cosine = _between(out, i - 1, j, k, i, j, k, lower[j, k, 3:], sign)
+                        total += cosine
+                        low, at = _least(cosine, low, at, flat)
+                        flat += 1
+                sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = total, low, at
+            total, low, at, flat = 0.0, np.inf, -1, 0
+            for j in range(n1 - 1):
+                for k in range(n2):
+                    cosine = _between(out, i, j, k, i, j + 1, k, across[j + 1, k], sign)
+                    total += cosine
+                    low, at = _least(cosine, low, at, flat)
+                    flat += 1
+            sums[1, i], lows[1, i], where[1, i] = total, low, at
+            total, low, at, flat = 0.0, np.inf, -1, 0
+            for j in range(n1):
+                for k in range(n2 - 1):
+                    cosine = _between(out, i, j, k, i, j, k + 1, along[j, k + 1], sign)
+                    total += cosine
+                    low, at = _least(cosine, low, at, flat)
+                    flat += 1
+            sums[2, i], lows[2, i], where[2, i] = total, low, at
+            lower, upper = upper, lower
+
+
+@njit(parallel=True, **_JIT)
+def _layers(X, corners, C, layers, sign, sums, lows, where):
+    """The internal faces normal to the first axis between cell layers ``layers[t]`` and the next
+    (the faces at node layer ``layers[t]`` + 1, corner offsets ``corners``), face by face: per
+    layer, the sum of their cosines in C order (``sums``), the least (``lows``: NaN if one is NaN,
+    as ``np.min``) and its index within the layer (``where``: the first NaN, else the first least,
+    as ``np.argmin``)."""
+    n1, n2 = C.shape[1], C.shape[2]
+    for t in prange(layers.shape[0]):
+        i = layers[t]
+        total, low, at, flat = 0.0, np.inf, -1, 0
+        for j in range(n1):
+            for k in range(n2):
+                face = _face(X, corners, i + 1, j, k)
                 cosine = _cosine(
-                    C[i1, j1, k1, 0] - C[i, j, k, 0],
-                    C[i1, j1, k1, 1] - C[i, j, k, 1],
-                    C[i1, j1, k1, 2] - C[i, j, k, 2],
+                    C[i + 1, j, k, 0] - C[i, j, k, 0],
+                    C[i + 1, j, k, 1] - C[i, j, k, 1],
+                    C[i + 1, j, k, 2] - C[i, j, k, 2],
                     sign * face[3],
                     sign * face[4],
                     sign * face[5],
                 )
                 total += cosine
-                if at < 0 or (not math.isnan(low) and (math.isnan(cosine) or cosine < low)):
-                    low = cosine
-                    at = flat
+                low, at = _least(cosine, low, at, flat)
                 flat += 1
-        sums[i] = total
-        lows[i] = low
-        where[i] = at
+        sums[i], lows[i], where[i] = total, low, at
 
 
-def internal_cosines(X: np.ndarray, C: np.ndarray, axis: int, sign: float):
-    """The cosines of the internal faces normal to ``axis`` (node layers 1 to n-1 along it) of the
-    node array ``X`` with cell centres ``C`` and orientation ``sign`` (+1 or -1), reduced without
-    an array of them: (sum, count, least, index of the least), as ``np.sum``, ``size``, ``np.min``
-    and ``np.unravel_index(np.argmin)`` of that array (shaped like the cells, one fewer along
-    ``axis``) give them; the sum is added layer by layer along the first axis, so it agrees with
-    NumPy's to round-off. (0.0, 0, None, None) when there are none."""
+def cells_and_internal_cosines(X: np.ndarray, sign: float):
+    """The cell centres (n1, n2, n3, 3) of the 3D node array ``X`` (``faces_openfoam.cell_centres``)
+    and, for each axis, its internal faces' cosines with orientation ``sign`` (+1 or -1), reduced
+    without an array of them: (sum, count, least, index of the least) as ``np.sum``, ``size``,
+    ``np.min`` and ``np.unravel_index(np.argmin)`` of that array (shaped like the cells, one fewer
+    along the axis) give them; (0.0, 0, None, None) where there are none. The sums are added layer
+    by layer along the first axis, so they agree with NumPy's to round-off."""
     X = np.ascontiguousarray(X, dtype=np.float64)
-    shape = list(C.shape[:-1])
-    shape[axis] -= 1
-    if min(shape) <= 0:
-        return 0.0, 0, None, None
-    step = np.zeros(3, dtype=np.int64)
-    step[axis] = 1
-    sums, lows = np.empty(shape[0]), np.empty(shape[0])
-    where = np.empty(shape[0], dtype=np.int64)
-    _internal(X, _CORNERS[axis], C, step, float(sign), sums, lows, where)
-    layer = int(np.argmin(lows))  # the first layer holding a NaN, else the first with the least
-    index = np.unravel_index(layer * shape[1] * shape[2] + int(where[layer]), shape)
-    return float(sums.sum()), int(np.prod(shape)), float(lows[layer]), tuple(int(i) for i in index)
+    cells = tuple(n - 1 for n in X.shape[:-1])
+    C = np.empty((*cells, 3))
+    sums, lows = np.zeros((3, max(cells[0], 1))), np.zeros((3, max(cells[0], 1)))
+    where = np.full((3, max(cells[0], 1)), -1, dtype=np.int64)
+    if C.size:
+        _cells(X, _CORNERS, float(sign), C, CHUNK_LAYERS, sums, lows, where)
+        boundaries = np.arange(CHUNK_LAYERS, cells[0], CHUNK_LAYERS, dtype=np.int64) - 1  # below each task's first layer
+        _layers(X, _CORNERS[0], C, boundaries, float(sign), sums[0], lows[0], where[0])
+    reduced = []
+    for axis in range(3):
+        shape = list(cells)
+        shape[axis] -= 1
+        if min(shape) <= 0:
+            reduced.append((0.0, 0, None, None))
+            continue
+        layer = int(np.argmin(lows[axis, : shape[0]]))  # the first layer holding a NaN, else the first least
+        index = np.unravel_index(layer * shape[1] * shape[2] + int(where[axis, layer]), shape)
+        total = float(sums[axis, : shape[0]].sum())
+        reduced.append((total, int(np.prod(shape)), float(lows[axis, layer]), tuple(int(i) for i in index)))
+    return C, reduced
+
+
+def cell_centres(X: np.ndarray) -> np.ndarray:
+    """``faces_openfoam.cell_centres`` of the 3D node array ``X``, computed from the nodes cell by
+    cell (``cells_and_internal_cosines``' first part): (n1, n2, n3, 3)."""
+    return cells_and_internal_cosines(X, 1.0)[0]
 
 
 def boundary_faces(X: np.ndarray, axis: int):

@@ -186,10 +186,10 @@ def _non_orthogonality_compiled(X3: np.ndarray, two_d: bool) -> dict:
     X3 = np.ascontiguousarray(X3, dtype=np.float64)
     sides = [faces_compiled.boundary_faces(X3, axis) for axis in range(3)]
     sign = _orientation_of_sides(sides)
-    C = faces_compiled.cell_centres(X3)
+    C, reduced = faces_compiled.cells_and_internal_cosines(X3, sign)
     internal, boundary = [], []
     for axis in range(2 if two_d else 3):
-        internal.append((*faces_compiled.internal_cosines(X3, C, axis, sign), axis, 1))
+        internal.append((*reduced[axis], axis, 1))
         last = X3.shape[axis] - 1
         cosines = faces_compiled.boundary_cosines(C, sides[axis], axis, sign)
         boundary += [_reduced(np.expand_dims(cos, axis), axis, side) for cos, side in zip(cosines, (0, last))]
