@@ -171,6 +171,62 @@ def _least(cosine, low, at, flat):
     return low, at
 
 
+@njit(inline="always", **_JIT)
+def _layer_of_faces(X, corners, i, faces):
+    """``faces[j, k]`` (centre, area vector): the faces at node layer ``i`` of the first axis."""
+    for j in range(faces.shape[0]):
+        for k in range(faces.shape[1]):
+            _store(faces[j, k], _face(X, corners, i, j, k))
+
+
+@njit(inline="always", **_JIT)
+def _centre(lower, upper, front, back, side_low, side_high, estimate, sums):
+    """A cell's centre from its six faces (centre, area vector each), in the NumPy definition's
+    order (the faces at the lower and the upper node layer along the first axis, the second, the
+    third), each sum from zero, with the outward normals of a right-handed map: (x, y, z)."""
+    for c in range(3):
+        total = lower[c] + upper[c]
+        total += front[c] + back[c]
+        total += side_low[c] + side_high[c]
+        estimate[c] = total / 6.0
+    for m in range(4):
+        sums[m] = 0.0
+    _pyramid(lower, estimate, -1.0, sums)
+    _pyramid(upper, estimate, 1.0, sums)
+    _pyramid(front, estimate, -1.0, sums)
+    _pyramid(back, estimate, 1.0, sums)
+    _pyramid(side_low, estimate, -1.0, sums)
+    _pyramid(side_high, estimate, 1.0, sums)
+    volume = sums[0]
+    if abs(volume) > 1e-300:
+        return sums[1] / volume, sums[2] / volume, sums[3] / volume
+    return estimate[0], estimate[1], estimate[2]
+
+
+@njit(inline="always", **_JIT)
+def _layer_cosines(C, i, step, areas, shift, component, n1, n2, sign):
+    """(sum, least, index of the least) of the cosines of the internal faces between the cells
+    (i, j, k) and (i, j, k) + ``step``, j < ``n1`` and k < ``n2``, in C order; the face's area
+    vector is ``areas[j + shift[0], k + shift[1], component:component + 3]``."""
+    total, low, at, flat = 0.0, np.inf, -1, 0
+    for j in range(n1):
+        for k in range(n2):
+            i1, j1, k1 = i + step[0], j + step[1], k + step[2]
+            area = areas[j + shift[0], k + shift[1]]
+            cosine = _cosine(
+                C[i1, j1, k1, 0] - C[i, j, k, 0],
+                C[i1, j1, k1, 1] - C[i, j, k, 1],
+                C[i1, j1, k1, 2] - C[i, j, k, 2],
+                sign * area[component],
+                sign * area[component + 1],
+                sign * area[component + 2],
+            )
+            total += cosine
+            low, at = _least(cosine, low, at, flat)
+            flat += 1
+    return total, low, at
+
+
 @njit(parallel=True, **_JIT)
 def _cells(X, corners, sign, out, chunk, sums, lows, where):
     """Cell centres of the node array ``X`` into ``out`` (n1, n2, n3, 3), and the internal faces'
@@ -179,87 +235,41 @@ def _cells(X, corners, sign, out, chunk, sums, lows, where):
 
     Each face is computed once (``_face``) for the two cells beside it (within a task), into
     buffers: the faces normal to the first axis a node layer at a time, to the second and the
-    third a row of cells at a time; per cell, the mean of its six face centres and its pyramids in
-    the NumPy definition's order (the faces at the lower and the upper node layer along the first
-    axis, the second, the third), each sum from zero. The pyramids take the outward normals of a
-    right-handed map: a left-handed map negates every pyramid and every sum exactly, so the centres
-    (their ratio) are the same to the bit. Once a layer of cells has its centres, the internal
-    faces within it and those to the layer below (in the same task) get their cosines, with
-    ``sign`` (the map's orientation) on the area vectors; the faces between two tasks' layers are
-    ``_layers``'."""
+    third a row of cells at a time; then each cell's centre (``_centre``). The pyramids take the
+    outward normals of a right-handed map: a left-handed map negates every pyramid and every sum
+    exactly, so the centres (their ratio) are the same to the bit. Once a layer of cells has its
+    centres, the internal faces within it and those to the layer below (in the same task) get
+    their cosines (``_layer_cosines``), with ``sign`` (the map's orientation) on the area vectors;
+    the faces between two tasks' layers are ``_layers``'."""
     n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
+    steps = np.eye(3, dtype=np.int64)
     for block in prange((n0 + chunk - 1) // chunk):
         first, stop = block * chunk, min(block * chunk + chunk, n0)
         lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
-        front, back = np.empty((n2, 6)), np.empty((n2, 6))
-        side = np.empty((n2 + 1, 6))
-        across = np.empty((n1 + 1, n2, 3))  # the layer's area vectors normal to the second axis
-        along = np.empty((n1, n2 + 1, 3))  # and to the third
-        estimate = np.empty(3)
-        sums4 = np.empty(4)
-        for j in range(n1):
-            for k in range(n2):
-                _store(lower[j, k], _face(X, corners[0], first, j, k))
+        across = np.empty((n1 + 1, n2, 6))  # the layer's faces normal to the second axis
+        along = np.empty((n1, n2 + 1, 6))  # and to the third
+        estimate, scratch = np.empty(3), np.empty(4)
+        _layer_of_faces(X, corners[0], first, lower)
         for i in range(first, stop):
-            for j in range(n1):
+            _layer_of_faces(X, corners[0], i + 1, upper)
+            for j in range(n1 + 1):
                 for k in range(n2):
-                    _store(upper[j, k], _face(X, corners[0], i + 1, j, k))
-            for k in range(n2):
-                _store(front[k], _face(X, corners[1], i, 0, k))
-                for c in range(3):
-                    across[0, k, c] = front[k, 3 + c]
+                    _store(across[j, k], _face(X, corners[1], i, j, k))
             for j in range(n1):
-                for k in range(n2):
-                    _store(back[k], _face(X, corners[1], i, j + 1, k))
-                    for c in range(3):
-                        across[j + 1, k, c] = back[k, 3 + c]
                 for k in range(n2 + 1):
-                    _store(side[k], _face(X, corners[2], i, j, k))
-                    for c in range(3):
-                        along[j, k, c] = side[k, 3 + c]
-                for k in range(n2):
-                    for c in range(3):
-                        total = lower[j, k, c] + upper[j, k, c]
-                        total += front[k, c] + back[k, c]
-                        total += side[k, c] + side[k + 1, c]
-                        estimate[c] = total / 6.0
-                    for m in range(4):
-                        sums4[m] = 0.0
-                    _pyramid(lower[j, k], estimate, -1.0, sums4)
-                    _pyramid(upper[j, k], estimate, 1.0, sums4)
-                    _pyramid(front[k], estimate, -1.0, sums4)
-                    _pyramid(back[k], estimate, 1.0, sums4)
-                    _pyramid(side[k], estimate, -1.0, sums4)
-                    _pyramid(side[k + 1], estimate, 1.0, sums4)
-                    volume = sums4[0]
-                    for c in range(3):
-                        out[i, j, k, c] = sums4[1 + c] / volume if abs(volume) > 1e-300 else estimate[c]
-                front, back = back, front
-            if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
-                total, low, at, flat = 0.0, np.inf, -1, 0
-                for j in range(n1):
-                    for k in range(n2):
-                        cosine = _between(out, i - 1, j, k, i, j, k, lower[j, k, 3:], sign)
-                        total += cosine
-                        low, at = _least(cosine, low, at, flat)
-                        flat += 1
-                sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = total, low, at
-            total, low, at, flat = 0.0, np.inf, -1, 0
-            for j in range(n1 - 1):
-                for k in range(n2):
-                    cosine = _between(out, i, j, k, i, j + 1, k, across[j + 1, k], sign)
-                    total += cosine
-                    low, at = _least(cosine, low, at, flat)
-                    flat += 1
-            sums[1, i], lows[1, i], where[1, i] = total, low, at
-            total, low, at, flat = 0.0, np.inf, -1, 0
+                    _store(along[j, k], _face(X, corners[2], i, j, k))
             for j in range(n1):
-                for k in range(n2 - 1):
-                    cosine = _between(out, i, j, k, i, j, k + 1, along[j, k + 1], sign)
-                    total += cosine
-                    low, at = _least(cosine, low, at, flat)
-                    flat += 1
-            sums[2, i], lows[2, i], where[2, i] = total, low, at
+                for k in range(n2):
+                    centre = _centre(
+                        lower[j, k], upper[j, k], across[j, k], across[j + 1, k], along[j, k], along[j, k + 1], estimate, scratch
+                    )
+                    for c in range(3):
+                        out[i, j, k, c] = centre[c]
+            if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
+                found = _layer_cosines(out, i - 1, steps[0], lower, (0, 0), 3, n1, n2, sign)
+                sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = found
+            sums[1, i], lows[1, i], where[1, i] = _layer_cosines(out, i, steps[1], across, (1, 0), 3, n1 - 1, n2, sign)
+            sums[2, i], lows[2, i], where[2, i] = _layer_cosines(out, i, steps[2], along, (0, 1), 3, n1, n2 - 1, sign)
             lower, upper = upper, lower
 
 

@@ -62,6 +62,7 @@ import os
 import signal
 import sys
 import time
+import types
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -335,13 +336,18 @@ def _numba_without_extras() -> None:
     - PyYAML (about 20 ms), which numba imports to read a ``.numba_config.yaml`` in the working
       folder: left out only where there is none;
     - its lowering and typing registries (every NumPy function's implementation, about 60 ms and
-      50 modules), which a kernel loaded from the cache never calls: ``_load_from_cache_alone``.
+      50 modules, and ``meshgen.run.jit``'s ``numba.np.arraymath`` before them, about 35 ms), which
+      a kernel loaded from the cache never calls: ``_load_from_cache_alone``;
+    - the overloads of built-in functions for jitclass instances that ``import numba`` registers
+      (``numba.experimental.jitclass.overloads``, about 30 ms): meshgen's kernels have none.
     """
     if "numba" in sys.modules:
         return
     sys.modules.setdefault("cffi", None)  # None: ``import cffi`` raises ImportError, numba types no CFFI
     if not os.path.isfile(".numba_config.yaml"):
         sys.modules.setdefault("yaml", None)  # numba's config then reads the NUMBA_ variables alone
+    overloads = "numba.experimental.jitclass.overloads"  # imported for its registrations alone
+    sys.modules.setdefault(overloads, types.ModuleType(overloads))
     import numba.core.entrypoints as entrypoints
 
     entrypoints._already_initialized = True  # numba's own flag for "extensions loaded"

@@ -4,8 +4,11 @@ numba's CPU target imports ``numba.np.arraymath`` when it loads its first functi
 from the cache, and that module asks at import whether SciPy's BLAS is there
 (``numba.np.linalg.ensure_blas``: ``import scipy.linalg``, 0.44 s of a 1.0 s start, most of it
 SciPy's array-API shim walking NumPy's lazy submodules). SciPy is one of meshgen's requirements,
-so the answer is always yes; :data:`numba` is imported here with that module loaded while the
-probe answers yes without importing SciPy. A kernel that calls BLAS (none of meshgen's does)
+so the answer is always yes; ``numba.np.arraymath`` is imported with the probe answering yes
+without importing SciPy, just before numba's CPU target first loads its registries (the step that
+imports it: ``CPUContext.load_additional_registries``), not when this module is imported: a
+process that only loads kernels from the cache without the registries (the quality worker's child,
+``meshgen.quality.worker``) never pays for it. A kernel that calls BLAS (none of meshgen's does)
 still imports ``scipy.linalg`` when numba compiles it, through ``numba.np.linalg``'s own probe,
 which is left as it was.
 """
@@ -15,7 +18,7 @@ from __future__ import annotations
 import sys
 
 import numba
-import numba.np.linalg as _linalg
+from numba.core import cpu
 
 __all__ = ["numba"]
 
@@ -23,7 +26,11 @@ __all__ = ["numba"]
 def _load_arraymath() -> None:
     """Import ``numba.np.arraymath`` with its BLAS probe answering yes (SciPy is installed: meshgen
     requires it) instead of importing ``scipy.linalg``; the probe is restored afterwards."""
-    if "numba.np.arraymath" in sys.modules or not callable(getattr(_linalg, "ensure_blas", None)):
+    if "numba.np.arraymath" in sys.modules:
+        return
+    import numba.np.linalg as _linalg
+
+    if not callable(getattr(_linalg, "ensure_blas", None)):
         return
     probe = _linalg.ensure_blas
     _linalg.ensure_blas = lambda: None
@@ -35,4 +42,16 @@ def _load_arraymath() -> None:
         arraymath.ensure_blas = probe
 
 
-_load_arraymath()
+def _before_the_registries(load_additional_registries):
+    """``CPUContext.load_additional_registries`` with ``_load_arraymath`` first."""
+
+    def load(self):
+        _load_arraymath()
+        return load_additional_registries(self)
+
+    load.meshgen_arraymath_first = True
+    return load
+
+
+if not getattr(cpu.CPUContext.load_additional_registries, "meshgen_arraymath_first", False):
+    cpu.CPUContext.load_additional_registries = _before_the_registries(cpu.CPUContext.load_additional_registries)
