@@ -40,3 +40,31 @@ def test_a_kernel_that_calls_blas_still_compiles():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(done.stdout) == 5.0
+
+
+# The quality worker's child (``meshgen.quality.worker._numba_without_extras``): every kernel of a
+# 3D report from numba's cache, and what that start leaves out; then a kernel in no cache.
+CACHE_ALONE = """
+import sys
+import numpy as np
+from meshgen.quality import worker
+worker._numba_without_extras()
+worker.load_compiled_kernels(3)
+print("numba.np.arraymath" in sys.modules, "numba.np.linalg" in sys.modules, sys.modules.get("yaml", "absent"))
+from numba import njit
+twice = njit(lambda a: a.sum() * 2.0)
+print(twice(np.arange(4.0)), "numba.np.arraymath" in sys.modules)
+"""
+
+
+def test_the_worker_loads_kernels_from_the_cache_without_the_registries_and_still_compiles(tmp_path):
+    """The first run fills numba's cache where it is empty (a fresh checkout); the second loads
+    every kernel from it without numba's registries, ``numba.np.arraymath`` or PyYAML (no
+    ``.numba_config.yaml`` in its folder), and a kernel that is in no cache compiles, the
+    registries loaded then."""
+    run = [sys.executable, "-c", CACHE_ALONE]
+    subprocess.run(run, capture_output=True, text=True, check=True, cwd=tmp_path)
+    done = subprocess.run(run, capture_output=True, text=True, check=True, cwd=tmp_path)
+    loaded, compiled = done.stdout.strip().splitlines()[-2:]
+    assert loaded == "False False None"
+    assert compiled == "12.0 True"

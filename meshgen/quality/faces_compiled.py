@@ -30,7 +30,7 @@ from meshgen.run.jit import numba
 if "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "threadsafe"
 
-__all__ = ["boundary_cosines", "boundary_faces", "cell_centres", "cells_and_internal_cosines", "face_centres_and_areas"]
+__all__ = ["cell_centres", "cells_and_internal_cosines", "face_centres_and_areas"]
 
 CHUNK_LAYERS = 4  # layers of cells along the first axis a task of ``_cells`` (the faces between tasks: twice)
 ROOT_VSMALL = 1e-150  # OpenFOAM's ROOTVSMALL (double), added to |d| |S|
@@ -227,78 +227,83 @@ def _layer_cosines(C, i, step, areas, shift, component, n1, n2, sign):
     return total, low, at
 
 
+@njit(inline="always", **_JIT)
+def _cell_block(X, corners, sign, out, first, stop, sums, lows, where):
+    """The cell centres of the layers of cells ``first`` to ``stop`` - 1 into ``out``, and the
+    cosines of their internal faces but those to the layer below ``first`` (``_cells``)."""
+    n1, n2 = out.shape[1], out.shape[2]
+    steps = np.eye(3, dtype=np.int64)
+    lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
+    across = np.empty((n1 + 1, n2, 6))  # the layer's faces normal to the second axis
+    along = np.empty((n1, n2 + 1, 6))  # and to the third
+    estimate, scratch = np.empty(3), np.empty(4)
+    _layer_of_faces(X, corners[0], first, lower)
+    for i in range(first, stop):
+        _layer_of_faces(X, corners[0], i + 1, upper)
+        for j in range(n1 + 1):
+            for k in range(n2):
+                _store(across[j, k], _face(X, corners[1], i, j, k))
+        for j in range(n1):
+            for k in range(n2 + 1):
+                _store(along[j, k], _face(X, corners[2], i, j, k))
+        for j in range(n1):
+            for k in range(n2):
+                centre = _centre(
+                    lower[j, k], upper[j, k], across[j, k], across[j + 1, k], along[j, k], along[j, k + 1], estimate, scratch
+                )
+                for c in range(3):
+                    out[i, j, k, c] = centre[c]
+        if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
+            sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = _layer_cosines(out, i - 1, steps[0], lower, (0, 0), 3, n1, n2, sign)
+        sums[1, i], lows[1, i], where[1, i] = _layer_cosines(out, i, steps[1], across, (1, 0), 3, n1 - 1, n2, sign)
+        sums[2, i], lows[2, i], where[2, i] = _layer_cosines(out, i, steps[2], along, (0, 1), 3, n1, n2 - 1, sign)
+        lower, upper = upper, lower
+
+
+@njit(inline="always", **_JIT)
+def _between_tasks(X, corners, C, i, sign):
+    """(sum, least, index of the least) of the cosines of the internal faces between cell layers
+    ``i`` and ``i`` + 1 (the faces at node layer ``i`` + 1, normal to the first axis), in C order."""
+    total, low, at, flat = 0.0, np.inf, -1, 0
+    for j in range(C.shape[1]):
+        for k in range(C.shape[2]):
+            face = _face(X, corners, i + 1, j, k)
+            cosine = _cosine(
+                C[i + 1, j, k, 0] - C[i, j, k, 0],
+                C[i + 1, j, k, 1] - C[i, j, k, 1],
+                C[i + 1, j, k, 2] - C[i, j, k, 2],
+                sign * face[3],
+                sign * face[4],
+                sign * face[5],
+            )
+            total += cosine
+            low, at = _least(cosine, low, at, flat)
+            flat += 1
+    return total, low, at
+
+
 @njit(parallel=True, **_JIT)
 def _cells(X, corners, sign, out, chunk, sums, lows, where):
     """Cell centres of the node array ``X`` into ``out`` (n1, n2, n3, 3), and the internal faces'
-    cosines reduced per layer (``sums``, ``lows``, ``where``: (axis, layer), see ``_layers``),
-    ``chunk`` layers of cells along the first axis a task.
+    cosines reduced per layer of faces: ``sums[axis, layer]`` their sum in C order, ``lows`` the
+    least (NaN if one is NaN, as ``np.min``), ``where`` its index within the layer (the first NaN,
+    else the first least, as ``np.argmin``).
 
-    Each face is computed once (``_face``) for the two cells beside it (within a task), into
-    buffers: the faces normal to the first axis a node layer at a time, to the second and the
-    third a row of cells at a time; then each cell's centre (``_centre``). The pyramids take the
-    outward normals of a right-handed map: a left-handed map negates every pyramid and every sum
-    exactly, so the centres (their ratio) are the same to the bit. Once a layer of cells has its
-    centres, the internal faces within it and those to the layer below (in the same task) get
-    their cosines (``_layer_cosines``), with ``sign`` (the map's orientation) on the area vectors;
-    the faces between two tasks' layers are ``_layers``'."""
-    n0, n1, n2 = out.shape[0], out.shape[1], out.shape[2]
-    steps = np.eye(3, dtype=np.int64)
+    ``chunk`` layers of cells along the first axis a task (``_cell_block``): each face is computed
+    once (``_face``) for the two cells beside it, into buffers (the faces normal to the first axis
+    a node layer at a time, to the second and the third a layer of cells at a time), then each
+    cell's centre (``_centre``). The pyramids take the outward normals of a right-handed map: a
+    left-handed map negates every pyramid and every sum exactly, so the centres (their ratio) are
+    the same to the bit. Once a layer of cells has its centres, the internal faces within it and
+    those to the layer below (in the same task) get their cosines (``_layer_cosines``), ``sign``
+    (the map's orientation) on the area vectors; the faces between two tasks' layers after every
+    task is done (``_between_tasks``)."""
+    n0 = out.shape[0]
     for block in prange((n0 + chunk - 1) // chunk):
-        first, stop = block * chunk, min(block * chunk + chunk, n0)
-        lower, upper = np.empty((n1, n2, 6)), np.empty((n1, n2, 6))  # centre, area vector
-        across = np.empty((n1 + 1, n2, 6))  # the layer's faces normal to the second axis
-        along = np.empty((n1, n2 + 1, 6))  # and to the third
-        estimate, scratch = np.empty(3), np.empty(4)
-        _layer_of_faces(X, corners[0], first, lower)
-        for i in range(first, stop):
-            _layer_of_faces(X, corners[0], i + 1, upper)
-            for j in range(n1 + 1):
-                for k in range(n2):
-                    _store(across[j, k], _face(X, corners[1], i, j, k))
-            for j in range(n1):
-                for k in range(n2 + 1):
-                    _store(along[j, k], _face(X, corners[2], i, j, k))
-            for j in range(n1):
-                for k in range(n2):
-                    centre = _centre(
-                        lower[j, k], upper[j, k], across[j, k], across[j + 1, k], along[j, k], along[j, k + 1], estimate, scratch
-                    )
-                    for c in range(3):
-                        out[i, j, k, c] = centre[c]
-            if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
-                found = _layer_cosines(out, i - 1, steps[0], lower, (0, 0), 3, n1, n2, sign)
-                sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = found
-            sums[1, i], lows[1, i], where[1, i] = _layer_cosines(out, i, steps[1], across, (1, 0), 3, n1 - 1, n2, sign)
-            sums[2, i], lows[2, i], where[2, i] = _layer_cosines(out, i, steps[2], along, (0, 1), 3, n1, n2 - 1, sign)
-            lower, upper = upper, lower
-
-
-@njit(parallel=True, **_JIT)
-def _layers(X, corners, C, layers, sign, sums, lows, where):
-    """The internal faces normal to the first axis between cell layers ``layers[t]`` and the next
-    (the faces at node layer ``layers[t]`` + 1, corner offsets ``corners``), face by face: per
-    layer, the sum of their cosines in C order (``sums``), the least (``lows``: NaN if one is NaN,
-    as ``np.min``) and its index within the layer (``where``: the first NaN, else the first least,
-    as ``np.argmin``)."""
-    n1, n2 = C.shape[1], C.shape[2]
-    for t in prange(layers.shape[0]):
-        i = layers[t]
-        total, low, at, flat = 0.0, np.inf, -1, 0
-        for j in range(n1):
-            for k in range(n2):
-                face = _face(X, corners, i + 1, j, k)
-                cosine = _cosine(
-                    C[i + 1, j, k, 0] - C[i, j, k, 0],
-                    C[i + 1, j, k, 1] - C[i, j, k, 1],
-                    C[i + 1, j, k, 2] - C[i, j, k, 2],
-                    sign * face[3],
-                    sign * face[4],
-                    sign * face[5],
-                )
-                total += cosine
-                low, at = _least(cosine, low, at, flat)
-                flat += 1
-        sums[i], lows[i], where[i] = total, low, at
+        _cell_block(X, corners, sign, out, block * chunk, min(block * chunk + chunk, n0), sums, lows, where)
+    for block in prange(1, (n0 + chunk - 1) // chunk):
+        i = block * chunk - 1
+        sums[0, i], lows[0, i], where[0, i] = _between_tasks(X, corners[0], out, i, sign)
 
 
 def cells_and_internal_cosines(X: np.ndarray, sign: float):
@@ -315,8 +320,6 @@ def cells_and_internal_cosines(X: np.ndarray, sign: float):
     where = np.full((3, max(cells[0], 1)), -1, dtype=np.int64)
     if C.size:
         _cells(X, _CORNERS, float(sign), C, CHUNK_LAYERS, sums, lows, where)
-        boundaries = np.arange(CHUNK_LAYERS, cells[0], CHUNK_LAYERS, dtype=np.int64) - 1  # below each task's first layer
-        _layers(X, _CORNERS[0], C, boundaries, float(sign), sums[0], lows[0], where[0])
     reduced = []
     for axis in range(3):
         shape = list(cells)
@@ -335,31 +338,3 @@ def cell_centres(X: np.ndarray) -> np.ndarray:
     """``faces_openfoam.cell_centres`` of the 3D node array ``X``, computed from the nodes cell by
     cell (``cells_and_internal_cosines``' first part): (n1, n2, n3, 3)."""
     return cells_and_internal_cosines(X, 1.0)[0]
-
-
-def boundary_faces(X: np.ndarray, axis: int):
-    """``face_centres_and_areas`` of the two boundary node layers along ``axis`` (first, last),
-    each with that axis dropped: [(centres, areas), (centres, areas)], shapes (cells along the
-    other two axes) + (3,)."""
-    X = np.ascontiguousarray(X, dtype=np.float64)
-    sides = []
-    for layer in (0, X.shape[axis] - 1):
-        nodes = np.ascontiguousarray(np.take(X, [layer], axis=axis))
-        centres, areas = face_centres_and_areas(nodes, axis)
-        sides.append((np.take(centres, 0, axis), np.take(areas, 0, axis)))
-    return sides
-
-
-def boundary_cosines(C: np.ndarray, sides, axis: int, sign: float) -> list[np.ndarray]:
-    """Cosines of the boundary faces normal to ``axis`` (``sides``: their ``boundary_faces``) with
-    cell centres ``C`` and orientation ``sign``: first layer, last layer (that axis dropped)."""
-    cosines = []
-    for (centres, areas), outward, cell in zip(sides, (-1.0, 1.0), (0, -1)):
-        d = centres - np.take(C, cell, axis)
-        S = outward * (sign * areas)
-        dot = d[..., 0] * S[..., 0] + d[..., 1] * S[..., 1] + d[..., 2] * S[..., 2]
-        lengths = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]) * np.sqrt(
-            S[..., 0] * S[..., 0] + S[..., 1] * S[..., 1] + S[..., 2] * S[..., 2]
-        )
-        cosines.append(dot / (lengths + ROOT_VSMALL))
-    return cosines

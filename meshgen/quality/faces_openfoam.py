@@ -184,19 +184,46 @@ def _non_orthogonality_compiled(X3: np.ndarray, two_d: bool) -> dict:
     from meshgen.quality import faces_compiled  # numba
 
     X3 = np.ascontiguousarray(X3, dtype=np.float64)
-    sides = [faces_compiled.boundary_faces(X3, axis) for axis in range(3)]
+    sides = [_boundary_faces(X3, axis) for axis in range(3)]
     sign = _orientation_of_sides(sides)
     C, reduced = faces_compiled.cells_and_internal_cosines(X3, sign)
     internal, boundary = [], []
     for axis in range(2 if two_d else 3):
         internal.append((*reduced[axis], axis, 1))
         last = X3.shape[axis] - 1
-        cosines = faces_compiled.boundary_cosines(C, sides[axis], axis, sign)
+        cosines = _boundary_cosines(C, sides[axis], axis, sign)
         boundary += [_reduced(np.expand_dims(cos, axis), axis, side) for cos, side in zip(cosines, (0, last))]
     return {
         "non_orthogonality_internal": _summary(internal),
         "non_orthogonality_boundary": _summary(boundary),
     }
+
+
+def _boundary_faces(X: np.ndarray, axis: int):
+    """``face_centres_and_areas`` of the two boundary node layers along ``axis`` (first, last),
+    each with that axis dropped: [(centres, areas), (centres, areas)], shapes (cells along the
+    other two axes) + (3,). NumPy: the compiled kernel's values to the bit (tested), for a few
+    layers, without another kernel to load."""
+    sides = []
+    for layer in (0, X.shape[axis] - 1):
+        centres, areas = face_centres_and_areas(np.take(X, [layer], axis=axis), axis)
+        sides.append((np.take(centres, 0, axis), np.take(areas, 0, axis)))
+    return sides
+
+
+def _boundary_cosines(C: np.ndarray, sides, axis: int, sign: float) -> list[np.ndarray]:
+    """Cosines of the boundary faces normal to ``axis`` (``sides``: their ``_boundary_faces``) with
+    cell centres ``C`` and orientation ``sign``: first layer, last layer (that axis dropped)."""
+    cosines = []
+    for (centres, areas), outward, cell in zip(sides, (-1.0, 1.0), (0, -1)):
+        d = centres - np.take(C, cell, axis)
+        S = outward * (sign * areas)
+        dot = d[..., 0] * S[..., 0] + d[..., 1] * S[..., 1] + d[..., 2] * S[..., 2]
+        lengths = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]) * np.sqrt(
+            S[..., 0] * S[..., 0] + S[..., 1] * S[..., 1] + S[..., 2] * S[..., 2]
+        )
+        cosines.append(dot / (lengths + ROOT_VSMALL))
+    return cosines
 
 
 def _orientation_of_sides(sides) -> float:
