@@ -152,6 +152,19 @@ def first_call() -> dict:
 CLI_TARGET_SECONDS = 0.8
 
 
+def python_loop_seconds(repeat: int = 3) -> float:
+    """Best of ``repeat`` timings of a plain Python loop (6e6 multiply-adds): how fast this
+    machine runs serial Python at the moment, beside a row that is mostly that (a two-core machine
+    shared with others runs the same loop 1.5x slower in one hour than in another)."""
+    best = float("inf")
+    for _ in range(repeat):
+        start, total = time.perf_counter(), 0
+        for i in range(6_000_000):
+            total += i * i
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
 def evaluate_cli(dims=(100, 100, 100), repeat: int = 5, suffix: str = ".vts") -> dict:
     """``meshgen evaluate`` of the TFI semicylinder's .vts (or ``suffix``: ``.vtu``, ``meshgen
     mesh``'s default; ``meshgen mesh --method tfi``), end to end: a subprocess from its start to
@@ -161,6 +174,7 @@ def evaluate_cli(dims=(100, 100, 100), repeat: int = 5, suffix: str = ".vts") ->
     from bytecode import compile_bytecode
 
     bytecode = compile_bytecode()
+    loop = python_loop_seconds()
     root = str(Path(__file__).resolve().parents[1])
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
     with tempfile.TemporaryDirectory() as folder:
@@ -185,6 +199,7 @@ def evaluate_cli(dims=(100, 100, 100), repeat: int = 5, suffix: str = ".vts") ->
         "runs_seconds": walls,
         "format": suffix,
         "target_seconds": CLI_TARGET_SECONDS if suffix == ".vts" else None,
+        "python_loop_seconds": loop,
         **bytecode,
     }
 
@@ -209,7 +224,8 @@ def print_table(data: dict) -> None:
         print(
             f"meshgen evaluate of the {cli.get('format', '.vts')}, end to end: median {cli['seconds']:.3f} s "
             f"(min {cli['min_seconds']:.3f}, max {cli['max_seconds']:.3f}, cpu {cli['cpu_seconds']:.3f}) of "
-            f"{len(cli['runs_seconds'])} runs{target}; bytecode {cli.get('bytecode', 'as found')}"
+            f"{len(cli['runs_seconds'])} runs{target}; bytecode {cli.get('bytecode', 'as found')}; "
+            f"a Python loop of 6e6 multiply-adds just before: {cli.get('python_loop_seconds', float('nan')):.2f} s"
         )
     if "first_call" in data:
         first = data["first_call"]

@@ -1161,6 +1161,7 @@ def summary(sections: dict) -> list[dict]:  # noqa: C901 - one flat list of rows
                 "s",
                 "evaluate_cli_100_seconds",
                 cpu=cli["cpu_seconds"],
+                note=f"bytecode {cli.get('bytecode', 'as found')}; a Python loop of 6e6 multiply-adds {cli.get('python_loop_seconds', float('nan')):.2f} s just before",
             )
         if "cli_vtu" in data:
             cli = data["cli_vtu"]
