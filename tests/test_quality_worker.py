@@ -358,6 +358,36 @@ def test_python_m_meshgen_forks_the_early_child_before_numpy_and_click(large_vts
     assert json.loads(result.stdout) == expected
 
 
+# Says on stderr whether the cyclic garbage collector runs in the parent as the file's evaluation
+# starts and in the child as it computes the report's parts.
+COLLECTOR = """
+import gc
+import meshgen.quality.files as files
+original_evaluate = files.evaluate_file
+def evaluate_file(*arguments, **keywords):
+    print(f"parent collects: {gc.isenabled()}", file=sys.stderr, flush=True)
+    return original_evaluate(*arguments, **keywords)
+files.evaluate_file = evaluate_file
+original_parts = worker._parts
+def parts(connection, nodes, metrics):
+    print(f"child collects: {gc.isenabled()}", file=sys.stderr, flush=True)
+    return original_parts(connection, nodes, metrics)
+worker._parts = parts
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or len(os.sched_getaffinity(0)) < 2, reason="forked on Linux, two CPUs")
+def test_the_collector_is_off_for_the_start_and_the_child_only(large_vts):
+    """``meshgen evaluate`` starts with the cyclic garbage collector off (the imports make no
+    garbage), turns it back on when the command's body begins, before any file is read; the child
+    keeps it off; the report is the in-process one."""
+    path, expected = large_vts
+    result = run_evaluate(path, COLLECTOR)
+    assert result.returncode == 0, result.stderr
+    assert "parent collects: True" in result.stderr and "child collects: False" in result.stderr
+    assert "parts from the worker" in result.stderr and json.loads(result.stdout) == expected
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the worker is forked: Linux only")
 def test_without_the_early_child_the_worker_is_forked_once_the_extent_is_read(large_vts):
     """Where ``meshgen evaluate`` forks no child first (one CPU, no memory files), the worker

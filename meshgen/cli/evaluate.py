@@ -22,6 +22,7 @@ from meshgen.quality import METRICS, STATS, evaluate_file, json_ready, write_jso
 from meshgen.quality.files import zone_reports
 from meshgen.quality.gates import GateError, check_gates, parse_gate
 from meshgen.run.atomic import atomic_write, check_output_file
+from meshgen.run.early import resume_collection
 from meshgen.run.scheduler import connect, scheduler_address
 
 __all__ = ["EPILOG", "evaluate", "markdown", "tables"]
@@ -175,6 +176,7 @@ def evaluate(meshes, geometry, params, json_path, markdown_path, gates, chunked,
     validity verdict (valid: no inverted cell), and the boundary deviation when
     the geometry is known: files written by meshgen record it; for others pass --geometry.
     """
+    resume_collection()  # the imports are done (meshgen.run.early)
     # Report paths first: a bad one fails before any mesh is read.
     if json_path and json_path != "-":  # '-': stdout
         check_output_file(json_path, "report.json")

@@ -57,6 +57,7 @@ more), and for meshes that take the compiled kernels (``NUMPY_CELLS`` cells and 
 from __future__ import annotations
 
 import contextlib
+import gc
 import mmap
 import os
 import signal
@@ -406,6 +407,7 @@ def _serve(connection, parent_end, parent: int, nodes, work, *arguments) -> None
     parent's end of the pipe is closed first, so the pipe ends with the parent, and the wait also
     checks that ``parent`` is still its parent."""
     parent_end.close()
+    gc.disable()  # a child of imports, numba's start and one report: no garbage worth a collection
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for signum in TERMINATING_SIGNALS:
         signal.signal(signum, signal.SIG_DFL)
