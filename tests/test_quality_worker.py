@@ -308,7 +308,12 @@ def early():
     original_early()
     pid = early_start._early[0].pid if early_start._early else None
     print(f"early {pid}", file=sys.stderr, flush=True)
-    atexit.register(lambda: print(f"early child at exit: {pid is not None and os.path.exists(f'/proc/{pid}')}", file=sys.stderr))
+    def running():  # a process that exists and is no zombie (multiprocessing reaps the dead at exit)
+        try:
+            return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] != "Z"
+        except (OSError, TypeError):
+            return False
+    atexit.register(lambda: print(f"early child at exit: {running()}", file=sys.stderr))
 early_start.fork_early_worker = early
 """
 

@@ -272,7 +272,7 @@ class _Preloading:
         for thread in self.threads:
             thread.join()
         if self.worker is not None:
-            self.worker.close()
+            self.worker.close(wait=False)  # done with it: its memory goes back while the table is printed
             self.worker = None
 
 

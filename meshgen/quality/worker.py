@@ -183,9 +183,10 @@ class _ForkedWorker:
         self._deadline = time.monotonic() + self._timeout
         return self._send("go")
 
-    def close(self) -> None:
-        """End the child (at once if it still works) and release the pipe."""
-        end(self._process, self._connection)
+    def close(self, wait: bool = True) -> None:
+        """End the child (at once if it still works) and release the pipe; ``wait``: until it is
+        reaped (``meshgen.run.early.end``)."""
+        end(self._process, self._connection, wait=wait)
 
     def _send(self, message) -> bool:
         try:
