@@ -1,13 +1,18 @@
 """OpenFOAM's face and cell geometry of a structured 3D node array as compiled numba kernels: the
 face centres and area vectors, the cell centres, and the cosines of the internal and boundary
 faces' non-orthogonality that ``meshgen.quality.faces_openfoam`` defines and summarises.
+``cells_and_internal_cosines`` is what the report calls: the cell centres and the internal faces'
+cosines, reduced as they are computed, from the nodes alone (no face or cosine arrays: at 1e6 cells
+those were 200 MB, and touching them the most of a fresh report's time; design notes §21).
+``face_centres_and_areas`` writes the same faces (``_face``) as arrays, for the tests that hold
+them to the NumPy definition to the bit.
 
 Each kernel is the NumPy definition of ``faces_openfoam`` written per face or per cell, operation
 by operation in IEEE double precision (``fastmath`` off, the same order of sums), in parallel over
 the first index (``prange``). Only the dot products differ: NumPy's ``einsum`` may sum the three
 products in another order, so the two agree to round-off (tested to 1e-12), not to the bit. The
 NumPy definition makes some 60 full-size temporaries per face family (0.75 s of CPU at 1e6 cells);
-the kernels make none beside their outputs.
+the kernels make none beside their outputs and a few layers of faces per task.
 
 Arrays are as in ``faces_openfoam``: ``X`` (n1+1, n2+1, n3+1, 3); the faces normal to ``axis``
 shaped like the node layers along ``axis`` and the cells along the others, + (3,); cell centres
@@ -111,7 +116,8 @@ def _faces(X, corners, centres, areas):
 
 
 def face_centres_and_areas(X: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """``faces_openfoam.face_centres_and_areas`` of the 3D node array ``X`` (contiguous float64)."""
+    """``faces_openfoam.face_centres_and_areas`` of the 3D node array ``X`` (contiguous float64):
+    the faces ``_cells`` computes, as arrays (the tests' view of them; the report needs none)."""
     X = np.ascontiguousarray(X, dtype=np.float64)
     shape = [n - 1 for n in X.shape[:-1]]
     shape[axis] += 1
