@@ -156,19 +156,6 @@ def _cosine(d0, d1, d2, s0, s1, s2):
 
 
 @njit(inline="always", **_JIT)
-def _between(C, p0, p1, p2, q0, q1, q2, area, sign):
-    """The cosine of the internal face of area vector ``area`` (3) between the cells p and q."""
-    return _cosine(
-        C[q0, q1, q2, 0] - C[p0, p1, p2, 0],
-        C[q0, q1, q2, 1] - C[p0, p1, p2, 1],
-        C[q0, q1, q2, 2] - C[p0, p1, p2, 2],
-        sign * area[0],
-        sign * area[1],
-        sign * area[2],
-    )
-
-
-@njit(inline="always", **_JIT)
 def _least(cosine, low, at, flat):
     """(least, its index) after ``cosine`` (the ``flat``-th), as ``np.min`` / ``np.argmin`` keep
     them: the first NaN, else the first least."""
@@ -210,22 +197,22 @@ def _centre(lower, upper, front, back, side_low, side_high, estimate, sums):
 
 
 @njit(inline="always", **_JIT)
-def _layer_cosines(C, i, step, areas, shift, component, n1, n2, sign):
+def _layer_cosines(C, i, step, faces, shift, n1, n2, sign):
     """(sum, least, index of the least) of the cosines of the internal faces between the cells
     (i, j, k) and (i, j, k) + ``step``, j < ``n1`` and k < ``n2``, in C order; the face's area
-    vector is ``areas[j + shift[0], k + shift[1], component:component + 3]``."""
+    vector is ``faces[j + shift[0], k + shift[1], 3:6]`` (``_store``'s layout)."""
     total, low, at, flat = 0.0, np.inf, -1, 0
     for j in range(n1):
         for k in range(n2):
             i1, j1, k1 = i + step[0], j + step[1], k + step[2]
-            area = areas[j + shift[0], k + shift[1]]
+            area = faces[j + shift[0], k + shift[1]]
             cosine = _cosine(
                 C[i1, j1, k1, 0] - C[i, j, k, 0],
                 C[i1, j1, k1, 1] - C[i, j, k, 1],
                 C[i1, j1, k1, 2] - C[i, j, k, 2],
-                sign * area[component],
-                sign * area[component + 1],
-                sign * area[component + 2],
+                sign * area[3],
+                sign * area[4],
+                sign * area[5],
             )
             total += cosine
             low, at = _least(cosine, low, at, flat)
@@ -260,32 +247,10 @@ def _cell_block(X, corners, sign, out, first, stop, sums, lows, where):
                 for c in range(3):
                     out[i, j, k, c] = centre[c]
         if i > first:  # the faces at node layer i, to the layer below (``lower`` holds them)
-            sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = _layer_cosines(out, i - 1, steps[0], lower, (0, 0), 3, n1, n2, sign)
-        sums[1, i], lows[1, i], where[1, i] = _layer_cosines(out, i, steps[1], across, (1, 0), 3, n1 - 1, n2, sign)
-        sums[2, i], lows[2, i], where[2, i] = _layer_cosines(out, i, steps[2], along, (0, 1), 3, n1, n2 - 1, sign)
+            sums[0, i - 1], lows[0, i - 1], where[0, i - 1] = _layer_cosines(out, i - 1, steps[0], lower, (0, 0), n1, n2, sign)
+        sums[1, i], lows[1, i], where[1, i] = _layer_cosines(out, i, steps[1], across, (1, 0), n1 - 1, n2, sign)
+        sums[2, i], lows[2, i], where[2, i] = _layer_cosines(out, i, steps[2], along, (0, 1), n1, n2 - 1, sign)
         lower, upper = upper, lower
-
-
-@njit(inline="always", **_JIT)
-def _between_tasks(X, corners, C, i, sign):
-    """(sum, least, index of the least) of the cosines of the internal faces between cell layers
-    ``i`` and ``i`` + 1 (the faces at node layer ``i`` + 1, normal to the first axis), in C order."""
-    total, low, at, flat = 0.0, np.inf, -1, 0
-    for j in range(C.shape[1]):
-        for k in range(C.shape[2]):
-            face = _face(X, corners, i + 1, j, k)
-            cosine = _cosine(
-                C[i + 1, j, k, 0] - C[i, j, k, 0],
-                C[i + 1, j, k, 1] - C[i, j, k, 1],
-                C[i + 1, j, k, 2] - C[i, j, k, 2],
-                sign * face[3],
-                sign * face[4],
-                sign * face[5],
-            )
-            total += cosine
-            low, at = _least(cosine, low, at, flat)
-            flat += 1
-    return total, low, at
 
 
 @njit(parallel=True, **_JIT)
@@ -303,13 +268,16 @@ def _cells(X, corners, sign, out, chunk, sums, lows, where):
     the same to the bit. Once a layer of cells has its centres, the internal faces within it and
     those to the layer below (in the same task) get their cosines (``_layer_cosines``), ``sign``
     (the map's orientation) on the area vectors; the faces between two tasks' layers after every
-    task is done (``_between_tasks``)."""
+    task is done, a layer of them at a time."""
     n0 = out.shape[0]
     for block in prange((n0 + chunk - 1) // chunk):
         _cell_block(X, corners, sign, out, block * chunk, min(block * chunk + chunk, n0), sums, lows, where)
+    steps = np.eye(3, dtype=np.int64)
     for block in prange(1, (n0 + chunk - 1) // chunk):
-        i = block * chunk - 1
-        sums[0, i], lows[0, i], where[0, i] = _between_tasks(X, corners[0], out, i, sign)
+        i = block * chunk - 1  # the cell layer below a task's first: the faces between them
+        layer = np.empty((out.shape[1], out.shape[2], 6))
+        _layer_of_faces(X, corners[0], i + 1, layer)
+        sums[0, i], lows[0, i], where[0, i] = _layer_cosines(out, i, steps[0], layer, (0, 0), out.shape[1], out.shape[2], sign)
 
 
 def cells_and_internal_cosines(X: np.ndarray, sign: float):

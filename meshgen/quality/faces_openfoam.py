@@ -117,12 +117,16 @@ def cell_centres(X: np.ndarray, faces=None, orientation: float | None = None) ->
 
 def _orientation(faces) -> float:
     """+1 or -1: the sign of the map's total volume (sum over boundary faces of x_f . S_f / 3)."""
-    total = 0.0
-    for axis, (centres, areas) in enumerate(faces):
-        last = centres.shape[axis] - 1
-        for side, sign in ((0, -1.0), (last, 1.0)):
-            total += sign * float(np.sum(np.take(centres, side, axis) * np.take(areas, side, axis)))
-    return 1.0 if total >= 0 else -1.0
+    return _orientation_of_sides(_sides(faces))
+
+
+def _sides(faces):
+    """The boundary faces of the three axes' ``faces``: per axis, the (centres, areas) of its first
+    and last node layer, that axis dropped (``_boundary_faces``' form)."""
+    return [
+        [(np.take(centres, side, axis), np.take(areas, side, axis)) for side in (0, centres.shape[axis] - 1)]
+        for axis, (centres, areas) in enumerate(faces)
+    ]
 
 
 def _extruded(X: np.ndarray) -> np.ndarray:
@@ -159,20 +163,13 @@ def non_orthogonality(X: np.ndarray, kernels: str = "auto") -> dict:
     faces = [face_centres_and_areas(X3, axis) for axis in range(3)]
     sign = _orientation(faces)
     C = cell_centres(X3, faces, sign)
-    internal, boundary = [], []  # ``_reduced`` cosines, with their axis and index offset along it
-    for axis, (centres, areas) in enumerate(faces):
-        if two_d and axis == 2:
-            continue
-        S = sign * areas
+    internal = []  # ``_reduced`` cosines, with their axis and index offset along it
+    for axis, (_, areas) in enumerate(faces[: 2 if two_d else 3]):
         d = _along(C, axis, 1, None) - _along(C, axis, 0, -1)
-        internal.append(_reduced(_angles(d, _along(S, axis, 1, -1)), axis, 1))
-        last = centres.shape[axis] - 1
-        for side, outward, cell in ((0, -1.0, 0), (last, 1.0, -1)):
-            cos = _angles(np.take(centres, side, axis) - np.take(C, cell, axis), outward * np.take(S, side, axis))
-            boundary.append(_reduced(np.expand_dims(cos, axis), axis, side))
+        internal.append(_reduced(_angles(d, _along(sign * areas, axis, 1, -1)), axis, 1))
     return {
         "non_orthogonality_internal": _summary(internal),
-        "non_orthogonality_boundary": _summary(boundary),
+        "non_orthogonality_boundary": _summary(_boundary_parts(C, _sides(faces), 2 if two_d else 3, sign)),
     }
 
 
@@ -180,22 +177,17 @@ def _non_orthogonality_compiled(X3: np.ndarray, two_d: bool) -> dict:
     """:func:`non_orthogonality` of the 3D node array ``X3`` with the compiled kernels (``two_d``:
     the front and back faces of an extruded 2D mesh left out): the cell centres from the nodes, the
     internal faces' cosines reduced as they are computed (no face or cosine arrays: at 1e6 cells
-    those were 200 MB, and their first touch most of the time), the boundary faces' as arrays."""
+    those were 200 MB, and their first touch most of the time), the boundary faces as the NumPy
+    definition has them."""
     from meshgen.quality import faces_compiled  # numba
 
     X3 = np.ascontiguousarray(X3, dtype=np.float64)
     sides = [_boundary_faces(X3, axis) for axis in range(3)]
     sign = _orientation_of_sides(sides)
     C, reduced = faces_compiled.cells_and_internal_cosines(X3, sign)
-    internal, boundary = [], []
-    for axis in range(2 if two_d else 3):
-        internal.append((*reduced[axis], axis, 1))
-        last = X3.shape[axis] - 1
-        cosines = _boundary_cosines(C, sides[axis], axis, sign)
-        boundary += [_reduced(np.expand_dims(cos, axis), axis, side) for cos, side in zip(cosines, (0, last))]
     return {
-        "non_orthogonality_internal": _summary(internal),
-        "non_orthogonality_boundary": _summary(boundary),
+        "non_orthogonality_internal": _summary([(*reduced[axis], axis, 1) for axis in range(2 if two_d else 3)]),
+        "non_orthogonality_boundary": _summary(_boundary_parts(C, sides, 2 if two_d else 3, sign)),
     }
 
 
@@ -211,19 +203,17 @@ def _boundary_faces(X: np.ndarray, axis: int):
     return sides
 
 
-def _boundary_cosines(C: np.ndarray, sides, axis: int, sign: float) -> list[np.ndarray]:
-    """Cosines of the boundary faces normal to ``axis`` (``sides``: their ``_boundary_faces``) with
-    cell centres ``C`` and orientation ``sign``: first layer, last layer (that axis dropped)."""
-    cosines = []
-    for (centres, areas), outward, cell in zip(sides, (-1.0, 1.0), (0, -1)):
-        d = centres - np.take(C, cell, axis)
-        S = outward * (sign * areas)
-        dot = d[..., 0] * S[..., 0] + d[..., 1] * S[..., 1] + d[..., 2] * S[..., 2]
-        lengths = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]) * np.sqrt(
-            S[..., 0] * S[..., 0] + S[..., 1] * S[..., 1] + S[..., 2] * S[..., 2]
-        )
-        cosines.append(dot / (lengths + ROOT_VSMALL))
-    return cosines
+def _boundary_parts(C: np.ndarray, sides, axes: int, sign: float) -> list[tuple]:
+    """``_reduced`` cosines of the boundary faces of the first ``axes`` axes (``sides``: their
+    ``_sides`` or ``_boundary_faces``) with cell centres ``C`` and orientation ``sign``: the angle
+    between the outward area vector and the vector from the face's cell to its centre."""
+    parts = []
+    for axis in range(axes):
+        last = C.shape[axis]  # the last node layer
+        for (centres, areas), outward, cell, side in zip(sides[axis], (-1.0, 1.0), (0, -1), (0, last)):
+            cosines = _angles(centres - np.take(C, cell, axis), outward * (sign * areas))
+            parts.append(_reduced(np.expand_dims(cosines, axis), axis, side))
+    return parts
 
 
 def _orientation_of_sides(sides) -> float:

@@ -150,11 +150,6 @@ def _mapped(memory: int, node_shape: tuple, size: bool = False) -> np.ndarray:
     return np.frombuffer(buffer, dtype=np.float64, count=count).reshape(*node_shape, len(node_shape))
 
 
-def _fork(nodes, work, *arguments):
-    """(process, connection): a forked child running ``_serve(..., nodes, work, *arguments)``."""
-    return fork(_serve, nodes, work, *arguments)
-
-
 class _ForkedWorker:
     """A forked child that loads the kernels, then works on the node array handed to it
     (``submit``): the shared memory, the pipe and the bounded waits of both workers."""
@@ -165,7 +160,7 @@ class _ForkedWorker:
         # a node array has one coordinate per index axis (``check_node_array``)
         self._nodes = _shared(int(np.prod(node_shape)) * len(node_shape)).reshape(*node_shape, len(node_shape))
         self._metrics = _shared(metric_rows * cells).reshape(metric_rows, cells)
-        self._process, self._connection = _fork(self._nodes, serve, self._metrics, *arguments)
+        self._process, self._connection = fork(_serve, self._nodes, serve, self._metrics, *arguments)
         self._begin(cells)
 
     def _begin(self, cells: int) -> None:
